@@ -16,7 +16,8 @@ from studyapp.errors import StudyappError
 _COMMAND_MODULES = (
     "studyapp.motion.cli",   # inspect, convert
     "studyapp.render.cli",   # render, view
-    "studyapp.study.cli",    # validate, schedule, run, export, bundle, merge
+    "studyapp.study.design_cli",   # validate, schedule
+    "studyapp.study.session_cli",  # run, export, bundle, merge
     "studyapp.models.cli",   # generate
     "studyapp.ui.cli",       # doctor
     "studyapp.demo_cli",     # demo
