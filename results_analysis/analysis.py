@@ -1,0 +1,181 @@
+"""The whole rank analysis of a results frame, as data (no files): what ``report`` writes out.
+
+Per criterion: the Friedman test on the chosen blocks (trials by default) and the other block type as a
+sensitivity check, Nemenyi and Holm-adjusted Wilcoxon post-hoc tests (Conover optional), the critical
+difference, per-condition descriptives over all answered trials and Bradley-Terry strengths. Optionally
+the same per level of stimulus tags / participant groups, and questionnaire summaries.
+"""
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from results_analysis.bradley_terry import bradley_terry
+from results_analysis.descriptives import condition_summary
+from results_analysis.errors import AnalysisInputError
+from results_analysis.exclusions import apply_exclusions, attention_summary
+from results_analysis.friedman import FriedmanResult, friedman_ranks
+from results_analysis.loader import CORE_COLUMNS, normalize_results
+from results_analysis.posthoc import conover as conover_test
+from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
+from results_analysis.questionnaire import item_summary, scale_reliability
+from results_analysis.ranks import RankBlocks, rank_blocks
+from results_analysis.validate import validate_results
+
+
+@dataclass
+class CriterionAnalysis:
+    """Everything computed for one criterion."""
+
+    criterion: str
+    blocks: RankBlocks
+    friedman: FriedmanResult
+    sensitivity: FriedmanResult | None
+    sensitivity_block: str
+    summary: pd.DataFrame
+    posthoc: dict[str, pd.DataFrame]
+    critical_difference: float
+    bradley_terry: pd.DataFrame
+
+
+@dataclass
+class Analysis:
+    """The analysis of one results frame (see :func:`run_analysis`)."""
+
+    criteria: dict[str, CriterionAnalysis]
+    conditions: list[str]
+    block: str
+    alpha: float
+    n_participants: int
+    n_trials: int
+    exclusions: pd.DataFrame
+    attention: pd.DataFrame
+    n_practice_rows: int
+    dropped_incomplete: int
+    incomplete: str
+    groups: dict[str, pd.DataFrame] = field(default_factory=dict)
+    questionnaire_items: pd.DataFrame | None = None
+    questionnaire_reliability: pd.DataFrame | None = None
+    warnings: list[str] = field(default_factory=list)
+    source: str | None = None
+    design_hashes: list[str] = field(default_factory=list)
+    n_boot: int = 2000
+    seed: int = 0
+    ci: float = 0.95
+    conover: bool = False
+
+
+def group_columns(df: pd.DataFrame) -> list[str]:
+    """Columns that can be used for breakdowns: everything that is not a core export column."""
+    return [c for c in df.columns if c not in CORE_COLUMNS]
+
+
+def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "trial",
+                      alpha: float = 0.05, conover: bool = False, n_boot: int = 2000, ci: float = 0.95,
+                      seed: int = 0) -> CriterionAnalysis:
+    """Analyse one criterion of a validated, exclusion-applied tidy frame.
+
+    >>> from results_analysis.simulate import simulate_results
+    >>> df = simulate_results(12, 4, seed=3, n_practice=0, n_attention=0)
+    >>> a = analyze_criterion(df, "realism", conditions=["FaceCapGes", "DiffSHEG", "CaMN"], n_boot=100)
+    >>> a.friedman.n_blocks, a.sensitivity.n_blocks
+    (48, 12)
+    """
+    blocks = rank_blocks(df, criterion, block=block, conditions=conditions)
+    if blocks.n < 2:
+        raise AnalysisInputError(df.attrs.get("source"), f"criterion {criterion}",
+                                 f"only {blocks.n} complete block(s) left after exclusions: nothing to test")
+    other = "participant" if block == "trial" else "trial"
+    other_blocks = rank_blocks(df, criterion, block=other, conditions=conditions)
+    sens = friedman_ranks(other_blocks.ranks) if other_blocks.n >= 2 else None
+    trial_blocks = blocks if block == "trial" else other_blocks
+    fr = friedman_ranks(blocks.ranks)
+    post = {"nemenyi": nemenyi(blocks.ranks, conditions, alpha=alpha),
+            "wilcoxon_holm": wilcoxon_holm(blocks.values, conditions)}
+    if conover:
+        post["conover"] = conover_test(blocks.ranks, conditions)
+    return CriterionAnalysis(
+        criterion=criterion, blocks=blocks, friedman=fr, sensitivity=sens, sensitivity_block=other,
+        summary=condition_summary(trial_blocks, n_boot=n_boot, ci=ci, seed=seed),
+        posthoc=post, critical_difference=critical_difference(blocks.k, blocks.n, alpha),
+        bradley_terry=bradley_terry(trial_blocks, n_boot=n_boot // 2, ci=ci, seed=seed))
+
+
+def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], criteria: Sequence[str],
+                    block: str = "trial") -> pd.DataFrame:
+    """The Friedman table per level of ``column`` (a stimulus tag or participant group) and criterion.
+
+    Columns: group, level, criterion, n_blocks, n_participants, chi2, df, p, kendall_w, mean_rank_<condition>...
+    and share_rank_1_<condition>....
+    """
+    if column not in df.columns:
+        raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
+                                 f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
+    rows = []
+    for level, sub in df.groupby(df[column].fillna("(none)").astype(str), sort=True):
+        for crit in criteria:
+            b = rank_blocks(sub, crit, block=block, conditions=conditions)
+            row = {"group": column, "level": level, "criterion": crit, "n_blocks": b.n,
+                   "n_participants": int(np.unique(b.participants).size)}
+            if b.n >= 2:
+                fr = friedman_ranks(b.ranks)
+                row.update(chi2=fr.chi2, df=fr.df, p=fr.p, kendall_w=fr.kendall_w)
+                row.update({f"mean_rank_{c}": v for c, v in zip(conditions, fr.mean_rank)})
+            else:
+                row.update(chi2=np.nan, df=len(conditions) - 1, p=np.nan, kendall_w=np.nan)
+                row.update({f"mean_rank_{c}": (float(b.ranks[0, i]) if b.n else np.nan)
+                            for i, c in enumerate(conditions)})
+            if b.n:
+                tb = b if block == "trial" else rank_blocks(sub, crit, block="trial", conditions=conditions)
+                row.update({f"share_rank_1_{c}": float(np.isclose(tb.values[:, i], 1).mean())
+                            for i, c in enumerate(conditions)})
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str] = (),
+                 questionnaire: pd.DataFrame | None = None, exclude_failed_attention: bool = False,
+                 exclude: Iterable[str] = (), alpha: float = 0.05, conover: bool = False, n_boot: int = 2000,
+                 ci: float = 0.95, seed: int = 0, incomplete: str = "error") -> Analysis:
+    """Validate, apply exclusions and analyse every criterion (see module docstring).
+
+    ``incomplete='drop'`` deletes trials that do not rank every condition (listwise deletion) instead of
+    stopping with an error. Warnings (e.g. mixed design hashes) are collected in ``Analysis.warnings``
+    and also re-emitted.
+    """
+    df = normalize_results(df)  # frames from studyapp's export_dataframe come with their own dtypes
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        checked = validate_results(df, incomplete=incomplete)
+    notes = [str(w.message) for w in caught]
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    kept, excluded = apply_exclusions(checked, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
+    if kept.empty:
+        raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
+                                 "(practice and attention-check trials are never analysed)")
+    conditions = sorted(kept["condition"].unique())
+    if len(conditions) < 2:
+        raise AnalysisInputError(df.attrs.get("source"), "column 'condition'", "fewer than 2 conditions")
+    criteria = list(dict.fromkeys(kept["criterion"]))
+    results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
+                                    n_boot=n_boot, ci=ci, seed=seed) for c in criteria}
+    by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block) for g in groups}
+    items = reliability = None
+    if questionnaire is not None and len(questionnaire):
+        q = questionnaire[~questionnaire["participant"].astype(str).isin(set(excluded["participant"]))]
+        items, reliability = item_summary(q), scale_reliability(q)
+    key = ["participant", "trial_index"]
+    hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
+    return Analysis(criteria=results, conditions=conditions, block=block, alpha=alpha,
+                    n_participants=int(kept["participant"].nunique()),
+                    n_trials=int(kept[key].drop_duplicates().shape[0]), exclusions=excluded,
+                    attention=attention_summary(checked), n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)),
+                    dropped_incomplete=int(checked.attrs.get("dropped_incomplete", 0)), incomplete=incomplete,
+                    groups=by_group, questionnaire_items=items, questionnaire_reliability=reliability,
+                    warnings=notes, source=df.attrs.get("source"), design_hashes=[str(h) for h in hashes],
+                    n_boot=n_boot, seed=seed, ci=ci, conover=conover)

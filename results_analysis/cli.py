@@ -1,0 +1,85 @@
+"""``results-analysis``: analyse exported study results (CSV export or the SQLite results database).
+
+Example: ``results-analysis results.csv --out analysis/ --group speaker --exclude-failed-attention``
+writes analysis/stats.json, analysis/tables/*.csv, analysis/figures/*.png|svg, analysis/report.md and a
+self-contained analysis/report.html.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+from results_analysis.errors import AnalysisInputError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="results-analysis", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("results", type=Path, help="tidy results CSV (studyapp export) or results .sqlite database")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--block", choices=("trial", "participant"), default="trial",
+                   help="Friedman blocks: trials (default) or participants (mean rank per participant)")
+    p.add_argument("--group", action="append", default=[], metavar="COL",
+                   help="also break the analysis down by this stimulus tag or participant group (repeatable)")
+    p.add_argument("--questionnaire", type=Path, help="questionnaire CSV (participant,item,scale,value); "
+                   "with a database input its questionnaire table is used when this is omitted")
+    p.add_argument("--exclude-failed-attention", action="store_true",
+                   help="exclude participants who failed any attention check")
+    p.add_argument("--exclude", default="", metavar="P1,P2", help="comma-separated participants to exclude")
+    p.add_argument("--incomplete", choices=("error", "drop"), default="error",
+                   help="a trial that does not rank every condition: stop (default) or drop it (listwise deletion)")
+    p.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
+    p.add_argument("--conover", action="store_true", help="add Conover's Friedman post-hoc tests")
+    p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
+    p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    p.add_argument("--title", default=None, help="report title")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from results_analysis.loader import load_questionnaire, load_results
+    from results_analysis.report import analyze
+
+    try:
+        if not 0 < args.alpha < 1:
+            raise AnalysisInputError(None, "--alpha", f"{args.alpha} is not between 0 and 1")
+        df = load_results(args.results)
+        q = None
+        if args.questionnaire is not None:
+            q = load_questionnaire(args.questionnaire)
+        elif _is_sqlite(args.results):
+            q = load_questionnaire(args.results)
+            q = q if len(q) else None
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            a = analyze(df, args.out, title=args.title or f"Results: {args.results.name}", block=args.block,
+                        groups=args.group, questionnaire=q, exclude_failed_attention=args.exclude_failed_attention,
+                        exclude=[x for x in args.exclude.split(",") if x.strip()], alpha=args.alpha,
+                        conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete)
+    except AnalysisInputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for w in {str(w.message) for w in caught}:
+        print(f"warning: {w}", file=sys.stderr)
+    for crit, c in a.criteria.items():
+        fr = c.friedman
+        print(f"{crit}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}, n = {fr.n_blocks}")
+    if len(a.exclusions):
+        print("excluded: " + "; ".join(f"{r.participant} ({r.reason})" for r in a.exclusions.itertuples()))
+    print(f"report: {args.out / 'report.html'}")
+    return 0
+
+
+def _is_sqlite(path: Path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(16).startswith(b"SQLite format 3")
+    except OSError:
+        return False
+
+
+if __name__ == "__main__":
+    sys.exit(main())

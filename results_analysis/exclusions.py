@@ -1,0 +1,65 @@
+"""Who and what is left out of the analysis, and why.
+
+Practice trials are always out. Attention-check trials are catch trials, not comparisons, so they are out
+of the rank statistics too; with ``exclude_failed_attention`` every participant who failed one is out.
+Participants can also be excluded by name.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import pandas as pd
+
+from results_analysis.validate import trial_key
+
+
+def apply_exclusions(df: pd.DataFrame, *, exclude_failed_attention: bool = False,
+                     exclude: Iterable[str] = ()) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Return the analysed rows and a table of the excluded participants (participant, reason).
+
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"participant": ["P1", "P1", "P2", "P2"], "trial_index": [0, 1, 0, 1],
+    ...     "is_practice": [True, False, False, False], "is_attention_check": [False, False, True, False],
+    ...     "attention_passed": [True, True, False, True]})
+    >>> kept, who = apply_exclusions(df, exclude_failed_attention=True)
+    >>> kept["participant"].tolist(), who.to_dict("records")
+    (['P1'], [{'participant': 'P2', 'reason': 'failed 1 of 1 attention check(s)'}])
+    """
+    attrs = dict(df.attrs)
+    exclude = [str(p).strip() for p in exclude if str(p).strip()]
+    reasons: dict[str, list[str]] = {}
+    known = set(df["participant"].astype(str))
+    for p in exclude:
+        reasons.setdefault(p, []).append("excluded by name (--exclude)" if p in known
+                                         else "excluded by name (--exclude), but has no answers")
+    checks = df[df["is_attention_check"].astype(bool)] if "is_attention_check" in df.columns else df.iloc[:0]
+    if len(checks):
+        # One verdict per attention-check trial: a trial failed when any of its rows says so.
+        per_trial = checks.groupby(trial_key(checks))["attention_passed"].all().reset_index()
+        summary = per_trial.groupby("participant")["attention_passed"].agg(["size", "sum"])
+        for p, row in summary.iterrows():
+            failed = int(row["size"] - row["sum"])
+            if failed and exclude_failed_attention:
+                reasons.setdefault(str(p), []).append(f"failed {failed} of {int(row['size'])} attention check(s)")
+    out = df["participant"].astype(str).isin(reasons)
+    if "is_practice" in df.columns:
+        out |= df["is_practice"].astype(bool)
+    if "is_attention_check" in df.columns:
+        out |= df["is_attention_check"].astype(bool)
+    kept = df.loc[~out].copy()
+    kept.attrs.update(attrs)
+    kept.attrs["n_practice_rows"] = int(df["is_practice"].astype(bool).sum()) if "is_practice" in df.columns else 0
+    table = pd.DataFrame([{"participant": p, "reason": "; ".join(r)} for p, r in sorted(reasons.items())],
+                         columns=["participant", "reason"])
+    return kept, table
+
+
+def attention_summary(df: pd.DataFrame) -> pd.DataFrame:
+    """Per participant: attention-check trials seen and failed (empty when there are none)."""
+    if "is_attention_check" not in df.columns or not df["is_attention_check"].any():
+        return pd.DataFrame(columns=["participant", "checks", "failed"])
+    checks = df[df["is_attention_check"].astype(bool)]
+    per_trial = checks.groupby(trial_key(checks))["attention_passed"].all().reset_index()
+    s = per_trial.groupby("participant")["attention_passed"].agg(checks="size", passed="sum").reset_index()
+    s["failed"] = s["checks"] - s["passed"]
+    return s[["participant", "checks", "failed"]]

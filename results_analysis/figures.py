@@ -1,0 +1,257 @@
+"""Publication figures of the rank analysis (matplotlib, headless Agg backend).
+
+* :func:`rank_share_figure` — 100% stacked bars of the share of answers at each rank, per criterion.
+* :func:`cd_diagram` — Demsar's critical-difference diagram: mean ranks on an axis, bars joining the
+  conditions the Nemenyi test cannot separate, the CD drawn to scale.
+* :func:`mean_rank_figure` — mean ranks with bootstrap intervals, per criterion.
+* :func:`bt_figure` — Bradley-Terry strengths with bootstrap intervals.
+
+Every function returns a Figure; :func:`save` writes it as PNG and SVG.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.colors import to_rgb  # noqa: E402
+
+_STYLE = {
+    "font.size": 9, "axes.titlesize": 10, "axes.titleweight": "bold", "axes.labelsize": 9,
+    "xtick.labelsize": 8.5, "ytick.labelsize": 8.5, "legend.fontsize": 8.5, "axes.spines.top": False,
+    "axes.spines.right": False, "svg.fonttype": "none", "figure.dpi": 100, "savefig.dpi": 200,
+    "font.family": "DejaVu Sans",
+}
+#: Colour-blind-safe qualitative colours (Okabe-Ito) for conditions.
+CONDITION_COLORS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
+
+
+def rank_colors(k: int) -> list[tuple[float, float, float]]:
+    """Sequential blues, darkest for rank 1 (best)."""
+    cmap = plt.get_cmap("Blues")
+    return [cmap(v)[:3] for v in np.linspace(0.9, 0.3, k)]
+
+
+def condition_color(i: int) -> str:
+    return CONDITION_COLORS[i % len(CONDITION_COLORS)]
+
+
+def save(fig, out_dir: Path, name: str) -> list[Path]:
+    """Write ``name.png`` (200 dpi) and ``name.svg`` into ``out_dir``; close the figure."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [out_dir / f"{name}.png", out_dir / f"{name}.svg"]
+    for p in paths:
+        fig.savefig(p, bbox_inches="tight", facecolor="white", dpi=200)
+    plt.close(fig)
+    return paths
+
+
+def _order(summary: pd.DataFrame, conditions: list[str] | None) -> list[str]:
+    return list(conditions) if conditions is not None else list(summary["condition"])
+
+
+def rank_share_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] | None = None):
+    """One panel per criterion; per condition a 100% bar split into the shares of rank 1..k.
+
+    ``summaries``: criterion -> :func:`results_analysis.descriptives.condition_summary` table.
+    """
+    with plt.rc_context(_STYLE):
+        crits = list(summaries)
+        first = summaries[crits[0]]
+        conds = _order(first, conditions)
+        k = len([c for c in first.columns if c.startswith("share_rank_")])
+        colors = rank_colors(k)
+        fig, axes = plt.subplots(1, len(crits), figsize=(2.3 * len(crits) + 0.6, 0.42 * len(conds) + 1.5),
+                                 sharey=True, squeeze=False)
+        for ax, crit in zip(axes[0], crits):
+            s = summaries[crit].set_index("condition").reindex(conds)
+            left = np.zeros(len(conds))
+            y = np.arange(len(conds))[::-1]
+            for r in range(1, k + 1):
+                share = s[f"share_rank_{r}"].to_numpy() * 100.0
+                ax.barh(y, share, left=left, color=colors[r - 1], edgecolor="white", linewidth=0.8, height=0.72,
+                        label=_rank_label(r, k))
+                for yi, l, w in zip(y, left, share):
+                    if w >= 14:
+                        dark = sum(to_rgb(colors[r - 1])) < 1.6
+                        ax.text(l + w / 2, yi, f"{w:.0f}%", ha="center", va="center", fontsize=7.5,
+                                color="white" if dark else "#1a1a1a")
+                left += share
+            ax.set_xlim(0, 100)
+            ax.set_xticks([0, 25, 50, 75, 100])
+            ax.set_xticklabels(["0", "25", "50", "75", "100"])
+            ax.set_title(crit.capitalize())
+            ax.tick_params(axis="y", length=0)
+            ax.spines["left"].set_visible(False)
+            ax.set_yticks(y)
+            ax.set_yticklabels(conds)
+            n = int(s["n"].iloc[0])
+            ax.set_xlabel(f"% of answers (n = {n})")
+        handles, labels = axes[0][0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="upper center", ncol=k, frameon=False, bbox_to_anchor=(0.5, 1.0))
+        fig.tight_layout(rect=(0, 0, 1, 0.9))
+        return fig
+
+
+def _rank_label(r: int, k: int) -> str:
+    if r == 1:
+        return "ranked 1st (best)"
+    if r == k:
+        return f"ranked {_ordinal(r)} (worst)"
+    return f"ranked {_ordinal(r)}"
+
+
+def _ordinal(r: int) -> str:
+    return f"{r}{'tsnrhtdd'[(r // 10 % 10 != 1) * (r % 10 < 4) * r % 10::4]}"
+
+
+def cliques(mean_ranks: np.ndarray, cd: float) -> list[tuple[int, int]]:
+    """Maximal runs (i, j) of conditions sorted by mean rank whose spread is at most ``cd`` (not separable).
+
+    Indices refer to the sorted order. Single conditions are not cliques.
+
+    >>> cliques(np.array([1.0, 1.2, 2.0, 2.1]), 0.5)
+    [(0, 1), (2, 3)]
+    """
+    r = np.sort(np.asarray(mean_ranks, dtype=float))
+    out: list[tuple[int, int]] = []
+    for i in range(len(r)):
+        j = i
+        while j + 1 < len(r) and r[j + 1] - r[i] <= cd + 1e-12:
+            j += 1
+        if j > i and not any(a <= i and j <= b for a, b in out):
+            out.append((i, j))
+    return out
+
+
+def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: float = 0.05,
+               order: list[str] | None = None):
+    """Critical-difference diagrams, one panel per criterion (Demsar 2006, Fig. 1 style).
+
+    ``results``: criterion -> (mean rank per condition, critical difference). Rank 1 (best) is on the
+    left; thick black bars join conditions whose mean ranks differ by less than the CD. ``order`` fixes
+    the colour of each condition (the same as in the other figures).
+    """
+    with plt.rc_context(_STYLE):
+        crits = list(results)
+        k = len(next(iter(results.values()))[0])
+        half = (k + 1) // 2
+        panel_h = 0.75 + 0.3 * half
+        fig, axes = plt.subplots(len(crits), 1, figsize=(6.4, panel_h * len(crits)), squeeze=False)
+        for ax, crit in zip(axes[:, 0], crits):
+            mean_rank, cd = results[crit]
+            names = list(mean_rank)
+            palette = {n: condition_color(i) for i, n in enumerate(order or names)}
+            vals = np.array([mean_rank[n] for n in names])
+            by_rank = np.argsort(vals, kind="stable")
+            lo, hi = 1.0, float(k)
+            ax.set_xlim(lo - 0.9, hi + 0.9)
+            ax.set_ylim(-(half + 0.6), 1.6)
+            ax.axis("off")
+            # Axis with ticks at every whole and half rank.
+            ax.plot([lo, hi], [0, 0], color="black", lw=1)
+            for t in np.arange(lo, hi + 0.01, 0.5):
+                major = float(t).is_integer()
+                ax.plot([t, t], [0, 0.12 if major else 0.07], color="black", lw=1)
+                if major:
+                    ax.text(t, 0.22, f"{int(t)}", ha="center", va="bottom", fontsize=8.5)
+            # CD to scale, above the axis at the left.
+            ax.plot([lo, lo + cd], [1.05, 1.05], color="#b2182b", lw=1.6)
+            for x in (lo, lo + cd):
+                ax.plot([x, x], [0.97, 1.13], color="#b2182b", lw=1.2)
+            ax.text(lo + cd / 2, 1.2, f"CD = {cd:.2f}", ha="center", va="bottom", fontsize=8, color="#b2182b")
+            ax.text(hi + 0.85, 1.2, crit.capitalize(), ha="right", va="bottom", fontsize=10, fontweight="bold")
+            # Labels: best half to the left, worst half to the right, each on its own line.
+            for pos, idx in enumerate(by_rank):
+                v = vals[idx]
+                if pos < half:
+                    y, x_text, ha = -(pos + 0.6), lo - 0.15, "right"
+                else:
+                    y, x_text, ha = -(k - pos - 1 + 0.6), hi + 0.15, "left"
+                color = palette.get(names[idx], "#333333")
+                ax.plot([v, v, x_text], [0, y, y], color=color, lw=1.1)
+                ax.plot([v], [0], marker="o", ms=3.5, color=color)
+                ax.text(x_text + (-0.03 if ha == "right" else 0.03), y, f"{names[idx]}  {v:.2f}" if ha == "left"
+                        else f"{v:.2f}  {names[idx]}", ha=ha, va="center", fontsize=8.5)
+            # Cliques: bars just below the axis, stacked.
+            sorted_vals = vals[by_rank]
+            for c_i, (a, b) in enumerate(cliques(sorted_vals, cd)):
+                y = -0.22 - 0.16 * c_i
+                ax.plot([sorted_vals[a] - 0.03, sorted_vals[b] + 0.03], [y, y], color="black", lw=3,
+                        solid_capstyle="round")
+        fig.text(0.5, 0.0, f"Mean rank (1 = best). Bars join conditions the Nemenyi test does not separate "
+                 f"(α = {alpha:g}).", ha="center", va="bottom", fontsize=7.5, color="#444444")
+        fig.tight_layout(rect=(0, 0.03, 1, 1))
+        return fig
+
+
+def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] | None = None, *,
+                     ci: float = 0.95):
+    """Mean rank per condition with its bootstrap interval, one panel per criterion (1 = best, on the left)."""
+    with plt.rc_context(_STYLE):
+        crits = list(summaries)
+        conds = _order(summaries[crits[0]], conditions)
+        k = len(conds)
+        fig, axes = plt.subplots(1, len(crits), figsize=(2.3 * len(crits) + 0.6, 0.42 * k + 1.3),
+                                 sharey=True, squeeze=False)
+        y = np.arange(k)[::-1]
+        for ax, crit in zip(axes[0], crits):
+            s = summaries[crit].set_index("condition").reindex(conds)
+            for i, c in enumerate(conds):
+                m, lo, hi = s.loc[c, "mean_rank"], s.loc[c, "ci_low"], s.loc[c, "ci_high"]
+                color = condition_color(i)
+                ax.plot([lo, hi], [y[i], y[i]], color=color, lw=2.2, solid_capstyle="round")
+                ax.plot([m], [y[i]], "o", color=color, ms=6, mec="white", mew=0.8)
+                ax.text(m, y[i] + 0.22, f"{m:.2f}", ha="center", va="bottom", fontsize=7.5, color="#333333")
+            ax.axvline((k + 1) / 2, color="#999999", lw=0.8, ls=":", zorder=0)
+            ax.set_xlim(1 - 0.1, k + 0.1)
+            ax.set_xticks(np.arange(1, k + 1))
+            ax.set_ylim(-0.6, k - 0.3)
+            ax.set_yticks(y)
+            ax.set_yticklabels(conds)
+            ax.tick_params(axis="y", length=0)
+            ax.spines["left"].set_visible(False)
+            ax.set_title(crit.capitalize())
+            ax.set_xlabel("mean rank (1 = best)")
+            ax.grid(axis="x", color="#e5e5e5", lw=0.6)
+            ax.set_axisbelow(True)
+        fig.text(0.5, 0.0, f"Dots: mean rank; lines: {ci:.0%} percentile bootstrap interval (participants "
+                 "resampled). Dotted line: chance.", ha="center", va="bottom", fontsize=7.5, color="#444444")
+        fig.tight_layout(rect=(0, 0.05, 1, 1))
+        return fig
+
+
+def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = None, *, ci: float = 0.95):
+    """Bradley-Terry strengths (sum to 1) with bootstrap intervals, one panel per criterion."""
+    with plt.rc_context(_STYLE):
+        crits = list(tables)
+        conds = _order(tables[crits[0]], conditions)
+        k = len(conds)
+        fig, axes = plt.subplots(1, len(crits), figsize=(2.3 * len(crits) + 0.6, 0.42 * k + 1.3),
+                                 sharey=True, squeeze=False)
+        y = np.arange(k)[::-1]
+        top = max(float(t["ci_high"].max()) if t["ci_high"].notna().any() else float(t["strength"].max())
+                  for t in tables.values())
+        for ax, crit in zip(axes[0], crits):
+            t = tables[crit].set_index("condition").reindex(conds)
+            for i, c in enumerate(conds):
+                color = condition_color(i)
+                ax.barh(y[i], t.loc[c, "strength"], color=color, height=0.6, alpha=0.85)
+                if np.isfinite(t.loc[c, "ci_low"]):
+                    ax.plot([t.loc[c, "ci_low"], t.loc[c, "ci_high"]], [y[i], y[i]], color="black", lw=1.2)
+            ax.axvline(1.0 / k, color="#999999", lw=0.8, ls=":")
+            ax.set_xlim(0, min(1.0, top * 1.1))
+            ax.set_yticks(y)
+            ax.set_yticklabels(conds)
+            ax.tick_params(axis="y", length=0)
+            ax.spines["left"].set_visible(False)
+            ax.set_title(crit.capitalize())
+            ax.set_xlabel("Bradley-Terry strength")
+        fig.text(0.5, 0.0, f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap interval over participants. "
+                 "Dotted line: equal strengths.", ha="center", va="bottom", fontsize=7.5, color="#444444")
+        fig.tight_layout(rect=(0, 0.05, 1, 1))
+        return fig

@@ -1,0 +1,191 @@
+"""Load exported study results into one tidy DataFrame, from the CSV export or the SQLite database.
+
+The tidy frame has one row per participant x trial x criterion x condition (the columns of
+``studyapp export``). Whatever the source, the frame comes back with the same columns and dtypes, the
+source path in ``df.attrs["source"]`` and, in ``_where``, where each row came from (``line 12`` of a
+CSV, ``responses id 5`` of a database) so validation errors can point at it.
+"""
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from results_analysis.errors import AnalysisInputError
+
+#: Columns every results table must have.
+REQUIRED_COLUMNS = ("participant", "trial_index", "stimulus", "criterion", "condition", "rank")
+#: Boolean flags of the export; missing ones default to False (attention_passed to True).
+FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
+#: Columns that are bookkeeping, never a stimulus tag or participant group.
+CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
+    "session", "slot", "plays", "response_time_s", "design_hash", "app_version", "_where")
+
+_TRUE = {"1", "true", "t", "yes", "y"}
+_FALSE = {"0", "false", "f", "no", "n", ""}
+
+
+def load_results(path: str | Path) -> pd.DataFrame:
+    """Read results from a tidy CSV (``studyapp export --csv``) or a results SQLite database.
+
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "r.csv"
+    >>> _ = p.write_text("participant,trial_index,stimulus,criterion,condition,rank\\n"
+    ...                  "P1,0,clip1,realism,A,1\\nP1,0,clip1,realism,B,2\\n")
+    >>> df = load_results(p)
+    >>> df[["participant", "condition", "rank"]].values.tolist()
+    [['P1', 'A', 1.0], ['P1', 'B', 2.0]]
+    """
+    path = Path(path)
+    if not path.exists():
+        raise AnalysisInputError(path, None, "file not found")
+    with open(path, "rb") as fh:
+        magic = fh.read(16)
+    if magic.startswith(b"SQLite format 3"):
+        df = _read_sqlite(path)
+    else:
+        try:
+            df = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
+        # Line numbers as a text editor shows them: the header is line 1.
+        df["_where"] = [f"line {i + 2}" for i in range(len(df))]
+    return normalize_results(df, source=path)
+
+
+def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.DataFrame:
+    """Give a results frame (e.g. from ``studyapp.study.export.export_dataframe``) the canonical dtypes.
+
+    Identifiers become strings, ``rank`` and ``trial_index`` numbers, flags booleans. Raises
+    :class:`AnalysisInputError` naming the column and row when a value cannot be read.
+    """
+    src = str(source) if source is not None else df.attrs.get("source")
+    df = df.copy()
+    if "_where" not in df.columns:
+        df["_where"] = [f"row {i + 1}" for i in range(len(df))]
+    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
+    if missing:
+        raise AnalysisInputError(src, f"column(s) {', '.join(missing)}",
+                                 f"missing required column(s); found: {', '.join(map(str, df.columns))}")
+    for col in ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version"):
+        if col in df.columns:
+            df[col] = df[col].map(lambda v: None if _isna(v) else str(v)).astype(object)
+    for col in ("participant", "stimulus", "criterion", "condition"):
+        bad = df[col].isna()
+        if bad.any():
+            raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
+                                     "empty value")
+    for col in ("rank", "trial_index", "slot", "plays", "response_time_s"):
+        if col in df.columns:
+            num = pd.to_numeric(df[col], errors="coerce")
+            bad = num.isna() & df[col].notna()
+            if col in ("rank", "trial_index"):
+                bad |= num.isna()
+            if bad.any():
+                i = int(np.argmax(bad.to_numpy()))
+                raise AnalysisInputError(src, f"{df['_where'].iloc[i]}, column '{col}'",
+                                         f"{df[col].iloc[i]!r} is not a number")
+            df[col] = num.astype(float)
+    for col in FLAG_COLUMNS:
+        default = col == "attention_passed"
+        if col not in df.columns:
+            df[col] = default
+            continue
+        df[col] = _parse_flags(df[col], col, df["_where"], src, default)
+    df.attrs["source"] = src
+    return df.reset_index(drop=True)
+
+
+def load_questionnaire(path: str | Path) -> pd.DataFrame:
+    """Read questionnaire answers: a CSV with participant, item, scale, value (or the results database).
+
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "q.csv"
+    >>> _ = p.write_text("participant,item,scale,value\\nP1,q1,ease,4\\nP1,q2,ease,5\\n")
+    >>> load_questionnaire(p)["value"].tolist()
+    [4.0, 5.0]
+    """
+    path = Path(path)
+    if not path.exists():
+        raise AnalysisInputError(path, None, "file not found")
+    with open(path, "rb") as fh:
+        magic = fh.read(16)
+    if magic.startswith(b"SQLite format 3"):
+        from results_analysis.sqlite_schema import questionnaire_from_connection
+
+        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as con:
+            if "questionnaire" not in _tables(con):
+                raise AnalysisInputError(path, "table questionnaire", "missing")
+            q = questionnaire_from_connection(con, path)
+    else:
+        q = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+        q["_where"] = [f"line {i + 2}" for i in range(len(q))]
+    missing = [c for c in ("participant", "item", "value") if c not in q.columns]
+    if missing:
+        raise AnalysisInputError(path, f"column(s) {', '.join(missing)}", "missing required column(s)")
+    if "scale" not in q.columns:
+        q["scale"] = "scale"
+    q["scale"] = q["scale"].fillna("scale")
+    for col in ("participant", "item", "scale"):
+        q[col] = q[col].astype(str)
+    num = pd.to_numeric(q["value"], errors="coerce")
+    bad = num.isna() & q["value"].notna()
+    if bad.any():
+        i = int(np.argmax(bad.to_numpy()))
+        raise AnalysisInputError(path, f"{q['_where'].iloc[i]}, column 'value'", f"{q['value'].iloc[i]!r} is not a number")
+    q["value"] = num.astype(float)
+    dup = q.duplicated(["participant", "item"], keep=False)
+    if dup.any():
+        rows = q.loc[dup, "_where"].tolist()[:2]
+        raise AnalysisInputError(path, " and ".join(rows), "the same participant answered the same item twice")
+    q.attrs["source"] = str(path)
+    return q.reset_index(drop=True)
+
+
+# --- SQLite -------------------------------------------------------------------------------------------
+
+
+def _tables(con: sqlite3.Connection) -> set[str]:
+    return {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type IN ('table','view')")}
+
+
+def _read_sqlite(path: Path) -> pd.DataFrame:
+    from results_analysis.sqlite_schema import tidy_from_connection
+
+    try:
+        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as con:
+            return tidy_from_connection(con, path)
+    except sqlite3.DatabaseError as exc:
+        raise AnalysisInputError(path, None, f"not a readable SQLite results database ({exc})") from exc
+
+
+# --- helpers ------------------------------------------------------------------------------------------
+
+
+def _isna(v) -> bool:
+    return v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA
+
+
+def _parse_flags(col: pd.Series, name: str, where: pd.Series, src, default: bool) -> pd.Series:
+    if col.dtype == bool:
+        return col
+    out = np.empty(len(col), dtype=bool)
+    for i, v in enumerate(col.tolist()):
+        if _isna(v):
+            out[i] = default
+            continue
+        if isinstance(v, (bool, np.bool_)):
+            out[i] = bool(v)
+            continue
+        s = str(v).strip().lower()
+        if s.endswith(".0"):
+            s = s[:-2]
+        if s in _TRUE:
+            out[i] = True
+        elif s in _FALSE:
+            out[i] = False if s else default
+        else:
+            raise AnalysisInputError(src, f"{where.iloc[i]}, column '{name}'", f"{v!r} is not a true/false flag")
+    return pd.Series(out, index=col.index)

@@ -1,0 +1,82 @@
+"""From tidy answers to a blocks x conditions matrix of within-block ranks.
+
+A block is whatever ranks every condition once. By default that is one trial (participant x stimulus);
+with ``block='participant'`` the block is a participant and the values are that participant's mean rank
+per condition (re-ranked within the participant by the Friedman test), the usual sensitivity check.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy.stats import rankdata
+
+from results_analysis.validate import trial_key
+
+BLOCKS = ("trial", "participant")
+
+
+@dataclass(frozen=True)
+class RankBlocks:
+    """Within-block values of one criterion.
+
+    values: (n, k) what each block gave each condition (ranks, or mean ranks per participant).
+    ranks: (n, k) ``values`` re-ranked within each block with average ranks for ties (1 = best).
+    conditions: the k condition names, column order of both matrices.
+    participants: (n,) the participant each block belongs to (for bootstraps over participants).
+    block: 'trial' or 'participant'.
+    """
+
+    values: np.ndarray
+    ranks: np.ndarray
+    conditions: list[str]
+    participants: np.ndarray
+    block: str
+
+    @property
+    def n(self) -> int:
+        return int(self.ranks.shape[0])
+
+    @property
+    def k(self) -> int:
+        return int(self.ranks.shape[1])
+
+
+def within_block_ranks(values: np.ndarray) -> np.ndarray:
+    """Average ranks within each row (1 = smallest): ties share the mean of the ranks they span.
+
+    >>> within_block_ranks(np.array([[1, 1, 3], [3.0, 1.0, 2.0]])).tolist()
+    [[1.5, 1.5, 3.0], [3.0, 1.0, 2.0]]
+    """
+    return rankdata(np.asarray(values, dtype=float), axis=1, method="average")
+
+
+def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "trial",
+                conditions: list[str] | None = None) -> RankBlocks:
+    """Build the blocks x conditions rank matrix of one criterion from a validated tidy frame.
+
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"participant": ["P1"] * 3 + ["P2"] * 3, "trial_index": 0, "stimulus": "c1",
+    ...                    "criterion": "realism", "condition": list("ABC") * 2, "rank": [1, 2, 3, 2, 1, 3]})
+    >>> rank_blocks(df, "realism").ranks.tolist()
+    [[1.0, 2.0, 3.0], [2.0, 1.0, 3.0]]
+    """
+    if block not in BLOCKS:
+        raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
+    sub = df[df["criterion"] == criterion]
+    if conditions is None:
+        conditions = sorted(df["condition"].unique())
+    if block == "trial":
+        key = trial_key(sub)
+        wide = sub.pivot_table(index=key, columns="condition", values="rank", aggfunc="first", observed=True)
+    else:
+        key = ["participant"]
+        wide = sub.pivot_table(index=key, columns="condition", values="rank", aggfunc="mean", observed=True)
+    wide = wide.reindex(columns=conditions)
+    # Blocks that lack a condition are dropped (listwise deletion); validation decides whether that may happen.
+    wide = wide.dropna(axis=0, how="any")
+    values = wide.to_numpy(dtype=float)
+    participants = wide.index.get_level_values("participant").astype(str).to_numpy()
+    return RankBlocks(values=values, ranks=within_block_ranks(values) if len(values) else values,
+                      conditions=list(conditions), participants=participants, block=block)

@@ -1,0 +1,369 @@
+"""Write the analysis of a results frame to a folder: stats.json, tables/*.csv, figures/*.png|svg,
+report.md and a self-contained report.html that reads like a results section.
+
+>>> import tempfile, pathlib
+>>> from results_analysis.simulate import simulate_results
+>>> out = pathlib.Path(tempfile.mkdtemp())
+>>> a = analyze(simulate_results(8, 4, seed=2), out, title="Demo", n_boot=200)
+>>> sorted(p.name for p in out.iterdir())
+['figures', 'report.html', 'report.md', 'stats.json', 'tables']
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import scipy
+
+from results_analysis import figures
+from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
+from results_analysis.document import Document
+from results_analysis.posthoc import WILCOXON_EXACT_MAX_N, nemenyi_q_alpha
+
+
+def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study results", **kwargs) -> Analysis:
+    """Run :func:`results_analysis.analysis.run_analysis` on ``df`` and write every output into ``out_dir``.
+
+    Keyword arguments are those of ``run_analysis`` (block, groups, questionnaire,
+    exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete). Returns the
+    :class:`Analysis`; the report is ``out_dir / "report.html"``.
+    """
+    out = Path(out_dir)
+    analysis = run_analysis(df, **kwargs)
+    write_outputs(analysis, out, title=title)
+    return analysis
+
+
+def write_outputs(a: Analysis, out: Path, *, title: str) -> None:
+    """Write stats.json, tables, figures, report.md and report.html of an :class:`Analysis`."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "stats.json").write_text(json.dumps(_clean(stats_dict(a)), indent=2, allow_nan=False) + "\n")
+    write_tables(a, out / "tables")
+    write_figures(a, out / "figures")
+    doc = build_document(a, title)
+    (out / "report.md").write_text(doc.to_markdown() + "\n")
+    (out / "report.html").write_text(doc.to_html(out / "figures"))
+
+
+# --- stats.json ------------------------------------------------------------------------------------
+
+
+def stats_dict(a: Analysis) -> dict:
+    """The content of stats.json: one entry per criterion, plus ``_meta`` (and ``_groups``)."""
+    out: dict = {}
+    for crit, c in a.criteria.items():
+        fr = c.friedman
+        entry = {
+            "block": a.block, "n_blocks": fr.n_blocks, "n_participants": int(np.unique(c.blocks.participants).size),
+            "k": fr.k, "chi2": fr.chi2, "df": fr.df, "p": fr.p, "kendall_w": fr.kendall_w,
+            "iman_davenport_f": fr.iman_davenport_f, "iman_davenport_df": [fr.iman_davenport_df1,
+                                                                          fr.iman_davenport_df2],
+            "iman_davenport_p": fr.iman_davenport_p, "tie_correction": fr.tie_correction,
+            "mean_rank": dict(zip(a.conditions, fr.mean_rank)),
+            "critical_difference": c.critical_difference, "alpha": a.alpha,
+            "posthoc": {m: t.to_dict("records") for m, t in c.posthoc.items()},
+            "conditions": c.summary.drop(columns=[]).to_dict("records"),
+            "bradley_terry": c.bradley_terry.to_dict("records"),
+        }
+        if c.sensitivity is not None:
+            s = c.sensitivity
+            entry["sensitivity"] = {"block": c.sensitivity_block, "n_blocks": s.n_blocks, "chi2": s.chi2,
+                                    "df": s.df, "p": s.p, "kendall_w": s.kendall_w,
+                                    "mean_rank": dict(zip(a.conditions, s.mean_rank))}
+        out[crit] = entry
+    out["_meta"] = {
+        "source": a.source, "block": a.block, "conditions": a.conditions, "criteria": list(a.criteria),
+        "n_participants": a.n_participants, "n_trials": a.n_trials, "alpha": a.alpha,
+        "excluded": a.exclusions.to_dict("records"), "incomplete_blocks": a.incomplete,
+        "dropped_incomplete": a.dropped_incomplete, "design_hashes": a.design_hashes, "warnings": a.warnings,
+        "bootstrap": {"n_boot": a.n_boot, "seed": a.seed, "ci": a.ci, "resampled": "participants"},
+        "wilcoxon": {"zero_method": "wilcox (zero differences dropped)",
+                     "exact_if": f"at most {WILCOXON_EXACT_MAX_N} non-zero differences and no ties",
+                     "otherwise": "normal approximation with tie and continuity correction",
+                     "adjustment": "holm"},
+        "software": {"scipy": scipy.__version__, "numpy": np.__version__, "pandas": pd.__version__},
+    }
+    if a.groups:
+        out["_groups"] = {g: t.to_dict("records") for g, t in a.groups.items()}
+    if a.questionnaire_reliability is not None:
+        out["_questionnaire"] = {"reliability": a.questionnaire_reliability.to_dict("records"),
+                                 "items": a.questionnaire_items.to_dict("records")}
+    return out
+
+
+def _clean(obj):
+    """JSON-safe: numpy scalars to Python, NaN/inf to None."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (np.bool_, bool)):
+        return bool(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    return obj
+
+
+# --- tables ----------------------------------------------------------------------------------------
+
+
+def friedman_table(a: Analysis) -> pd.DataFrame:
+    """One row per criterion: the test, its effect sizes, the CD and the sensitivity check."""
+    rows = []
+    for crit, c in a.criteria.items():
+        fr, s = c.friedman, c.sensitivity
+        rows.append({"criterion": crit, "block": a.block, "n_blocks": fr.n_blocks,
+                     "n_participants": int(np.unique(c.blocks.participants).size), "k": fr.k,
+                     "chi2": fr.chi2, "df": fr.df, "p": fr.p, "kendall_w": fr.kendall_w,
+                     "iman_davenport_f": fr.iman_davenport_f, "id_df1": fr.iman_davenport_df1,
+                     "id_df2": fr.iman_davenport_df2, "iman_davenport_p": fr.iman_davenport_p,
+                     "critical_difference": c.critical_difference,
+                     f"{c.sensitivity_block}_block_chi2": s.chi2 if s else np.nan,
+                     f"{c.sensitivity_block}_block_p": s.p if s else np.nan,
+                     f"{c.sensitivity_block}_block_w": s.kendall_w if s else np.nan})
+    return pd.DataFrame(rows)
+
+
+def write_tables(a: Analysis, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    friedman_table(a).to_csv(out / "friedman.csv", index=False)
+    pd.concat([c.summary.assign(criterion=k) for k, c in a.criteria.items()])[
+        ["criterion"] + list(next(iter(a.criteria.values())).summary.columns)].to_csv(out / "conditions.csv", index=False)
+    methods = sorted({m for c in a.criteria.values() for m in c.posthoc})
+    for m in methods:
+        t = pd.concat([c.posthoc[m].assign(criterion=k) for k, c in a.criteria.items() if m in c.posthoc])
+        t[["criterion"] + [x for x in t.columns if x != "criterion"]].to_csv(out / f"posthoc_{m}.csv", index=False)
+    bt = pd.concat([c.bradley_terry.assign(criterion=k) for k, c in a.criteria.items()])
+    bt[["criterion"] + [x for x in bt.columns if x != "criterion"]].to_csv(out / "bradley_terry.csv", index=False)
+    a.exclusions.to_csv(out / "exclusions.csv", index=False)
+    for g, t in a.groups.items():
+        t.to_csv(out / f"by_{_safe(g)}.csv", index=False)
+    if a.questionnaire_items is not None:
+        a.questionnaire_items.to_csv(out / "questionnaire_items.csv", index=False)
+        a.questionnaire_reliability.to_csv(out / "questionnaire_reliability.csv", index=False)
+
+
+def _safe(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name)
+
+
+# --- figures ---------------------------------------------------------------------------------------
+
+
+def display_order(a: Analysis) -> list[str]:
+    """Conditions best first, by their mean rank averaged over the criteria (same order in every figure)."""
+    avg = np.mean([c.friedman.mean_rank for c in a.criteria.values()], axis=0)
+    return [a.conditions[i] for i in np.argsort(avg, kind="stable")]
+
+
+def write_figures(a: Analysis, out: Path) -> None:
+    order = display_order(a)
+    summaries = {k: c.summary for k, c in a.criteria.items()}
+    figures.save(figures.rank_share_figure(summaries, order), out, "rank_shares")
+    cd_input = {k: (dict(zip(a.conditions, c.friedman.mean_rank)), c.critical_difference)
+                for k, c in a.criteria.items()}
+    figures.save(figures.cd_diagram(cd_input, alpha=a.alpha, order=order), out, "critical_difference")
+    figures.save(figures.mean_rank_figure(summaries, order, ci=a.ci), out, "mean_ranks")
+    figures.save(figures.bt_figure({k: c.bradley_terry for k, c in a.criteria.items()}, order, ci=a.ci), out,
+                 "bradley_terry")
+
+
+# --- the report text -------------------------------------------------------------------------------
+
+
+def fmt_p(p: float, *, adjusted: bool = False) -> str:
+    """APA style: ``p < .001`` or ``p = .023`` (``p_adj`` when adjusted).
+
+    >>> fmt_p(0.0004), fmt_p(0.02349), fmt_p(0.5)
+    ('p < .001', 'p = .023', 'p = .500')
+    """
+    name = "p_adj" if adjusted else "p"
+    if p is None or not np.isfinite(p):
+        return f"{name} = n/a"
+    if p < 0.001:
+        return f"{name} < .001"
+    return f"{name} = {p:.3f}".replace("0.", ".", 1)
+
+
+def _p_cell(p: float) -> str:
+    """A p value for a table cell: ``< .001`` or ``.023``."""
+    return fmt_p(p).split(" ", 1)[1].lstrip("= ")
+
+
+def _num(v: float, digits: int = 2) -> str:
+    return f"{v:.{digits}f}"
+
+
+def _alpha(x: float) -> str:
+    return f"{x:g}".replace("0.", ".", 1)
+
+
+def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
+    """The results-section text of one criterion."""
+    fr = c.friedman
+    k = fr.k
+    n_part = int(np.unique(c.blocks.participants).size)
+    s = c.summary.set_index("condition")
+    order = sorted(a.conditions, key=lambda x: s.loc[x, "mean_rank"])
+    ci = f"{a.ci:.0%}"
+    ranks = ", ".join(f"{x} {_num(s.loc[x, 'mean_rank'])} ({ci} CI {_num(s.loc[x, 'ci_low'])}–"
+                      f"{_num(s.loc[x, 'ci_high'])}; ranked first in {s.loc[x, 'share_rank_1']:.0%})" for x in order)
+    blocks = (f"{fr.n_blocks} trials (blocks) from {n_part} participants" if a.block == "trial"
+              else f"{fr.n_blocks} participants (blocks: mean rank per participant)")
+    sig = fr.p < a.alpha
+    verdict = "showed a significant difference between" if sig else "did not show a significant difference between"
+    text = [f"**{c.criterion.capitalize()}.** Mean ranks (1 = best) were {ranks}. A Friedman test over {blocks} "
+            f"{verdict} the {k} conditions, χ²({fr.df}) = {_num(fr.chi2)}, {fmt_p(fr.p)}, Kendall's W = "
+            f"{_num(fr.kendall_w)} (Iman–Davenport F({fr.iman_davenport_df1}, {fr.iman_davenport_df2}) = "
+            f"{_num(fr.iman_davenport_f)}, {fmt_p(fr.iman_davenport_p)})."]
+    if c.sensitivity is not None:
+        sv = c.sensitivity
+        agree = (sv.p < a.alpha) == sig
+        what = ("participants as blocks (each participant's mean rank per condition)" if c.sensitivity_block ==
+                "participant" else "single trials as blocks")
+        text[0] += (f" With {what} the test {'agreed' if agree else 'disagreed'}: χ²({sv.df}) = {_num(sv.chi2)}, "
+                    f"{fmt_p(sv.p)}, W = {_num(sv.kendall_w)}, n = {sv.n_blocks}.")
+    nem = c.posthoc["nemenyi"]
+    parts = []
+    for r in nem.itertuples():
+        better, worse = (r.a, r.b) if r.mean_rank_a < r.mean_rank_b else (r.b, r.a)
+        if r.significant:
+            parts.append(f"{better} was ranked better than {worse} (difference {_num(r.difference)}, "
+                         f"{fmt_p(r.p_adjusted, adjusted=True)})")
+        else:
+            parts.append(f"{better} and {worse} were not separated (difference {_num(r.difference)}, "
+                         f"{fmt_p(r.p_adjusted, adjusted=True)})")
+    lead = "Nemenyi post-hoc tests" if sig else "For completeness only (the omnibus test was not significant), Nemenyi tests"
+    post = (f"{lead} (critical difference CD = {_num(c.critical_difference)} at α = {_alpha(a.alpha)}) found: "
+            + "; ".join(parts) + ".")
+    wil = c.posthoc["wilcoxon_holm"]
+    wparts = [f"{r.a} vs {r.b}: V = {r.statistic:.0f}, r_rb = {_num(r.rank_biserial)}, "
+              f"{fmt_p(r.p_adjusted, adjusted=True)}" for r in wil.itertuples()]
+    same = all((w < a.alpha) == bool(n) for w, n in zip(wil["p_adjusted"], nem["significant"]))
+    methods = sorted(set(wil["method"]))
+    post += (f" Pairwise Wilcoxon signed-rank tests with Holm correction ({', '.join(methods)}) "
+             f"{'led to the same conclusions' if same else 'differed from the Nemenyi tests'}: " + "; ".join(wparts) + ".")
+    if "conover" in c.posthoc:
+        con = c.posthoc["conover"]
+        post += (" Conover's post-hoc tests (t distribution, Holm): "
+                 + "; ".join(f"{r.a} vs {r.b}: t({r.df}) = {_num(r.statistic)}, {fmt_p(r.p_adjusted, adjusted=True)}"
+                             for r in con.itertuples()) + ".")
+    text.append(post)
+    bt = c.bradley_terry.set_index("condition")
+    text.append("Bradley–Terry strengths from the pairwise preferences implied by the rankings: " + ", ".join(
+        f"{x} {_num(bt.loc[x, 'strength'])} ({ci} CI {_num(bt.loc[x, 'ci_low'])}–{_num(bt.loc[x, 'ci_high'])})"
+        for x in order) + ".")
+    return text
+
+
+def methods_paragraph(a: Analysis) -> str:
+    k = len(a.conditions)
+    excl = ("No participant was excluded." if a.exclusions.empty else
+            f"{len(a.exclusions)} participant(s) were excluded: " +
+            "; ".join(f"{r.participant} ({r.reason})" for r in a.exclusions.itertuples()) + ".")
+    block = ("each trial (one participant ranking the conditions for one stimulus) as a block"
+             if a.block == "trial" else
+             "each participant as a block, using the participant's mean rank per condition over their trials")
+    sens = ("As a sensitivity check the test was repeated with participants as blocks (mean rank per "
+            "participant and condition, re-ranked within participant)." if a.block == "trial" else
+            "As a sensitivity check the test was repeated with single trials as blocks.")
+    incomplete = ("Every analysed trial ranked every condition (incomplete trials would have stopped the analysis)."
+                  if a.incomplete == "error" else
+                  f"Trials that did not rank every condition were removed (listwise deletion; "
+                  f"{a.dropped_incomplete} trial-criterion block(s) removed); no Skillings–Mack test was used.")
+    return (
+        f"Practice trials and attention-check (catch) trials were not analysed. {excl} The analysis covers "
+        f"{a.n_participants} participants and {a.n_trials} trials. For each criterion, the {k} conditions were "
+        f"compared with a Friedman test with {block}; tied ranks received average ranks and the statistic was "
+        f"corrected for ties. Effect size is Kendall's W = χ²/(n(k−1)); the Iman–Davenport statistic "
+        f"F = (n−1)χ²/(n(k−1)−χ²) with ({k - 1}, ({k - 1})(n−1)) degrees of freedom is also reported. {sens} "
+        f"Post-hoc, mean ranks were compared with the Nemenyi single-step test (studentized range with infinite "
+        f"degrees of freedom; critical difference CD = q_α/√2 · √(k(k+1)/(6n)), q_α/√2 = "
+        f"{nemenyi_q_alpha(k, a.alpha):.3f} for k = {k} at α = {_alpha(a.alpha)}), and with two-sided Wilcoxon "
+        f"signed-rank tests on the paired block values, Holm-adjusted over the {k * (k - 1) // 2} pairs; zero "
+        f"differences were discarded (Wilcoxon's method), the exact null distribution was used when at most "
+        f"{WILCOXON_EXACT_MAX_N} non-zero differences without ties remained, otherwise the normal approximation "
+        f"with tie and continuity correction. Effect size of a pair is the matched-pairs rank-biserial correlation "
+        f"r_rb (positive: the first condition received larger, i.e. worse, ranks). Mean ranks come with "
+        f"{a.ci:.0%} percentile bootstrap intervals ({a.n_boot} resamples of participants, seed {a.seed}), which "
+        f"keeps each participant's trials together. Bradley–Terry strengths were fitted by maximum likelihood "
+        f"(MM algorithm) to the pairwise wins implied by each ranking (ties: half a win each), with "
+        f"{a.n_boot // 2} participant bootstrap resamples. {incomplete} Computed with results_analysis "
+        f"(scipy {scipy.__version__}).")
+
+
+def build_document(a: Analysis, title: str) -> Document:
+    doc = Document(title)
+    if a.warnings:
+        doc.h(1, "Warnings")
+        doc.items(a.warnings)
+    doc.h(1, "Method")
+    doc.p(methods_paragraph(a))
+    doc.h(1, "Results")
+    for c in a.criteria.values():
+        for para in criterion_paragraphs(a, c):
+            doc.p(para)
+    ft = friedman_table(a)
+    show = ft[["criterion", "n_blocks", "chi2", "df", "p", "kendall_w", "iman_davenport_f", "iman_davenport_p",
+               "critical_difference"]].rename(columns={"n_blocks": "n", "chi2": "χ²", "kendall_w": "W",
+                                                       "iman_davenport_f": "F_ID", "iman_davenport_p": "p (F_ID)",
+                                                       "critical_difference": "CD"})
+    show["p"] = [_p_cell(p) for p in show["p"]]
+    show["p (F_ID)"] = [_p_cell(p) for p in show["p (F_ID)"]]
+    doc.table(show, f"Table 1. Friedman tests per criterion (blocks: {a.block}s).")
+    rows = []
+    for crit, c in a.criteria.items():
+        for r in c.summary.itertuples():
+            rows.append({"criterion": crit, "condition": r.condition, "n": r.n, "mean rank": r.mean_rank,
+                         f"{a.ci:.0%} CI": f"{r.ci_low:.2f}–{r.ci_high:.2f}", "median": f"{r.median_rank:g}",
+                         **{f"rank {i}": f"{getattr(r, f'share_rank_{i}'):.0%}" for i in range(1, len(a.conditions) + 1)}})
+    doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
+              "interval, median, and share of answers at each rank.")
+    prow = []
+    for crit, c in a.criteria.items():
+        nem = c.posthoc["nemenyi"].set_index(["a", "b"])
+        wil = c.posthoc["wilcoxon_holm"].set_index(["a", "b"])
+        for (x, y) in nem.index:
+            prow.append({"criterion": crit, "pair": f"{x} – {y}", "Δ mean rank": nem.loc[(x, y), "difference"],
+                         "Nemenyi p_adj": nem.loc[(x, y), "p_adjusted"], "Wilcoxon V": wil.loc[(x, y), "statistic"],
+                         "r_rb": wil.loc[(x, y), "rank_biserial"], "Wilcoxon p_adj (Holm)": wil.loc[(x, y), "p_adjusted"],
+                         "method": wil.loc[(x, y), "method"]})
+    ptab = pd.DataFrame(prow)
+    for col in ("Nemenyi p_adj", "Wilcoxon p_adj (Holm)"):
+        ptab[col] = [_p_cell(p) for p in ptab[col]]
+    doc.table(ptab, "Table 3. Post-hoc comparisons (Δ: difference of mean ranks; r_rb: matched-pairs rank-biserial "
+              "correlation of the Wilcoxon test).")
+    doc.figure("rank_shares", "Figure 1. Share of answers at each rank, per condition and criterion.")
+    doc.figure("critical_difference", f"Figure 2. Critical-difference diagrams (Nemenyi, α = {_alpha(a.alpha)}): "
+               "conditions joined by a bar are not significantly different.")
+    doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")
+    doc.figure("bradley_terry", f"Figure 4. Bradley–Terry strengths with {a.ci:.0%} participant-bootstrap interval.")
+    if a.groups:
+        doc.h(1, "Breakdowns")
+        for g, t in a.groups.items():
+            cols = ["level", "criterion", "n_blocks", "n_participants", "chi2", "p", "kendall_w"] + \
+                   [f"mean_rank_{x}" for x in a.conditions]
+            show = t[cols].rename(columns={f"mean_rank_{x}": f"mean rank {x}" for x in a.conditions})
+            doc.table(show, f"Friedman test per level of '{g}' (blocks: {a.block}s).")
+    if a.questionnaire_reliability is not None:
+        doc.h(1, "Questionnaire")
+        rel = a.questionnaire_reliability
+        doc.p("Internal consistency per scale (Cronbach's α; participants who answered every item of the scale; "
+              "α ≥ 0.7 is conventionally taken as acceptable): " + "; ".join(
+                  f"{r.scale}: α = {_num(r.alpha)} ({r.n_items} items, {r.n_participants} participants)"
+                  for r in rel.itertuples()) + ".")
+        doc.table(a.questionnaire_items, "Questionnaire items.")
+    doc.h(1, "Exclusions")
+    if a.exclusions.empty:
+        doc.p("No participant was excluded. Practice trials and attention-check trials are never analysed.")
+    else:
+        doc.table(a.exclusions, "Excluded participants and why. Practice and attention-check trials are never analysed.")
+    if len(a.attention):
+        doc.table(a.attention, "Attention checks per participant (before exclusions).")
+    return doc

@@ -1,0 +1,88 @@
+"""Build the tidy results frame straight from a studyapp results database (schema version 1).
+
+Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
+(JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
+exactly the columns of ``studyapp export``.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+from pathlib import Path
+
+import pandas as pd
+
+from results_analysis.errors import AnalysisInputError
+
+_NEEDED = {"responses": {"participant", "trial_index", "criterion", "condition", "rank"},
+           "trials": {"participant", "trial_index", "stimulus"}}
+
+_QUERY = """
+SELECT r.rowid AS _rowid, r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition,
+       r.slot, r.rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
+       r.design_hash, r.app_version
+FROM responses r JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
+ORDER BY r.participant, r.trial_index, r.criterion, r.slot
+"""
+
+
+def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:
+    """The tidy frame (one row per participant x trial x criterion x condition) of an open database."""
+    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type IN ('table','view')")}
+    for table, cols in _NEEDED.items():
+        if table not in tables:
+            raise AnalysisInputError(path, f"table {table}", "missing: not a studyapp results database")
+        have = {r[1] for r in con.execute(f"PRAGMA table_info({table})")}
+        if cols - have:
+            raise AnalysisInputError(path, f"table {table}", f"missing column(s) {', '.join(sorted(cols - have))}")
+    df = pd.read_sql_query(_QUERY, con)
+    df["_where"] = [f"responses row {r} (participant {p}, trial {t}, criterion {c})"
+                    for r, p, t, c in zip(df["_rowid"], df["participant"], df["trial_index"], df["criterion"])]
+    df = df.drop(columns=["_rowid"])
+    # A trial that is not an attention check has attention_passed NULL: nothing to fail.
+    df["attention_passed"] = df["attention_passed"].fillna(1).astype(int).astype(bool)
+    df["is_practice"] = df["is_practice"].astype(int).astype(bool)
+    df["is_attention_check"] = df["is_attention_check"].astype(int).astype(bool)
+    if "stimuli" in tables:
+        tags = _json_columns(con, "SELECT id, tags FROM stimuli", path, "stimuli.tags")
+        df = _spread(df, "stimulus", tags)
+    if "participants" in tables:
+        groups = _json_columns(con, "SELECT id, groups FROM participants", path, "participants.groups")
+        df = _spread(df, "participant", groups)
+    return df
+
+
+def questionnaire_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:
+    """Questionnaire answers (participant, item, scale, value). The database stores no scales: an item
+    named ``scale.item`` or ``scale:item`` belongs to ``scale``, any other item to the scale ``questionnaire``."""
+    rows = pd.read_sql_query("SELECT rowid AS _rowid, participant, item, value FROM questionnaire", con)
+    rows["_where"] = [f"questionnaire row {r}" for r in rows.pop("_rowid")]
+    rows["scale"] = [_scale_of(i) for i in rows["item"]]
+    return rows
+
+
+def _scale_of(item: str) -> str:
+    for sep in (".", ":"):
+        if sep in item:
+            return item.split(sep, 1)[0]
+    return "questionnaire"
+
+
+def _json_columns(con: sqlite3.Connection, query: str, path, where: str) -> dict[str, dict[str, str]]:
+    out = {}
+    for key, text in con.execute(query):
+        try:
+            value = json.loads(text or "{}")
+        except json.JSONDecodeError as exc:
+            raise AnalysisInputError(path, f"{where} of {key}", f"not valid JSON ({exc})") from exc
+        out[str(key)] = {str(k): str(v) for k, v in (value or {}).items()}
+    return out
+
+
+def _spread(df: pd.DataFrame, key: str, mapping: dict[str, dict[str, str]]) -> pd.DataFrame:
+    names = sorted({k for d in mapping.values() for k in d})
+    for name in names:
+        if name in df.columns:
+            continue  # never shadow a core column with a tag of the same name
+        df[name] = df[key].map(lambda v, n=name: mapping.get(str(v), {}).get(n))
+    return df

@@ -1,0 +1,108 @@
+"""Checks of a tidy results frame before any statistic is computed.
+
+Errors name the file, the row(s) and the column; a frame mixing study designs only warns, naming the
+design hashes, because merging the runs of one study that changed its design slightly can be intended.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from results_analysis.errors import AnalysisInputError
+from results_analysis.loader import REQUIRED_COLUMNS
+
+
+class MixedDesignWarning(UserWarning):
+    """The results come from more than one study design (different design hashes)."""
+
+
+def trial_key(df: pd.DataFrame) -> list[str]:
+    """Columns that identify one trial: participant and trial_index (the results database's key; a resumed
+    session continues the participant's trial numbering, so the session is not needed)."""
+    return ["participant", "trial_index"]
+
+
+def validate_results(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFrame:
+    """Check a tidy results frame; return it, without incomplete trials when ``incomplete='drop'``.
+
+    Raises :class:`AnalysisInputError` for missing columns, duplicated rows (the same trial, criterion
+    and condition twice), ranks outside 1..k and, unless ``incomplete='drop'`` (listwise deletion), for a
+    trial that does not rank every condition on a criterion. Warns with :class:`MixedDesignWarning` when
+    the design hashes differ.
+
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"participant": "P1", "trial_index": 0, "stimulus": "c1", "criterion": "realism",
+    ...                    "condition": ["A", "B", "C"], "rank": [1, 2, 5]})
+    >>> validate_results(df)
+    Traceback (most recent call last):
+    ...
+    results_analysis.errors.AnalysisInputError: <data frame>: row 3, column 'rank': rank 5 is outside 1..3 (3 conditions)
+    """
+    if incomplete not in ("error", "drop"):
+        raise ValueError("incomplete must be 'error' or 'drop'")
+    src = df.attrs.get("source")
+    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
+    if missing:
+        raise AnalysisInputError(src, f"column(s) {', '.join(missing)}", "missing required column(s)")
+    where = df["_where"] if "_where" in df.columns else pd.Series([f"row {i + 1}" for i in range(len(df))],
+                                                                   index=df.index)
+    if df.empty:
+        raise AnalysisInputError(src, None, "no rows")
+    rank = pd.to_numeric(df["rank"], errors="coerce")
+    if rank.isna().any():
+        i = int(np.argmax(rank.isna().to_numpy()))
+        raise AnalysisInputError(src, f"{where.iloc[i]}, column 'rank'", "missing or non-numeric rank")
+
+    key = trial_key(df)
+    dup = df.duplicated(key + ["criterion", "condition"], keep=False)
+    if dup.any():
+        first = df.loc[dup].iloc[0]
+        same = dup & (df["participant"] == first["participant"]) & (df["trial_index"] == first["trial_index"]) \
+            & (df["criterion"] == first["criterion"]) & (df["condition"] == first["condition"])
+        rows = " and ".join(where[same].tolist()[:3])
+        raise AnalysisInputError(src, rows, f"duplicated answer: participant {first['participant']}, trial "
+                                 f"{_fmt(first['trial_index'])}, criterion {first['criterion']}, condition "
+                                 f"{first['condition']} appears more than once")
+
+    conditions = sorted(df["condition"].unique())
+    k = len(conditions)
+    bad = (rank < 1) | (rank > k)
+    if bad.any():
+        i = int(np.argmax(bad.to_numpy()))
+        raise AnalysisInputError(src, f"{where.iloc[i]}, column 'rank'",
+                                 f"rank {_fmt(rank.iloc[i])} is outside 1..{k} ({k} conditions)")
+
+    counts = df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
+    short = counts < k
+    if short.any():
+        if incomplete == "drop":
+            n_dropped = int(df.loc[short, key + ["criterion"]].drop_duplicates().shape[0])
+            attrs = dict(df.attrs)
+            df = df.loc[~short].copy()
+            df.attrs.update(attrs)
+            df.attrs["dropped_incomplete"] = n_dropped
+        else:
+            i = int(np.argmax(short.to_numpy()))
+            row = df.iloc[i]
+            have = set(df.loc[(df[key + ["criterion"]] == row[key + ["criterion"]]).all(axis=1), "condition"])
+            lacks = ", ".join(sorted(set(conditions) - have))
+            raise AnalysisInputError(src, f"{where.iloc[i]} (participant {row['participant']}, trial "
+                                     f"{_fmt(row['trial_index'])}, criterion {row['criterion']})",
+                                     f"the trial does not rank every condition: {lacks} missing "
+                                     "(use incomplete='drop' / --incomplete drop for listwise deletion)")
+
+    if "design_hash" in df.columns:
+        hashes = sorted(h for h in df["design_hash"].dropna().unique())
+        if len(hashes) > 1:
+            per = df.groupby("design_hash")["participant"].nunique()
+            detail = ", ".join(f"{h} ({per[h]} participant{'s' if per[h] != 1 else ''})" for h in hashes)
+            warnings.warn(f"{src or '<data frame>'}: column 'design_hash': results mix {len(hashes)} study "
+                          f"designs: {detail}", MixedDesignWarning, stacklevel=2)
+    return df
+
+
+def _fmt(v) -> str:
+    f = float(v)
+    return str(int(f)) if f.is_integer() else f"{f:g}"

@@ -1,0 +1,279 @@
+"""Motion stored as numpy arrays (model outputs) and studyapp's own NPZ motion format.
+
+Gesture models write per-frame joint rotations as arrays: CaMN Euler angles, DiffSHEG axis-angle,
+FaceCapGes 6D, often flattened to ``(F, J*k)`` and without any skeleton. :func:`load_rotation_array`
+puts such an array onto a template skeleton; :func:`save_motion_npz` / :func:`load_motion_npz` keep a
+whole motion (skeleton included) in one NPZ.
+
+>>> import numpy as np, tempfile, os
+>>> from studyapp.motion.beat import beat_skeleton
+>>> path = os.path.join(tempfile.mkdtemp(), "out.npy")
+>>> np.save(path, np.zeros((30, 47 * 3)))            # DiffSHEG-like: 47 joints, axis-angle
+>>> m = load_rotation_array(path, beat_skeleton(), "axis_angle", fps=15)
+>>> m.rotations.shape, m.fps
+((30, 75, 4), 15.0)
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from studyapp.errors import InputError
+from studyapp.motion.fk import joint_positions
+from studyapp.motion.rotations import representation_width, to_quat
+from studyapp.motion.skeleton import Motion, Skeleton
+
+__all__ = ["load_rotation_array", "save_motion_npz", "load_motion_npz", "read_array", "is_motion_npz"]
+
+# keys tried, in order, when an NPZ holds several arrays and no key is given
+_ROTATION_KEYS = ("rotations", "rotation", "poses", "pose", "motion", "body_pose", "data", "arr_0")
+_ROOT_KEYS = ("root", "root_translation", "trans", "translation", "transl")
+
+
+def _template_motion(template: Motion | Skeleton | str | Path) -> Motion:
+    if isinstance(template, Motion):
+        return template
+    if isinstance(template, Skeleton):
+        return Motion.rest(template)
+    name = str(template)
+    if name.lower() == "beat":
+        from studyapp.motion.beat import beat_skeleton
+
+        return Motion.rest(beat_skeleton())
+    from studyapp.motion.io import load_motion
+
+    return load_motion(name)
+
+
+def read_array(path: str | Path, key: str | None = None) -> tuple[np.ndarray, str]:
+    """The rotation array of an ``.npy`` / ``.npz`` file and the place it came from (for messages)."""
+    path = str(path)
+    try:
+        loaded = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise InputError(path, None, "file not found") from None
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(path, None, f"not a readable NumPy .npy/.npz file ({exc})") from None
+    if isinstance(loaded, np.ndarray):
+        if key is not None:
+            raise InputError(path, f"key {key}", "an .npy file holds a single array; drop the key")
+        return loaded, "array"
+    with loaded:
+        keys = list(loaded.keys())
+        if key is None:
+            if len(keys) == 1:
+                key = keys[0]
+            else:
+                key = next((k for k in _ROTATION_KEYS if k in keys), None)
+                if key is None:
+                    raise InputError(path, "keys", f"several arrays ({', '.join(keys)}); say which holds the rotations")
+        if key not in keys:
+            raise InputError(path, f"key {key}", f"no such array; the file has: {', '.join(keys) or 'nothing'}")
+        return loaded[key], f"key {key}"
+
+
+def _default_joints(skeleton: Skeleton, n: int | None) -> tuple[str, ...]:
+    from studyapp.motion.beat import BEAT_UPPER_BODY
+
+    beat_like = set(BEAT_UPPER_BODY) <= set(skeleton.names)
+    if beat_like and n == len(BEAT_UPPER_BODY) and n != skeleton.n_joints:
+        return BEAT_UPPER_BODY
+    return skeleton.names
+
+
+def load_rotation_array(
+    path: str | Path,
+    template: Motion | Skeleton | str,
+    representation: str,
+    fps: float,
+    joints: list[str] | None = None,
+    order: str | None = None,
+    key: str | None = None,
+    root_key: str | None = None,
+    degrees: bool = True,
+) -> Motion:
+    """Put an array of per-frame joint rotations onto ``template``'s skeleton.
+
+    Parameters
+    ----------
+    path:
+        ``.npy`` or ``.npz`` with ``(F, J, k)`` or flattened ``(F, J*k)`` values (leading singleton
+        batch dimensions are dropped); ``k`` is 3 for ``"euler"`` / ``"axis_angle"``, 4 for
+        ``"quat"`` / ``"quat_wxyz"``, 6 for ``"sixd"``, 9 (or ``3x3``) for ``"matrix"``.
+    template:
+        A :class:`Motion` (its first frame poses the joints the array does not drive), a
+        :class:`Skeleton` (rest pose), a motion file path, or ``"beat"``.
+    representation:
+        See :func:`studyapp.motion.rotations.to_quat`.
+    fps:
+        Frame rate of the array (arrays carry none).
+    joints:
+        Template joint names the array's joints map to, in column order. Default: all template
+        joints, or :data:`~studyapp.motion.beat.BEAT_UPPER_BODY` when the array has 47 joints and the
+        template is BEAT-like.
+    order:
+        Euler order (``"XYZ"``) for ``"euler"``; default: each joint's order in the template's BVH layout.
+    key, root_key:
+        NPZ array names for the rotations and an optional ``(F, 3)`` root translation.
+    degrees:
+        Euler angles in degrees (default) or radians.
+    """
+    path = str(path)
+    width = representation_width(representation)
+    base = _template_motion(template)
+    sk = base.skeleton
+    data, where = read_array(path, key)
+    data = np.asarray(data)
+    if not np.issubdtype(data.dtype, np.number):
+        raise InputError(path, where, f"array has dtype {data.dtype}; expected numbers")
+    data = data.astype(np.float64)
+    while data.ndim > 2 and data.shape[0] == 1 and not (representation == "matrix" and data.ndim == 4):
+        data = data[0]
+    if data.ndim < 2:
+        raise InputError(path, where, f"array has shape {data.shape}; expected (frames, joints, {width}) or (frames, joints*{width})")
+    n_frames = data.shape[0]
+    if representation == "matrix" and data.ndim == 4:
+        if data.shape[2:] != (3, 3):
+            raise InputError(path, where, f"matrix array has shape {data.shape}; expected (frames, joints, 3, 3)")
+        data = data.reshape(n_frames, data.shape[1], 9)
+    if data.ndim == 3:
+        if data.shape[2] != width:
+            raise InputError(
+                path, where,
+                f"array has shape {data.shape}: {data.shape[2]} numbers per joint, but {representation} needs {width}",
+            )
+        n_j = data.shape[1]
+    elif data.ndim == 2:
+        if data.shape[1] % width:
+            raise InputError(
+                path, where,
+                f"array has {data.shape[1]} columns, not a multiple of {width} ({representation} numbers per joint)",
+            )
+        n_j = data.shape[1] // width
+        data = data.reshape(n_frames, n_j, width)
+    else:
+        raise InputError(path, where, f"array has shape {data.shape}; expected (frames, joints, {width}) or (frames, joints*{width})")
+    if n_frames == 0:
+        raise InputError(path, where, "array has no frames")
+    if not np.isfinite(data).all():
+        bad = np.argwhere(~np.isfinite(data))[0]
+        raise InputError(path, where, f"non-finite value at frame {bad[0]}, joint {bad[1]}")
+
+    names = tuple(joints) if joints is not None else _default_joints(sk, n_j)
+    if len(names) != n_j:
+        raise InputError(
+            path, where,
+            f"array has {n_j} joints ({data.shape[1] * width if data.ndim == 3 else ''} values per frame) but "
+            f"{len(names)} joint names are mapped ({'given' if joints is not None else 'template'}); "
+            f"pass the joint list the columns follow",
+        )
+    missing = [n for n in names if n not in sk.names]
+    if missing:
+        raise InputError(path, "joints", f"joints not in the template skeleton: {', '.join(missing)}")
+    idx = np.array([sk.index(n) for n in names])
+
+    try:
+        if representation == "euler":
+            if order is not None:
+                quats = to_quat(data, "euler", order=order, degrees=degrees)
+            else:
+                quats = np.empty((n_frames, n_j, 4))
+                for c, j in enumerate(idx):
+                    o = sk.rotation_order(int(j))
+                    if o is None or len(o) != 3:
+                        raise InputError(path, "order", f"joint {sk.names[j]!r} has no 3-axis rotation order in the template; pass order")
+                    quats[:, c] = to_quat(data[:, c], "euler", order=o, degrees=degrees)
+        else:
+            quats = to_quat(data, representation)
+    except ValueError as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(path, where, f"cannot read as {representation}: {exc}") from None
+
+    first = 0 if base.n_frames else None
+    rot = np.broadcast_to(base.rotations[first] if first is not None else sk.rest_rotations, (n_frames, sk.n_joints, 4)).copy()
+    trans = np.broadcast_to(base.translations[first] if first is not None else sk.offsets, (n_frames, sk.n_joints, 3)).copy()
+    rot[:, idx] = quats
+    if root_key is not None:
+        root, rwhere = read_array(path, root_key)
+        root = np.asarray(root, dtype=np.float64).reshape(-1, 3) if np.asarray(root).size == n_frames * 3 else None
+        if root is None:
+            raise InputError(path, f"key {root_key}", f"root translation must be ({n_frames}, 3)")
+        roots = np.flatnonzero(sk.parents < 0)
+        trans[:, roots[0]] = root
+    return Motion(sk, float(fps), rot, trans, source=path)
+
+
+def save_motion_npz(motion: Motion, path: str | Path) -> None:
+    """Write ``motion`` to an NPZ that other tools can read without studyapp.
+
+    Arrays: ``rotations`` ``(F, J, 4)`` local quaternions in ``quaternion_order`` ``'xyzw'``,
+    ``translations`` ``(F, J, 3)`` local, ``positions`` ``(F, J, 3)`` world joint positions, ``joints``
+    (names), ``parents``, ``offsets``, ``rest_rotations``, ``fps``, ``unit_scale`` (NaN if unknown) and
+    ``channels`` (the BVH channel layout, one space-separated string per joint).
+    """
+    sk = motion.skeleton
+    np.savez_compressed(
+        str(path),
+        rotations=motion.rotations,
+        translations=motion.translations,
+        positions=joint_positions(motion),
+        joints=np.array(sk.names, dtype=str),
+        parents=sk.parents,
+        offsets=sk.offsets,
+        rest_rotations=sk.rest_rotations,
+        fps=np.float64(motion.fps),
+        unit_scale=np.float64(np.nan if sk.unit_scale is None else sk.unit_scale),
+        channels=np.array([" ".join(c) for c in sk.channels], dtype=str),
+        quaternion_order=np.array("xyzw"),
+    )
+
+
+def is_motion_npz(path: str | Path) -> bool:
+    """Whether ``path`` is an NPZ written by :func:`save_motion_npz` (has skeleton and rotations)."""
+    try:
+        with np.load(str(path), allow_pickle=False) as z:
+            return isinstance(z, np.lib.npyio.NpzFile) and {"rotations", "joints", "parents", "offsets"} <= set(z.keys())
+    except (ValueError, OSError, EOFError, AttributeError):
+        return False
+
+
+def load_motion_npz(path: str | Path, fps: float | None = None) -> Motion:
+    """Read an NPZ written by :func:`save_motion_npz` back into a :class:`Motion`."""
+    path = str(path)
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(path, None, f"not a readable NPZ file ({exc})") from None
+    with z:
+        keys = set(z.keys())
+        need = {"rotations", "joints", "parents", "offsets"}
+        if not need <= keys:
+            raise InputError(path, "keys", f"not a studyapp motion NPZ: missing {', '.join(sorted(need - keys))}")
+        order = str(z["quaternion_order"]) if "quaternion_order" in keys else "xyzw"
+        rot = np.asarray(z["rotations"], dtype=np.float64)
+        if order == "wxyz":
+            rot = rot[..., [1, 2, 3, 0]]
+        elif order != "xyzw":
+            raise InputError(path, "key quaternion_order", f"unknown quaternion order {order!r}; expected 'xyzw' or 'wxyz'")
+        names = tuple(str(n) for n in z["joints"])
+        chans = tuple(tuple(str(c).split()) for c in z["channels"]) if "channels" in keys else ()
+        unit = float(z["unit_scale"]) if "unit_scale" in keys else float("nan")
+        try:
+            sk = Skeleton(
+                names, z["parents"], z["offsets"], chans, {}, None if np.isnan(unit) else unit,
+                z["rest_rotations"] if "rest_rotations" in keys else None,
+            )
+        except ValueError as exc:
+            raise InputError(path, "key joints", f"invalid skeleton: {exc}") from None
+        trans = np.asarray(z["translations"], dtype=np.float64) if "translations" in keys else np.broadcast_to(
+            sk.offsets, rot.shape[:2] + (3,)).copy()
+        if fps is None:
+            if "fps" not in keys:
+                raise InputError(path, "key fps", "the file stores no frame rate; pass fps")
+            fps = float(z["fps"])
+    try:
+        return Motion(sk, fps, rot, trans, source=path)
+    except ValueError as exc:
+        raise InputError(path, "key rotations", str(exc)) from None

@@ -1,0 +1,158 @@
+"""``studyapp inspect`` and ``studyapp convert``.
+
+inspect PATH [--fps F] [--json]
+    Summary of a motion (BVH / NPZ / NPY), a face file (JSON / CSV) or a WAV.
+convert IN OUT [--fps F] [--in-fps F] [--order XYZ] [--template T] [--representation R] ...
+    BVH -> BVH (new rotation order and/or frame rate), NPZ/NPY rotation arrays -> BVH or NPZ (needs
+    ``--template``), BVH -> NPZ (studyapp motion NPZ with world joint positions).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from studyapp.errors import InputError
+
+_FACE_EXT = (".json", ".csv")
+_AUDIO_EXT = (".wav",)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "inspect",
+        help="summarize a motion, face or audio file",
+        description="Print what studyapp reads from a BVH/NPZ/NPY motion, a face JSON/CSV or a WAV file.",
+    )
+    p.add_argument("path", help="file to inspect")
+    p.add_argument("--fps", type=float, default=None, help="true frame rate (overrides a BVH header's Frame Time)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.set_defaults(func=cmd_inspect)
+
+    c = subparsers.add_parser(
+        "convert",
+        help="convert motion between BVH and NPZ/NPY, rotation orders and frame rates",
+        description=(
+            "Convert a motion file. BVH -> BVH (--order, --fps), rotation arrays (.npz/.npy) -> BVH or NPZ "
+            "(--template, --representation, --in-fps), BVH -> NPZ."
+        ),
+    )
+    c.add_argument("input", help="source file (.bvh, .npz, .npy)")
+    c.add_argument("output", help="destination file (.bvh or .npz)")
+    c.add_argument("--fps", type=float, default=None, help="frame rate of the output (the motion is resampled)")
+    c.add_argument(
+        "--in-fps", type=float, default=None,
+        help="true frame rate of the input (overrides a BVH header; for arrays defaults to --fps)",
+    )
+    c.add_argument("--order", default=None, help="rotation order of every joint in an output BVH, e.g. ZXY")
+    c.add_argument("--template", default=None, help="skeleton for rotation arrays: a BVH/NPZ file or 'beat'")
+    c.add_argument(
+        "--representation", default=None,
+        choices=["euler", "axis_angle", "quat", "quat_wxyz", "sixd", "matrix"],
+        help="rotation representation of an array input",
+    )
+    c.add_argument("--joints", default=None, help="comma-separated template joints the array columns map to")
+    c.add_argument("--in-order", default=None, help="Euler order of an 'euler' array (default: template's per joint)")
+    c.add_argument("--key", default=None, help="NPZ array name holding the rotations")
+    c.add_argument("--root-key", default=None, help="NPZ array name holding the (F, 3) root translation")
+    c.add_argument("--radians", action="store_true", help="Euler array angles are radians, not degrees")
+    c.add_argument("--precision", type=int, default=6, help="decimals written to BVH (default 6)")
+    c.set_defaults(func=cmd_convert)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
+    """Summary dict of a motion, face or audio file (chosen by extension)."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(path, None, "file not found")
+    ext = p.suffix.lower()
+    if ext in _FACE_EXT:
+        from studyapp.face.io import summarize as face_summarize
+
+        return {"kind": "face", **face_summarize(path)}
+    if ext in _AUDIO_EXT:
+        from studyapp.audio.wav import summarize as wav_summarize
+
+        return {"kind": "audio", **wav_summarize(path)}
+    from studyapp.motion.io import summarize_motion
+
+    return {"kind": "motion", **summarize_motion(path, fps=fps)}
+
+
+def _text(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}" if math.isfinite(value) else str(value)
+    if isinstance(value, dict):
+        return ", ".join(f"{k}: {_text(v)}" for k, v in value.items()) or "-"
+    if isinstance(value, (list, tuple)):
+        if len(value) > 12:
+            return ", ".join(_text(v) for v in value[:12]) + f", ... ({len(value)} in all)"
+        return ", ".join(_text(v) for v in value) or "-"
+    if value is None:
+        return "-"
+    return str(value)
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """Human-readable ``key: value`` lines; warnings last, one per line."""
+    lines = []
+    width = max((len(k) for k in summary), default=0)
+    for key, value in summary.items():
+        if key == "warnings":
+            continue
+        lines.append(f"{key.replace('_', ' '):<{width}}  {_text(value)}")
+    for w in summary.get("warnings") or []:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    summary = summarize_any(args.path, fps=args.fps)
+    if args.json:
+        print(json.dumps(summary, indent=2, default=str))
+    else:
+        print(format_summary(summary))
+    return 0
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    from studyapp.motion.arrays import save_motion_npz
+    from studyapp.motion.bvh import write_bvh
+    from studyapp.motion.io import load_motion
+    from studyapp.motion.resample import resample
+
+    src, dst = Path(args.input), Path(args.output)
+    out_ext = dst.suffix.lower()
+    if out_ext not in (".bvh", ".npz"):
+        raise InputError(str(dst), None, f"cannot write {out_ext or 'files without extension'}; use .bvh or .npz")
+    if args.order is not None and out_ext != ".bvh":
+        raise InputError(str(dst), None, "--order only applies to BVH output")
+    in_ext = src.suffix.lower()
+    kw: dict[str, Any] = {}
+    in_fps = args.in_fps
+    if in_ext in (".npy", ".npz") and args.template is not None:
+        in_fps = in_fps if in_fps is not None else args.fps
+        kw.update(
+            joints=[j.strip() for j in args.joints.split(",")] if args.joints else None,
+            order=args.in_order,
+            key=args.key,
+            root_key=args.root_key,
+            degrees=not args.radians,
+        )
+    motion = load_motion(src, fps=in_fps, template=args.template, representation=args.representation, **kw)
+    if args.fps is not None and float(args.fps) != float(motion.fps):
+        motion = resample(motion, args.fps)
+    if out_ext == ".bvh":
+        order = args.order.upper() if args.order else None
+        if order is not None and (len(order) != 3 or set(order) != set("XYZ")):
+            raise InputError(None, "--order", f"rotation order must be a permutation of XYZ, got {args.order!r}")
+        write_bvh(motion, dst, order=order, precision=args.precision)
+    else:
+        save_motion_npz(motion, dst)
+    print(f"wrote {dst} ({motion.n_frames} frames at {motion.fps:g} fps, {motion.skeleton.n_joints} joints)")
+    return 0

@@ -1,0 +1,144 @@
+"""One entry point for reading motion files, dispatching on the extension.
+
+``.bvh`` -> :func:`~studyapp.motion.bvh.read_bvh`; ``.npz`` written by studyapp ->
+:func:`~studyapp.motion.arrays.load_motion_npz`; other ``.npz`` / ``.npy`` (model output arrays) ->
+:func:`~studyapp.motion.arrays.load_rotation_array`, which needs a template skeleton, a
+representation and the frame rate.
+
+>>> unit_name(0.01), unit_name(None)
+('cm', 'unknown')
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from studyapp.errors import InputError
+from studyapp.motion.skeleton import Motion
+
+__all__ = ["MOTION_EXTENSIONS", "load_motion", "summarize_motion", "unit_name"]
+
+MOTION_EXTENSIONS = (".bvh", ".npz", ".npy")
+
+
+def unit_name(unit_scale: float | None) -> str:
+    """Human name of a metres-per-unit factor (``0.01`` -> ``"cm"``)."""
+    if unit_scale is None:
+        return "unknown"
+    for value, name in ((1.0, "m"), (0.01, "cm"), (0.001, "mm"), (0.0254, "inch")):
+        if abs(unit_scale - value) <= 1e-9:
+            return name
+    return f"{unit_scale:g} m"
+
+
+def load_motion(
+    path: str | Path,
+    fps: float | None = None,
+    template: Any = None,
+    representation: str | None = None,
+    **kw: Any,
+) -> Motion:
+    """Read a motion file of any supported format.
+
+    ``fps`` overrides a BVH's frame time and is required for raw arrays. ``template`` and
+    ``representation`` (and ``joints=``, ``order=``, ``key=``, ``root_key=``) are for raw rotation
+    arrays; see :func:`~studyapp.motion.arrays.load_rotation_array`.
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if not p.exists():
+        raise InputError(str(path), None, "file not found")
+    if ext == ".bvh":
+        from studyapp.motion.bvh import read_bvh
+
+        return read_bvh(p, fps=fps)
+    if ext in (".npz", ".npy"):
+        from studyapp.motion.arrays import is_motion_npz, load_motion_npz, load_rotation_array
+
+        if ext == ".npz" and is_motion_npz(p) and template is None:
+            return load_motion_npz(p, fps=fps)
+        if template is None or representation is None:
+            raise InputError(
+                str(path), None,
+                "a rotation array needs a template skeleton and a representation "
+                "(e.g. --template beat --representation axis_angle)",
+            )
+        if fps is None:
+            raise InputError(str(path), None, "a rotation array carries no frame rate; pass fps")
+        return load_rotation_array(p, template, representation, fps, **kw)
+    raise InputError(str(path), None, f"unsupported motion format {ext or '(no extension)'}; expected one of {', '.join(MOTION_EXTENSIONS)}")
+
+
+def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, Any]:
+    """Facts about a motion file for ``studyapp inspect`` (JSON-serialisable).
+
+    Keys: ``path``, ``format``, ``joints``, ``root``, ``frames``, ``fps``, ``duration_s``,
+    ``rotation_orders`` (order -> joint count), ``position_channels`` (joints with them),
+    ``channels``, ``figure_height`` (file units, first frame), ``unit_scale``, ``unit_guess``,
+    ``height_m`` (when the unit is known), ``warnings``. A raw rotation array (no skeleton) gives
+    ``format``, ``arrays`` (name -> shape, dtype) and ``warnings``.
+    """
+    from studyapp.motion.fk import figure_height
+
+    p = Path(path)
+    ext = p.suffix.lower()
+    out: dict[str, Any] = {"path": str(path)}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if ext == ".bvh":
+            from studyapp.motion.bvh import read_bvh_channels
+
+            data = read_bvh_channels(p)
+            motion = data.to_motion(fps)
+            out["format"] = "bvh"
+            out["header_frame_time"] = data.frame_time
+            out["header_frames"] = data.header_frames
+        elif ext in (".npz", ".npy"):
+            from studyapp.motion.arrays import is_motion_npz
+
+            if ext == ".npz" and is_motion_npz(p):
+                motion = load_motion(p, fps=fps)
+                out["format"] = "npz (studyapp motion)"
+            else:
+                try:
+                    loaded = np.load(str(p), allow_pickle=False)
+                except (ValueError, OSError, EOFError) as exc:
+                    raise InputError(str(path), None, f"not a readable NumPy file ({exc})") from None
+                if isinstance(loaded, np.ndarray):
+                    arrays = {"array": loaded}
+                else:
+                    with loaded:
+                        arrays = {k: loaded[k] for k in loaded.keys()}
+                out["format"] = f"{ext[1:]} (rotation array; needs a template to become a motion)"
+                out["arrays"] = {k: {"shape": list(v.shape), "dtype": str(v.dtype)} for k, v in arrays.items()}
+                out["warnings"] = [str(w.message) for w in caught]
+                return out
+        else:
+            motion = load_motion(p, fps=fps)
+    sk = motion.skeleton
+    orders: dict[str, int] = {}
+    for j in range(sk.n_joints):
+        o = sk.rotation_order(j)
+        if o:
+            orders[o] = orders.get(o, 0) + 1
+    height = figure_height(motion)
+    out.update(
+        joints=sk.n_joints,
+        root=sk.names[int(np.flatnonzero(sk.parents < 0)[0])],
+        frames=motion.n_frames,
+        fps=float(motion.fps),
+        duration_s=float(motion.duration),
+        rotation_orders=orders,
+        position_channels=[sk.names[j] for j in range(sk.n_joints) if sk.has_position_channels(j)],
+        channels=int(sum(len(c) for c in sk.channels)),
+        end_sites=len(sk.end_sites),
+        figure_height=round(height, 4),
+        unit_scale=sk.unit_scale,
+        unit_guess=unit_name(sk.unit_scale),
+        height_m=None if sk.unit_scale is None else round(height * sk.unit_scale, 4),
+        warnings=[str(w.message) for w in caught],
+    )
+    return out

@@ -1,0 +1,400 @@
+"""Rotation representations and conversions, batched over any leading dimensions.
+
+Every function takes ``(..., k)`` arrays and returns float64 arrays with the same leading shape.
+Conventions (see :mod:`studyapp.motion.skeleton`):
+
+* Quaternions are unit, scalar-last ``(x, y, z, w)``.
+* Euler ``order`` strings are upper-case axes such as ``"ZXY"`` and mean *intrinsic* rotations, the
+  way a BVH channel list reads: ``"ZXY"`` gives ``R = R_Z @ R_X @ R_Y`` and ``angles[..., 0]`` is the
+  Z angle. Angles are in degrees unless ``degrees=False``.
+* Matrices rotate column vectors: ``v_parent = R @ v_local``.
+* 6D (Zhou et al. 2019, "On the Continuity of Rotation Representations") is the first two
+  **columns** of the matrix, laid out ``[col0 (3), col1 (3)]`` = ``[R00, R10, R20, R01, R11, R21]``.
+
+>>> import numpy as np
+>>> q = euler_to_quat(np.array([90.0, 0.0, 0.0]), "ZXY")
+>>> np.round(quat_to_matrix(q) @ np.array([1.0, 0.0, 0.0]), 6)
+array([0., 1., 0.])
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp  # noqa: F401  (Slerp re-exported for callers)
+
+__all__ = [
+    "REPRESENTATIONS",
+    "ORDERS",
+    "euler_to_quat",
+    "quat_to_euler",
+    "quat_to_matrix",
+    "matrix_to_quat",
+    "axis_angle_to_quat",
+    "quat_to_axis_angle",
+    "sixd_to_matrix",
+    "matrix_to_sixd",
+    "quat_to_sixd",
+    "sixd_to_quat",
+    "quat_multiply",
+    "quat_inverse",
+    "quat_slerp",
+    "quat_normalize",
+    "quat_identity",
+    "quat_rotate",
+    "quat_between",
+    "to_quat",
+    "from_quat",
+    "representation_width",
+]
+
+#: The 12 intrinsic Euler orders (6 Tait-Bryan, 6 proper Euler).
+ORDERS: tuple[str, ...] = (
+    "XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX",
+    "XYX", "XZX", "YXY", "YZY", "ZXZ", "ZYZ",
+)
+
+#: Names accepted by :func:`to_quat` / :func:`from_quat`, with the per-joint width of each.
+REPRESENTATIONS: dict[str, int] = {
+    "euler": 3,
+    "axis_angle": 3,
+    "quat": 4,
+    "quat_wxyz": 4,
+    "sixd": 6,
+    "matrix": 9,
+}
+
+
+def _check_order(order: str) -> str:
+    o = str(order).upper()
+    if len(o) != 3 or any(c not in "XYZ" for c in o) or o[0] == o[1] or o[1] == o[2]:
+        raise ValueError(f"invalid Euler order {order!r}; expected three axes like 'ZXY'")
+    return o
+
+
+def _flat(a: np.ndarray, width: tuple[int, ...]) -> tuple[np.ndarray, tuple[int, ...]]:
+    a = np.asarray(a, dtype=np.float64)
+    k = len(width)
+    if a.shape[a.ndim - k:] != width:
+        raise ValueError(f"expected trailing shape {width}, got {a.shape}")
+    lead = a.shape[: a.ndim - k]
+    return a.reshape((-1,) + width), lead
+
+
+def quat_identity(shape: tuple[int, ...] = ()) -> np.ndarray:
+    """Identity quaternions of the given leading shape."""
+    q = np.zeros(tuple(shape) + (4,))
+    q[..., 3] = 1.0
+    return q
+
+
+def quat_normalize(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions; raises ``ValueError`` on zero-length or non-finite input."""
+    q = np.asarray(q, dtype=np.float64)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(n)) or np.any(n < 1e-12):
+        raise ValueError("quaternions must be finite and non-zero")
+    return q / n
+
+
+def _axis_quat(axis: str, half: np.ndarray) -> np.ndarray:
+    q = np.zeros(half.shape + (4,))
+    q[..., "XYZ".index(axis)] = np.sin(half)
+    q[..., 3] = np.cos(half)
+    return q
+
+
+def euler_to_quat(angles: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """Intrinsic Euler angles ``(..., 3)`` (in ``order``'s axis order) to quaternions ``(..., 4)``.
+
+    Computed as the product of the three axis rotations (pure numpy; BVH loading converts every
+    joint of every frame through here).
+
+    >>> np.round(euler_to_quat([0.0, 0.0, 180.0], "XYZ"), 6)
+    array([0., 0., 1., 0.])
+    """
+    o = _check_order(order)
+    a = np.asarray(angles, dtype=np.float64)
+    if a.shape[-1:] != (3,):
+        raise ValueError(f"expected trailing shape (3,), got {a.shape}")
+    half = np.radians(a) * 0.5 if degrees else a * 0.5
+    q = quat_multiply(_axis_quat(o[0], half[..., 0]), _axis_quat(o[1], half[..., 1]))
+    q = quat_multiply(q, _axis_quat(o[2], half[..., 2]))
+    # scipy's convention (w >= 0) keeps results comparable with Rotation.as_quat
+    return np.where(q[..., 3:4] < 0, -q, q)
+
+
+def quat_to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """Quaternions ``(..., 4)`` to intrinsic Euler angles ``(..., 3)`` in ``order``'s axis order.
+
+    Tait-Bryan orders (three different axes, all BVH orders) are decomposed here in closed form; the
+    middle angle is in ``[-90, 90]`` degrees. At gimbal lock the decomposition is not unique: the
+    third angle is set to zero and the first one absorbs the rest, so the angles still reproduce
+    the rotation. Proper Euler orders (``"ZXZ"``) go through scipy.
+    """
+    o = _check_order(order)
+    q = np.asarray(q, dtype=np.float64)
+    if q.shape[-1:] != (4,):
+        raise ValueError(f"expected trailing shape (4,), got {q.shape}")
+    if o[0] == o[2]:
+        flat, lead = _flat(q, (4,))
+        if flat.shape[0] == 0:
+            return np.zeros(lead + (3,))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            e = Rotation.from_quat(flat).as_euler(o, degrees=degrees)
+        return e.reshape(lead + (3,))
+    i, j, k = ("XYZ".index(c) for c in o)
+    s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+    m = quat_to_matrix(q)
+    cos_b = np.hypot(m[..., i, i], m[..., i, j])
+    b = np.arctan2(s * m[..., i, k], cos_b)
+    locked = cos_b < 1e-9
+    a = np.where(locked, np.arctan2(s * m[..., k, j], m[..., j, j]), np.arctan2(-s * m[..., j, k], m[..., k, k]))
+    c = np.where(locked, 0.0, np.arctan2(-s * m[..., i, j], m[..., i, i]))
+    out = np.stack([a, b, c], axis=-1)
+    return np.degrees(out) if degrees else out
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` to rotation matrices ``(..., 3, 3)``.
+
+    Pure numpy (no per-call object construction): forward kinematics calls it on every joint of
+    every frame. Input is normalised first so slightly denormalised data stays a rotation.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    n2 = np.einsum("...i,...i->...", q, q)
+    s = np.where(n2 > 0, 2.0 / np.where(n2 > 0, n2, 1.0), 0.0)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    xs, ys, zs = x * s, y * s, z * s
+    wx, wy, wz = w * xs, w * ys, w * zs
+    xx, xy, xz = x * xs, x * ys, x * zs
+    yy, yz, zz = y * ys, y * zs, z * zs
+    m = np.empty(q.shape[:-1] + (3, 3))
+    m[..., 0, 0] = 1.0 - (yy + zz)
+    m[..., 0, 1] = xy - wz
+    m[..., 0, 2] = xz + wy
+    m[..., 1, 0] = xy + wz
+    m[..., 1, 1] = 1.0 - (xx + zz)
+    m[..., 1, 2] = yz - wx
+    m[..., 2, 0] = xz - wy
+    m[..., 2, 1] = yz + wx
+    m[..., 2, 2] = 1.0 - (xx + yy)
+    return m
+
+
+def matrix_to_quat(m: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` to unit quaternions ``(..., 4)`` (w >= 0).
+
+    Slightly non-orthogonal input is projected to the nearest rotation (scipy's method).
+    """
+    flat, lead = _flat(m, (3, 3))
+    if flat.shape[0] == 0:
+        return np.zeros(lead + (4,))
+    return Rotation.from_matrix(flat).as_quat(canonical=True).reshape(lead + (4,))
+
+
+def axis_angle_to_quat(v: np.ndarray) -> np.ndarray:
+    """Rotation vectors ``(..., 3)`` (axis times angle in radians) to quaternions ``(..., 4)``."""
+    flat, lead = _flat(v, (3,))
+    if flat.shape[0] == 0:
+        return np.zeros(lead + (4,))
+    return Rotation.from_rotvec(flat).as_quat().reshape(lead + (4,))
+
+
+def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` to rotation vectors ``(..., 3)`` with angle in ``[0, pi]`` radians."""
+    flat, lead = _flat(q, (4,))
+    if flat.shape[0] == 0:
+        return np.zeros(lead + (3,))
+    return Rotation.from_quat(flat).as_rotvec().reshape(lead + (3,))
+
+
+def sixd_to_matrix(d6: np.ndarray) -> np.ndarray:
+    """6D rotations ``(..., 6)`` = ``[col0, col1]`` to matrices ``(..., 3, 3)`` by Gram-Schmidt.
+
+    >>> sixd_to_matrix(np.array([2.0, 0, 0, 0.5, 3.0, 0])).round(6).tolist()
+    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    """
+    d6 = np.asarray(d6, dtype=np.float64)
+    if d6.shape[-1:] != (6,):
+        raise ValueError(f"expected trailing shape (6,), got {d6.shape}")
+    a1, a2 = d6[..., 0:3], d6[..., 3:6]
+    n1 = np.linalg.norm(a1, axis=-1, keepdims=True)
+    if np.any(n1 < 1e-12):
+        raise ValueError("6D rotation has a zero first column")
+    b1 = a1 / n1
+    b2 = a2 - np.sum(b1 * a2, axis=-1, keepdims=True) * b1
+    n2 = np.linalg.norm(b2, axis=-1, keepdims=True)
+    if np.any(n2 < 1e-12):
+        raise ValueError("6D rotation has parallel columns")
+    b2 = b2 / n2
+    b3 = np.cross(b1, b2)
+    return np.stack([b1, b2, b3], axis=-1)
+
+
+def matrix_to_sixd(m: np.ndarray) -> np.ndarray:
+    """Matrices ``(..., 3, 3)`` to 6D ``(..., 6)``: ``[R[:,0], R[:,1]]`` (first two columns)."""
+    m = np.asarray(m, dtype=np.float64)
+    if m.shape[-2:] != (3, 3):
+        raise ValueError(f"expected trailing shape (3, 3), got {m.shape}")
+    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
+
+
+def quat_to_sixd(q: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` to 6D ``(..., 6)``."""
+    return matrix_to_sixd(quat_to_matrix(q))
+
+
+def sixd_to_quat(d6: np.ndarray) -> np.ndarray:
+    """6D ``(..., 6)`` to quaternions ``(..., 4)``."""
+    return matrix_to_quat(sixd_to_matrix(d6))
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``), broadcasting leading dims.
+
+    >>> z90 = euler_to_quat([90.0, 0, 0], "ZYX")
+    >>> np.allclose(quat_multiply(z90, z90), euler_to_quat([180.0, 0, 0], "ZYX"))
+    True
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def quat_inverse(q: np.ndarray) -> np.ndarray:
+    """Inverse of (unit) quaternions: the conjugate divided by the squared norm."""
+    q = np.asarray(q, dtype=np.float64)
+    conj = q * np.array([-1.0, -1.0, -1.0, 1.0])
+    return conj / np.sum(q * q, axis=-1, keepdims=True)
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``(..., 3)`` by quaternions ``(..., 4)`` (broadcasting)."""
+    q = np.asarray(q, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    u, w = q[..., :3], q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Shortest-arc rotation taking direction ``a`` to direction ``b`` (``(..., 3)`` each).
+
+    Zero-length inputs give the identity; opposite directions pick an arbitrary perpendicular axis.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    a, b = np.broadcast_arrays(a, b)
+    na = np.linalg.norm(a, axis=-1, keepdims=True)
+    nb = np.linalg.norm(b, axis=-1, keepdims=True)
+    ok = (na[..., 0] > 1e-12) & (nb[..., 0] > 1e-12)
+    au = a / np.where(na > 1e-12, na, 1.0)
+    bu = b / np.where(nb > 1e-12, nb, 1.0)
+    d = np.sum(au * bu, axis=-1)
+    axis = np.cross(au, bu)
+    q = np.concatenate([axis, (1.0 + d)[..., None]], axis=-1)
+    opposite = ok & (d < -1.0 + 1e-9)
+    if np.any(opposite):
+        # any axis perpendicular to a: cross with the coordinate axis least aligned with it
+        helper = np.where(np.abs(au[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        perp = np.cross(au, helper)
+        perp /= np.linalg.norm(perp, axis=-1, keepdims=True)
+        q = np.where(opposite[..., None], np.concatenate([perp, np.zeros(perp.shape[:-1] + (1,))], axis=-1), q)
+    q = np.where(ok[..., None], q, [0.0, 0.0, 0.0, 1.0])
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quat_slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray | float) -> np.ndarray:
+    """Spherical linear interpolation along the shorter arc, broadcasting ``q0``, ``q1`` and ``t``.
+
+    ``t`` broadcasts against the leading dims (``q0[..., 0]``); ``t=0`` gives ``q0``, ``t=1`` gives
+    ``q1`` (up to sign).
+    """
+    q0 = quat_normalize(q0)
+    q1 = quat_normalize(q1)
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    dot = np.sum(q0 * q1, axis=-1, keepdims=True)
+    q1 = np.where(dot < 0, -q1, q1)
+    dot = np.abs(dot)
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    sin_t = np.sin(theta)
+    near = sin_t < 1e-6
+    safe = np.where(near, 1.0, sin_t)
+    w0 = np.where(near, 1.0 - t, np.sin((1.0 - t) * theta) / safe)
+    w1 = np.where(near, t, np.sin(t * theta) / safe)
+    out = w0 * q0 + w1 * q1
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def representation_width(representation: str) -> int:
+    """Numbers per joint for a representation name (``"sixd"`` -> 6)."""
+    try:
+        return REPRESENTATIONS[representation]
+    except KeyError:
+        raise ValueError(
+            f"unknown rotation representation {representation!r}; expected one of {sorted(REPRESENTATIONS)}"
+        ) from None
+
+
+def to_quat(data: np.ndarray, representation: str, order: str | None = None, degrees: bool = True) -> np.ndarray:
+    """Convert ``(..., k)`` rotations of a named representation to quaternions ``(..., 4)``.
+
+    ``representation`` is one of ``"euler"`` (needs ``order``; degrees unless ``degrees=False``),
+    ``"axis_angle"`` (radians), ``"quat"`` (xyzw), ``"quat_wxyz"``, ``"sixd"`` or ``"matrix"``
+    (``(..., 3, 3)`` or flattened row-major ``(..., 9)``).
+
+    >>> to_quat(np.array([1.0, 0, 0, 0]), "quat_wxyz").tolist()
+    [0.0, 0.0, 0.0, 1.0]
+    """
+    width = representation_width(representation)
+    data = np.asarray(data, dtype=np.float64)
+    if representation == "matrix":
+        if data.shape[-2:] == (3, 3):
+            return matrix_to_quat(data)
+        if data.shape[-1:] == (9,):
+            return matrix_to_quat(data.reshape(data.shape[:-1] + (3, 3)))
+        raise ValueError(f"matrix rotations must be (..., 3, 3) or (..., 9), got {data.shape}")
+    if data.shape[-1:] != (width,):
+        raise ValueError(f"{representation} rotations need {width} numbers per joint, got shape {data.shape}")
+    if representation == "euler":
+        if order is None:
+            raise ValueError("Euler rotations need an order such as 'XYZ'")
+        return euler_to_quat(data, order, degrees=degrees)
+    if representation == "axis_angle":
+        return axis_angle_to_quat(data)
+    if representation == "quat":
+        return quat_normalize(data)
+    if representation == "quat_wxyz":
+        return quat_normalize(data[..., [1, 2, 3, 0]])
+    return sixd_to_quat(data)
+
+
+def from_quat(q: np.ndarray, representation: str, order: str | None = None, degrees: bool = True) -> np.ndarray:
+    """Inverse of :func:`to_quat`: quaternions ``(..., 4)`` to a named representation."""
+    representation_width(representation)
+    q = np.asarray(q, dtype=np.float64)
+    if representation == "euler":
+        if order is None:
+            raise ValueError("Euler rotations need an order such as 'XYZ'")
+        return quat_to_euler(q, order, degrees=degrees)
+    if representation == "axis_angle":
+        return quat_to_axis_angle(q)
+    if representation == "quat":
+        return quat_normalize(q)
+    if representation == "quat_wxyz":
+        return quat_normalize(q)[..., [3, 0, 1, 2]]
+    if representation == "sixd":
+        return quat_to_sixd(q)
+    return quat_to_matrix(q)

@@ -1,0 +1,150 @@
+"""Thin wrappers around the GPU resources of one avatar, the bone palettes and the slot labels."""
+from __future__ import annotations
+
+import numpy as np
+import moderngl
+
+from studyapp.render.avatar import Avatar
+
+MORPH_TEX_W = 2048  # must match MORPH_TEX_W in shaders/skinned.vert
+MAX_ACTIVE_MORPHS = 52  # size of the u_morph_ids / u_morph_w arrays in shaders/skinned.vert
+
+
+def morph_texture_data(deltas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pack ``(M, V, 3)`` deltas for the vertex shader.
+
+    Returns ``(rows, texels)``: ``rows`` is ``(V,) int32``, the vertex's row among the R vertices that
+    any morph moves (-1 for the rest), and ``texels`` is ``(H, MORPH_TEX_W, 4) float32`` holding the delta
+    of morph ``m`` for row ``r`` at linear index ``m * R + r``.
+
+    >>> d = np.zeros((2, 3, 3), np.float32); d[1, 2] = [1, 2, 3]
+    >>> rows, tex = morph_texture_data(d)
+    >>> rows.tolist(), tex.reshape(-1, 4)[1 * 1 + 0].tolist()
+    ([-1, -1, 0], [1.0, 2.0, 3.0, 0.0])
+    """
+    m, v, _ = deltas.shape
+    moved = np.abs(deltas).max(axis=(0, 2)) > 0 if m else np.zeros(v, bool)
+    rows = np.full(v, -1, np.int32)
+    idx = np.flatnonzero(moved)
+    rows[idx] = np.arange(len(idx), dtype=np.int32)
+    packed = np.zeros((m * len(idx), 4), np.float32)
+    if len(idx):
+        packed[:, :3] = deltas[:, idx, :].reshape(-1, 3)
+    n = max(len(packed), 1)
+    h = -(-n // MORPH_TEX_W)
+    tex = np.zeros((h * MORPH_TEX_W, 4), np.float32)
+    tex[: len(packed)] = packed
+    return rows, tex.reshape(h, MORPH_TEX_W, 4)
+
+
+class AvatarMesh:
+    """Vertex buffers, morph textures and base-colour texture of one avatar, shared by every slot."""
+
+    def __init__(self, ctx: moderngl.Context, avatar: Avatar, program: moderngl.Program,
+                 palette_rows: int = 3) -> None:
+        self.ctx = ctx
+        self.avatar = avatar
+        self.n_joints = avatar.skeleton.n_joints
+        v = avatar.n_vertices
+        rows, tex = morph_texture_data(avatar.morph_deltas)
+        self.morph_rows = int(rows.max() + 1) if rows.size and rows.max() >= 0 else 0
+        ndeltas = avatar.morph_normal_deltas if avatar.morph_normal_deltas is not None else np.zeros_like(avatar.morph_deltas)
+        # normal texels must line up with position texels: pack them with the same row selection
+        ntex = self._pack_like(rows, ndeltas, tex.shape)
+        self.morph_pos = ctx.texture((MORPH_TEX_W, tex.shape[0]), 4, tex.tobytes(), dtype="f4")
+        self.morph_nrm = ctx.texture((MORPH_TEX_W, ntex.shape[0]), 4, ntex.tobytes(), dtype="f4")
+        for t in (self.morph_pos, self.morph_nrm):
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        color = np.concatenate([avatar.colors, avatar.material[:, None].astype(np.float32)], axis=1)
+        uv = avatar.uv if avatar.uv is not None else np.zeros((v, 2), np.float32)
+        self._buffers = {
+            "in_position": ctx.buffer(avatar.vertices.tobytes()),
+            "in_normal": ctx.buffer(avatar.normals.tobytes()),
+            "in_color": ctx.buffer(np.ascontiguousarray(color, np.float32).tobytes()),
+            "in_joints": ctx.buffer(avatar.joints.astype(np.int32).tobytes()),
+            "in_weights": ctx.buffer(avatar.weights.tobytes()),
+            "in_morph_row": ctx.buffer(rows.tobytes()),
+            "in_uv": ctx.buffer(np.ascontiguousarray(uv, np.float32).tobytes()),
+        }
+        self.index_buffer = ctx.buffer(avatar.indices.astype(np.uint32).tobytes())
+        fmt = {"in_position": "3f", "in_normal": "3f", "in_color": "4f", "in_joints": "4i", "in_weights": "4f",
+               "in_morph_row": "i", "in_uv": "2f"}
+        content = [(self._buffers[name], fmt[name], name) for name in fmt if name in program]
+        self.vao = ctx.vertex_array(program, content, self.index_buffer, index_element_size=4)
+        if avatar.texture is not None:
+            img = np.ascontiguousarray(avatar.texture[::-1], np.uint8)  # GL wants the bottom row first
+            self.texture = ctx.texture((img.shape[1], img.shape[0]), img.shape[2], img.tobytes())
+            self.texture.build_mipmaps()
+            self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        else:
+            self.texture = ctx.texture((1, 1), 4, bytes([255, 255, 255, 255]))
+        self.has_texture = avatar.texture is not None and avatar.uv is not None
+        self.palette = PaletteTexture(ctx, self.n_joints, palette_rows)
+        self._bare_vao: moderngl.VertexArray | None = None
+
+    @staticmethod
+    def _pack_like(rows: np.ndarray, deltas: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+        idx = np.flatnonzero(rows >= 0)
+        out = np.zeros((shape[0] * shape[1], 4), np.float32)
+        if len(idx) and len(deltas):
+            packed = deltas[:, idx, :].reshape(-1, 3)
+            out[: len(packed), :3] = packed
+        return out.reshape(shape)
+
+    def bare_vao(self, program: moderngl.Program) -> moderngl.VertexArray:
+        """Same triangles, positions only (benchmark baseline)."""
+        if self._bare_vao is None:
+            self._bare_vao = self.ctx.vertex_array(program, [(self._buffers["in_position"], "3f", "in_position")],
+                                                   self.index_buffer, index_element_size=4)
+        return self._bare_vao
+
+    def release(self) -> None:
+        for b in self._buffers.values():
+            b.release()
+        for obj in (self.index_buffer, self.vao, self.morph_pos, self.morph_nrm, self.texture, self._bare_vao):
+            if obj is not None:
+                obj.release()
+        self.palette.release()
+
+
+class PaletteTexture:
+    """Bone palettes of up to ``rows`` slots in one float texture (texel 4*j+k = column k of joint j)."""
+
+    def __init__(self, ctx: moderngl.Context, n_joints: int, rows: int = 3) -> None:
+        self.n_joints = n_joints
+        self.rows = rows
+        self.texture = ctx.texture((4 * n_joints, rows), 4, dtype="f4")
+        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._data = np.zeros((rows, n_joints, 4, 4), np.float32)
+        self._data[:] = np.eye(4, dtype=np.float32)
+
+    def set_row(self, row: int, palette: np.ndarray) -> None:
+        # numpy matrices are row-major; GLSL mat4(c0, c1, c2, c3) takes columns
+        self._data[row] = np.swapaxes(palette, -1, -2)
+
+    def upload(self) -> None:
+        self.texture.write(self._data.tobytes())
+
+    def release(self) -> None:
+        self.texture.release()
+
+
+def rasterize_label(text: str, height_px: int) -> np.ndarray:
+    """White-on-black coverage image ``(H, W) uint8`` of ``text`` (matplotlib's Agg and bundled DejaVu Sans).
+
+    >>> img = rasterize_label("A", 32); img.shape[0] == 32 and img.max() > 200
+    True
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    height_px = max(8, int(height_px))
+    width_px = max(height_px, int(height_px * (0.68 * len(text) + 0.6)))
+    dpi = 100
+    fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, facecolor="black")
+    canvas = FigureCanvasAgg(fig)
+    fig.text(0.5, 0.5, text, color="white", ha="center", va="center", fontsize=height_px * 0.62 * 72 / dpi,
+             family="DejaVu Sans", weight="semibold")
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba())
+    return np.ascontiguousarray(rgba[..., 0])

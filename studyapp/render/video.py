@@ -1,0 +1,123 @@
+"""Offline output: MP4 videos (H.264 + AAC via PyAV) and PNG stills of a trial, rendered headless.
+
+>>> import tempfile, pathlib
+>>> from studyapp.render.avatar import build_default_avatar
+>>> from studyapp.render.pose import prepare_slot
+>>> from studyapp.render.scene import make_scene
+>>> from studyapp.motion.skeleton import Motion
+>>> av = build_default_avatar()
+>>> scene = make_scene([prepare_slot(av, Motion.rest(av.skeleton, 3, 30.0), None)] * 3, av)
+>>> out = pathlib.Path(tempfile.mkdtemp()) / "still.png"
+>>> render_still(scene, 0.0, out, size=(192, 108)).shape
+(108, 192, 3)
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from studyapp.render.context import OffscreenTarget, create_offscreen_context
+from studyapp.render.renderer import Renderer
+
+_CONTEXT = None
+
+
+def _shared_context():
+    """One headless context per process: creating EGL contexts repeatedly is slow and leaks on some drivers."""
+    global _CONTEXT
+    if _CONTEXT is None:
+        _CONTEXT = create_offscreen_context()
+    return _CONTEXT
+
+
+def _even(size: tuple[int, int]) -> tuple[int, int]:
+    # yuv420p needs even dimensions
+    return int(size[0]) // 2 * 2, int(size[1]) // 2 * 2
+
+
+def render_frames(scene, times, size: tuple[int, int] = (1280, 720), renderer: Renderer | None = None):
+    """Yield ``(H, W, 3) uint8`` frames of ``scene`` at the given times (headless)."""
+    ctx = renderer.ctx if renderer is not None else _shared_context()
+    renderer = renderer or Renderer(ctx)
+    target = OffscreenTarget(ctx, size)
+    try:
+        for t in times:
+            renderer.draw_trial(scene, float(t), target.fbo)
+            yield target.read_rgb()
+    finally:
+        target.release()
+
+
+def render_still(scene, t: float, out_png: str | Path, size: tuple[int, int] = (1280, 720),
+                 renderer: Renderer | None = None) -> np.ndarray:
+    """Render one frame at ``t`` seconds to a PNG; returns the image ``(H, W, 3) uint8``."""
+    import matplotlib.image as mpimg
+
+    img = next(render_frames(scene, [t], size, renderer))
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    mpimg.imsave(out_png, img)
+    return img
+
+
+def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (1280, 720), fps: int = 30,
+                 renderer: Renderer | None = None, duration: float | None = None, crf: int = 20) -> Path:
+    """Write an MP4 (H.264 yuv420p, plus AAC audio when ``audio`` is an AudioClip) of the whole trial.
+
+    The video lasts ``duration`` seconds (default: the longer of the motion and the audio); the audio is
+    muxed from the start of the clip, so picture and sound line up as they do in the study.
+    """
+    import av
+
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    size = _even(size)
+    if duration is None:
+        duration = scene.duration
+        if audio is not None:
+            duration = max(duration, len(audio.samples) / float(audio.sample_rate))
+    n_frames = max(1, int(round(duration * fps)))
+    with av.open(str(out_path), mode="w") as container:
+        vstream = container.add_stream("libx264", rate=Fraction(int(fps), 1))
+        vstream.width, vstream.height = size
+        vstream.pix_fmt = "yuv420p"
+        vstream.options = {"crf": str(crf), "preset": "veryfast"}
+        astream = None
+        if audio is not None:
+            samples = np.asarray(audio.samples, np.float32)
+            if samples.ndim == 1:
+                samples = samples[:, None]
+            layout = "mono" if samples.shape[1] == 1 else "stereo"
+            samples = samples[:, :2]
+            astream = container.add_stream("aac", rate=int(audio.sample_rate))
+            astream.layout = layout
+        times = np.arange(n_frames) / float(fps)
+        for img in render_frames(scene, times, size, renderer):
+            frame = av.VideoFrame.from_ndarray(img, format="rgb24")
+            for packet in vstream.encode(frame):
+                container.mux(packet)
+        for packet in vstream.encode():
+            container.mux(packet)
+        if astream is not None:
+            _write_audio(container, astream, samples, int(audio.sample_rate))
+    return out_path
+
+
+def _write_audio(container, stream, samples: np.ndarray, rate: int) -> None:
+    import av
+
+    chunk = 1024
+    layout = "mono" if samples.shape[1] == 1 else "stereo"
+    pts = 0
+    for start in range(0, len(samples), chunk):
+        block = np.ascontiguousarray(samples[start:start + chunk].T, np.float32)  # planar: (channels, n)
+        frame = av.AudioFrame.from_ndarray(block, format="fltp", layout=layout)
+        frame.sample_rate = rate
+        frame.pts = pts
+        pts += block.shape[1]
+        for packet in stream.encode(frame):
+            container.mux(packet)
+    for packet in stream.encode():
+        container.mux(packet)

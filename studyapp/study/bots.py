@@ -1,0 +1,142 @@
+"""Scripted participants: they go through the real :class:`~studyapp.study.session.Session`, without rendering.
+
+Policies:
+
+* ``random``: a uniformly random ranking per criterion. The generator is seeded per trial from
+  ``(seed, participant, trial index)``, so a session killed and resumed answers every trial exactly as an
+  uninterrupted one would (the kill tests rely on this).
+* ``ordered``: ranks conditions in the order the design lists them, on every criterion (the condition listed
+  first gets rank 1). A frozen attention-check slot ranks after every real condition.
+* ``careful``: ranks by :func:`studyapp.study.careful.careful_scores` (higher score = better rank), i.e. what a
+  careful viewer would perceive in the actual motion and audio; criteria without a score fall back to random.
+
+Example
+-------
+>>> import numpy as np
+>>> from studyapp.study.schedule import TrialPlan
+>>> plan = TrialPlan(0, "s1", ("b", "c", "a"), False, False, 0)
+>>> choose_ranking("ordered", plan, None, ["realism"], np.random.default_rng(0), condition_order=["a", "b", "c"])
+{'realism': {0: 2, 1: 3, 2: 1}}
+"""
+from __future__ import annotations
+
+import time
+import zlib
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from studyapp.errors import StudyappError
+from studyapp.study.session import PlayStats, Session, State
+
+POLICIES = ("random", "ordered", "careful")
+
+
+def _criterion_ids(criteria: Sequence[Any]) -> list[str]:
+    return [c if isinstance(c, str) else c.id for c in criteria]
+
+
+def _ranks_from_scores(scores: Sequence[float]) -> dict[int, int]:
+    # Higher score -> better (lower) rank; equal scores keep slot order so the result is deterministic.
+    order = sorted(range(3), key=lambda i: (-float(scores[i]), i))
+    return {slot: pos + 1 for pos, slot in enumerate(order)}
+
+
+def choose_ranking(
+    policy: str,
+    plan: Any,
+    media: Any | None,
+    criteria: Sequence[Any],
+    rng: np.random.Generator,
+    *,
+    condition_order: Sequence[str] | None = None,
+) -> dict[str, dict[int, int]]:
+    """A complete ranking ``{criterion: {slot: rank}}`` for one trial under ``policy``.
+
+    ``media`` (a :class:`~studyapp.study.stimuli.TrialMedia`) is needed by ``careful`` only;
+    ``condition_order`` (the design's condition ids) by ``ordered`` only.
+    """
+    crits = _criterion_ids(criteria)
+    if policy == "random":
+        return {c: {i: int(r) for i, r in enumerate(rng.permutation(3) + 1)} for c in crits}
+    if policy == "ordered":
+        if condition_order is None:
+            raise ValueError("the ordered bot needs condition_order (the design's condition ids)")
+        position = {cid: i for i, cid in enumerate(condition_order)}
+        keys = [position.get(cid, len(position)) for cid in plan.slots]  # frozen:... and unknown rank last
+        return {c: _ranks_from_scores([-k for k in keys]) for c in crits}
+    if policy == "careful":
+        if media is None:
+            raise ValueError("the careful bot needs the trial's media (load_trial_media)")
+        from studyapp.study.careful import careful_scores
+
+        scores = careful_scores(media)
+        out = {}
+        for c in crits:
+            if c in scores:
+                out[c] = _ranks_from_scores(scores[c])
+            else:
+                out[c] = {i: int(r) for i, r in enumerate(rng.permutation(3) + 1)}
+        return out
+    raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(POLICIES)}")
+
+
+def trial_rng(seed: int, participant_id: str, trial_index: int) -> np.random.Generator:
+    """The generator a bot uses for one trial: independent of how many trials ran in this process."""
+    return np.random.default_rng([int(seed) & 0xFFFFFFFF, zlib.crc32(participant_id.encode()), int(trial_index)])
+
+
+def questionnaire_answers(items: Sequence[Any], rng: np.random.Generator) -> dict[str, Any]:
+    """Bot answers: a random point on each Likert item, a fixed note on text items."""
+    return {q.id: int(rng.integers(1, int(q.points) + 1)) if q.kind == "likert" else "(scripted participant)"
+            for q in items}
+
+
+def run_bot_session(
+    design: Any,
+    db: Any,
+    participant: str,
+    policy: str,
+    seed: int = 0,
+    on_trial: Callable[[Any], None] | None = None,
+    *,
+    row: int | None = None,
+    groups: dict[str, str] | None = None,
+    allow_rerun: bool = False,
+    pace_s: float = 0.0,
+    plans: Sequence[Any] | None = None,
+    n_rows: int | None = None,
+) -> Session:
+    """Run (or resume) one participant with a scripted policy; returns the finished :class:`Session`.
+
+    ``on_trial(plan)`` is called after each answer is committed. ``pace_s`` waits that long per clip as
+    if watching it (kill tests use it to land kills between commits).
+    """
+    if policy not in POLICIES:
+        raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(POLICIES)}")
+    session = Session(design, db, participant, row=row, groups=groups, allow_rerun=allow_rerun, plans=plans,
+                      n_rows=n_rows, on_saved=on_trial)
+    try:
+        session.accept_consent()
+        session.finish_instructions()
+        session.record_env_check({"bot": policy, "bot_seed": int(seed)})
+        cond_order = [c.id for c in design.conditions]
+        while (plan := session.current_trial()) is not None:
+            media = None
+            if policy == "careful":
+                from studyapp.study.stimuli import load_trial_media
+
+                media = load_trial_media(design, plan)
+            session.record_play_started()
+            if pace_s > 0:
+                time.sleep(pace_s)
+            session.record_play_finished(True, PlayStats())
+            rng = trial_rng(seed, session.participant_id, plan.trial_index)
+            session.submit_ranking(choose_ranking(policy, plan, media, design.criteria, rng,
+                                                  condition_order=cond_order))
+        if session.state is State.QUESTIONNAIRE:
+            rng = trial_rng(seed, session.participant_id, -1 & 0xFFFFFFFF)
+            session.submit_questionnaire(questionnaire_answers(session.questionnaire_items, rng))
+    finally:
+        session.close()
+    return session

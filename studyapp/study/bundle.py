@@ -1,0 +1,565 @@
+"""Remote studies: one zip a participant runs on their own PC, one results file they send back, and merging.
+
+What ``make_bundle`` writes (``STUDY.zip``)::
+
+    manifest.json   format, study name, sha256 of every file, the remote roster (participant id -> row)
+    study.toml      the design, rewritten to point at the bundled files
+    media/m_<hex>.* every stimulus, motion, template, live model and avatar file, renamed
+
+Blinding (the choice made here): inside the bundle **condition ids and stimulus ids are replaced by opaque
+ids** (``c_<hex>`` and ``<hex>``, salted hashes), and every media file is named by a salted hash, so nothing
+a participant can see -- on screen, in the cache folder or inside the zip -- carries a model name, a
+condition id or an original file name. ONNX models also lose their graph name, doc string and metadata.
+The mapping back (the *key*) stays with the experimenter: in ``STUDY.key.json`` next to the zip and in
+the experimenter's results database (table ``bundles``), so ``studyapp merge`` maps results back to the
+real condition and stimulus ids and to the original design hash without extra arguments.
+
+On the participant's PC ``studyapp run STUDY.zip`` extracts the bundle to a per-user cache (verifying every
+checksum), stores results in the per-user data folder and, when the participant finishes, writes
+``results-<study>-<participant>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
+with its sha256) into ``~/studyapp-results`` (a visible folder in the participant's home) and says where.
+
+``merge_results`` imports such files into the experimenter's database, refusing -- with one clear message
+per file -- damaged files (checksum), results of another design, and participants already present.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import secrets
+import shutil
+import sys
+import tempfile
+import tomllib
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+from studyapp import __version__
+from studyapp.errors import InputError, StudyappError
+
+BUNDLE_FORMAT = "studyapp-bundle"
+RESULTS_FORMAT = "studyapp-results"
+FORMAT_VERSION = 1
+
+
+# ------------------------------------------------------------------------------------------ places
+def user_data_dir() -> Path:
+    """Per-user data folder: ``%APPDATA%\\studyapp``, ``~/Library/Application Support/studyapp`` or
+    ``$XDG_DATA_HOME/studyapp`` (default ``~/.local/share/studyapp``)."""
+    if sys.platform == "win32":
+        base = Path(os.environ.get("APPDATA") or Path.home() / "AppData" / "Roaming")
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Application Support"
+    else:
+        base = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
+    return base / "studyapp"
+
+
+def user_cache_dir() -> Path:
+    """Per-user cache folder (``%LOCALAPPDATA%``, ``~/Library/Caches``, ``$XDG_CACHE_HOME``)."""
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "studyapp"
+
+
+def results_folder() -> Path:
+    """Where a remote participant's results file goes: a visible folder in their home."""
+    return Path(os.environ.get("STUDYAPP_RESULTS_DIR") or Path.home() / "studyapp-results")
+
+
+def _sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-.") or "study"
+
+
+# ------------------------------------------------------------------------------------------ TOML writing
+def _toml_key(k: str) -> str:
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)  # a JSON string is a valid TOML basic string
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def dump_toml(data: dict[str, Any]) -> str:
+    """TOML text for a design-shaped dict: scalars and lists on top, ``[table]`` and ``[[array]]`` blocks.
+
+    >>> print(dump_toml({"title": "T", "slots": {"labels": "ABC"}, "conditions": [{"id": "a"}]}).strip())
+    title = "T"
+    <BLANKLINE>
+    [slots]
+    labels = "ABC"
+    <BLANKLINE>
+    [[conditions]]
+    id = "a"
+    """
+    lines: list[str] = []
+    tables, arrays = [], []
+    for k, v in data.items():
+        if isinstance(v, dict):
+            tables.append((k, v))
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            arrays.append((k, v))
+        else:
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+    for k, v in tables:
+        lines += ["", f"[{_toml_key(k)}]"] + [f"{_toml_key(a)} = {_toml_value(b)}" for a, b in v.items()]
+    for k, items in arrays:
+        for item in items:
+            lines += ["", f"[[{_toml_key(k)}]]"] + [f"{_toml_key(a)} = {_toml_value(b)}" for a, b in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------------------------------ making bundles
+@dataclass
+class BundleInfo:
+    """What :func:`make_bundle` wrote."""
+
+    path: Path
+    key_path: Path
+    bundle_hash: str
+    n_files: int
+    size_bytes: int
+    roster: dict[str, int] = field(default_factory=dict)
+
+
+def _strip_onnx(data: bytes) -> bytes:
+    # Graph names and metadata often carry the model's name; the participant must not see it.
+    try:
+        import onnx
+
+        model = onnx.load_from_string(data)
+    except Exception:  # not loadable here: ship it unchanged rather than break the study
+        return data
+    model.graph.name = "model"
+    model.doc_string = ""
+    model.producer_name = ""
+    model.producer_version = ""
+    model.domain = ""
+    model.graph.doc_string = ""
+    keep = [p for p in model.metadata_props if not p.key.lower() in ("name", "model_name", "author", "description")]
+    del model.metadata_props[:]
+    model.metadata_props.extend(keep)
+    return model.SerializeToString()
+
+
+def make_bundle(
+    design_path: str | Path,
+    output: str | Path,
+    *,
+    participants: int = 0,
+    results: str | Path | None = None,
+    salt: str | None = None,
+) -> BundleInfo:
+    """Write ``output`` (a zip) with everything a remote participant needs; see the module docstring.
+
+    ``participants`` pre-assigns Latin-square rows to ids ``R01..RN``, continuing the balance of the
+    experimenter's database ``results`` (which also receives the key).
+    """
+    from studyapp.study.design import load_design, motion_path, resolve
+    from studyapp.study.schedule import n_rows
+    from studyapp.study.storage import ResultsDB
+
+    design_path = Path(design_path)
+    output = Path(output)
+    design = load_design(design_path)
+    raw = tomllib.loads(design_path.read_text(encoding="utf-8"))
+    salt = salt or secrets.token_hex(16)
+
+    def opaque(kind: str, text: str, n: int = 8) -> str:
+        return hashlib.sha256(f"{salt}\0{kind}\0{text}".encode()).hexdigest()[:n]
+
+    cond_map = {c.id: f"c_{opaque('condition', c.id, 6)}" for c in design.conditions}
+    stim_map = {s.id: opaque("stimulus", s.id) for s in design.stimuli}
+    media: dict[str, bytes] = {}  # bundle name -> bytes
+    origin: dict[str, str] = {}   # bundle name -> original path (for the key)
+
+    def add_file(path: Path, name: str | None = None) -> str:
+        data = path.read_bytes()
+        if path.suffix.lower() == ".onnx":
+            data = _strip_onnx(data)
+        if name is None:
+            name = f"media/m_{opaque('file', _sha256_bytes(data), 12)}{path.suffix.lower()}"
+        media[name] = data
+        origin[name] = str(path)
+        return name
+
+    out = {k: v for k, v in raw.items() if k not in ("conditions", "stimuli", "practice", "attention_checks")}
+    conditions = []
+    for c_raw, cond in zip(raw.get("conditions", []), design.conditions):
+        c = dict(c_raw)
+        c["id"] = cond_map[cond.id]
+        hexid = cond_map[cond.id][2:]
+        if cond.motion is not None:
+            suffix = Path(cond.motion).suffix.lower()
+            c["motion"] = f"media/m_{{stimulus}}{hexid}{suffix}"
+            for s in design.stimuli:
+                add_file(motion_path(design, cond, s), f"media/m_{stim_map[s.id]}{hexid}{suffix}")
+        if cond.model is not None and not str(cond.model).startswith("builtin:"):
+            c["model"] = add_file(resolve(design, cond.model))
+        if cond.template is not None:
+            c["template"] = add_file(resolve(design, cond.template))
+        conditions.append(c)
+    stimuli = []
+    for s_raw, stim in zip(raw.get("stimuli", []), design.stimuli):
+        s = dict(s_raw)
+        s["id"] = stim_map[stim.id]
+        s["audio"] = add_file(stim.audio)
+        if stim.face is not None:
+            s["face"] = add_file(stim.face)
+        if stim.head is not None:
+            s["head"] = add_file(stim.head)
+        stimuli.append(s)
+    out["conditions"] = conditions
+    out["stimuli"] = stimuli
+    if "practice" in raw:
+        out["practice"] = [stim_map[p] for p in raw["practice"]]
+    if "attention_checks" in raw:
+        checks = []
+        for a in raw["attention_checks"]:
+            a = dict(a)
+            a["stimulus"] = stim_map[a["stimulus"]]
+            if "condition" in a:
+                a["condition"] = cond_map[a["condition"]]
+            checks.append(a)
+        out["attention_checks"] = checks
+    if "avatar" in raw:
+        av = dict(raw["avatar"])
+        if av.get("model", "builtin") != "builtin":
+            av["model"] = add_file(resolve(design, av["model"]))
+        if "by_speaker" in av:
+            av["by_speaker"] = {k: v if v == "builtin" else add_file(resolve(design, v)) for k, v in av["by_speaker"].items()}
+        out["avatar"] = av
+    design_text = dump_toml(out)
+
+    # The hash the participant's copy will compute: load the rewritten design from a scratch folder.
+    with tempfile.TemporaryDirectory(prefix="studyapp-bundle-") as tmp:
+        tmp_path = Path(tmp)
+        for name, data in media.items():
+            (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+            (tmp_path / name).write_bytes(data)
+        (tmp_path / "study.toml").write_text(design_text, encoding="utf-8")
+        bundled = load_design(tmp_path / "study.toml")
+        bundle_hash = bundled.design_hash
+
+    results = Path(results) if results is not None else design_path.with_name(f"{design_path.stem}.results.sqlite")
+    db = ResultsDB(results, design)
+    try:
+        roster: dict[str, int] = {}
+        if participants > 0:
+            counts = db.row_counts(n_rows(design))
+            width = max(2, len(str(participants)))
+            for k in range(participants):
+                row = counts.index(min(counts))
+                counts[row] += 1
+                roster[f"R{k + 1:0{width}d}"] = row
+        study = _slug(design_path.stem)
+        key = {
+            "format": "studyapp-bundle-key", "study": study, "bundle": output.name,
+            "design_hash": design.design_hash, "bundle_hash": bundle_hash,
+            "conditions": {v: k for k, v in cond_map.items()}, "stimuli": {v: k for k, v in stim_map.items()},
+            "files": origin, "roster": roster, "app_version": __version__,
+        }
+        db.add_bundle_key(bundle_hash, key)
+    finally:
+        db.close()
+
+    files = {"study.toml": design_text.encode("utf-8"), **media}
+    manifest = {
+        "format": BUNDLE_FORMAT, "version": FORMAT_VERSION, "study": study, "title": design.title,
+        "design": "study.toml", "design_hash": bundle_hash, "app_version": __version__,
+        "roster": roster, "files": {name: _sha256_bytes(data) for name, data in sorted(files.items())},
+    }
+    output.parent.mkdir(parents=True, exist_ok=True)
+    tmp_out = output.with_name(output.name + ".part")
+    with zipfile.ZipFile(tmp_out, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("manifest.json", json.dumps(manifest, indent=2, sort_keys=True))
+        for name, data in sorted(files.items()):
+            zf.writestr(name, data)
+    os.replace(tmp_out, output)
+    key_path = output.with_name(f"{output.stem}.key.json")
+    key_path.write_text(json.dumps(key, indent=2, sort_keys=True), encoding="utf-8")
+    return BundleInfo(path=output, key_path=key_path, bundle_hash=bundle_hash, n_files=len(files),
+                      size_bytes=output.stat().st_size, roster=roster)
+
+
+# ------------------------------------------------------------------------------------------ opening bundles
+@dataclass
+class OpenedBundle:
+    """A verified, extracted bundle on the participant's PC."""
+
+    zip_path: Path
+    folder: Path
+    design_path: Path
+    study: str
+    bundle_hash: str
+    roster: dict[str, int]
+    default_results: Path
+    results_dir: Path
+
+
+def _safe_name(name: str) -> bool:
+    p = Path(name)
+    return not p.is_absolute() and ".." not in p.parts and not name.startswith(("/", "\\")) and ":" not in name
+
+
+def open_bundle(zip_path: str | Path, cache: str | Path | None = None) -> OpenedBundle:
+    """Verify ``zip_path`` against its manifest and extract it to the per-user cache (reused when intact)."""
+    zip_path = Path(zip_path)
+    if not zip_path.is_file():
+        raise InputError(zip_path, None, "study bundle not found; check the path")
+    try:
+        zf = zipfile.ZipFile(zip_path)
+    except zipfile.BadZipFile:
+        raise InputError(zip_path, None, "not a zip file (damaged download?); ask the experimenter for the file again") from None
+    with zf:
+        try:
+            manifest = json.loads(zf.read("manifest.json"))
+        except (KeyError, ValueError):
+            raise InputError(zip_path, "manifest.json", "missing or unreadable: this is not a studyapp study bundle") from None
+        if manifest.get("format") != BUNDLE_FORMAT:
+            raise InputError(zip_path, "manifest.json", "not a studyapp study bundle")
+        files: dict[str, str] = manifest.get("files", {})
+        bad = [n for n in files if not _safe_name(n)]
+        if bad:
+            raise InputError(zip_path, "manifest.json", f"unsafe file names in the bundle: {bad[:3]}")
+        zip_digest = _sha256_file(zip_path)[:16]
+        folder = Path(cache) if cache is not None else user_cache_dir() / "bundles" / f"{_slug(manifest['study'])}-{zip_digest}"
+        if not _verify_folder(folder, files):
+            tmp = Path(tempfile.mkdtemp(prefix=".extract-", dir=_mkdir(folder.parent)))
+            try:
+                for name, digest in files.items():
+                    try:
+                        data = zf.read(name)
+                    except (KeyError, zipfile.BadZipFile, OSError) as exc:
+                        raise InputError(zip_path, name, f"cannot be read from the bundle ({exc}); the file is damaged") from None
+                    if _sha256_bytes(data) != digest:
+                        raise InputError(zip_path, name, "checksum mismatch: the bundle is damaged; ask the "
+                                         "experimenter for the file again")
+                    target = tmp / name
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    target.write_bytes(data)
+                if folder.exists():
+                    shutil.rmtree(folder)
+                os.replace(tmp, folder)
+            finally:
+                if tmp.exists():
+                    shutil.rmtree(tmp, ignore_errors=True)
+    study = _slug(manifest["study"])
+    return OpenedBundle(
+        zip_path=zip_path, folder=folder, design_path=folder / manifest.get("design", "study.toml"), study=study,
+        bundle_hash=manifest.get("design_hash", ""), roster={k: int(v) for k, v in manifest.get("roster", {}).items()},
+        default_results=user_data_dir() / "studies" / f"{study}-{manifest.get('design_hash', '')[:12]}.results.sqlite",
+        results_dir=results_folder(),
+    )
+
+
+def _mkdir(p: Path) -> Path:
+    p.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _verify_folder(folder: Path, files: dict[str, str]) -> bool:
+    if not folder.is_dir():
+        return False
+    try:
+        return all(_sha256_file(folder / name) == digest for name, digest in files.items())
+    except OSError:
+        return False
+
+
+def remote_row(design: Any, opened: OpenedBundle, participant_id: str) -> int:
+    """Latin-square row of a remote participant: from the bundle's roster, else derived from the id."""
+    if participant_id in opened.roster:
+        return opened.roster[participant_id]
+    from studyapp.study.schedule import default_row
+
+    return int(default_row(design, participant_id))
+
+
+# ------------------------------------------------------------------------------------------ results files
+def _participant_rows(db: Any, pid: str) -> dict[str, list[dict[str, Any]]]:
+    con = db.connection
+    rows = {}
+    for table in ("participants", "sessions", "trials", "responses", "plays", "questionnaire"):
+        col = "id" if table == "participants" else "participant"
+        rows[table] = [dict(r) for r in con.execute(f"SELECT * FROM {table} WHERE {col} = ?", (pid,))]
+    return rows
+
+
+def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened: OpenedBundle | None = None) -> Path:
+    """Pack one participant's rows as ``results-<study>-<participant>.zip`` (``results.json`` + manifest)."""
+    study = opened.study if opened is not None else _slug(db.title)
+    payload = {
+        "format": RESULTS_FORMAT, "version": FORMAT_VERSION, "study": study, "design_hash": db.design_hash,
+        "app_version": __version__, "participant": participant_id,
+        "stimuli": [dict(r) for r in db.connection.execute("SELECT * FROM stimuli")],
+        **_participant_rows(db, participant_id),
+    }
+    data = json.dumps(payload, indent=1, sort_keys=True, default=str).encode("utf-8")
+    manifest = {"format": RESULTS_FORMAT, "version": FORMAT_VERSION, "participant": participant_id, "study": study,
+                "design_hash": db.design_hash, "files": {"results.json": _sha256_bytes(data)}}
+    out_dir = _mkdir(Path(out_dir))
+    path = out_dir / f"results-{study}-{_slug(participant_id)}.zip"
+    tmp = path.with_name(path.name + ".part")
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("results.json", data)
+        zf.writestr("manifest.json", json.dumps(manifest, indent=2, sort_keys=True))
+    os.replace(tmp, path)
+    return path
+
+
+# ------------------------------------------------------------------------------------------ merging
+@dataclass
+class MergeReport:
+    file: Path
+    ok: bool
+    message: str
+    participant: str | None = None
+
+
+def _read_results_file(path: Path) -> dict[str, Any]:
+    try:
+        with zipfile.ZipFile(path) as zf:
+            manifest = json.loads(zf.read("manifest.json"))
+            data = zf.read("results.json")
+    except FileNotFoundError:
+        raise InputError(path, None, "file not found") from None
+    except (zipfile.BadZipFile, KeyError, ValueError, OSError) as exc:
+        raise InputError(path, None, f"not a readable results file ({exc}); ask the participant to send it again") from None
+    if manifest.get("format") != RESULTS_FORMAT:
+        raise InputError(path, "manifest.json", "not a studyapp results file")
+    if _sha256_bytes(data) != manifest.get("files", {}).get("results.json"):
+        raise InputError(path, "results.json", "checksum mismatch: the file was damaged or edited; ask the "
+                         "participant to send the original again")
+    payload = json.loads(data)
+    if payload.get("design_hash") != manifest.get("design_hash"):
+        raise InputError(path, "results.json", "the manifest and the results disagree on the design")
+    return payload
+
+
+def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file: str | Path | None = None) -> list[MergeReport]:
+    """Import results files into the experimenter's database; one :class:`MergeReport` per file."""
+    from studyapp.study.storage import ResultsDB
+
+    extra_keys: dict[str, dict] = {}
+    if key_file is not None:
+        try:
+            k = json.loads(Path(key_file).read_text(encoding="utf-8"))
+            extra_keys[k["bundle_hash"]] = k
+        except (OSError, ValueError, KeyError) as exc:
+            raise InputError(key_file, None, f"not a bundle key file ({exc})") from None
+    db = ResultsDB(db_path, create=False)
+    reports = []
+    try:
+        for f in files:
+            f = Path(f)
+            try:
+                pid = _merge_one(db, f, extra_keys)
+                reports.append(MergeReport(f, True, f"participant {pid}", pid))
+            except StudyappError as exc:
+                reports.append(MergeReport(f, False, getattr(exc, "problem", str(exc))))
+    finally:
+        db.close()
+    return reports
+
+
+def _merge_one(db: Any, path: Path, extra_keys: dict[str, dict]) -> str:
+    payload = _read_results_file(path)
+    h = payload["design_hash"]
+    if h == db.design_hash:
+        key = {"conditions": {}, "stimuli": {}, "bundle_hash": h}
+    else:
+        key = db.bundle_key(h) or extra_keys.get(h)
+        if key is None or key.get("design_hash") != db.design_hash:
+            raise StudyappError(f"results of another design (hash {h[:12]}…): this database is for {db.title!r} "
+                                f"(hash {db.design_hash[:12]}…) and knows no bundle with that hash. Merge it into the "
+                                "database of its own study, or pass that bundle's --key file")
+    cmap: dict[str, str] = key["conditions"]
+    smap: dict[str, str] = key["stimuli"]
+
+    def cond(c: str) -> str:
+        if c.startswith("frozen:"):
+            return "frozen:" + cmap.get(c[7:], c[7:])
+        return cmap.get(c, c)
+
+    parts = payload["participants"]
+    if len(parts) != 1:
+        raise StudyappError(f"expected one participant in the file, found {len(parts)}")
+    p = parts[0]
+    pid = p["id"]
+    if db.participant(pid) is not None:
+        raise StudyappError(f"participant {pid!r} is already in {db.path} (duplicate: this file was merged "
+                            "before, or two participants used the same id)")
+    dh = db.design_hash
+    groups = json.loads(p["groups"])
+    if key.get("bundle_hash") != dh:
+        groups.setdefault("remote", "yes")
+        groups["bundle"] = h[:12]
+    with db.transaction() as con:
+        con.execute("INSERT INTO participants (id, latin_row, groups, status, created, completed, design_hash, "
+                    "app_version) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                    (pid, p["latin_row"], json.dumps(groups, sort_keys=True), p["status"], p["created"],
+                     p.get("completed"), dh, p["app_version"]))
+        session_ids: dict[int, int] = {}
+        for s in payload["sessions"]:
+            cur = con.execute("INSERT INTO sessions (participant, started, ended, app_version, design_hash, machine) "
+                              "VALUES (?, ?, ?, ?, ?, ?)",
+                              (pid, s["started"], s["ended"], s["app_version"], dh, s["machine"]))
+            session_ids[s["id"]] = int(cur.lastrowid)
+        for t in payload["trials"]:
+            con.execute(
+                "INSERT INTO trials (participant, trial_index, session, stimulus, is_practice, is_attention_check, "
+                "slot_left, slot_middle, slot_right, shown_at, answered_at, response_time_s, plays, frames_shown, "
+                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (pid, t["trial_index"], session_ids.get(t["session"]), smap.get(t["stimulus"], t["stimulus"]),
+                 t["is_practice"], t["is_attention_check"], cond(t["slot_left"]), cond(t["slot_middle"]),
+                 cond(t["slot_right"]), t["shown_at"], t["answered_at"], t["response_time_s"], t["plays"],
+                 t["frames_shown"], t["dropped_frames"], t["refresh_hz"], t["worst_av_offset_ms"],
+                 t["attention_passed"], dh, t["app_version"]))
+        con.executemany(
+            "INSERT INTO responses (participant, trial_index, criterion, condition, slot, rank, design_hash, app_version) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            [(pid, r["trial_index"], r["criterion"], cond(r["condition"]), r["slot"], r["rank"], dh, r["app_version"])
+             for r in payload["responses"]])
+        con.executemany(
+            "INSERT INTO plays (participant, trial_index, session, started, ended, completed, design_hash, app_version) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            [(pid, r["trial_index"], session_ids.get(r["session"]), r["started"], r["ended"], r["completed"], dh,
+              r["app_version"]) for r in payload["plays"]])
+        con.executemany(
+            "INSERT INTO questionnaire (participant, item, kind, scale, value, design_hash, app_version) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?)",
+            [(pid, q["item"], q.get("kind", "likert"), q.get("scale"), q["value"], dh, q["app_version"])
+             for q in payload["questionnaire"]])
+    return pid

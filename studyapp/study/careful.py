@@ -1,0 +1,137 @@
+"""What a careful viewer perceives in each slot: the scores behind the ``careful`` bot's rankings.
+
+Each score is a plain, documented signal measure (higher = better), computed on the hands because that is
+where co-speech gesture lives, and normalised by the figure's height so units (cm, m) do not matter:
+
+* **synchronization**: Pearson correlation ``r`` at lag 0 between the speed of the hands *relative to the
+  chest* (a viewer reads gestures against the body; whole-body sway would only add noise) and the speech
+  energy envelope, frame by frame (beat strokes are ~100 ms events, so no smoothing); mapped to
+  ``(1 + r) / 2`` and times an *activity* factor: a figure that barely moves shows no synchrony to
+  perceive, whatever its correlation, so it ranks below one that moves out of time.
+* **diversity**: how much of the gesture space the hands cover (RMS spread of hand positions relative to
+  the chest, in figure heights) times how varied their movement is in time (0.5 + 0.5 x normalised
+  spectral entropy of hand speed: one repeated rhythm scores low, varied strokes high).
+* **realism**: the activity factor (a frozen or near-frozen figure looks dead) times smoothness
+  ``(1 - h)^2``, with ``h`` the fraction of hand velocity power above 6 Hz: gestures live below a few Hz,
+  frame-to-frame jitter spreads its power up to the Nyquist rate.
+
+The activity factor is ``1 - exp(-a / 0.05)`` with ``a`` the mean world-space hand speed in figure heights
+per second (gesturing hands move ~0.1-0.3 heights/s; idle sway well under 0.01).
+
+>>> from studyapp.resources import demo_design
+>>> from studyapp.study.design import load_design
+>>> from studyapp.study.schedule import participant_schedule
+>>> from studyapp.study.stimuli import load_trial_media
+>>> d = load_design(demo_design())
+>>> media = load_trial_media(d, participant_schedule(d, "P01", row=0)[1])
+>>> sorted(careful_scores(media)) == sorted(c.id for c in d.criteria)
+True
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from studyapp.motion.skeleton import Motion
+
+if TYPE_CHECKING:
+    from studyapp.study.stimuli import TrialMedia
+
+#: Mean hand speed (figure heights per second) at which a figure counts as clearly moving.
+ACTIVITY_REF = 0.05
+#: Frequency (Hz) above which hand movement reads as jitter rather than gesture.
+JITTER_HZ = 6.0
+
+_HAND_BONES = ("LeftHand", "RightHand")
+_FALLBACK_BONES = ("LeftLowerArm", "RightLowerArm")
+_BODY_BONES = ("UpperChest", "Chest", "Spine", "Hips")
+
+
+def body_indices(motion: Motion) -> tuple[list[int], int]:
+    """Joint indices of the hands (else forearms, else all joints) and of the chest (else spine, hips, root)."""
+    from studyapp.motion.retarget import detect_name_map
+
+    by_bone = {b: motion.skeleton.index(j) for j, b in detect_name_map(motion.skeleton).items()}
+    hands = next(([by_bone[b] for b in want if b in by_bone] for want in (_HAND_BONES, _FALLBACK_BONES)
+                  if any(b in by_bone for b in want)), list(range(motion.skeleton.n_joints)))
+    chest = next((by_bone[b] for b in _BODY_BONES if b in by_bone), 0)
+    return hands, chest
+
+
+def motion_measures(motion: Motion, energy: np.ndarray | None, duration_s: float) -> dict[str, float]:
+    """The raw measures behind the scores for one motion (``energy`` frame-aligned at the motion's rate)."""
+    from studyapp.motion.fk import figure_height, joint_positions
+
+    fps = float(motion.fps)
+    n = max(1, min(motion.n_frames, int(round(duration_s * fps))))
+    if n < 4:
+        return {"activity": 0.0, "correlation": 0.0, "spread": 0.0, "entropy": 0.0, "high_freq": 0.0}
+    clipped = Motion(motion.skeleton, fps, motion.rotations[:n], motion.translations[:n])
+    hands, chest = body_indices(motion)
+    pos = joint_positions(clipped) / (figure_height(clipped) or 1.0)
+    world = pos[:, hands]                       # (F, H, 3)
+    rel = world - pos[:, [chest]]
+    vel = np.gradient(world, 1.0 / fps, axis=0)
+    speed = np.linalg.norm(vel, axis=-1)        # (F, H)
+    activity = float(speed.mean())
+    rel_speed = np.linalg.norm(np.gradient(rel, 1.0 / fps, axis=0), axis=-1).sum(axis=1)
+
+    corr = 0.0
+    if energy is not None:
+        m = min(n, len(energy))
+        a, b = rel_speed[:m], np.asarray(energy[:m], dtype=np.float64)
+        if m > 2 and a.std() > 1e-12 and b.std() > 1e-12:
+            corr = float(np.corrcoef(a, b)[0, 1])
+
+    power = (np.abs(np.fft.rfft(vel, axis=0)) ** 2).sum(axis=(1, 2))
+    freqs = np.fft.rfftfreq(n, 1.0 / fps)
+    high = float(power[freqs > JITTER_HZ].sum() / power.sum()) if power.sum() > 1e-18 else 0.0
+
+    spread = float(np.sqrt(rel.var(axis=0).sum(axis=-1).mean()))
+    spec = np.abs(np.fft.rfft(rel_speed - rel_speed.mean()))[1:] ** 2
+    entropy = 0.0
+    if spec.sum() > 1e-18 and len(spec) > 1:
+        p = spec / spec.sum()
+        entropy = float(-(p[p > 0] * np.log(p[p > 0])).sum() / np.log(len(p)))
+    return {"activity": activity, "correlation": corr, "spread": spread, "entropy": entropy, "high_freq": high}
+
+
+def scores_from_measures(m: dict[str, float]) -> dict[str, float]:
+    """Per-criterion scores (higher = better) from :func:`motion_measures`."""
+    active = 1.0 - np.exp(-m["activity"] / ACTIVITY_REF)
+    smooth = (1.0 - m["high_freq"]) ** 2
+    return {
+        "synchronization": float(active * (1.0 + m["correlation"]) / 2.0),
+        "diversity": float(m["spread"] * (0.5 + 0.5 * m["entropy"])),
+        "realism": float(active * smooth),
+    }
+
+
+def careful_scores(media: "TrialMedia") -> dict[str, tuple[float, float, float]]:
+    """Scores per criterion for the three slots (left, middle, right); higher = better.
+
+    Criteria other than realism / synchronization / diversity (designs may define their own) get the mean
+    of the three normalised known scores, so a careful viewer still prefers the better motion overall.
+    """
+    from studyapp.demo_content.signals import speech_energy
+
+    energies: dict[float, np.ndarray] = {}
+    per_slot = []
+    for motion in media.motions:
+        fps = float(motion.fps)
+        if fps not in energies:
+            energies[fps] = speech_energy(media.audio, fps)
+        per_slot.append(scores_from_measures(motion_measures(motion, energies[fps], media.duration_s)))
+    known = ("realism", "synchronization", "diversity")
+    out = {k: tuple(s[k] for s in per_slot) for k in known}
+    extra = {}
+    for cid in media.criteria:
+        if cid not in out:
+            normed = []
+            for k in known:
+                v = np.asarray(out[k], dtype=np.float64)
+                rng = v.max() - v.min()
+                normed.append((v - v.min()) / rng if rng > 0 else np.zeros(3))
+            extra[cid] = tuple(float(x) for x in np.mean(normed, axis=0))
+    return {**out, **extra}  # type: ignore[dict-item]

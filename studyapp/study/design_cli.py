@@ -1,0 +1,79 @@
+"""``studyapp validate`` and ``studyapp schedule``: check a design, print the plan it produces."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    v = sub.add_parser(
+        "validate",
+        help="check a study design: every problem in one run, each with file, key and fix",
+        description="Check a study design file and every file it references. Exit status 0 only when the "
+                    "design can run; otherwise one line per problem (file:line: key: problem -- fix: ...).",
+    )
+    v.add_argument("design", type=Path, help="the design .toml")
+    v.add_argument("--json", action="store_true", help="print a JSON list of {file, key, line, message, fix}")
+    v.add_argument("--quick", action="store_true",
+                   help="do not open stimulus files (skips duration and skeleton checks; missing files are still reported)")
+    v.set_defaults(func=_cmd_validate)
+
+    s = sub.add_parser(
+        "schedule",
+        help="print the full trial plan of a design and its balance counts",
+        description="The plan for N participants arriving in order (participant k gets design row k mod "
+                    "n_rows): one row per participant x trial, then how often each clip comes at each "
+                    "position and each condition sits in each slot.",
+    )
+    s.add_argument("design", type=Path, help="the design .toml")
+    s.add_argument("--participants", "-n", type=int, required=True, help="number of participants")
+    s.add_argument("--csv", type=Path, help="write the plan to this CSV file instead of printing it")
+    s.set_defaults(func=_cmd_schedule)
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from studyapp.study.design import problems_to_json, validate_design
+
+    problems = validate_design(args.design, check_files=not args.quick)
+    if args.json:
+        print(problems_to_json(problems))
+    else:
+        for p in problems:
+            print(p)
+        if problems:
+            n = len(problems)
+            print(f"{n} problem{'s' if n != 1 else ''}: the design cannot run until they are fixed.", file=sys.stderr)
+        else:
+            print(f"{args.design}: OK, the design can run.")
+    return 1 if problems else 0
+
+
+def _cmd_schedule(args: argparse.Namespace) -> int:
+    from studyapp.errors import StudyappError
+    from studyapp.study.design import load_design
+    from studyapp.study.schedule import balance_counts, full_schedule, n_rows
+
+    if args.participants < 1:
+        raise StudyappError("--participants must be at least 1")
+    design = load_design(args.design, check_files=False)
+    df = full_schedule(design, args.participants)
+    if args.csv:
+        args.csv.parent.mkdir(parents=True, exist_ok=True)
+        df.to_csv(args.csv, index=False)
+        print(f"Wrote {len(df)} trials of {args.participants} participants to {args.csv}")
+    else:
+        with pd.option_context("display.max_rows", None, "display.width", 200):
+            print(df.to_string(index=False))
+    rows = n_rows(design)
+    print(f"\nOrdering {design.ordering}, slot assignment {design.slot_assignment}: {rows} design rows; "
+          f"full balance needs a multiple of {rows} participants"
+          + ("" if args.participants % rows == 0 else f" ({args.participants} is not)") + ".")
+    counts = balance_counts(df)
+    print("\nRated trials per position (rows) x stimulus (columns):")
+    print(counts["position_x_stimulus"].to_string())
+    print("\nConditions (rows) x slots (columns):")
+    print(counts["slot_x_condition"].to_string())
+    return 0

@@ -1,0 +1,536 @@
+"""The participant's session as a state machine, drivable without a window.
+
+States, in order: ``WELCOME`` (consent) -> ``INSTRUCTIONS`` -> ``ENV_CHECK`` -> ``PRACTICE`` -> ``TRIALS``
+-> ``QUESTIONNAIRE`` -> ``DONE``; ``ENDED_EARLY`` replaces the rest after too many failed attention checks.
+Phases with nothing to do (no practice clips, no questionnaire) are skipped.
+
+The UI's screens call the methods; bots and tests call the same methods, so what is tested is what
+participants run. Rules the machine enforces:
+
+* an answer is committed (one transaction for all ranks of a trial) before the next trial becomes current;
+* there is no going back, and an answered trial can never be answered again;
+* with ``must_watch_fully`` a clip must have been played to its end once in this session before ranking;
+  with ``allow_replay = false`` it can be played only once;
+* ranks are complete (every criterion, every slot) and, unless the design allows ties, a permutation of
+  1..3. With ties allowed, tied ranks are stored as average ranks (1, 1, 3 -> 1.5, 1.5, 3), the convention
+  of the Friedman test;
+* starting the same participant again resumes at the first unanswered trial, on the same Latin-square row
+  and therefore with the same schedule; a finished participant is refused unless ``allow_rerun``, which
+  records a new participant ``<id>-rerun<k>`` on the same row (earlier answers are never touched).
+
+Attention checks (``design.attention_checks``): a trial whose plan has ``is_attention_check`` is scored by
+:func:`attention_passed`; when more checks fail than ``design.max_attention_failures`` allows, the session
+ends early with a polite message.
+
+Example (with a loaded ``design`` and a :class:`~studyapp.study.storage.ResultsDB` ``db``)::
+
+    s = Session(design, db, "P01")
+    s.accept_consent(); s.finish_instructions(); s.record_env_check({"gl_renderer": "llvmpipe"})
+    while s.current_trial() is not None:
+        s.record_play_started(); s.record_play_finished(True)
+        s.submit_ranking({c.id: {0: 1, 1: 2, 2: 3} for c in design.criteria})
+"""
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import asdict, dataclass, is_dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+from studyapp import __version__
+from studyapp.errors import InputError, StudyappError
+from studyapp.study.storage import (
+    ParticipantRecord,
+    Response,
+    ResultsDB,
+    TrialRecord,
+    machine_basics,
+    now_iso,
+)
+
+
+class State(str, enum.Enum):
+    WELCOME = "welcome"
+    INSTRUCTIONS = "instructions"
+    ENV_CHECK = "env_check"
+    PRACTICE = "practice"
+    TRIALS = "trials"
+    QUESTIONNAIRE = "questionnaire"
+    DONE = "done"
+    ENDED_EARLY = "ended_early"
+
+
+class SessionError(StudyappError):
+    """A method was called in a state where it makes no sense (a UI bug, not a participant error)."""
+
+
+class RankingError(StudyappError):
+    """The submitted ranking is incomplete or invalid; the message is written for the participant."""
+
+
+class ParticipantFinishedError(StudyappError):
+    """The participant already completed (or ended) the study; running again needs an explicit rerun."""
+
+
+@dataclass
+class PlayStats:
+    """What the player measured during one play of a clip (all optional; bots leave them empty)."""
+
+    frames_shown: int | None = None
+    dropped_frames: int | None = None
+    refresh_hz: float | None = None
+    worst_av_offset_ms: float | None = None
+
+
+ENDED_EARLY_MESSAGE = (
+    "Thank you for your time. The study has ended early because several check questions were not answered "
+    "as expected. This can happen to anyone; your participation is appreciated and nothing more is needed "
+    "from you."
+)
+DONE_MESSAGE = "Thank you! You have completed the study. Your answers have been saved."
+
+
+def _stats_dict(stats: PlayStats | Mapping[str, Any] | None) -> dict[str, Any]:
+    if stats is None:
+        return {}
+    if is_dataclass(stats):
+        return {k: v for k, v in asdict(stats).items() if v is not None}
+    return {k: v for k, v in dict(stats).items() if v is not None}
+
+
+def _average_ranks(values: Sequence[float]) -> tuple[float, float, float]:
+    # Average ("fractional") ranks of three values; tiny, and keeps scipy.stats' slow import off the
+    # path between a click and the commit.
+    out = []
+    for v in values:
+        below = sum(x < v for x in values)
+        equal = sum(x == v for x in values)
+        out.append(below + (equal + 1) / 2)
+    return (float(out[0]), float(out[1]), float(out[2]))
+
+
+def normalise_ranks(
+    ranks: Mapping[str, Mapping[Any, Any]], criteria: Sequence[str], allow_ties: bool
+) -> dict[str, tuple[float, float, float]]:
+    """Check a submitted ranking and return ``{criterion: (rank of slot 0, slot 1, slot 2)}``.
+
+    Slots may be given as ints or digit strings. Raises :class:`RankingError` with a message for the
+    participant when a criterion or slot is missing, a rank is outside 1..3, or ranks tie without
+    ``allow_ties``.
+
+    >>> normalise_ranks({"realism": {0: 2, 1: 1, 2: 3}}, ["realism"], False)
+    {'realism': (2.0, 1.0, 3.0)}
+    >>> normalise_ranks({"realism": {"0": 1, "1": 1, "2": 3}}, ["realism"], True)
+    {'realism': (1.5, 1.5, 3.0)}
+    """
+    unknown = sorted(set(ranks) - set(criteria))
+    if unknown:
+        raise RankingError(f"unknown question(s): {', '.join(unknown)}")
+    out: dict[str, tuple[float, float, float]] = {}
+    for crit in criteria:
+        given = ranks.get(crit)
+        if not given:
+            raise RankingError(f"Please rank all three for '{crit}'.")
+        by_slot: dict[int, float] = {}
+        for k, v in given.items():
+            try:
+                slot = int(k)
+                value = float(v)
+            except (TypeError, ValueError):
+                raise RankingError(f"'{crit}': {k!r} -> {v!r} is not a slot and a rank") from None
+            if slot not in (0, 1, 2):
+                raise RankingError(f"'{crit}': there is no slot {slot}")
+            if value not in (1.0, 2.0, 3.0):
+                raise RankingError(f"'{crit}': ranks go from 1 (best) to 3, not {v!r}")
+            by_slot[slot] = value
+        if set(by_slot) != {0, 1, 2}:
+            raise RankingError(f"Please rank all three for '{crit}'.")
+        values = [by_slot[0], by_slot[1], by_slot[2]]
+        if len(set(values)) < 3 and not allow_ties:
+            raise RankingError(f"'{crit}': each rank (1, 2, 3) can be given only once; ties are not allowed.")
+        out[crit] = _average_ranks(values)
+    return out
+
+
+def attention_passed(design: Any, plan: Any, ranks: Mapping[str, tuple[float, float, float]]) -> bool | None:
+    """Score an attention-check trial; ``None`` when the trial is not one (or no check names its stimulus).
+
+    The rule is the design's (:meth:`studyapp.study.design.AttentionCheck.passed`): the deciding slot (the
+    frozen slot, or the known-worst condition) must get the expected rank on the expected criterion; a tie
+    that includes the expected rank passes.
+    """
+    if not getattr(plan, "is_attention_check", False):
+        return None
+    checks = [c for c in getattr(design, "attention_checks", []) or [] if c.stimulus == plan.stimulus_id]
+    if not checks:
+        return None
+    try:
+        return bool(checks[0].passed(tuple(plan.slots), ranks))
+    except (ValueError, KeyError):
+        return None
+
+
+def prepare_participant(
+    design: Any,
+    db: ResultsDB,
+    participant_id: str,
+    *,
+    row: int | None = None,
+    groups: Mapping[str, str] | None = None,
+    allow_rerun: bool = False,
+    n_rows: int | None = None,
+) -> ParticipantRecord:
+    """The participant record a session should run: existing (resume), new (next free row), or a rerun.
+
+    Raises :class:`ParticipantFinishedError` for a participant who already finished (unless
+    ``allow_rerun``: then a new participant ``<id>-rerun<k>`` on the same row is registered), and
+    :class:`InputError` when ``row`` contradicts the row a resumed participant already follows.
+    """
+
+    def rows() -> int:
+        if n_rows is not None:
+            return int(n_rows)
+        from studyapp.study.schedule import n_rows as schedule_rows
+
+        return int(schedule_rows(design))
+
+    def new(pid: str, on_row: int | None, extra: Mapping[str, str]) -> ParticipantRecord:
+        base = {k: str(v) for k, v in (getattr(design, "groups", None) or {}).items()}
+        return db.add_participant(pid, rows(), row=on_row, groups={**base, **extra})
+
+    rec = db.participant(participant_id)
+    if rec is None:
+        return new(participant_id, row, dict(groups or {}))
+    if rec.status != "active":
+        if not allow_rerun:
+            what = "completed the study" if rec.status == "done" else "ended the study early"
+            raise ParticipantFinishedError(
+                f"participant {participant_id!r} already {what} ({rec.completed}) in {db.path}. "
+                "Use a new participant id, or --allow-rerun to record a separate run")
+        k = 2
+        while db.participant(f"{participant_id}-rerun{k}") is not None:
+            k += 1
+        return new(f"{participant_id}-rerun{k}", rec.latin_row,
+                   {**rec.groups, **(groups or {}), "rerun_of": participant_id})
+    if row is not None and row != rec.latin_row:
+        raise InputError(db.path, "--row", f"participant {participant_id!r} already follows Latin-square row "
+                         f"{rec.latin_row}; a resumed session keeps its row (drop --row, or use a new id)")
+    if groups:
+        db.update_groups(rec.id, dict(groups))
+        rec = db.participant(rec.id) or rec
+    return rec
+
+
+class Session:
+    """One participant going through the study (see the module docstring for the rules).
+
+    Parameters
+    ----------
+    design:
+        The loaded :class:`~studyapp.study.design.Design`.
+    db:
+        The study's results database.
+    participant_id:
+        As typed by the experimenter. A known id resumes; a new id is assigned a Latin-square row.
+    row:
+        Explicit Latin-square row for a new participant (``None``: the least used row).
+    groups:
+        Extra participant groups stored with the participant (e.g. ``{"device": "vr"}``); the design's
+        ``groups`` are added automatically.
+    allow_rerun:
+        Let a finished participant run again as a new participant ``<id>-rerun<k>``.
+    plans, n_rows:
+        A schedule to use instead of :func:`studyapp.study.schedule.participant_schedule` (tests, bundles).
+    on_saved:
+        Called with the :class:`TrialPlan` after its answer is committed (bots print "saved trial K").
+    """
+
+    def __init__(
+        self,
+        design: Any,
+        db: ResultsDB,
+        participant_id: str,
+        *,
+        row: int | None = None,
+        groups: Mapping[str, str] | None = None,
+        allow_rerun: bool = False,
+        plans: Sequence[Any] | None = None,
+        n_rows: int | None = None,
+        on_saved: Callable[[Any], None] | None = None,
+    ) -> None:
+        self.design = design
+        self.db = db
+        self.on_saved = on_saved
+        self.criteria: list[str] = [c.id for c in design.criteria]
+        self.playback = design.playback
+        rec = prepare_participant(design, db, participant_id, row=row, groups=groups, allow_rerun=allow_rerun,
+                                  n_rows=n_rows)
+        self.participant: ParticipantRecord = rec
+        self.participant_id: str = rec.id
+        self.row: int = rec.latin_row
+        if plans is None:
+            from studyapp.study.schedule import participant_schedule
+
+            plans = participant_schedule(design, self.participant_id, self.row)
+        self.plans: list[Any] = list(plans)
+        self.n_practice: int = sum(1 for p in self.plans if p.is_practice)
+        self.n_trials: int = len(self.plans) - self.n_practice
+        answered = db.answered_trials(self.participant_id)
+        self.resumed: bool = bool(answered)
+        self._pos = next((i for i, p in enumerate(self.plans) if p.trial_index not in answered), len(self.plans))
+        self.session_id: int = db.start_session(self.participant_id, {**machine_basics(), "app_version": __version__})
+        self.state: State = State.WELCOME
+        #: The results file to send back (remote bundle runs), set when the session ends; the final screen shows it.
+        self.results_file: Any = None
+        self._reset_trial()
+
+    # ------------------------------------------------------------------ setup helpers
+    def _reset_trial(self) -> None:
+        self._shown_wall: str | None = None
+        self._shown_mono: float | None = None
+        self._play_id: int | None = None
+        self._completed_plays = 0
+        self._plays = 0
+        self._frames_shown: int | None = None
+        self._dropped: int | None = None
+        self._refresh: float | None = None
+        self._worst_av: float | None = None
+
+    def _expect(self, *states: State) -> None:
+        if self.state not in states:
+            raise SessionError(f"cannot do that in state {self.state.value} (expected {', '.join(s.value for s in states)})")
+
+    # ------------------------------------------------------------------ the fixed screens
+    def accept_consent(self) -> State:
+        """The participant agreed on the welcome screen."""
+        self._expect(State.WELCOME)
+        self.db.update_session_machine(self.session_id, {"consent_at": now_iso()})
+        self.state = State.INSTRUCTIONS
+        return self.state
+
+    def finish_instructions(self) -> State:
+        self._expect(State.INSTRUCTIONS)
+        self.state = State.ENV_CHECK
+        return self.state
+
+    def record_env_check(self, info: Mapping[str, Any] | None = None) -> State:
+        """Store what the environment check found (GL renderer, refresh rate, audio device and latency, ...)
+        with this session, then go to the first unanswered trial (or further)."""
+        self._expect(State.ENV_CHECK)
+        if info:
+            self.db.update_session_machine(self.session_id, dict(info))
+        self._advance()
+        return self.state
+
+    # ------------------------------------------------------------------ progress
+    def _advance(self) -> None:
+        self._reset_trial()
+        limit = getattr(self.design, "max_attention_failures", None)
+        if limit is not None and self.db.attention_failures(self.participant_id) > limit:
+            self.state = State.ENDED_EARLY
+            self._finish("ended_early")
+            return
+        if self._pos < len(self.plans):
+            self.state = State.PRACTICE if self.plans[self._pos].is_practice else State.TRIALS
+            self._shown_wall = now_iso()
+            self._shown_mono = time.monotonic()
+            return
+        items = list(getattr(self.design, "questionnaire", None) or [])
+        if items and not self.db.questionnaire(self.participant_id):
+            self.state = State.QUESTIONNAIRE
+            return
+        self.state = State.DONE
+        self._finish("done")
+
+    def _finish(self, status: str) -> None:
+        self.db.set_status(self.participant_id, status)
+        self.db.end_session(self.session_id)
+        # A remote (bundle) run sets this hook on the database to pack the participant's results file,
+        # so whichever front end drives the session (window, offscreen, bot) produces it and can show it.
+        hook = getattr(self.db, "on_participant_finished", None)
+        if hook is not None:
+            self.results_file = hook(self.participant_id)
+
+    def current_trial(self) -> Any | None:
+        """The :class:`TrialPlan` to show now, or ``None`` outside the practice and trial phases."""
+        if self.state in (State.PRACTICE, State.TRIALS):
+            return self.plans[self._pos]
+        return None
+
+    def trial_number(self) -> int:
+        """1-based number of the current clip within its phase (practice clips are counted separately)."""
+        plan = self.current_trial()
+        if plan is None:
+            return 0
+        return sum(1 for p in self.plans[: self._pos + 1] if p.is_practice == plan.is_practice)
+
+    def phase_total(self) -> int:
+        plan = self.current_trial()
+        if plan is None:
+            return 0
+        return self.n_practice if plan.is_practice else self.n_trials
+
+    def progress_label(self) -> str:
+        """``"Practice clip 1 of 2"`` / ``"Clip 3 of 8"`` / ``""``."""
+        plan = self.current_trial()
+        if plan is None:
+            return ""
+        prefix = "Practice clip" if plan.is_practice else "Clip"
+        return f"{prefix} {self.trial_number()} of {self.phase_total()}"
+
+    @property
+    def answered(self) -> int:
+        """Trials answered so far (all sessions of this participant)."""
+        return self._pos
+
+    # ------------------------------------------------------------------ playback
+    @property
+    def plays(self) -> int:
+        """Plays of the current clip in this session."""
+        return self._plays
+
+    def can_play(self) -> bool:
+        if self.current_trial() is None or self._play_id is not None:
+            return False
+        return bool(self.playback.allow_replay) or self._plays == 0
+
+    def record_play_started(self) -> int:
+        """The clip started playing (from the start). Returns the play's id."""
+        self._expect(State.PRACTICE, State.TRIALS)
+        if self._play_id is not None:
+            raise SessionError("the clip is already playing")
+        if not self.can_play():
+            raise SessionError("this study allows each clip to be played only once")
+        plan = self.plans[self._pos]
+        self._play_id = self.db.start_play(self.participant_id, plan.trial_index, self.session_id)
+        self._plays += 1
+        return self._play_id
+
+    def record_play_finished(self, completed: bool, stats: PlayStats | Mapping[str, Any] | None = None) -> None:
+        """The play ended: ``completed`` when it reached the clip's end (not stopped or interrupted)."""
+        self._expect(State.PRACTICE, State.TRIALS)
+        if self._play_id is None:
+            raise SessionError("no clip is playing")
+        self.db.finish_play(self._play_id, completed)
+        self._play_id = None
+        if completed:
+            self._completed_plays += 1
+        self._add_stats(_stats_dict(stats))
+
+    def _add_stats(self, s: Mapping[str, Any]) -> None:
+        if s.get("frames_shown") is not None:
+            self._frames_shown = (self._frames_shown or 0) + int(s["frames_shown"])
+        if s.get("dropped_frames") is not None:
+            self._dropped = (self._dropped or 0) + int(s["dropped_frames"])
+        if s.get("refresh_hz") is not None:
+            self._refresh = float(s["refresh_hz"])
+        if s.get("worst_av_offset_ms") is not None:
+            w = abs(float(s["worst_av_offset_ms"]))
+            self._worst_av = w if self._worst_av is None else max(self._worst_av, w)
+
+    def can_rank(self) -> bool:
+        """True when the ranking may be submitted (the clip was watched fully once, if the design asks)."""
+        if self.current_trial() is None or self._play_id is not None:
+            return False
+        return self._completed_plays > 0 or not bool(self.playback.must_watch_fully)
+
+    # ------------------------------------------------------------------ answers
+    def submit_ranking(
+        self,
+        ranks: Mapping[str, Mapping[Any, Any]],
+        stats: PlayStats | Mapping[str, Any] | None = None,
+    ) -> State:
+        """Validate, commit (one transaction) and advance to the next trial; returns the new state.
+
+        ``ranks`` is ``{criterion id: {slot index 0..2: rank 1..3}}``; ``stats`` may add playback figures
+        not reported through :meth:`record_play_finished`.
+        """
+        self._expect(State.PRACTICE, State.TRIALS)
+        if self._play_id is not None:
+            raise RankingError("Please wait until the clip has finished playing.")
+        if not self.can_rank():
+            raise RankingError("Please watch the clip to the end before ranking.")
+        allow_ties = bool(getattr(self.playback, "allow_ties", False))
+        clean = normalise_ranks(ranks, self.criteria, allow_ties)
+        self._add_stats(_stats_dict(stats))
+        plan = self.plans[self._pos]
+        passed = attention_passed(self.design, plan, clean)
+        record = TrialRecord(
+            participant=self.participant_id,
+            trial_index=int(plan.trial_index),
+            stimulus=plan.stimulus_id,
+            is_practice=bool(plan.is_practice),
+            is_attention_check=bool(plan.is_attention_check),
+            slots=tuple(plan.slots),
+            shown_at=self._shown_wall,
+            answered_at=now_iso(),
+            response_time_s=None if self._shown_mono is None else round(time.monotonic() - self._shown_mono, 4),
+            plays=self.db.play_count(self.participant_id, plan.trial_index),
+            frames_shown=self._frames_shown,
+            dropped_frames=self._dropped,
+            refresh_hz=self._refresh,
+            worst_av_offset_ms=self._worst_av,
+            attention_passed=passed,
+            session=self.session_id,
+        )
+        responses = [
+            Response(criterion=crit, condition=plan.slots[slot], slot=slot, rank=r)
+            for crit in self.criteria
+            for slot, r in enumerate(clean[crit])
+        ]
+        self.db.save_trial(record, responses)  # durable when it returns
+        self._pos += 1
+        if self.on_saved is not None:
+            self.on_saved(plan)
+        self._advance()
+        return self.state
+
+    # ------------------------------------------------------------------ questionnaire
+    @property
+    def questionnaire_items(self) -> list[Any]:
+        return list(getattr(self.design, "questionnaire", None) or [])
+
+    def submit_questionnaire(self, answers: Mapping[str, Any]) -> State:
+        """Store the questionnaire (likert items must be answered with 1..points; text items may be empty)."""
+        self._expect(State.QUESTIONNAIRE)
+        items = {q.id: q for q in self.questionnaire_items}
+        unknown = sorted(set(answers) - set(items))
+        if unknown:
+            raise RankingError(f"unknown question(s): {', '.join(unknown)}")
+        clean: dict[str, Any] = {}
+        for qid, q in items.items():
+            v = answers.get(qid)
+            if q.kind == "likert":
+                try:
+                    iv = int(v)
+                except (TypeError, ValueError):
+                    raise RankingError(f"Please answer: {q.text}") from None
+                if not (1 <= iv <= int(q.points)) or float(v) != iv:
+                    raise RankingError(f"'{q.text}': choose a value from 1 to {q.points}")
+                clean[qid] = iv
+            else:
+                clean[qid] = "" if v is None else str(v)
+        self.db.save_questionnaire(self.participant_id, clean,
+                                   {q.id: (q.kind, getattr(q, "scale", None)) for q in items.values()})
+        self.state = State.DONE
+        self._finish("done")
+        return self.state
+
+    # ------------------------------------------------------------------ the end
+    @property
+    def finished(self) -> bool:
+        return self.state in (State.DONE, State.ENDED_EARLY)
+
+    @property
+    def end_message(self) -> str:
+        if self.state is State.ENDED_EARLY:
+            return ENDED_EARLY_MESSAGE
+        if self.state is State.DONE:
+            return DONE_MESSAGE
+        return ""
+
+    def close(self) -> None:
+        """Mark this session's end time (the participant may still resume later)."""
+        if not self.finished:
+            self.db.end_session(self.session_id)
+

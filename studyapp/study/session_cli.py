@@ -1,0 +1,212 @@
+"""``studyapp run | export | bundle | merge``: running sessions and moving their results around."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from studyapp.errors import InputError, StudyappError
+
+BOTS = ("random", "ordered", "careful")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run (or resume) one participant's session: a window, or a scripted bot",
+        description="Run one participant through a study design (.toml) or a remote study bundle (.zip). "
+        "Starting a participant again resumes at the first unanswered clip with the same order.",
+    )
+    p.add_argument("design", type=Path, help="study design (.toml) or study bundle (.zip)")
+    p.add_argument("--participant", required=True, help="participant id (e.g. P01)")
+    p.add_argument("--results", type=Path, help="results database (default: <design>.results.sqlite next to the "
+                   "design; for a bundle, in your user data folder)")
+    p.add_argument("--row", type=int, help="Latin-square row for a new participant (default: the least used row)")
+    p.add_argument("--group", action="append", default=[], metavar="KEY=VALUE",
+                   help="participant group stored with the answers, e.g. --group device=vr (repeatable)")
+    p.add_argument("--allow-rerun", action="store_true",
+                   help="let a participant who finished run again (recorded as <id>-rerun<k>)")
+    p.add_argument("--fullscreen", action="store_true", help="open the participant window full screen")
+    p.add_argument("--offscreen", action="store_true", help="no window: a scripted participant through the real UI")
+    p.add_argument("--bot", choices=BOTS, help="scripted participant policy (with --offscreen or --no-render)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the scripted participant")
+    p.add_argument("--no-render", action="store_true", help="bot at the session level, no rendering (fast)")
+    p.add_argument("--bot-pace", type=float, default=0.0, metavar="SECONDS",
+                   help="with --no-render: seconds a bot 'watches' each clip (default 0)")
+    p.set_defaults(func=_cmd_run)
+
+    e = sub.add_parser("export", help="export a results database as a tidy CSV (one row per rank)")
+    e.add_argument("db", type=Path, help="results database (.sqlite)")
+    e.add_argument("--csv", type=Path, help="long table: participant x trial x criterion x condition")
+    e.add_argument("--questionnaire-csv", type=Path, help="questionnaire answers, one row per participant x item")
+    e.add_argument("--exclude-practice", action="store_true",
+                   help="leave practice trials out (by default they are kept and flagged in is_practice)")
+    e.set_defaults(func=_cmd_export)
+
+    b = sub.add_parser("bundle", help="pack a study into one zip for remote participants (opaque file names)")
+    b.add_argument("design", type=Path, help="study design (.toml)")
+    b.add_argument("-o", "--output", type=Path, required=True, help="bundle to write (STUDY.zip)")
+    b.add_argument("--participants", type=int, default=0,
+                   help="pre-assign Latin-square rows to N remote participant ids R01..RN (continuing the balance "
+                   "of the experimenter's database)")
+    b.add_argument("--results", type=Path, help="the experimenter's results database, which keeps the bundle's key "
+                   "(default: <design>.results.sqlite next to the design)")
+    b.set_defaults(func=_cmd_bundle)
+
+    m = sub.add_parser("merge", help="import remote participants' results files into the experimenter's database")
+    m.add_argument("db", type=Path, help="the experimenter's results database")
+    m.add_argument("files", type=Path, nargs="+", help="results-*.zip files sent back by participants")
+    m.add_argument("--key", type=Path, help="a bundle key file (STUDY.key.json) when the database does not hold it")
+    m.set_defaults(func=_cmd_merge)
+
+
+def default_results_path(design_path: Path) -> Path:
+    """``<design stem>.results.sqlite`` next to the design."""
+    return design_path.with_name(f"{design_path.stem}.results.sqlite")
+
+
+def parse_groups(items: list[str]) -> dict[str, str]:
+    groups = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise InputError(None, "--group", f"{item!r} is not KEY=VALUE (e.g. --group device=vr)")
+        groups[key.strip()] = value.strip()
+    return groups
+
+
+def _print_saved(plan: Any) -> None:
+    # Printed only after the commit returned, so the kill tests may hold the database to it.
+    print(f"saved trial {plan.trial_index}", flush=True)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from studyapp.study.design import load_design
+    from studyapp.study.session import prepare_participant
+    from studyapp.study.storage import ResultsDB
+
+    opened = None
+    if args.design.suffix.lower() == ".zip":
+        from studyapp.study.bundle import open_bundle
+
+        opened = open_bundle(args.design)
+        design_path = opened.design_path
+        results = args.results or opened.default_results
+    else:
+        design_path = args.design
+        results = args.results or default_results_path(args.design)
+    if args.no_render or args.offscreen:
+        if not args.bot:
+            raise StudyappError("--no-render and --offscreen need a scripted participant: add --bot random|ordered|careful")
+    elif args.bot:
+        args.no_render = True  # a bot without a window mode: the fast session-level run
+    design = load_design(design_path)
+    db = ResultsDB(results, design)
+    print(f"Results database: {results}", flush=True)
+    finished_files: list[Path] = []
+    try:
+        row = args.row
+        groups = parse_groups(args.group)
+        if opened is not None:
+            from studyapp.study.bundle import remote_row, write_results_file
+
+            if row is None:
+                row = remote_row(design, opened, args.participant)
+            groups.setdefault("remote", "yes")
+            out_dir = opened.results_dir
+
+            def pack(pid: str) -> Path:
+                path = write_results_file(db, pid, out_dir, opened)
+                finished_files.append(path)
+                return path
+
+            db.on_participant_finished = pack
+        rec = prepare_participant(design, db, args.participant, row=row, groups=groups,
+                                  allow_rerun=args.allow_rerun)
+        if rec.id != args.participant:
+            print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
+        code = _run_mode(args, design, db, rec.id)
+        final = db.participant(rec.id)
+    finally:
+        db.close()
+    if final is not None and final.status == "ended_early":
+        from studyapp.study.session import ENDED_EARLY_MESSAGE
+
+        print(ENDED_EARLY_MESSAGE)
+    elif final is not None and final.status == "done":
+        print(f"Participant {rec.id} completed the study.")
+    for f in finished_files:
+        print(f"Your results file: {f}\nPlease send this file to the experimenter.")
+    return code
+
+
+def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:
+    if args.no_render:
+        from studyapp.study.bots import run_bot_session
+
+        run_bot_session(design, db, pid, args.bot, args.seed, on_trial=_print_saved, pace_s=args.bot_pace)
+        return 0
+    if args.offscreen:
+        try:
+            from studyapp.ui.app import run_offscreen_bot
+        except ImportError:
+            print("The offscreen UI is not available in this installation; running the bot without rendering.",
+                  file=sys.stderr)
+            from studyapp.study.bots import run_bot_session
+
+            run_bot_session(design, db, pid, args.bot, args.seed, on_trial=_print_saved)
+            return 0
+        return int(run_offscreen_bot(design, db, pid, args.bot, args.seed) or 0)
+    from studyapp.demo_cli import display_available
+
+    if not display_available():
+        raise StudyappError("no display found to open the participant window; run on a desktop, or use "
+                            "--offscreen --bot careful for a scripted check")
+    from studyapp.ui.app import run_window
+
+    return int(run_window(design, db, pid, fullscreen=args.fullscreen) or 0)
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from studyapp.study.export import export_dataframe, questionnaire_dataframe
+
+    if not args.csv and not args.questionnaire_csv:
+        raise StudyappError("nothing to export: give --csv OUT and/or --questionnaire-csv OUT")
+    if args.csv:
+        df = export_dataframe(args.db, include_practice=not args.exclude_practice)
+        args.csv.parent.mkdir(parents=True, exist_ok=True)
+        df.to_csv(args.csv, index=False)
+        n_part = df["participant"].nunique() if len(df) else 0
+        print(f"Wrote {len(df)} rows ({n_part} participants) to {args.csv}")
+    if args.questionnaire_csv:
+        q = questionnaire_dataframe(args.db)
+        args.questionnaire_csv.parent.mkdir(parents=True, exist_ok=True)
+        q.to_csv(args.questionnaire_csv, index=False)
+        print(f"Wrote {len(q)} questionnaire answers to {args.questionnaire_csv}")
+    return 0
+
+
+def _cmd_bundle(args: argparse.Namespace) -> int:
+    from studyapp.study.bundle import make_bundle
+
+    results = args.results or default_results_path(args.design)
+    info = make_bundle(args.design, args.output, participants=args.participants, results=results)
+    print(f"Wrote {info.path} ({info.n_files} files, {info.size_bytes / 1e6:.1f} MB)")
+    print(f"Key (opaque ids -> conditions and files), keep it private: {info.key_path}")
+    print(f"The key is also stored in {results}, so `studyapp merge` can map results back.")
+    if info.roster:
+        print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
+    return 0
+
+
+def _cmd_merge(args: argparse.Namespace) -> int:
+    from studyapp.study.bundle import merge_results
+
+    reports = merge_results(args.db, args.files, key_file=args.key)
+    bad = 0
+    for r in reports:
+        print(("imported: " if r.ok else "REFUSED: ") + f"{r.file}: {r.message}")
+        bad += not r.ok
+    print(f"{len(reports) - bad} of {len(reports)} file(s) imported into {args.db}")
+    return 1 if bad else 0

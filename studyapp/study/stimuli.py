@@ -1,0 +1,394 @@
+"""Load what one trial shows: the clip's audio and face, and each slot's body motion.
+
+:func:`load_trial_media` is called every time a trial starts and on every replay, so everything it reads
+goes through a small in-process LRU cache keyed by file identity (path, size, modification time) and
+loading options: a replay, or the attention-check repeat of a clip, costs a dictionary lookup. Validation
+(:func:`check_stimulus_files`, run by :func:`~studyapp.study.design.load_design`) reads the same files the
+same way, so it also warms the cache for the first trial.
+
+Live conditions (``model = "x.onnx"``) run the model over the stimulus through
+:func:`studyapp.models.live.motion_for_stimulus`, which keeps its own disk cache.
+
+Example
+-------
+>>> from studyapp.resources import demo_design
+>>> from studyapp.study.design import load_design
+>>> from studyapp.study.schedule import participant_schedule
+>>> design = load_design(demo_design())
+>>> media = load_trial_media(design, participant_schedule(design, "P01", row=0)[1])
+>>> len(media.motions), media.labels, round(media.duration_s)
+(3, ('A', 'B', 'C'), 10)
+"""
+from __future__ import annotations
+
+import csv
+import math
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Hashable
+
+import numpy as np
+
+from studyapp.audio.wav import AudioClip
+from studyapp.errors import InputError
+from studyapp.face.animation import FaceAnimation
+from studyapp.motion.skeleton import Motion
+from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
+                                   motion_path, resolve)
+from studyapp.study.schedule import TrialPlan
+
+#: Largest allowed difference between the durations of a stimulus's audio, face and motions (seconds).
+DURATION_TOLERANCE_S = 0.2
+#: Frame rate of the neutral face used for stimuli without face data.
+NEUTRAL_FACE_FPS = 30.0
+
+
+@dataclass
+class TrialMedia:
+    """Everything the viewer needs for one trial.
+
+    Attributes
+    ----------
+    plan: the scheduled trial.
+    audio: the clip's speech.
+    face: ARKit blendshapes shared by all three avatars (a neutral face when the stimulus has none).
+    motions: body motion per slot, left, middle, right.
+    avatar: ``"builtin"`` or the absolute path of a glTF/VRM avatar.
+    labels: slot labels shown to the participant (``("A", "B", "C")``) or None.
+    duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
+    criteria: the design's criterion ids, in order (what the participant ranks the slots on).
+    """
+
+    plan: TrialPlan
+    audio: AudioClip
+    face: FaceAnimation
+    motions: tuple[Motion, Motion, Motion]
+    avatar: str
+    labels: tuple[str, str, str] | None
+    duration_s: float
+    criteria: tuple[str, ...] = ()
+
+    @property
+    def avatar_spec(self) -> str:
+        """Alias of ``avatar`` (the name the renderer uses)."""
+        return self.avatar
+
+    @property
+    def slots(self) -> tuple[str, str, str]:
+        return self.plan.slots
+
+
+# ---------------------------------------------------------------------------------------------------------
+# A small thread-safe LRU cache (the UI may preload the next trial on a worker thread)
+
+
+class _LRU:
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._data: OrderedDict[Hashable, Any] = OrderedDict()
+        self._lock = threading.Lock()
+        self.hits = 0
+        self.misses = 0
+
+    def get(self, key: Hashable, make: Callable[[], Any]) -> Any:
+        with self._lock:
+            if key in self._data:
+                self._data.move_to_end(key)
+                self.hits += 1
+                return self._data[key]
+        value = make()  # outside the lock: loading may take a while and must not block other lookups
+        with self._lock:
+            self.misses += 1
+            self._data[key] = value
+            self._data.move_to_end(key)
+            while len(self._data) > self.size:
+                self._data.popitem(last=False)
+        return value
+
+    def clear(self) -> None:
+        with self._lock:
+            self._data.clear()
+            self.hits = self.misses = 0
+
+
+_FILES = _LRU(48)   # decoded files (audio, faces, motions, templates)
+_MEDIA = _LRU(8)    # assembled TrialMedia (the current trial, its replays, a preloaded next one)
+
+
+def clear_cache() -> None:
+    """Forget every cached file and trial (tests; or after stimulus files changed on disk)."""
+    _FILES.clear()
+    _MEDIA.clear()
+
+
+def cache_info() -> dict[str, int]:
+    """Hits and misses of the file and trial caches since the last :func:`clear_cache`."""
+    return {"file_hits": _FILES.hits, "file_misses": _FILES.misses,
+            "media_hits": _MEDIA.hits, "media_misses": _MEDIA.misses}
+
+
+def _file_id(path: Path) -> tuple[str, int, int]:
+    st = Path(path).stat()
+    return (str(path), st.st_size, st.st_mtime_ns)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Loaders (each cached by file identity)
+
+
+def load_audio(path: Path) -> AudioClip:
+    from studyapp.audio.wav import load_wav
+
+    return _FILES.get(("audio", _file_id(path)), lambda: load_wav(path))
+
+
+def load_stimulus_face(stimulus: Stimulus, n_frames_hint: float | None = None) -> FaceAnimation:
+    """The stimulus's face animation, or a neutral face ``n_frames_hint`` seconds long when it has none."""
+    if stimulus.face is None:
+        seconds = n_frames_hint or 1.0
+        return FaceAnimation.neutral(max(1, math.ceil(seconds * NEUTRAL_FACE_FPS)), NEUTRAL_FACE_FPS)
+    from studyapp.face.io import load_face
+
+    return _FILES.get(("face", _file_id(stimulus.face)), lambda: load_face(stimulus.face))
+
+
+def load_head(path: Path) -> np.ndarray:
+    """Head rotation ``(F, 3)`` yaw, pitch, roll in radians, at the face's frame rate.
+
+    ``.npy``: an ``(F, 3)`` array. ``.csv``: a header row with ``yaw``, ``pitch``, ``roll`` columns (any case,
+    optional ``head`` prefix, e.g. Live Link Face's ``HeadYaw``), other columns ignored.
+    """
+    def read() -> np.ndarray:
+        if path.suffix.lower() == ".npy":
+            arr = np.load(path, allow_pickle=False)
+            if arr.ndim != 2 or arr.shape[1] != 3:
+                raise InputError(path, "array shape", f"{arr.shape}, expected (frames, 3) yaw/pitch/roll radians")
+            return arr.astype(np.float64)
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            rows = list(csv.reader(f))
+        if not rows:
+            raise InputError(path, "line 1", "empty file; expected a header with yaw, pitch, roll")
+        header = [h.strip().lower().removeprefix("head").lstrip("_") for h in rows[0]]
+        try:
+            cols = [header.index(n) for n in ("yaw", "pitch", "roll")]
+        except ValueError:
+            raise InputError(path, "line 1", f"header {rows[0]} lacks yaw, pitch and roll columns") from None
+        out = np.empty((len(rows) - 1, 3))
+        for i, row in enumerate(rows[1:]):
+            try:
+                out[i] = [float(row[c]) for c in cols]
+            except (ValueError, IndexError):
+                raise InputError(path, f"line {i + 2}", f"expected numbers in the yaw/pitch/roll columns: {row}") from None
+        return out
+
+    return _FILES.get(("head", _file_id(path)), read)
+
+
+def _load_template(design: Design, condition: Condition) -> Motion | None:
+    if condition.template is None:
+        return None
+    from studyapp.motion.io import load_motion
+
+    path = resolve(design, condition.template)
+    return _FILES.get(("template", _file_id(path)), lambda: load_motion(path))
+
+
+def load_condition_motion(design: Design, condition: Condition, stimulus: Stimulus) -> Motion:
+    """Body motion of one condition for one stimulus (file, or live model output)."""
+    if condition.model is not None:
+        return _live_motion(design, condition, stimulus)
+    from studyapp.motion.io import load_motion
+
+    path = motion_path(design, condition, stimulus)
+    template = _load_template(design, condition)
+    kwargs: dict[str, Any] = {}
+    if condition.rotation_order:
+        kwargs["order"] = condition.rotation_order
+    key = ("motion", _file_id(path), condition.fps, condition.representation, condition.template,
+           condition.rotation_order)
+    return _FILES.get(key, lambda: load_motion(path, fps=condition.fps, template=template,
+                                               representation=condition.representation, **kwargs))
+
+
+def _live_motion(design: Design, condition: Condition, stimulus: Stimulus) -> Motion:
+    from studyapp.models.live import motion_for_stimulus
+
+    model = model_path(design, condition)
+    audio = load_audio(stimulus.audio)
+    face = load_stimulus_face(stimulus) if stimulus.face is not None else None
+    head = load_head(stimulus.head) if stimulus.head is not None else None
+    template = _load_template(design, condition)
+    key = ("live", _file_id(model), _file_id(stimulus.audio),
+           None if stimulus.face is None else _file_id(stimulus.face),
+           None if stimulus.head is None else _file_id(stimulus.head), condition.template)
+    return _FILES.get(key, lambda: motion_for_stimulus(model, audio, face, head, template))
+
+
+def frozen_motion(motion: Motion, duration_s: float) -> Motion:
+    """The first frame of ``motion`` held for ``duration_s`` (the frozen slot of an attention check)."""
+    n = max(1, math.ceil(duration_s * motion.fps - 1e-9))
+    rot = np.repeat(motion.rotations[:1], n, axis=0)
+    trans = np.repeat(motion.translations[:1], n, axis=0)
+    return Motion(motion.skeleton, motion.fps, rot, trans, source=f"frozen first frame of {motion.source}")
+
+
+def slot_motion(design: Design, slot_condition: str, stimulus: Stimulus, duration_s: float) -> Motion:
+    """Motion for one slot's condition id (``frozen:<id>`` gives the frozen first frame of ``<id>``)."""
+    if slot_condition.startswith(FROZEN_PREFIX):
+        base = load_condition_motion(design, design.condition(slot_condition[len(FROZEN_PREFIX):]), stimulus)
+        return frozen_motion(base, duration_s)
+    return load_condition_motion(design, design.condition(slot_condition), stimulus)
+
+
+def load_trial_media(design: Design, plan: TrialPlan) -> TrialMedia:
+    """Audio, face and the three slot motions of one trial (cached: replays cost nothing)."""
+    key = (design.design_hash, str(design.path), plan)
+    return _MEDIA.get(key, lambda: _assemble(design, plan))
+
+
+def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
+    stimulus = design.stimulus(plan.stimulus_id)
+    audio = load_audio(stimulus.audio)
+    duration = stimulus.duration_s if stimulus.duration_s is not None else audio.duration
+    face = load_stimulus_face(stimulus, duration)
+    motions = tuple(slot_motion(design, cid, stimulus, duration) for cid in plan.slots)
+    return TrialMedia(plan=plan, audio=audio, face=face, motions=motions,  # type: ignore[arg-type]
+                      avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
+                      criteria=tuple(design.criterion_ids))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Validation of the files a design references (called by design.validate_design)
+
+
+def _problem_text(exc: Exception) -> str:
+    if isinstance(exc, InputError):
+        where = f"{exc.where}: " if exc.where else ""
+        return f"{where}{exc.problem}"
+    return f"{type(exc).__name__}: {exc}"
+
+
+def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
+    """Problems ``(key, message, fix)`` found by reading every file a design references.
+
+    Reads each audio, face, head and motion file (and runs each live model once per stimulus, cached on
+    disk), then checks that each stimulus's media last equally long and that each condition's skeleton can
+    be retargeted onto the avatar's humanoid bones. Missing files are reported by the design loader and
+    skipped here.
+    """
+    from studyapp.durations import duration_mismatches
+
+    problems: list[tuple[str, str, str]] = []
+    skeletons_checked: set[tuple[int, tuple[str, ...]]] = set()
+    cond_index = {c.id: i for i, c in enumerate(design.conditions)}
+
+    for ci, cond in enumerate(design.conditions):
+        if cond.template is not None and resolve(design, cond.template).is_file():
+            try:
+                _load_template(design, cond)
+            except (InputError, ValueError, OSError) as exc:
+                problems.append((f"conditions[{ci}].template", f"cannot read the template: {_problem_text(exc)}",
+                                 "give a readable BVH file"))
+        if cond.model is not None:
+            problems += _check_model(design, ci, cond)
+
+    for si, stim in enumerate(design.stimuli):
+        items: dict[str, tuple[float, str]] = {}
+        if stim.audio.is_file():
+            try:
+                items["audio"] = (load_audio(stim.audio).duration, str(stim.audio))
+            except (InputError, ValueError, OSError) as exc:
+                problems.append((f"stimuli[{si}].audio", f"cannot read the audio: {_problem_text(exc)}",
+                                 "give a PCM or float WAV file"))
+        if stim.face is not None and stim.face.is_file():
+            try:
+                items["face"] = (load_stimulus_face(stim).duration, str(stim.face))
+            except (InputError, ValueError, OSError) as exc:
+                problems.append((f"stimuli[{si}].face", f"cannot read the face animation: {_problem_text(exc)}",
+                                 "give an ARKit CSV, Live Link Face CSV, BEAT JSON or NPY/NPZ file"))
+        if stim.head is not None and stim.head.is_file():
+            try:
+                load_head(stim.head)
+            except (InputError, ValueError, OSError) as exc:
+                problems.append((f"stimuli[{si}].head", f"cannot read the head rotation: {_problem_text(exc)}",
+                                 "give an (F, 3) NPY or a CSV with yaw, pitch, roll columns (radians)"))
+        for cond in design.conditions:
+            ci = cond_index[cond.id]
+            if cond.motion is None:
+                continue  # live conditions are generated to the audio's length
+            path = motion_path(design, cond, stim)
+            if not path.is_file():
+                continue
+            try:
+                motion = load_condition_motion(design, cond, stim)
+            except (InputError, ValueError, OSError, KeyError) as exc:
+                problems.append((f"conditions[{ci}].motion", f"cannot read the motion of {cond.id!r} for "
+                                 f"stimulus {stim.id!r}: {_problem_text(exc)}", "fix or re-export the file"))
+                continue
+            items[f"motion:{cond.id}"] = (motion.duration, str(path))
+            sig = (ci, motion.skeleton.names)
+            if sig not in skeletons_checked:
+                skeletons_checked.add(sig)
+                problems += _check_retarget(ci, cond, motion, path)
+        problems += _check_durations(si, stim, items, duration_mismatches)
+    return problems
+
+
+def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]], mismatches) -> list:
+    key = f"stimuli[{si}]"
+    if stim.duration_s is None:
+        return [(key, f"stimulus {stim.id!r}: {m}",
+                 "re-export the files to the same length, or set duration_s to play only the common part")
+                for m in mismatches(items, DURATION_TOLERANCE_S)]
+    short = {k: v for k, v in items.items() if v[0] < stim.duration_s - DURATION_TOLERANCE_S}
+    return [(f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {k} is only "
+             f"{d:.3f} s long ({p})", "lower duration_s or give longer files") for k, (d, p) in short.items()]
+
+
+def _check_retarget(ci: int, cond: Condition, motion: Motion, path: Path) -> list[tuple[str, str, str]]:
+    """Can this skeleton be mapped onto the humanoid bones the avatars need (built-in maps + name_map)?"""
+    from studyapp.motion.humanoid import REQUIRED_BONES
+    from studyapp.motion.retarget import merge_name_map
+
+    out = []
+    good: dict[str, str] = {}
+    for src, bone in cond.name_map.items():  # one problem per bad entry, not just the first
+        try:
+            merge_name_map(motion.skeleton, {src: bone})
+            good[src] = bone
+        except InputError as exc:
+            out.append((f"conditions[{ci}].name_map.{src}", f"{exc.problem} (in {path.name})",
+                        "use joint names from the motion file (studyapp inspect lists them) and Unity humanoid "
+                        "bone names (Hips, Spine, Chest, UpperChest, Neck, Head, LeftUpperArm, ...)"))
+    mapping = merge_name_map(motion.skeleton, good)
+    missing = [b for b in REQUIRED_BONES if b not in set(mapping.values())]
+    if missing:
+        out.append((f"conditions[{ci}]", f"the skeleton of {path.name} ({motion.skeleton.n_joints} joints) cannot "
+                    f"be retargeted: no joint maps to the required bones {', '.join(missing)}",
+                    "add a [conditions.name_map] table: source joint name = humanoid bone name"))
+    return out
+
+
+def _check_model(design: Design, ci: int, cond: Condition) -> list[tuple[str, str, str]]:
+    path = model_path(design, cond)
+    if not path.is_file():
+        if cond.model == BUILTIN_REFERENCE:
+            return [(f"conditions[{ci}].model", f"the shipped reference model is missing: {path}",
+                     "reinstall studyapp")]
+        return []  # reported as a missing file by the design loader
+    try:
+        import onnxruntime as ort
+
+        from studyapp.models.contract import read_spec
+
+        session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+        read_spec(session, path)
+    except InputError as exc:
+        return [(f"conditions[{ci}].model", f"the model does not follow the studyapp model contract: "
+                 f"{_problem_text(exc)}", "see studyapp/models/CONTRACT.md")]
+    except Exception as exc:  # onnxruntime raises its own exception types for unreadable graphs
+        return [(f"conditions[{ci}].model", f"cannot load the ONNX model: {exc}"[:300],
+                 "export the model again (ONNX opset supported by onnxruntime)")]
+    return []

@@ -1,0 +1,584 @@
+"""SQLite storage of study results: one database per study, every answer durable before the next clip.
+
+Why these settings: ``journal_mode=WAL`` + ``synchronous=FULL`` make each committed transaction survive
+a killed process or a power cut (the WAL is fsynced at commit), and a trial's ranks are written in one
+transaction, so a crash leaves either the whole answer or none of it. Every result row carries the
+design hash and the app version, so rows stay attributable after files are merged or moved.
+
+The database checks itself when opened: not an SQLite file, a damaged file (``PRAGMA integrity_check``),
+an unknown schema or a database made for another design each raise an :class:`InputError` that names the
+file and says what to do.
+
+Example
+-------
+>>> import tempfile, pathlib
+>>> db = ResultsDB(pathlib.Path(tempfile.mkdtemp()) / "s.sqlite", design_hash="ab12", title="Demo")
+>>> db.add_participant("P01", n_rows=4).latin_row
+0
+>>> db.add_participant("P02", n_rows=4).latin_row
+1
+>>> db.close()
+"""
+from __future__ import annotations
+
+import json
+import platform
+import sqlite3
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Iterable
+
+from studyapp import __version__
+from studyapp.errors import InputError, StudyappError
+
+#: Bumped whenever the tables change; a database with another version is refused, never guessed at.
+SCHEMA_VERSION = 1
+
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+PARTICIPANT_STATUSES = ("active", "done", "ended_early")
+
+_SCHEMA = """
+CREATE TABLE schema_version (version INTEGER NOT NULL);
+CREATE TABLE study (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    design_hash TEXT NOT NULL,
+    title TEXT NOT NULL,
+    created TEXT NOT NULL,
+    app_version TEXT NOT NULL
+);
+-- Study metadata copied from the design, so an export needs only the database.
+CREATE TABLE stimuli (
+    id TEXT PRIMARY KEY,
+    tags TEXT NOT NULL DEFAULT '{}'
+);
+CREATE TABLE conditions (
+    id TEXT PRIMARY KEY,
+    position INTEGER NOT NULL
+);
+CREATE TABLE participants (
+    id TEXT PRIMARY KEY,
+    latin_row INTEGER NOT NULL,
+    groups TEXT NOT NULL DEFAULT '{}',
+    status TEXT NOT NULL DEFAULT 'active' CHECK (status IN ('active', 'done', 'ended_early')),
+    created TEXT NOT NULL,
+    completed TEXT,
+    design_hash TEXT NOT NULL,
+    app_version TEXT NOT NULL
+);
+CREATE TABLE sessions (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    participant TEXT NOT NULL REFERENCES participants(id),
+    started TEXT NOT NULL,
+    ended TEXT,
+    app_version TEXT NOT NULL,
+    design_hash TEXT NOT NULL,
+    machine TEXT NOT NULL DEFAULT '{}'
+);
+CREATE TABLE trials (
+    participant TEXT NOT NULL REFERENCES participants(id),
+    trial_index INTEGER NOT NULL,
+    session INTEGER REFERENCES sessions(id),
+    stimulus TEXT NOT NULL,
+    is_practice INTEGER NOT NULL,
+    is_attention_check INTEGER NOT NULL,
+    slot_left TEXT NOT NULL,
+    slot_middle TEXT NOT NULL,
+    slot_right TEXT NOT NULL,
+    shown_at TEXT,
+    answered_at TEXT NOT NULL,
+    response_time_s REAL,
+    plays INTEGER NOT NULL DEFAULT 0,
+    frames_shown INTEGER,
+    dropped_frames INTEGER,
+    refresh_hz REAL,
+    worst_av_offset_ms REAL,
+    attention_passed INTEGER,
+    design_hash TEXT NOT NULL,
+    app_version TEXT NOT NULL,
+    PRIMARY KEY (participant, trial_index)
+);
+CREATE TABLE responses (
+    participant TEXT NOT NULL,
+    trial_index INTEGER NOT NULL,
+    criterion TEXT NOT NULL,
+    condition TEXT NOT NULL,
+    slot INTEGER NOT NULL CHECK (slot BETWEEN 0 AND 2),
+    rank REAL NOT NULL,
+    design_hash TEXT NOT NULL,
+    app_version TEXT NOT NULL,
+    PRIMARY KEY (participant, trial_index, criterion, slot),
+    FOREIGN KEY (participant, trial_index) REFERENCES trials(participant, trial_index)
+);
+CREATE TABLE plays (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    participant TEXT NOT NULL REFERENCES participants(id),
+    trial_index INTEGER NOT NULL,
+    session INTEGER REFERENCES sessions(id),
+    started TEXT NOT NULL,
+    ended TEXT,
+    completed INTEGER NOT NULL DEFAULT 0,
+    design_hash TEXT NOT NULL,
+    app_version TEXT NOT NULL
+);
+CREATE TABLE questionnaire (
+    participant TEXT NOT NULL REFERENCES participants(id),
+    item TEXT NOT NULL,
+    kind TEXT NOT NULL DEFAULT 'likert',
+    scale TEXT,
+    value TEXT,
+    design_hash TEXT NOT NULL,
+    app_version TEXT NOT NULL,
+    PRIMARY KEY (participant, item)
+);
+-- Keys of remote bundles made from this study: opaque condition ids -> real ids (see bundle.py).
+CREATE TABLE bundles (
+    design_hash TEXT PRIMARY KEY,
+    created TEXT NOT NULL,
+    key TEXT NOT NULL
+);
+"""
+
+#: Tables (and their columns) a valid database must have; used to recognise a foreign schema.
+_EXPECTED_TABLES = {
+    "schema_version", "study", "stimuli", "conditions", "participants", "sessions", "trials",
+    "responses", "plays", "questionnaire", "bundles",
+}
+
+
+def now_iso() -> str:
+    """Current UTC time as ISO 8601 with milliseconds (sortable text, unambiguous across machines)."""
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+class DuplicateAnswerError(StudyappError):
+    """A trial that already has an answer was submitted again (answers are never overwritten)."""
+
+
+@dataclass
+class ParticipantRecord:
+    """One participant as stored: the Latin-square row they follow and their groups."""
+
+    id: str
+    latin_row: int
+    groups: dict[str, str] = field(default_factory=dict)
+    status: str = "active"
+    created: str = ""
+    completed: str | None = None
+
+
+@dataclass
+class TrialRecord:
+    """Everything stored about one answered trial besides the ranks themselves.
+
+    ``slots`` are condition ids in left, middle, right order; ``attention_passed`` is ``None`` for a
+    trial that is not an attention check.
+    """
+
+    participant: str
+    trial_index: int
+    stimulus: str
+    is_practice: bool
+    is_attention_check: bool
+    slots: tuple[str, str, str]
+    answered_at: str
+    shown_at: str | None = None
+    response_time_s: float | None = None
+    plays: int = 0
+    frames_shown: int | None = None
+    dropped_frames: int | None = None
+    refresh_hz: float | None = None
+    worst_av_offset_ms: float | None = None
+    attention_passed: bool | None = None
+    session: int | None = None
+
+
+@dataclass(frozen=True)
+class Response:
+    """One rank: ``condition`` shown in ``slot`` (0 left, 1 middle, 2 right) got ``rank`` on ``criterion``."""
+
+    criterion: str
+    condition: str
+    slot: int
+    rank: float
+
+
+def machine_basics() -> dict[str, str]:
+    """Operating system facts recorded with every session (the UI adds GL, display and audio facts)."""
+    return {
+        "os": platform.platform(),
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+    }  # no host name: on a participant's own PC it can identify them
+
+
+class ResultsDB:
+    """The results database of one study.
+
+    Parameters
+    ----------
+    path:
+        The SQLite file; created (with its folder) when missing and ``create`` is true.
+    design:
+        The loaded design (anything with ``design_hash``, ``title`` and, optionally, ``stimuli`` /
+        ``conditions``). A new database is stamped with its hash; an existing one must carry the same hash.
+    design_hash, title:
+        Alternatives to ``design`` for callers that have no design object (tests, merge tools).
+        With neither, an existing database is opened as it is (export, merge).
+    create:
+        With ``False`` a missing file is an error instead of a new database.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        design: Any = None,
+        *,
+        design_hash: str | None = None,
+        title: str | None = None,
+        create: bool = True,
+    ) -> None:
+        self.path = Path(path)
+        if design is not None:
+            design_hash = design.design_hash
+            title = design.title
+        exists = self.path.exists() and self.path.stat().st_size > 0
+        if not exists and not create:
+            raise InputError(self.path, None, "results database not found; check the path")
+        if not exists and design_hash is None:
+            raise InputError(self.path, None, "results database not found, and no design was given to create one")
+        if exists:
+            self._check_header()
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=30.0)
+        except sqlite3.Error as exc:
+            raise InputError(self.path, None, f"cannot open the results database: {exc}") from None
+        self._con.row_factory = sqlite3.Row
+        try:
+            self._configure()
+            if exists:
+                self._check_integrity()
+            # A process killed while creating the database can leave a valid SQLite file with no tables
+            # (the schema is one transaction): that is still a new database, not a foreign one.
+            empty = not self._con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone()
+            if exists and not empty:
+                self._check_schema()
+            elif design_hash is None:
+                raise InputError(self.path, None, "the results database is empty, and no design was given to create it")
+            else:
+                self._create_schema(design_hash, title or "")
+            row = self._con.execute("SELECT design_hash, title FROM study WHERE id = 1").fetchone()
+        except sqlite3.DatabaseError as exc:
+            self._con.close()
+            raise InputError(self.path, None, f"the results database is damaged or not a studyapp database ({exc}); "
+                             "keep a copy of the file and start a new one with --results") from None
+        except BaseException:
+            self._con.close()
+            raise
+        if row is None:
+            self._con.close()
+            raise InputError(self.path, "table study", "the study record is missing; the file is not a complete "
+                             "studyapp results database")
+        self.design_hash: str = row["design_hash"]
+        self.title: str = row["title"]
+        if design_hash is not None and design_hash != self.design_hash:
+            self._con.close()
+            raise InputError(
+                self.path, "study.design_hash",
+                f"this results database belongs to another design (hash {self.design_hash[:12]}…, this design is "
+                f"{design_hash[:12]}…): the design or one of its stimuli changed since the first participant. "
+                "Use a new results file (--results) or restore the original design",
+            )
+        if design is not None:
+            self._store_design_metadata(design)
+        #: Optional ``f(participant_id) -> Path`` called when a participant finishes (set by bundle runs).
+        self.on_participant_finished: Any = None
+
+    # ------------------------------------------------------------------ opening and checking
+    def _check_header(self) -> None:
+        with open(self.path, "rb") as fh:
+            head = fh.read(len(_SQLITE_MAGIC))
+        if head != _SQLITE_MAGIC:
+            raise InputError(self.path, "file header", "not an SQLite database (wrong file, or damaged); "
+                             "pass a studyapp results file (.sqlite)")
+
+    def _configure(self) -> None:
+        con = self._con
+        mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+        if str(mode).lower() != "wal":
+            raise InputError(self.path, None, f"cannot switch the database to WAL journaling (got {mode!r}); "
+                             "is it on a read-only or network drive?")
+        con.execute("PRAGMA synchronous=FULL")
+        con.execute("PRAGMA foreign_keys=ON")
+
+    def _check_integrity(self) -> None:
+        problems = [r[0] for r in self._con.execute("PRAGMA integrity_check").fetchall()]
+        if problems != ["ok"]:
+            shown = "; ".join(problems[:3]) + (f" (+{len(problems) - 3} more)" if len(problems) > 3 else "")
+            raise InputError(self.path, "integrity check", f"the results database is damaged: {shown}. Keep a "
+                             "copy of the file for recovery and start a new one with --results")
+
+    def _check_schema(self) -> None:
+        tables = {r[0] for r in self._con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        missing = sorted(_EXPECTED_TABLES - tables)
+        if missing:
+            raise InputError(self.path, "schema", f"not a studyapp results database (missing tables: "
+                             f"{', '.join(missing)})")
+        row = self._con.execute("SELECT version FROM schema_version").fetchone()
+        if row is None or row[0] != SCHEMA_VERSION:
+            found = None if row is None else row[0]
+            raise InputError(self.path, "schema_version", f"schema version {found} is not the version this "
+                             f"studyapp {__version__} writes ({SCHEMA_VERSION}); use the studyapp version "
+                             "that created the file")
+
+    def _create_schema(self, design_hash: str, title: str) -> None:
+        with self.transaction() as con:
+            for stmt in _SCHEMA.split(";"):
+                if stmt.strip():
+                    con.execute(stmt)
+            con.execute("INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,))
+            con.execute("INSERT INTO study (id, design_hash, title, created, app_version) VALUES (1, ?, ?, ?, ?)",
+                        (design_hash, title, now_iso(), __version__))
+
+    def _store_design_metadata(self, design: Any) -> None:
+        stimuli = getattr(design, "stimuli", None) or []
+        conditions = getattr(design, "conditions", None) or []
+        with self.transaction() as con:
+            for s in stimuli:
+                con.execute("INSERT OR IGNORE INTO stimuli (id, tags) VALUES (?, ?)",
+                            (s.id, json.dumps(dict(getattr(s, "tags", {}) or {}), sort_keys=True)))
+            for i, c in enumerate(conditions):
+                con.execute("INSERT OR IGNORE INTO conditions (id, position) VALUES (?, ?)", (c.id, i))
+
+    # ------------------------------------------------------------------ plumbing
+    @property
+    def connection(self) -> sqlite3.Connection:
+        """The raw connection, for read-only queries (export); write through the methods."""
+        return self._con
+
+    class _Tx:
+        def __init__(self, con: sqlite3.Connection) -> None:
+            self.con = con
+
+        def __enter__(self) -> sqlite3.Connection:
+            # IMMEDIATE takes the write lock up front, so two processes on one database serialise
+            # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
+            self.con.execute("BEGIN IMMEDIATE")
+            return self.con
+
+        def __exit__(self, exc_type, exc, tb) -> None:
+            if exc_type is None:
+                self.con.execute("COMMIT")
+            else:
+                self.con.execute("ROLLBACK")
+
+    def transaction(self) -> "ResultsDB._Tx":
+        """``with db.transaction() as con:`` — all statements inside commit together or not at all."""
+        return ResultsDB._Tx(self._con)
+
+    def close(self) -> None:
+        try:
+            self._con.close()
+        except sqlite3.Error:
+            pass
+
+    def __enter__(self) -> "ResultsDB":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ study metadata
+    def stimulus_tags(self) -> dict[str, dict[str, str]]:
+        return {r["id"]: json.loads(r["tags"]) for r in self._con.execute("SELECT id, tags FROM stimuli")}
+
+    def condition_ids(self) -> list[str]:
+        return [r[0] for r in self._con.execute("SELECT id FROM conditions ORDER BY position")]
+
+    # ------------------------------------------------------------------ participants
+    @staticmethod
+    def _participant(row: sqlite3.Row) -> ParticipantRecord:
+        return ParticipantRecord(id=row["id"], latin_row=row["latin_row"], groups=json.loads(row["groups"]),
+                                 status=row["status"], created=row["created"], completed=row["completed"])
+
+    def participant(self, participant_id: str) -> ParticipantRecord | None:
+        row = self._con.execute("SELECT * FROM participants WHERE id = ?", (participant_id,)).fetchone()
+        return None if row is None else self._participant(row)
+
+    def participants(self) -> list[ParticipantRecord]:
+        return [self._participant(r) for r in self._con.execute("SELECT * FROM participants ORDER BY created, id")]
+
+    def row_counts(self, n_rows: int) -> list[int]:
+        """How many participants follow each Latin-square row ``0 .. n_rows-1``."""
+        counts = [0] * n_rows
+        for r in self._con.execute("SELECT latin_row, COUNT(*) FROM participants GROUP BY latin_row"):
+            if 0 <= r[0] < n_rows:
+                counts[r[0]] = r[1]
+        return counts
+
+    def add_participant(self, participant_id: str, n_rows: int, row: int | None = None,
+                        groups: dict[str, str] | None = None) -> ParticipantRecord:
+        """Register a new participant on ``row`` or, when ``None``, on the least used row (lowest index on ties).
+
+        The choice and the insert happen in one write transaction, so concurrent sessions never pick the
+        same "free" row from a stale count.
+        """
+        if not participant_id or not participant_id.strip():
+            raise InputError(None, "participant id", "the participant id is empty")
+        if row is not None and not (0 <= row < n_rows):
+            raise InputError(self.path, "--row", f"row {row} is outside the design's Latin square rows 0..{n_rows - 1}")
+        with self.transaction() as con:
+            if con.execute("SELECT 1 FROM participants WHERE id = ?", (participant_id,)).fetchone():
+                raise StudyappError(f"participant {participant_id!r} is already in {self.path}")
+            if row is None:
+                counts = self.row_counts(n_rows)
+                row = counts.index(min(counts))
+            con.execute(
+                "INSERT INTO participants (id, latin_row, groups, status, created, design_hash, app_version) "
+                "VALUES (?, ?, ?, 'active', ?, ?, ?)",
+                (participant_id, row, json.dumps(groups or {}, sort_keys=True), now_iso(), self.design_hash, __version__),
+            )
+        rec = self.participant(participant_id)
+        assert rec is not None
+        return rec
+
+    def set_status(self, participant_id: str, status: str) -> None:
+        if status not in PARTICIPANT_STATUSES:
+            raise ValueError(f"unknown participant status {status!r}")
+        with self.transaction() as con:
+            con.execute("UPDATE participants SET status = ?, completed = CASE WHEN ? = 'active' THEN NULL ELSE ? END "
+                        "WHERE id = ?", (status, status, now_iso(), participant_id))
+
+    def update_groups(self, participant_id: str, groups: dict[str, str]) -> None:
+        """Merge ``groups`` into the participant's stored groups (later values win)."""
+        rec = self.participant(participant_id)
+        if rec is None:
+            raise KeyError(participant_id)
+        merged = {**rec.groups, **groups}
+        with self.transaction() as con:
+            con.execute("UPDATE participants SET groups = ? WHERE id = ?", (json.dumps(merged, sort_keys=True), participant_id))
+
+    # ------------------------------------------------------------------ sessions
+    def start_session(self, participant_id: str, machine: dict[str, Any] | None = None) -> int:
+        with self.transaction() as con:
+            cur = con.execute(
+                "INSERT INTO sessions (participant, started, app_version, design_hash, machine) VALUES (?, ?, ?, ?, ?)",
+                (participant_id, now_iso(), __version__, self.design_hash, json.dumps(machine or {}, sort_keys=True)),
+            )
+            return int(cur.lastrowid)
+
+    def update_session_machine(self, session_id: int, machine: dict[str, Any]) -> None:
+        row = self._con.execute("SELECT machine FROM sessions WHERE id = ?", (session_id,)).fetchone()
+        merged = {**(json.loads(row[0]) if row else {}), **machine}
+        with self.transaction() as con:
+            con.execute("UPDATE sessions SET machine = ? WHERE id = ?", (json.dumps(merged, sort_keys=True, default=str), session_id))
+
+    def end_session(self, session_id: int) -> None:
+        with self.transaction() as con:
+            con.execute("UPDATE sessions SET ended = ? WHERE id = ?", (now_iso(), session_id))
+
+    def sessions(self, participant_id: str | None = None) -> list[dict[str, Any]]:
+        q = "SELECT * FROM sessions" + (" WHERE participant = ?" if participant_id else "") + " ORDER BY id"
+        rows = self._con.execute(q, (participant_id,) if participant_id else ()).fetchall()
+        return [{**dict(r), "machine": json.loads(r["machine"])} for r in rows]
+
+    # ------------------------------------------------------------------ trials and answers
+    def answered_trials(self, participant_id: str) -> set[int]:
+        return {r[0] for r in self._con.execute("SELECT trial_index FROM trials WHERE participant = ?", (participant_id,))}
+
+    def trials(self, participant_id: str | None = None) -> list[dict[str, Any]]:
+        q = "SELECT * FROM trials" + (" WHERE participant = ?" if participant_id else "") + " ORDER BY participant, trial_index"
+        return [dict(r) for r in self._con.execute(q, (participant_id,) if participant_id else ())]
+
+    def responses(self, participant_id: str | None = None) -> list[dict[str, Any]]:
+        q = ("SELECT * FROM responses" + (" WHERE participant = ?" if participant_id else "")
+             + " ORDER BY participant, trial_index, criterion, slot")
+        return [dict(r) for r in self._con.execute(q, (participant_id,) if participant_id else ())]
+
+    def save_trial(self, trial: TrialRecord, responses: Iterable[Response]) -> None:
+        """Commit one trial and all its ranks in a single transaction (durable when this returns).
+
+        Raises :class:`DuplicateAnswerError` when the trial already has an answer: answers are never
+        overwritten, so a double submit (or a resumed session racing an old one) cannot change data.
+        """
+        t = trial
+        with self.transaction() as con:
+            if con.execute("SELECT 1 FROM trials WHERE participant = ? AND trial_index = ?",
+                           (t.participant, t.trial_index)).fetchone():
+                raise DuplicateAnswerError(f"trial {t.trial_index} of participant {t.participant!r} is already answered")
+            con.execute(
+                "INSERT INTO trials (participant, trial_index, session, stimulus, is_practice, is_attention_check, "
+                "slot_left, slot_middle, slot_right, shown_at, answered_at, response_time_s, plays, frames_shown, "
+                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (t.participant, t.trial_index, t.session, t.stimulus, int(t.is_practice), int(t.is_attention_check),
+                 *t.slots, t.shown_at, t.answered_at, t.response_time_s, t.plays, t.frames_shown, t.dropped_frames,
+                 t.refresh_hz, t.worst_av_offset_ms, None if t.attention_passed is None else int(t.attention_passed),
+                 self.design_hash, __version__),
+            )
+            con.executemany(
+                "INSERT INTO responses (participant, trial_index, criterion, condition, slot, rank, design_hash, "
+                "app_version) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                [(t.participant, t.trial_index, r.criterion, r.condition, r.slot, float(r.rank), self.design_hash,
+                  __version__) for r in responses],
+            )
+
+    def attention_failures(self, participant_id: str) -> int:
+        row = self._con.execute("SELECT COUNT(*) FROM trials WHERE participant = ? AND attention_passed = 0",
+                                (participant_id,)).fetchone()
+        return int(row[0])
+
+    # ------------------------------------------------------------------ plays
+    def start_play(self, participant_id: str, trial_index: int, session_id: int | None) -> int:
+        with self.transaction() as con:
+            cur = con.execute(
+                "INSERT INTO plays (participant, trial_index, session, started, design_hash, app_version) "
+                "VALUES (?, ?, ?, ?, ?, ?)",
+                (participant_id, trial_index, session_id, now_iso(), self.design_hash, __version__),
+            )
+            return int(cur.lastrowid)
+
+    def finish_play(self, play_id: int, completed: bool) -> None:
+        with self.transaction() as con:
+            con.execute("UPDATE plays SET ended = ?, completed = ? WHERE id = ?", (now_iso(), int(completed), play_id))
+
+    def play_count(self, participant_id: str, trial_index: int) -> int:
+        row = self._con.execute("SELECT COUNT(*) FROM plays WHERE participant = ? AND trial_index = ?",
+                                (participant_id, trial_index)).fetchone()
+        return int(row[0])
+
+    def plays(self, participant_id: str | None = None) -> list[dict[str, Any]]:
+        q = "SELECT * FROM plays" + (" WHERE participant = ?" if participant_id else "") + " ORDER BY id"
+        return [dict(r) for r in self._con.execute(q, (participant_id,) if participant_id else ())]
+
+    # ------------------------------------------------------------------ questionnaire
+    def save_questionnaire(self, participant_id: str, answers: dict[str, Any],
+                           items: dict[str, tuple[str, str | None]] | None = None) -> None:
+        """Store all answers in one transaction; ``items`` maps item id -> (kind, scale) for the record."""
+        items = items or {}
+        with self.transaction() as con:
+            con.executemany(
+                "INSERT INTO questionnaire (participant, item, kind, scale, value, design_hash, app_version) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                [(participant_id, k, items.get(k, ("likert", None))[0], items.get(k, ("likert", None))[1],
+                  None if v is None else str(v), self.design_hash, __version__) for k, v in answers.items()],
+            )
+
+    def questionnaire(self, participant_id: str | None = None) -> list[dict[str, Any]]:
+        q = ("SELECT * FROM questionnaire" + (" WHERE participant = ?" if participant_id else "")
+             + " ORDER BY participant, item")
+        return [dict(r) for r in self._con.execute(q, (participant_id,) if participant_id else ())]
+
+    # ------------------------------------------------------------------ bundles
+    def add_bundle_key(self, bundle_hash: str, key: dict[str, Any]) -> None:
+        with self.transaction() as con:
+            con.execute("INSERT OR REPLACE INTO bundles (design_hash, created, key) VALUES (?, ?, ?)",
+                        (bundle_hash, now_iso(), json.dumps(key, sort_keys=True)))
+
+    def bundle_key(self, bundle_hash: str) -> dict[str, Any] | None:
+        row = self._con.execute("SELECT key FROM bundles WHERE design_hash = ?", (bundle_hash,)).fetchone()
+        return None if row is None else json.loads(row[0])
+

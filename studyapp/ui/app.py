@@ -1,0 +1,371 @@
+"""The participant application: the session's screens drawn with Dear ImGui over the 3D view.
+
+:class:`StudyApp` is the whole UI for one GL context and is driven one frame at a time, so the same
+code runs in a GLFW window (:func:`run_window`, :class:`WindowRunner`) and offscreen for the scripted
+participant (:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`). Each frame:
+
+1. queued input (:mod:`studyapp.ui.input`) goes to ImGui;
+2. the screen for the session's state builds the UI and, on a trial, asks for the 3D view at the media
+   time that the audio clock will have reached when the frame is shown;
+3. the renderer draws the three avatars into their part of the framebuffer, the UI is drawn on top;
+4. after the flip, :meth:`StudyApp.after_flip` records the audio/video offset and does slow work that
+   was requested (loading a trial, the environment check) so a "Loading..." frame is shown first.
+"""
+from __future__ import annotations
+
+import logging
+import time
+import wave
+from pathlib import Path
+from typing import Any
+
+from studyapp.ui.frames import FlipPredictor
+from studyapp.ui.input import InputQueue
+from studyapp.ui.layer import ImGuiLayer
+from studyapp.ui.trial import TrialView
+from studyapp.ui.widgets import Painter
+
+log = logging.getLogger(__name__)
+
+BACKGROUND = (0.11, 0.12, 0.14)
+DEFAULT_SLOT_NAMES = ("Left", "Middle", "Right")
+
+
+class StudyApp:
+    """All screens of one participant session, for one GL context.
+
+    Parameters
+    ----------
+    design, session:
+        The loaded design and the running :class:`~studyapp.study.session.Session`.
+    ctx:
+        The moderngl context (window or offscreen).
+    clock:
+        The master clock: an :class:`~studyapp.audio.playback.AudioPlayer` or a
+        :class:`~studyapp.audio.clock.SilentClock`.
+    refresh_hz:
+        Display refresh rate when known (frame drop detection, flip prediction).
+    display:
+        ``(name, size, refresh, content scale)`` for the environment check (None: measured there).
+    bench_frames:
+        Frames of the render benchmark in the environment check.
+    """
+
+    def __init__(self, design: Any, session: Any, ctx: Any, clock: Any, *, queue: InputQueue | None = None,
+                 refresh_hz: float | None = None, display: tuple | None = None, bench_frames: int = 20,
+                 db_path: Path | str | None = None) -> None:
+        self.design = design
+        self.session = session
+        self.ctx = ctx
+        self.clock = clock
+        self.refresh_hz = refresh_hz
+        self.display = display
+        self.bench_frames = bench_frames
+        self.db_path = db_path if db_path is not None else getattr(getattr(session, "db", None), "path", None)
+        self.layer = ImGuiLayer(ctx)
+        self.ui = Painter()
+        self.ui.layer = self.layer
+        self.input = queue or InputQueue()
+        self.input.on_focus = self._on_focus
+        self.predictor = FlipPredictor(refresh_hz)
+        self.slot_names = tuple(design.slot_labels) if design.slot_labels else DEFAULT_SLOT_NAMES
+        self._renderer = None
+        self._view: TrialView | None = None
+        self._scene_req: tuple | None = None
+        self._pending: list[str] = []
+        self._last_now: float | None = None
+        self.fb_size = (1280, 720)
+        self.scale = 1.0
+        self.now = 0.0
+        self.frame_index = 0
+        # screen state that outlives a frame
+        self.env_report = None
+        self.test_sound_played = False
+        self.answers: dict[str, Any] = {}
+        self.question_active = 0
+        self.focus_text = False
+        self.typing = False
+        self.results_file: Path | None = None
+        self.quit = False
+        self.fullscreen_toggle = False
+        self.error: str | None = None
+
+    # -- resources ---------------------------------------------------------------------------------
+    @property
+    def renderer(self) -> Any:
+        if self._renderer is None:
+            from studyapp.render.renderer import Renderer
+
+            self._renderer = Renderer(self.ctx)
+        return self._renderer
+
+    def trial_view(self) -> TrialView | None:
+        plan = self.session.current_trial()
+        if plan is None:
+            self._view = None
+            return None
+        if self._view is None or self._view.plan.trial_index != plan.trial_index:
+            self._view = TrialView(self, plan)
+        return self._view
+
+    # -- requests from screens ------------------------------------------------------------------
+    def request_scene(self, scene: Any, t: float, rect: tuple[float, float, float, float]) -> None:
+        self._scene_req = (scene, t, rect)
+
+    def request_trial_load(self) -> None:
+        if "trial" not in self._pending:
+            self._pending.append("trial")
+
+    def request_env_check(self) -> None:
+        if "env" not in self._pending:
+            self._pending.append("env")
+
+    def key_pressed(self, key: Any) -> bool:
+        """A key went down this frame (no repeats), unless the participant is typing into a text box."""
+        from imgui_bundle import imgui
+
+        if imgui.get_io().want_text_input:
+            return False
+        names = {"enter": ("enter", "keypad_enter"), "space": ("space",), "up": ("up_arrow",),
+                 "down": ("down_arrow",), "backspace": ("backspace",), "delete": ("delete",), "f11": ("f11",)}
+        keys = [getattr(imgui.Key, n) for n in names[key]] if isinstance(key, str) else [key]
+        return any(imgui.is_key_pressed(k, False) for k in keys)
+
+    def estimated_minutes(self) -> int:
+        total = 0.0
+        by_id = {s.id: s for s in self.design.stimuli}
+        for plan in self.session.plans:
+            stim = by_id.get(plan.stimulus_id)
+            total += _clip_seconds(stim) + 40.0  # watching once + ranking three questions
+        return max(2, int(round(total / 60.0)))
+
+    def play_test_sound(self) -> None:
+        from studyapp.audio.playback import sound_check_tone
+
+        rate = getattr(self.clock, "rate", 48000)
+        self.clock.play(sound_check_tone(sample_rate=rate))
+        self.test_sound_played = True
+
+    def env_info(self) -> dict[str, Any]:
+        """What the environment check found, as stored with the session."""
+        if self.env_report is None:
+            return {}
+        d = self.env_report.as_dict()
+        keep = ("gl_renderer", "gl_version", "display", "display_size", "refresh_hz", "content_scale",
+                "audio_device", "audio_latency_ms", "render_fps", "ok", "verdict")
+        return {k: d[k] for k in keep if d.get(k) is not None}
+
+    def screen_key(self) -> str:
+        """A name for what is on screen (screenshots, tests): ``welcome``, ``trials:ranking``, ..."""
+        state = self.session.state.value
+        view = self._view if self.session.current_trial() is not None else None
+        if view is None:
+            return state
+        if not view.loaded:
+            return f"{state}:loading"
+        if view.ranking_open() and not view.playing_id:
+            return f"{state}:{'ranked' if view.ranking.all_complete() else 'ranking'}"
+        return f"{state}:{view.state}"
+
+    def _on_focus(self, focused: bool) -> None:
+        view = self._view
+        if not focused and view is not None and bool(self.design.playback.pause_on_focus_loss):
+            view.pause()
+
+    # -- the frame ---------------------------------------------------------------------------------
+    def frame(self, fbo: Any, fb_size: tuple[int, int], now: float, content_scale: float = 1.0) -> None:
+        """Build and draw one frame into ``fbo`` (``fb_size`` pixels) for time ``now`` (seconds)."""
+        from imgui_bundle import imgui
+
+        from studyapp.study.session import State
+        from studyapp.ui.screens import env_check, final, instructions, questionnaire, trial, welcome
+
+        dt = 1.0 / 60.0 if self._last_now is None else max(1e-4, now - self._last_now)
+        self._last_now = now
+        self.now = now
+        self.fb_size = (int(fb_size[0]), int(fb_size[1]))
+        self.input.apply(imgui.get_io())
+        self.layer.new_frame(self.fb_size, dt, content_scale)
+        self.scale = self.layer.scale
+        self.ui.begin_frame()
+        self._scene_req = None
+        screens = {
+            State.WELCOME: welcome.draw, State.INSTRUCTIONS: instructions.draw, State.ENV_CHECK: env_check.draw,
+            State.PRACTICE: trial.draw, State.TRIALS: trial.draw, State.QUESTIONNAIRE: questionnaire.draw,
+            State.DONE: final.draw, State.ENDED_EARLY: final.draw,
+        }
+        from studyapp.errors import StudyappError
+
+        try:
+            screens[self.session.state](self)
+        except StudyappError as exc:  # a refused action (e.g. a ranking the session rejects): say so
+            self.error = str(exc)
+            log.warning("%s", exc)
+        if self.key_pressed("f11"):
+            self.fullscreen_toggle = True
+        if self.error:
+            self._draw_error()
+        fbo.use()
+        self.ctx.viewport = (0, 0, *self.fb_size)
+        fbo.clear(*BACKGROUND, 1.0, depth=1.0)
+        if self._scene_req is not None:
+            scene, t, (x, y, w, h) = self._scene_req
+            if w >= 1 and h >= 1:
+                viewport = (int(x), int(self.fb_size[1] - y - h), int(w), int(h))  # GL: origin bottom-left
+                self.renderer.draw_trial(scene, t, fbo, viewport)
+                fbo.use()
+        self.ctx.viewport = (0, 0, *self.fb_size)
+        self.layer.render(self.fb_size)
+        self.frame_index += 1
+
+    def _draw_error(self) -> None:
+        from imgui_bundle import imgui
+
+        s = self.scale
+        imgui.set_next_window_pos((self.fb_size[0] / 2, 20 * s), 0, imgui.ImVec2(0.5, 0.0))
+        imgui.begin("##error", None, imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_decoration)
+        self.ui.text(self.error, color=(1.0, 0.55, 0.5, 1.0))
+        if self.ui.button("OK", key="error_ok"):
+            self.error = None
+        imgui.end()
+
+    def after_flip(self, flip_time: float) -> None:
+        """Call right after the frame was presented (swap) with the time it happened."""
+        self.predictor.flipped(flip_time)
+        if self._view is not None:
+            self._view.after_flip(flip_time)
+        while self._pending:
+            job = self._pending.pop(0)
+            if job == "trial" and self._view is not None and not self._view.loaded:
+                self._view.load()
+            elif job == "env" and self.env_report is None:
+                from studyapp.ui.envcheck import gather
+
+                self.env_report = gather(self.ctx, clock=self.clock, bench_frames=self.bench_frames,
+                                         display=self.display)
+
+    def shutdown(self) -> None:
+        view = self._view
+        if view is not None and view.playing_id:
+            view.stop()
+        self.layer.shutdown()
+
+
+def _clip_seconds(stim: Any) -> float:
+    if stim is None:
+        return 30.0
+    if getattr(stim, "duration_s", None):
+        return float(stim.duration_s)
+    try:
+        with wave.open(str(stim.audio), "rb") as w:
+            return w.getnframes() / float(w.getframerate())
+    except Exception:  # non-PCM WAV variants: an estimate is enough for "about N minutes"
+        return 30.0
+
+
+# -- the window -----------------------------------------------------------------------------------------
+
+class WindowRunner:
+    """The participant window: a GLFW :class:`~studyapp.render.context.Window` driving a StudyApp.
+
+    :meth:`step` runs one frame (tests interleave it with xdotool events); :meth:`run` loops until the
+    participant finishes or closes the window.
+    """
+
+    def __init__(self, design: Any, session: Any, clock: Any, *, fullscreen: bool = False,
+                 size: tuple[int, int] = (1280, 720), vsync: bool = True) -> None:
+        import glfw
+
+        from studyapp.render.context import Window
+
+        self.window = Window(size, fullscreen=fullscreen, vsync=vsync)
+        self.queue = InputQueue()
+        self.queue.attach_glfw(self.window)
+        monitor = glfw.get_window_monitor(self.window.handle) or glfw.get_primary_monitor()
+        mode = glfw.get_video_mode(monitor) if monitor else None
+        refresh = float(mode.refresh_rate) if mode and mode.refresh_rate else None
+        display = ("window", (mode.size.width, mode.size.height) if mode else None, refresh,
+                   self.window.content_scale[0])
+        self.app = StudyApp(design, session, self.window.ctx, clock, queue=self.queue, refresh_hz=refresh,
+                            display=display)
+        self.last_rgb = None
+        self.capture = False
+
+    def step(self) -> bool:
+        """One frame; False once the window should close (participant done or window closed)."""
+        win = self.window
+        win.poll_events()
+        if win.should_close or self.app.quit:
+            return False
+        win.use()
+        self.app.frame(win.fbo, win.framebuffer_size, time.perf_counter(), win.content_scale[0])
+        if self.capture:
+            self.last_rgb = win.read_rgb()
+        win.swap_buffers()
+        self.app.after_flip(time.perf_counter())
+        if self.app.fullscreen_toggle:
+            self.app.fullscreen_toggle = False
+            win.set_fullscreen(not win.is_fullscreen)
+        return True
+
+    def run(self) -> None:
+        while self.step():
+            pass
+
+    def close(self) -> None:
+        self.app.shutdown()
+        self.window.close()
+
+
+def run_window(design: Any, db: Any, participant_id: str, fullscreen: bool = False,
+               audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720)) -> int:
+    """Run the participant's session in a window. Returns 0 when the study was completed (or ended
+    early by the attention rule), 1 when the window was closed before the end (run again to resume)."""
+    from studyapp.audio.playback import open_clock
+    from studyapp.study.session import Session
+
+    clock, message = open_clock(audio_device)
+    print(message, flush=True)
+    session = Session(design, db, participant_id)
+    runner = None
+    hook = getattr(db, "on_participant_finished", None)
+    try:
+        runner = WindowRunner(design, session, clock, fullscreen=fullscreen, size=size)
+        if callable(hook):  # bundles write a results file at the end: show its path on the last screen
+            def capture(pid: str, _hook=hook, _app=runner.app):
+                path = _hook(pid)
+                _app.results_file = path
+                return path
+            db.on_participant_finished = capture
+        runner.run()
+    finally:
+        if runner is not None:
+            runner.close()
+        if callable(hook):
+            db.on_participant_finished = hook
+        clock.close()
+        session.close()
+    if session.finished:
+        return 0
+    print(f"The window was closed before the end; run the same command again to continue "
+          f"(participant {session.participant_id}).", flush=True)
+    return 1
+
+
+def run_offscreen_bot(design: Any, db: Any, participant_id: str, policy: str, seed: int,
+                      out_dir: Path | str | None = None, max_frames_per_trial: int = 400,
+                      size: tuple[int, int] = (1280, 720)) -> int:
+    """A scripted participant through the real session and UI code, without a display.
+
+    Frames are rendered offscreen (EGL); a virtual silent clock jumps ahead so a 10 s clip takes a few
+    frames; clicks, drags and key presses are synthesized through :mod:`studyapp.ui.input`. With
+    ``out_dir`` a PNG of every screen is written there. Returns 0 when the session finished.
+    """
+    from studyapp.ui.bot import UIBot
+
+    bot = UIBot(design, db, participant_id, policy, seed, size=size, out_dir=out_dir,
+                max_frames_per_trial=max_frames_per_trial)
+    try:
+        return bot.run()
+    finally:
+        bot.close()

@@ -1,0 +1,271 @@
+"""The scripted participant that uses the real UI offscreen (``studyapp run --offscreen --bot P``).
+
+It renders every frame into an EGL framebuffer and acts only through :class:`~studyapp.ui.input.InputQueue`
+events at the rectangles the screens drew their buttons at -- the same path a participant's mouse and
+keyboard take. Its choices come from :func:`studyapp.study.bots.choose_ranking` (random / ordered /
+careful). To exercise every ranking method it drags the chips for the first question, clicks them for
+the second and uses the number keys for the rest. Time is virtual: each frame while a clip plays moves
+the silent clock ahead by a fraction of the clip.
+"""
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from studyapp.audio.clock import SilentClock
+from studyapp.errors import StudyappError
+from studyapp.ui.app import StudyApp
+from studyapp.ui.input import digit_key
+
+#: Rendered frames per clip play (virtual time jumps duration / this per frame).
+FRAMES_PER_PLAY = 8
+
+
+def center(rect: tuple[float, float, float, float]) -> tuple[float, float]:
+    x0, y0, x1, y1 = rect
+    return (x0 + x1) / 2.0, (y0 + y1) / 2.0
+
+
+def save_png(rgb: np.ndarray, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.image as mimage
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mimage.imsave(str(path), rgb)
+
+
+class UIBot:
+    """Drives a :class:`StudyApp` offscreen, one rendered frame per step."""
+
+    def __init__(self, design: Any, db: Any, participant_id: str, policy: str, seed: int, *,
+                 size: tuple[int, int] = (1280, 720), out_dir: Path | str | None = None,
+                 max_frames_per_trial: int = 400, session: Any = None) -> None:
+        from studyapp.render.context import OffscreenTarget, create_offscreen_context
+        from studyapp.study.bots import POLICIES
+        from studyapp.study.session import Session
+
+        if policy not in POLICIES:
+            raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(POLICIES)}")
+        self.design = design
+        self.policy = policy
+        self.seed = int(seed)
+        self.size = (int(size[0]), int(size[1]))
+        self.out_dir = Path(out_dir) if out_dir is not None else None
+        self.max_frames_per_trial = int(max_frames_per_trial)
+        self.session = session or Session(design, db, participant_id)
+        self.ctx = create_offscreen_context()
+        self.target = OffscreenTarget(self.ctx, self.size)
+        self.clock = SilentClock(virtual=True, reason="offscreen scripted participant")
+        self.app = StudyApp(design, self.session, self.ctx, self.clock, refresh_hz=60.0,
+                            display=("offscreen", self.size, 60.0, 1.0), bench_frames=3)
+        self.steps: deque[Callable[[], None]] = deque()
+        self.t = 0.0
+        self.shots: list[Path] = []
+        self._shot_keys: set[str] = set()
+        self._planned_for: Any = None
+        self.frames = 0
+        self.last_rgb: np.ndarray | None = None
+
+    # -- frame loop ----------------------------------------------------------------------------------
+    def frame(self) -> None:
+        self.app.frame(self.target.fbo, self.size, self.t, 1.0)
+        self.frames += 1
+        self.t += 1.0 / 60.0
+        view = self.app._view
+        if view is not None and view.playing_id and not self.clock.paused:
+            self.clock.advance(max(view.duration_s / FRAMES_PER_PLAY, 1.0 / 60.0))
+        self.app.after_flip(self.t)
+
+    def screenshot(self, name: str) -> np.ndarray:
+        rgb = self.target.read_rgb()
+        self.last_rgb = rgb
+        if self.out_dir is not None:
+            path = self.out_dir / f"{len(self.shots) + 1:02d}_{name}.png"
+            save_png(rgb, path)
+            self.shots.append(path)
+        return rgb
+
+    def run(self) -> int:
+        per_trial = 0
+        last_trial = None
+        total_limit = self.max_frames_per_trial * (len(self.session.plans) + 6)
+        while not self.app.quit and self.frames < total_limit:
+            self.frame()
+            key = self.app.screen_key()
+            # A new screen is complete on its second frame (ImGui hides a new window for one frame).
+            if key not in self._shot_keys and self._stable(key):
+                self._shot_keys.add(key)
+                self.screenshot(key.replace(":", "_"))
+            plan = self.session.current_trial()
+            cur = None if plan is None else plan.trial_index
+            per_trial = per_trial + 1 if cur == last_trial else 0
+            last_trial = cur
+            if cur is not None and per_trial > self.max_frames_per_trial:
+                raise StudyappError(f"the scripted participant got stuck on trial {cur} "
+                                    f"(screen {key!r}) after {per_trial} frames")
+            if self.steps:
+                self.steps.popleft()()
+            else:
+                self._plan(key)
+        return 0 if self.session.finished else 1
+
+    def _stable(self, key: str) -> bool:
+        stable = getattr(self, "_prev_key", None) == key
+        self._prev_key = key
+        return stable and not key.endswith(":loading")
+
+    def close(self) -> None:
+        self.app.shutdown()
+        self.target.release()
+        self.session.close()
+
+    # -- input helpers --------------------------------------------------------------------------------
+    def _rect(self, key: Any) -> tuple[float, float, float, float]:
+        r = self.app.ui.rects.get(key)
+        if r is None:
+            raise StudyappError(f"the scripted participant cannot find {key!r} on screen {self.app.screen_key()!r}")
+        return r
+
+    def _ensure_visible(self, key: Any, tries: int = 60) -> Callable[[], None]:
+        """A step that scrolls the page (mouse wheel) until the item is inside the window."""
+        q = self.app.input
+        w, h = self.size
+
+        def step(left: int = tries) -> None:
+            _, y0, _, y1 = self._rect(key)
+            if left <= 0 or (y0 >= 0 and y1 <= h):
+                return
+            q.mouse_move(w / 2, h / 2)
+            q.scroll(0.0, -1.0 if y1 > h else 1.0)
+            self.steps.appendleft(lambda: step(left - 1))
+            self.steps.appendleft(lambda: None)
+        return step
+
+    def click(self, key: Any) -> None:
+        """Queue a click on the item drawn under ``key`` (looked up when the step runs)."""
+        q = self.app.input
+        self.steps.append(self._ensure_visible(key))
+        self.steps.append(lambda: q.mouse_move(*center(self._rect(key))))
+        self.steps.append(lambda: q.mouse_button(0, True))
+        self.steps.append(lambda: q.mouse_button(0, False))
+        self.steps.append(lambda: None)
+
+    def drag(self, src: Any, dst: Any) -> None:
+        """Press on ``src``, move in steps (past the drag threshold) onto ``dst``, release."""
+        q = self.app.input
+        state: dict[str, tuple[float, float]] = {}
+
+        def press():
+            state["a"] = center(self._rect(src))
+            q.mouse_move(*state["a"])
+
+        def down():
+            q.mouse_button(0, True)
+
+        def move(frac: float):
+            def f():
+                if "b" not in state:
+                    state["b"] = center(self._rect(dst))
+                (ax, ay), (bx, by) = state["a"], state["b"]
+                q.mouse_move(ax + (bx - ax) * frac, ay + (by - ay) * frac)
+            return f
+
+        self.steps.extend([self._ensure_visible(src), press, down, move(0.05), move(0.3), move(0.7), move(1.0), move(1.0),
+                           lambda: q.mouse_button(0, False), lambda: None])
+
+    def key(self, imgui_key: Any) -> None:
+        q = self.app.input
+        self.steps.append(lambda: q.key(imgui_key, True))
+        self.steps.append(lambda: q.key(imgui_key, False))
+        self.steps.append(lambda: None)
+
+    def wait(self, n: int = 1) -> None:
+        for _ in range(n):
+            self.steps.append(lambda: None)
+
+    # -- what to do next --------------------------------------------------------------------------------
+    def _plan(self, key: str) -> None:
+        state = key.split(":")[0]
+        if state == "welcome":
+            self.click("consent")
+        elif state == "instructions":
+            self.click("continue")
+        elif state == "env_check":
+            if self.app.env_report is None:
+                self.wait()
+            else:
+                self.click("test_sound")
+                self.click("continue")
+        elif state in ("practice", "trials"):
+            self._plan_trial(key)
+        elif state == "questionnaire":
+            self._plan_questionnaire()
+        elif state in ("done", "ended_early"):
+            self.click("close")
+        else:
+            self.wait()
+
+    def _plan_trial(self, key: str) -> None:
+        from studyapp.study.bots import choose_ranking, trial_rng
+
+        view = self.app.trial_view()
+        sub = key.split(":")[1] if ":" in key else ""
+        if view is None or not view.loaded or sub in ("loading", "playing"):
+            self.wait()
+            return
+        if sub == "ready":
+            self.click("play")
+            return
+        if sub == "ranking" and self._planned_for != view.plan.trial_index:
+            self._planned_for = view.plan.trial_index
+            plan = view.plan
+            rng = trial_rng(self.seed, self.session.participant_id, plan.trial_index)
+            ranks = choose_ranking(self.policy, plan, view.media, self.design.criteria, rng,
+                                   condition_order=[c.id for c in self.design.conditions])
+            for ci, crit in enumerate(self.design.criteria):
+                order = sorted(range(3), key=lambda slot: ranks[crit.id][slot])  # best first
+                if ci == 0:      # drag and drop
+                    for place, slot in enumerate(order):
+                        self.drag(("chip", crit.id, slot), ("place", crit.id, place))
+                elif ci == 1:    # click in order best -> worst
+                    for slot in order:
+                        self.click(("chip", crit.id, slot))
+                else:            # keyboard: select the question, then 1/2/3
+                    self.click(("crit", crit.id))
+                    for slot in order:
+                        self.key(digit_key(slot + 1))
+            self.wait(2)
+            return
+        if sub == "ranked":
+            self.click("next")
+            self.wait(2)
+            return
+        self.wait()
+
+    def _plan_questionnaire(self) -> None:
+        from studyapp.study.bots import questionnaire_answers, trial_rng
+
+        if getattr(self, "_q_planned", False):
+            self.wait()
+            return
+        self._q_planned = True
+        items = self.session.questionnaire_items
+        answers = questionnaire_answers(items, trial_rng(self.seed, self.session.participant_id, 10**6))
+        for q in items:
+            if q.kind == "likert":
+                self.click(("likert", q.id, int(answers[q.id])))
+            else:
+                self.click(("text", q.id))
+                text = str(answers[q.id])
+                q_input = self.app.input
+                self.steps.append(lambda t=text: q_input.type_text(t))
+                self.wait(len(text) + 2)
+                self.click(("question", q.id))  # click elsewhere: the text box lets go of the keyboard
+        self.wait(2)
+        self.click("submit")

@@ -1,0 +1,106 @@
+"""Frame pacing and audio/video sync bookkeeping for one play of a clip.
+
+The audio clock is the master. Before drawing a frame the app asks :class:`FlipPredictor` when that
+frame will appear (the next vsync flip) and draws the media time the audio will have reached by then
+(:func:`media_time_for_flip`). After the flip, :class:`PlayRecorder` compares the time it drew with the
+audio clock read at the flip: that difference is the audio/video offset the participant sees.
+
+>>> rec = PlayRecorder(refresh_hz=60.0)
+>>> for k, drawn in enumerate([0.0, 1/60, 2/60, 4/60]):      # one frame missed between 2 and 3
+...     rec.flip(flip_time=[0, 1, 2, 4][k] / 60, drawn_media_s=drawn, audio_at_flip_s=drawn + 0.002)
+>>> rec.frames_shown, rec.dropped_frames, round(rec.worst_av_offset_ms, 1)
+(4, 1, 2.0)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def media_time_for_flip(audio_pos_s: float, now: float, predicted_flip: float | None) -> float:
+    """The clip time to draw now so it matches the audio when the frame appears at ``predicted_flip``."""
+    if predicted_flip is None:
+        return audio_pos_s
+    return audio_pos_s + max(0.0, predicted_flip - now)
+
+
+class FlipPredictor:
+    """Predicts the next flip from the last one and the refresh period (measured when not known)."""
+
+    def __init__(self, refresh_hz: float | None = None) -> None:
+        self.nominal_hz = refresh_hz
+        self.last_flip: float | None = None
+        self._intervals: list[float] = []
+
+    @property
+    def period(self) -> float | None:
+        if self.nominal_hz:
+            return 1.0 / self.nominal_hz
+        if len(self._intervals) >= 3:
+            return float(np.median(self._intervals[-60:]))
+        return None
+
+    def predict(self, now: float) -> float | None:
+        period = self.period
+        if self.last_flip is None or period is None:
+            return None
+        nxt = self.last_flip + period
+        if nxt < now:  # we are late: the frame goes out at the next whole period after now
+            nxt += np.ceil((now - nxt) / period) * period
+        return float(nxt)
+
+    def flipped(self, t: float) -> None:
+        if self.last_flip is not None:
+            self._intervals.append(t - self.last_flip)
+            del self._intervals[:-240]
+        self.last_flip = t
+
+
+@dataclass
+class PlayRecorder:
+    """Frames, drops and A/V offsets of one play (what ``Session.record_play_finished`` stores)."""
+
+    refresh_hz: float | None = None
+    flips: list[float] = field(default_factory=list)
+    offsets_s: list[float] = field(default_factory=list)
+
+    def flip(self, flip_time: float, drawn_media_s: float, audio_at_flip_s: float) -> None:
+        self.flips.append(float(flip_time))
+        self.offsets_s.append(float(drawn_media_s) - float(audio_at_flip_s))
+
+    @property
+    def frames_shown(self) -> int:
+        return len(self.flips)
+
+    @property
+    def measured_refresh_hz(self) -> float | None:
+        """Median flip rate (what the display actually did), None with fewer than 3 frames."""
+        if len(self.flips) < 3:
+            return self.refresh_hz
+        d = np.diff(self.flips)
+        d = d[d > 0]
+        return float(1.0 / np.median(d)) if d.size else self.refresh_hz
+
+    @property
+    def dropped_frames(self) -> int:
+        """Frame intervals longer than 1.5 refresh periods (each counts once, however long)."""
+        if len(self.flips) < 2:
+            return 0
+        hz = self.refresh_hz or self.measured_refresh_hz
+        if not hz:
+            return 0
+        return int(np.sum(np.diff(self.flips) > 1.5 / hz))
+
+    @property
+    def worst_av_offset_ms(self) -> float:
+        return float(np.max(np.abs(self.offsets_s)) * 1000.0) if self.offsets_s else 0.0
+
+    def stats(self) -> dict[str, float | int | None]:
+        refresh = self.measured_refresh_hz
+        return {
+            "frames_shown": self.frames_shown,
+            "dropped_frames": self.dropped_frames,
+            "refresh_hz": None if refresh is None else round(refresh, 2),
+            "worst_av_offset_ms": round(self.worst_av_offset_ms, 2),
+        }

@@ -1,0 +1,1 @@
+"""One module per participant screen; each has ``draw(app)`` and reads/writes state through the app."""

@@ -1,0 +1,38 @@
+"""Instructions from the design, the criteria explained, and how to rank."""
+from __future__ import annotations
+
+from typing import Any
+
+from imgui_bundle import imgui
+
+from studyapp.ui.screens.common import page_begin, page_end, primary_row
+
+HOW_TO_RANK = (
+    "After a clip has played to the end, a panel opens below the figures. For each question, put the three "
+    "figures in order from best (1st) to worst (3rd): drag a figure's letter into a box, or click the letters "
+    "in order from best to worst. Keyboard: press {keys} to place a figure, Up/Down to change question, "
+    "Backspace to clear a question, Enter for the next clip. Space pauses and resumes the clip."
+)
+
+
+def draw(app: Any) -> None:
+    ui = app.ui
+    page_begin(app, "instructions")
+    ui.heading("Instructions", 2.0)
+    ui.text("")
+    ui.paragraphs(app.design.instructions or "")
+    ui.heading("The questions", 1.3)
+    for crit in app.design.criteria:
+        ui.heading(crit.label, 1.1)
+        imgui.indent()
+        ui.wrapped(crit.question)
+        if crit.explanation:
+            ui.muted(crit.explanation)
+        imgui.unindent()
+    imgui.spacing()
+    ui.heading("How to rank", 1.3)
+    keys = " / ".join(f"{i + 1} ({label})" for i, label in enumerate(app.slot_names))
+    ui.wrapped(HOW_TO_RANK.format(keys=keys))
+    if primary_row(app, "Continue", "continue", hint="or press Enter"):
+        app.session.finish_instructions()
+    page_end()

@@ -1,0 +1,78 @@
+"""Post-study questionnaire: Likert rows (radio buttons between two anchors) and free-text answers.
+
+Keyboard: Up/Down pick the item, digits choose a point on a Likert item, Enter submits when every
+Likert item is answered (text items are optional).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from imgui_bundle import imgui
+
+from studyapp.ui.input import digit_key
+from studyapp.ui.screens.common import page_begin, page_end, primary_row
+
+
+def complete(items: list[Any], answers: dict[str, Any]) -> bool:
+    return all(answers.get(q.id) is not None for q in items if q.kind == "likert")
+
+
+def draw(app: Any) -> None:
+    ui = app.ui
+    s = app.scale
+    items = app.session.questionnaire_items
+    answers = app.answers
+    page_begin(app, "questionnaire")
+    ui.heading("A few last questions", 2.0)
+    ui.wrapped("Please tell us about your experience. Choose one point on each scale.")
+    ui.text("")
+    _keys(app, items)
+    for qi, q in enumerate(items):
+        active = qi == app.question_active
+        ui.heading(f"{qi + 1}. {q.text}", 1.05, key=("question", q.id))
+        if q.kind == "likert":
+            left, right = q.anchors
+            ui.muted(left)
+            imgui.same_line(0, 14 * s)
+            for v in range(1, int(q.points) + 1):
+                if ui.radio(f"{v}##{q.id}", answers.get(q.id) == v, key=("likert", q.id, v)):
+                    answers[q.id] = v
+                    app.question_active = qi
+                imgui.same_line(0, 12 * s)
+            ui.muted(right)
+        else:
+            old = answers.get(q.id, "") or ""
+            if active and app.focus_text:
+                imgui.set_keyboard_focus_here()
+                app.focus_text = False
+            new = ui.input_multiline(f"##{q.id}", old, (min(700 * s, imgui.get_content_region_avail().x),
+                                                         90 * s), key=("text", q.id))
+            if imgui.is_item_active():
+                app.question_active = qi
+                app.typing = True
+            answers[q.id] = new
+        if active:
+            ui.muted("(selected: use the number keys)" if q.kind == "likert" else "(selected: type your answer)")
+        imgui.spacing()
+    ok = complete(items, answers)
+    if primary_row(app, "Submit answers", "submit", enabled=ok,
+                   hint="" if ok else "Please answer every scale (text answers are optional)."):
+        app.session.submit_questionnaire({q.id: answers.get(q.id) for q in items})
+    page_end()
+
+
+def _keys(app: Any, items: list[Any]) -> None:
+    if not items or app.typing:
+        app.typing = False
+        return
+    if app.key_pressed("down"):
+        app.question_active = min(len(items) - 1, app.question_active + 1)
+        app.focus_text = True
+    if app.key_pressed("up"):
+        app.question_active = max(0, app.question_active - 1)
+        app.focus_text = True
+    q = items[app.question_active]
+    if q.kind == "likert":
+        for v in range(1, min(9, int(q.points)) + 1):
+            if app.key_pressed(digit_key(v)):
+                app.answers[q.id] = v

@@ -1,0 +1,145 @@
+"""A trial: the three figures play with the sound; Play / Pause / Replay; the ranking panel below.
+
+Layout (framebuffer pixels, top to bottom): a progress bar ("Clip 3 of 8", a Practice badge), the 3D
+view (the renderer draws the three avatars there), and the control panel (transport, then the ranking
+once the clip has been watched). Attention-check trials look exactly like the others.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from imgui_bundle import imgui
+
+from studyapp.ui.screens import ranking_panel
+from studyapp.ui.screens.common import PAGE_FLAGS
+
+TOP_PX = 50.0
+CONTROLS_PX = 70.0
+
+
+def _fmt(t: float) -> str:
+    t = max(0.0, t)
+    return f"{int(t // 60)}:{int(t % 60):02d}"
+
+
+def layout(app: Any, view: Any) -> dict[str, tuple[float, float, float, float]]:
+    """Pixel rectangles (x, y, w, h; y down) of the top bar, the 3D view and the panel."""
+    w, h = app.fb_size
+    s = app.scale
+    top = TOP_PX * s
+    panel = CONTROLS_PX * s
+    if view.ranking_open():
+        panel += ranking_panel.height(app)
+    panel = min(panel, 0.62 * h)
+    return {"top": (0, 0, w, top), "scene": (0, top, w, h - top - panel), "panel": (0, h - panel, w, panel)}
+
+
+def draw(app: Any) -> None:
+    ui = app.ui
+    s = app.scale
+    view = app.trial_view()
+    session = app.session
+    if view is None or not view.loaded:
+        _loading(app)
+        return
+    view.update()
+    _keys(app, view)
+    rects = layout(app, view)
+
+    # -- top bar: progress, practice badge -----------------------------------------------------
+    x, y, w, h = rects["top"]
+    imgui.set_next_window_pos((x, y))
+    imgui.set_next_window_size((w, h))
+    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 12 * s))
+    imgui.begin("##topbar", None, PAGE_FLAGS)
+    imgui.pop_style_var()
+    ui.heading(session.progress_label(), 1.25, key="progress")
+    if view.plan.is_practice:
+        imgui.same_line(0, 24 * s)
+        imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
+        ui.text("PRACTICE  -  this clip is for getting used to the task; its answers are not analysed",
+                color=(1.0, 0.80, 0.35, 1.0), key="practice_badge")
+    imgui.end()
+
+    # -- the 3D view: drawn by the renderer before the UI ------------------------------------------
+    t = view.media_time(app.now)
+    view.drawn_media_s = t if view.playing_id else None
+    app.request_scene(view.scene, t, rects["scene"])
+
+    # -- panel: transport + ranking -------------------------------------------------------------
+    x, y, w, h = rects["panel"]
+    imgui.set_next_window_pos((x, y))
+    imgui.set_next_window_size((w, h))
+    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 12 * s))
+    imgui.begin("##panel", None, PAGE_FLAGS)
+    imgui.pop_style_var()
+    _transport(app, view, t)
+    if view.ranking_open():
+        ranking_panel.draw(app, view)
+    imgui.end()
+
+
+def _loading(app: Any) -> None:
+    from studyapp.ui.screens.common import page_begin, page_end
+
+    page_begin(app, "loading")
+    app.ui.heading(app.session.progress_label(), 1.4)
+    app.ui.wrapped("Loading the next clip...")
+    page_end()
+    app.request_trial_load()
+
+
+def _transport(app: Any, view: Any, t: float) -> None:
+    ui = app.ui
+    s = app.scale
+    state = view.state
+    bw = 150 * s
+    bh = 44 * s
+    if state == "ready":
+        if ui.button("Play", key="play", size=(bw, bh), primary=True, enabled=view.can_play()):
+            view.play()
+    elif state == "playing":
+        if ui.button("Pause", key="pause", size=(bw, bh)):
+            view.toggle_pause()
+    elif state == "paused":
+        if ui.button("Resume", key="resume", size=(bw, bh), primary=True):
+            view.toggle_pause()
+    else:
+        if ui.button("Replay", key="replay", size=(bw, bh), enabled=view.can_play()):
+            view.play()
+    if view.playing_id and view.watched:
+        imgui.same_line()
+        if ui.button("Stop", key="stop", size=(110 * s, bh)):
+            view.stop()
+    imgui.same_line(0, 20 * s)
+    frac = 0.0 if view.duration_s <= 0 else min(1.0, t / view.duration_s)
+    imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 10 * s)
+    imgui.progress_bar(frac, imgui.ImVec2(260 * s, 24 * s), f"{_fmt(t)} / {_fmt(view.duration_s)}")
+    imgui.same_line(0, 20 * s)
+    imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
+    ui.muted(_status_text(app, view, state))
+
+
+def _status_text(app: Any, view: Any, state: str) -> str:
+    if state == "ready":
+        return "Press Play (or Space) to watch the clip with sound."
+    if state == "paused":
+        return "Paused. Press Resume or Space to continue."
+    if state == "playing" and not view.ranking_open():
+        return "Watch to the end; the questions appear afterwards. Space pauses."
+    if state == "playing":
+        return "Replaying. Space pauses."
+    if not view.app.session.can_play():
+        return "Now rank the three figures below."
+    return "Rank the three figures below. You may replay the clip as often as you like."
+
+
+def _keys(app: Any, view: Any) -> None:
+    K = imgui.Key
+    if app.key_pressed("space"):
+        if view.state == "ready":
+            view.play()
+        else:
+            view.toggle_pause()
+    if app.key_pressed("enter") and view.state == "ready":
+        view.play()

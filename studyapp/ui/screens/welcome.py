@@ -1,0 +1,28 @@
+"""Welcome and consent: what the study is, what is recorded, and the participant's agreement."""
+from __future__ import annotations
+
+from typing import Any
+
+from studyapp.ui.screens.common import page_begin, page_end, primary_row
+
+CONSENT_TEXT = (
+    "In this study you will watch short clips of three animated figures talking and rank them on a few "
+    "questions. It takes about {minutes} minutes. Your answers are saved as you go, under a participant "
+    "code, without your name. You can stop at any time by closing the window; nothing else is recorded."
+)
+
+
+def draw(app: Any) -> None:
+    ui = app.ui
+    page_begin(app, "welcome")
+    ui.heading("Welcome", 2.0)
+    ui.heading(app.design.title, 1.25)
+    ui.text("")
+    minutes = app.estimated_minutes()
+    ui.wrapped(CONSENT_TEXT.format(minutes=minutes))
+    ui.text("")
+    ui.wrapped("By pressing the button below you agree to take part and to your anonymous answers being "
+               "used for research.")
+    if primary_row(app, "I agree, start", "consent", hint="or press Enter"):
+        app.session.accept_consent()
+    page_end()

@@ -1,0 +1,125 @@
+"""One trial's playback state: media, scene, play/pause/replay, watched-once, ranking, frame stats.
+
+The drawing lives in :mod:`studyapp.ui.screens.trial`; this class holds what must survive between
+frames and talks to the :class:`~studyapp.study.session.Session` (plays, stats, the ranking).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from studyapp.ui.frames import PlayRecorder, media_time_for_flip
+from studyapp.ui.ranking import RankingState
+
+
+class TrialView:
+    """State of the trial on screen. ``scene`` is built by the app's renderer when the trial loads."""
+
+    def __init__(self, app: Any, plan: Any) -> None:
+        self.app = app
+        self.plan = plan
+        self.media: Any = None
+        self.scene: Any = None
+        self.ranking = RankingState([c.id for c in app.design.criteria])
+        self.recorder: PlayRecorder | None = None
+        self.watched = False          # played to the end at least once
+        self.playing_id = False       # a play is registered with the session
+        self.drawn_media_s: float | None = None
+        self.error: str | None = None
+
+    # -- loading ---------------------------------------------------------------------------------
+    def load(self) -> None:
+        from studyapp.render.scene import build_trial_scene
+        from studyapp.study.stimuli import load_trial_media
+
+        self.media = load_trial_media(self.app.design, self.plan)
+        self.scene = build_trial_scene(self.app.renderer, self.media)
+
+    @property
+    def loaded(self) -> bool:
+        return self.scene is not None
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.scene.duration) if self.scene is not None else 0.0
+
+    # -- transport ---------------------------------------------------------------------------------
+    @property
+    def clock(self) -> Any:
+        return self.app.clock
+
+    @property
+    def state(self) -> str:
+        """"ready" (never played), "playing", "paused", "ended" (last play reached the end or stopped)."""
+        if not self.playing_id:
+            return "ended" if self.watched or self.app.session.plays else "ready"
+        return "paused" if self.clock.paused else "playing"
+
+    def can_play(self) -> bool:
+        return not self.playing_id and self.app.session.can_play() and self.loaded
+
+    def play(self) -> None:
+        """Start (or replay) the clip from the beginning, with sound."""
+        if not self.can_play():
+            return
+        self.app.session.record_play_started()
+        self.playing_id = True
+        self.recorder = PlayRecorder(refresh_hz=self.app.refresh_hz)
+        self.clock.play(self.media.audio, 0.0, duration_s=self.duration_s)
+
+    def toggle_pause(self) -> None:
+        if not self.playing_id:
+            return
+        if self.clock.paused:
+            self.clock.resume()
+        else:
+            self.clock.pause()
+
+    def pause(self) -> None:
+        if self.playing_id and not self.clock.paused:
+            self.clock.pause()
+
+    def stop(self) -> None:
+        """End the current play early (only offered after the clip was watched once)."""
+        if self.playing_id:
+            self._finish(completed=False)
+
+    def _finish(self, completed: bool) -> None:
+        stats = self.recorder.stats() if self.recorder else None
+        self.clock.stop()
+        self.playing_id = False
+        self.app.session.record_play_finished(completed, stats)
+        if completed:
+            self.watched = True
+
+    def update(self) -> None:
+        """Once per frame before drawing: notice the end of the clip."""
+        if self.playing_id and not self.clock.paused and self.clock.finished:
+            self._finish(completed=True)
+
+    def media_time(self, now: float) -> float:
+        """Clip time to draw now: the audio clock plus the time until this frame is shown."""
+        if not self.playing_id:
+            return self.duration_s if self.watched else 0.0
+        pos = self.clock.position_s()
+        if self.clock.paused:
+            return pos
+        t = media_time_for_flip(pos, now, self.app.predictor.predict(now))
+        return min(t, self.duration_s)
+
+    def after_flip(self, flip_time: float) -> None:
+        if self.playing_id and self.recorder is not None and self.drawn_media_s is not None \
+                and not self.clock.paused:
+            self.recorder.flip(flip_time, self.drawn_media_s, self.clock.position_s())
+        self.drawn_media_s = None
+
+    # -- answers -----------------------------------------------------------------------------------
+    def ranking_open(self) -> bool:
+        """The ranking panel shows once the design's watching rule is met (and stays open on replays)."""
+        return self.watched or not bool(self.app.design.playback.must_watch_fully)
+
+    def can_submit(self) -> bool:
+        return self.ranking.all_complete() and not self.playing_id and self.app.session.can_rank()
+
+    def submit(self) -> None:
+        if self.can_submit():
+            self.app.session.submit_ranking(self.ranking.ranks())

@@ -1,0 +1,140 @@
+"""The only way screens put text and controls on screen.
+
+Every participant-visible string goes through :class:`Painter`, which records it, so tests can assert
+that no condition id or model name is ever drawn (:meth:`Painter.leaks`); every interactive item records
+its rectangle under a stable key, so the offscreen bot and the window tests know where to click
+(through :mod:`studyapp.ui.input`, like a participant).
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from typing import Any
+
+Rect = tuple[float, float, float, float]  # x0, y0, x1, y1 in framebuffer pixels
+
+
+def visible_label(label: str) -> str:
+    """The part of an ImGui label that is drawn (``"Next##trial"`` -> ``"Next"``; ``"###x"`` -> ``""``)."""
+    return label.split("##", 1)[0]
+
+
+class Painter:
+    """Thin wrapper over the imgui calls the screens use; records strings and item rectangles."""
+
+    def __init__(self) -> None:
+        from imgui_bundle import imgui
+
+        self.imgui = imgui
+        self.drawn: set[str] = set()
+        self.frame_strings: list[str] = []
+        self.rects: dict[Any, Rect] = {}
+        self.layer = None  # set by the app: fonts live there
+
+    def begin_frame(self) -> None:
+        self.frame_strings = []
+        self.rects = {}
+
+    def record(self, s: str) -> None:
+        if s:
+            self.drawn.add(s)
+            self.frame_strings.append(s)
+
+    def _item_rect(self, key: Any) -> None:
+        if key is not None:
+            imgui = self.imgui
+            a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+            self.rects[key] = (a.x, a.y, b.x, b.y)
+
+    # -- text ----------------------------------------------------------------------------------
+    def text(self, s: str, *, color: tuple[float, float, float, float] | None = None, key: Any = None) -> None:
+        self.record(s)
+        if color is None:
+            self.imgui.text_unformatted(s)
+        else:
+            self.imgui.text_colored(self.imgui.ImVec4(*color), s.replace("%", "%%"))
+        self._item_rect(key)
+
+    def wrapped(self, s: str, *, key: Any = None) -> None:
+        self.record(s)
+        self.imgui.push_text_wrap_pos(0.0)
+        self.imgui.text_unformatted(s)
+        self.imgui.pop_text_wrap_pos()
+        self._item_rect(key)
+
+    def muted(self, s: str) -> None:
+        self.record(s)
+        imgui = self.imgui
+        imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(0.70, 0.72, 0.77, 1.0))
+        imgui.push_text_wrap_pos(0.0)
+        imgui.text_unformatted(s)
+        imgui.pop_text_wrap_pos()
+        imgui.pop_style_color()
+
+    def heading(self, s: str, size: float = 1.6, *, key: Any = None) -> None:
+        """Bold text ``size`` times the body size."""
+        self.record(s)
+        imgui = self.imgui
+        font = self.layer.font_bold if self.layer else None
+        imgui.push_font(font, imgui.get_style().font_size_base * size)
+        imgui.push_text_wrap_pos(0.0)
+        imgui.text_unformatted(s)
+        imgui.pop_text_wrap_pos()
+        imgui.pop_font()
+        self._item_rect(key)
+
+    def paragraphs(self, s: str) -> None:
+        """Text from a design (blank lines separate paragraphs; single newlines are kept)."""
+        for para in re.split(r"\n\s*\n", s.strip()):
+            self.wrapped(para.strip())
+            self.imgui.spacing()
+
+    # -- controls -----------------------------------------------------------------------------
+    def button(self, label: str, *, key: Any = None, enabled: bool = True, size: tuple[float, float] = (0, 0),
+               primary: bool = False) -> bool:
+        imgui = self.imgui
+        self.record(visible_label(label))
+        if primary and enabled:
+            imgui.push_style_color(imgui.Col_.button, imgui.ImVec4(0.16, 0.55, 0.36, 1.0))
+            imgui.push_style_color(imgui.Col_.button_hovered, imgui.ImVec4(0.20, 0.64, 0.42, 1.0))
+            imgui.push_style_color(imgui.Col_.button_active, imgui.ImVec4(0.13, 0.46, 0.30, 1.0))
+        imgui.begin_disabled(not enabled)
+        pressed = imgui.button(label, imgui.ImVec2(*size))
+        imgui.end_disabled()
+        if primary and enabled:
+            imgui.pop_style_color(3)
+        self._item_rect(key if key is not None else visible_label(label))
+        return bool(pressed) and enabled
+
+    def radio(self, label: str, active: bool, *, key: Any = None) -> bool:
+        self.record(visible_label(label))
+        pressed = self.imgui.radio_button(label, active)
+        self._item_rect(key)
+        return bool(pressed)
+
+    def checkbox(self, label: str, value: bool, *, key: Any = None) -> bool:
+        self.record(visible_label(label))
+        _, value = self.imgui.checkbox(label, value)
+        self._item_rect(key)
+        return bool(value)
+
+    def input_multiline(self, label: str, value: str, size: tuple[float, float], *, key: Any = None) -> str:
+        self.record(value)
+        _, value = self.imgui.input_text_multiline(label, value, self.imgui.ImVec2(*size))
+        self._item_rect(key)
+        return value
+
+    # -- checks --------------------------------------------------------------------------------
+    def leaks(self, secrets: Iterable[str]) -> list[tuple[str, str]]:
+        """``(secret, drawn string)`` pairs where a secret (condition id, model name, file name) was drawn.
+
+        Matching is case-insensitive and on word boundaries (so the id ``"a"`` does not match every
+        "a" in the instructions, but ``"camn"`` matches "CaMN result").
+        """
+        out = []
+        for secret in secrets:
+            if not secret:
+                continue
+            pat = re.compile(r"(?<![A-Za-z0-9])" + re.escape(secret) + r"(?![A-Za-z0-9])", re.IGNORECASE)
+            out += [(secret, s) for s in sorted(self.drawn) if pat.search(s)]
+        return out

@@ -1,0 +1,187 @@
+"""Cross-checks against independent implementations where no published value exists."""
+from __future__ import annotations
+
+from itertools import combinations
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import optimize, stats
+
+from results_analysis import (bradley_terry, conover, cronbach_alpha, fit_bradley_terry, friedman_ranks, holm,
+                              kendall_w, nemenyi, pairwise_wins, rank_blocks, simulate_results, wilcoxon_holm,
+                              within_block_ranks)
+from results_analysis.descriptives import condition_summary
+
+rank_tables = st.integers(2, 6).flatmap(lambda k: st.lists(
+    st.lists(st.integers(1, k), min_size=k, max_size=k), min_size=3, max_size=40))
+
+
+@settings(max_examples=60, deadline=None)
+@given(rank_tables)
+def test_friedman_matches_scipy_with_ties(rows: list[list[int]]) -> None:
+    values = np.array(rows, dtype=float)
+    if values.shape[1] < 3 or np.all(values == values[:, :1]):
+        return  # scipy needs k >= 3 and is undefined when every block ties completely
+    ours = friedman_ranks(within_block_ranks(values))
+    theirs = stats.friedmanchisquare(*values.T)
+    assert ours.chi2 == pytest.approx(theirs.statistic, rel=1e-9, abs=1e-9)
+    assert ours.p == pytest.approx(theirs.pvalue, rel=1e-9, abs=1e-12)
+
+
+def _kendall_w_direct(ranks: np.ndarray) -> float:
+    """Kendall & Babington Smith's W with tie correction, written from the textbook formula:
+    W = 12 S / (m^2 (n^3 - n) - m sum T), S = sum (R_j - mean R)^2, T = sum over tie groups (t^3 - t),
+    m raters (blocks), n objects (conditions)."""
+    m, n = ranks.shape
+    r = ranks.sum(axis=0)
+    s = float(((r - r.mean()) ** 2).sum())
+    t = 0.0
+    for row in ranks:
+        _, counts = np.unique(row, return_counts=True)
+        t += float((counts ** 3 - counts).sum())
+    return 12 * s / (m ** 2 * (n ** 3 - n) - m * t)
+
+
+@settings(max_examples=60, deadline=None)
+@given(rank_tables)
+def test_kendall_w_matches_direct_formula(rows: list[list[int]]) -> None:
+    ranks = within_block_ranks(np.array(rows, dtype=float))
+    if np.all(ranks == ranks[:, :1]):
+        return
+    assert kendall_w(ranks) == pytest.approx(_kendall_w_direct(ranks), rel=1e-9, abs=1e-12)
+
+
+def _holm_by_hand(p: list[float]) -> list[float]:
+    """Holm (1979) step-down, written as a loop over the sorted p values."""
+    m = len(p)
+    order = sorted(range(m), key=lambda i: p[i])
+    adjusted = [0.0] * m
+    running = 0.0
+    for step, i in enumerate(order):
+        running = max(running, min(1.0, (m - step) * p[i]))
+        adjusted[i] = running
+    return adjusted
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(0, 1), min_size=1, max_size=12))
+def test_holm_matches_hand_written(p: list[float]) -> None:
+    assert holm(p).tolist() == pytest.approx(_holm_by_hand(p))
+
+
+def test_wilcoxon_holm_matches_scipy_and_hand_holm() -> None:
+    rng = np.random.default_rng(4)
+    values = within_block_ranks(rng.normal(size=(60, 4)) + np.array([0.0, 0.3, 0.5, 0.1]))
+    values[:5, 1] = values[:5, 0]  # some zero differences
+    names = list("ABCD")
+    table = wilcoxon_holm(values, names)
+    raw = []
+    for (i, j), row in zip(combinations(range(4), 2), table.itertuples()):
+        d = values[:, i] - values[:, j]
+        # R's default for n >= 50 or ties: normal approximation with continuity correction, zeros dropped.
+        ref = stats.wilcoxon(values[:, i], values[:, j], zero_method="wilcox", correction=True,
+                             method="asymptotic")
+        assert row.p == pytest.approx(ref.pvalue, rel=1e-12)
+        assert row.statistic == pytest.approx(stats.rankdata(np.abs(d[d != 0]))[d[d != 0] > 0].sum())
+        assert row.zeros_dropped == int((d == 0).sum())
+        raw.append(ref.pvalue)
+    assert table["p_adjusted"].tolist() == pytest.approx(_holm_by_hand(raw))
+    assert (table["method"] == "normal approximation").all()
+
+
+def test_conover_matches_formula_from_conover_1999() -> None:
+    rng = np.random.default_rng(5)
+    ranks = within_block_ranks(rng.integers(1, 4, size=(30, 3)).astype(float))
+    b, k = ranks.shape
+    r = ranks.sum(axis=0)
+    a1 = (ranks ** 2).sum()
+    denom = np.sqrt(2 * (b * a1 - (r ** 2).sum()) / ((b - 1) * (k - 1)))
+    table = conover(ranks, ["A", "B", "C"])
+    for (i, j), row in zip(combinations(range(3), 2), table.itertuples()):
+        t = abs(r[i] - r[j]) / denom
+        assert row.statistic == pytest.approx(t)
+        assert row.p == pytest.approx(2 * stats.t.sf(t, (b - 1) * (k - 1)))
+
+
+def test_nemenyi_p_matches_critical_difference() -> None:
+    rng = np.random.default_rng(6)
+    ranks = within_block_ranks(rng.normal(size=(40, 5)) + np.linspace(0, 1, 5))
+    for alpha in (0.01, 0.05, 0.1):
+        t = nemenyi(ranks, list("ABCDE"), alpha=alpha)
+        # the single-step p falls below alpha exactly when the difference exceeds the CD
+        assert ((t["p_adjusted"] < alpha) == t["significant"]).all()
+
+
+def test_bradley_terry_mm_matches_scipy_optimize() -> None:
+    rng = np.random.default_rng(7)
+    ranks = within_block_ranks(rng.normal(size=(200, 4)) - np.array([0.8, 0.4, 0.0, 0.0]))
+    ranks[:10] = within_block_ranks(np.array([[1, 1, 2, 3]] * 10, dtype=float))  # ties: half wins
+    wins = pairwise_wins(ranks)
+    # Independent fit: maximise sum_ij w_ij log(p_i / (p_i + p_j)) over log-strengths with scipy.
+    def nll(theta):
+        th = np.append(theta, 0.0)
+        diff = th[:, None] - th[None, :]
+        return -(wins * (diff - np.logaddexp(0, diff))).sum()
+    opt = optimize.minimize(nll, np.zeros(3), method="BFGS", options={"gtol": 1e-10})
+    theta = np.append(opt.x, 0.0)
+    expected = np.exp(theta) / np.exp(theta).sum()
+    assert fit_bradley_terry(wins, prior=0.0) == pytest.approx(expected, abs=1e-5)
+
+
+def test_pairwise_wins_count_each_pair_once_per_block() -> None:
+    ranks = within_block_ranks(np.random.default_rng(8).integers(1, 4, size=(25, 3)).astype(float))
+    w = pairwise_wins(ranks)
+    assert (w + w.T)[~np.eye(3, dtype=bool)] == pytest.approx(np.full(6, 25.0))
+
+
+def test_bootstrap_intervals_are_seeded_and_cover_the_estimate() -> None:
+    df = simulate_results(30, 6, seed=9, n_practice=0, n_attention=0)
+    blocks = rank_blocks(df, "realism")
+    a = condition_summary(blocks, n_boot=500, seed=3)
+    b = condition_summary(blocks, n_boot=500, seed=3)
+    c = condition_summary(blocks, n_boot=500, seed=4)
+    pd.testing.assert_frame_equal(a, b)
+    assert not np.allclose(a["ci_low"], c["ci_low"])
+    assert ((a["ci_low"] <= a["mean_rank"]) & (a["mean_rank"] <= a["ci_high"])).all()
+    bt = bradley_terry(blocks, n_boot=300, seed=1)
+    assert ((bt["ci_low"] <= bt["strength"]) & (bt["strength"] <= bt["ci_high"])).all()
+    assert bt["strength"].sum() == pytest.approx(1.0)
+
+
+def test_bootstrap_resamples_participants_not_trials() -> None:
+    # Participants who always agree with themselves but disagree with each other: a trial bootstrap would
+    # give a narrow interval, the participant bootstrap a wide one (only 4 independent units).
+    rows = []
+    for p, order in enumerate([[1, 2, 3], [3, 2, 1], [1, 2, 3], [3, 2, 1]]):
+        for t in range(50):
+            rows += [{"participant": f"P{p}", "trial_index": t, "stimulus": f"s{t}", "criterion": "c",
+                      "condition": c, "rank": r} for c, r in zip("ABC", order)]
+    blocks = rank_blocks(pd.DataFrame(rows), "c")
+    s = condition_summary(blocks, n_boot=2000, seed=0).set_index("condition")
+    assert s.loc["A", "ci_high"] - s.loc["A", "ci_low"] > 1.0
+
+
+def test_cronbach_alpha_matches_covariance_formula() -> None:
+    rng = np.random.default_rng(10)
+    latent = rng.normal(size=(80, 1))
+    items = pd.DataFrame(latent + rng.normal(scale=0.8, size=(80, 5)), columns=list("abcde"))
+    cov = np.cov(items.to_numpy(), rowvar=False)
+    k = cov.shape[0]
+    expected = k / (k - 1) * (1 - np.trace(cov) / cov.sum())
+    assert cronbach_alpha(items) == pytest.approx(expected)
+    # listwise deletion: a missing answer drops that participant only
+    items.iloc[0, 2] = np.nan
+    cov = np.cov(items.dropna().to_numpy(), rowvar=False)
+    assert cronbach_alpha(items) == pytest.approx(k / (k - 1) * (1 - np.trace(cov) / cov.sum()))
+
+
+def test_participant_block_uses_mean_rank_per_participant() -> None:
+    df = simulate_results(10, 6, seed=11, n_practice=0, n_attention=0)
+    blocks = rank_blocks(df, "diversity", block="participant")
+    by_hand = (df[df.criterion == "diversity"].groupby(["participant", "condition"])["rank"].mean()
+               .unstack()[blocks.conditions])
+    assert blocks.values == pytest.approx(by_hand.to_numpy())
+    assert friedman_ranks(blocks.ranks).chi2 == pytest.approx(stats.friedmanchisquare(*by_hand.to_numpy().T).statistic)

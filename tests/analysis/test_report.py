@@ -1,0 +1,151 @@
+"""The written analysis: stats.json numbers vs scipy, tables, figures (pixels), self-contained HTML, CLI."""
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from results_analysis import analyze, simulate_results
+from results_analysis.cli import main
+
+STRENGTHS = {"realism": [6.0, 1.5, 1.0], "synchronization": [5.0, 1.0, 1.0], "diversity": [1.0, 1.0, 1.0]}
+
+
+@pytest.fixture(scope="module")
+def study() -> pd.DataFrame:
+    # FaceCapGes clearly best on realism and synchronization; no difference on diversity.
+    return simulate_results(24, 8, strengths=STRENGTHS, fail_attention=["P07"], seed=5)
+
+
+@pytest.fixture(scope="module")
+def written(study: pd.DataFrame, tmp_path_factory) -> tuple[Path, object]:
+    out = tmp_path_factory.mktemp("analysis")
+    a = analyze(study, out, title="Test study", groups=["speaker", "device"], exclude_failed_attention=True,
+                conover=True, n_boot=400, seed=1)
+    return out, a
+
+
+def test_stats_json_matches_scipy_on_the_same_blocks(study: pd.DataFrame, written) -> None:
+    out, _ = written
+    s = json.loads((out / "stats.json").read_text())
+    rated = study[~study.is_practice & ~study.is_attention_check & (study.participant != "P07")]
+    for crit in ("realism", "synchronization", "diversity"):
+        wide = rated[rated.criterion == crit].pivot(index=["participant", "trial_index"], columns="condition",
+                                                    values="rank")
+        ref = stats.friedmanchisquare(*wide.to_numpy().T)
+        e = s[crit]
+        assert e["n_blocks"] == len(wide) == 23 * 8 and e["k"] == 3 and e["df"] == 2
+        assert e["chi2"] == pytest.approx(ref.statistic) and e["p"] == pytest.approx(ref.pvalue)
+        assert e["kendall_w"] == pytest.approx(ref.statistic / (len(wide) * 2))
+        n = len(wide)
+        f = (n - 1) * ref.statistic / (n * 2 - ref.statistic)
+        assert e["iman_davenport_f"] == pytest.approx(f)
+        assert e["iman_davenport_p"] == pytest.approx(stats.f.sf(f, 2, 2 * (n - 1)))
+        assert e["mean_rank"] == pytest.approx(wide.mean().to_dict())
+        assert e["critical_difference"] == pytest.approx(
+            stats.studentized_range.ppf(0.95, 3, np.inf) / np.sqrt(2) * np.sqrt(3 * 4 / (6 * n)))
+        assert set(e["posthoc"]) == {"nemenyi", "wilcoxon_holm", "conover"}
+        for row in e["posthoc"]["wilcoxon_holm"]:
+            assert {"a", "b", "statistic", "p", "p_adjusted"} <= set(row)
+    assert s["realism"]["p"] < 1e-6 and s["diversity"]["p"] > 0.001
+    assert s["realism"]["mean_rank"]["FaceCapGes"] < 1.6
+    assert s["_meta"]["excluded"] == [{"participant": "P07", "reason": "failed 1 of 1 attention check(s)"}]
+
+
+def test_tables_written(written) -> None:
+    out, a = written
+    names = {p.name for p in (out / "tables").iterdir()}
+    assert names >= {"friedman.csv", "conditions.csv", "posthoc_nemenyi.csv", "posthoc_wilcoxon_holm.csv",
+                     "posthoc_conover.csv", "bradley_terry.csv", "exclusions.csv", "by_speaker.csv", "by_device.csv"}
+    by = pd.read_csv(out / "tables" / "by_speaker.csv")
+    assert sorted(by["level"].unique()) == ["speaker1", "speaker2", "speaker3", "speaker4"]
+    # every speaker has 2 clips: 23 participants x 2 trials per level and criterion
+    assert (by["n_blocks"] == 46).all()
+    cond = pd.read_csv(out / "tables" / "conditions.csv")
+    shares = cond[[c for c in cond.columns if c.startswith("share_rank_")]].sum(axis=1)
+    assert shares.to_numpy() == pytest.approx(np.ones(len(cond)))
+
+
+def test_figures_are_real_images(written) -> None:
+    out, _ = written
+    for name in ("rank_shares", "critical_difference", "mean_ranks", "bradley_terry"):
+        png = mpimg.imread(out / "figures" / f"{name}.png")
+        assert png.shape[0] > 300 and png.shape[1] > 800, name
+        assert (out / "figures" / f"{name}.svg").read_text().lstrip().startswith("<?xml")
+        # not blank: a good share of non-white pixels
+        assert (png[..., :3].mean(axis=2) < 0.9).mean() > 0.01, name
+    bars = mpimg.imread(out / "figures" / "rank_shares.png")[..., :3]
+    # the darkest rank-1 blue of the stacked bars is present
+    dark_blue = (np.abs(bars - np.array([0.03, 0.27, 0.58])) < 0.08).all(axis=2)
+    assert dark_blue.sum() > 2000
+    cd = mpimg.imread(out / "figures" / "critical_difference.png")[..., :3]
+    red = (np.abs(cd - np.array([0xb2, 0x18, 0x2b]) / 255) < 0.1).all(axis=2)
+    assert red.sum() > 50  # the CD scale bar
+
+
+def test_report_reads_like_a_results_section(written) -> None:
+    out, a = written
+    md = (out / "report.md").read_text()
+    fr = a.criteria["realism"].friedman
+    assert f"χ²(2) = {fr.chi2:.2f}, p < .001, Kendall's W = {fr.kendall_w:.2f}" in md
+    assert "Nemenyi post-hoc tests (critical difference CD =" in md
+    assert "Holm" in md and "normal approximation" in md and "continuity" in md
+    assert "P07 (failed 1 of 1 attention check(s))" in md
+    assert "did not show a significant difference" in md  # diversity has no effect
+    for fig in ("rank_shares", "critical_difference", "mean_ranks"):
+        assert f"figures/{fig}.png" in md
+
+
+def test_html_is_self_contained(written) -> None:
+    out, _ = written
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 4
+    assert not re.search(r'src="(?!data:)', html) and "<link" not in html
+    assert "<table>" in html and "χ²(2)" in html
+
+
+def test_cli_end_to_end(tmp_path: Path, study: pd.DataFrame, capsys) -> None:
+    csv = tmp_path / "results.csv"
+    study.to_csv(csv, index=False)
+    q = tmp_path / "q.csv"
+    rng = np.random.default_rng(0)
+    rows = [(p, f"q{i}", "presence", int(np.clip(round(3 + rng.normal()), 1, 5)))
+            for p in study.participant.unique() for i in range(4)]
+    pd.DataFrame(rows, columns=["participant", "item", "scale", "value"]).to_csv(q, index=False)
+    code = main([str(csv), "--out", str(tmp_path / "out"), "--block", "participant", "--group", "device",
+                 "--questionnaire", str(q), "--exclude", "P01,P02", "--bootstrap", "200"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "realism: chi2(2) =" in printed and "P01 (excluded by name" in printed
+    s = json.loads((tmp_path / "out" / "stats.json").read_text())
+    assert s["realism"]["block"] == "participant" and s["realism"]["n_blocks"] == 22
+    assert s["realism"]["sensitivity"]["block"] == "trial"
+    assert (tmp_path / "out" / "tables" / "questionnaire_reliability.csv").exists()
+    assert "Cronbach" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_cli_reports_bad_input_with_exit_code_2(tmp_path: Path, study: pd.DataFrame, capsys) -> None:
+    bad = study.copy()
+    bad.loc[3, "rank"] = 0
+    csv = tmp_path / "bad.csv"
+    bad.to_csv(csv, index=False)
+    assert main([str(csv), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {csv}: line 5, column 'rank': rank 0 is outside 1..3" in err
+    assert main([str(csv), "--out", str(tmp_path / "o"), "--group", "nope"]) == 2
+
+
+def test_console_script_is_installed(tmp_path: Path) -> None:
+    exe = Path(sys.executable).with_name("results-analysis")
+    if not exe.exists():
+        pytest.skip("console script not installed in this environment")
+    r = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "--block" in r.stdout and "--exclude-failed-attention" in r.stdout

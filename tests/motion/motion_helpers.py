@@ -1,0 +1,38 @@
+"""Shared helpers for the motion tests (imported by name; pytest puts this folder on sys.path)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+SAMPLES = Path("/work/shared/samples")
+BEAT_SAMPLE = SAMPLES / "beat75_diffsheg_output_excerpt.bvh"
+MIXAMO_SAMPLE = SAMPLES / "mixamo_test_freebvh_excerpt.bvh"
+PYBVH_SAMPLE = SAMPLES / "pybvh_test1_zyx_excerpt.bvh"
+ALL_SAMPLES = (BEAT_SAMPLE, MIXAMO_SAMPLE, PYBVH_SAMPLE)
+
+SMALL_BVH = """HIERARCHY
+ROOT Hips
+{
+\tOFFSET 0.0 90.0 0.0
+\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\tJOINT Spine
+\t{
+\t\tOFFSET 0.0 10.0 0.0
+\t\tCHANNELS 3 Zrotation Xrotation Yrotation
+\t\tEnd Site
+\t\t{
+\t\t\tOFFSET 0.0 80.0 0.0
+\t\t}
+\t}
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+1.0 90.0 2.0 10.0 20.0 30.0 5.0 6.0 7.0
+1.5 91.0 2.5 11.0 21.0 31.0 8.0 9.0 10.0
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "m.bvh") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p

@@ -1,0 +1,63 @@
+"""Forward kinematics against hand-computed poses and a per-frame reference loop."""
+from __future__ import annotations
+
+import numpy as np
+
+from studyapp.motion import fk
+from studyapp.motion.beat import beat_skeleton
+from studyapp.motion.rotations import euler_to_quat, quat_normalize, quat_to_matrix
+from studyapp.motion.skeleton import Motion, Skeleton
+
+
+def chain() -> Skeleton:
+    return Skeleton(("root", "a", "b"), np.array([-1, 0, 1]), np.array([[0, 0, 0], [0, 1.0, 0], [0, 2.0, 0]]))
+
+
+def test_two_bone_chain_by_hand():
+    sk = chain()
+    rot = np.tile([0.0, 0, 0, 1], (1, 3, 1))
+    rot[0, 1] = euler_to_quat([90.0, 0, 0], "ZXY")  # joint a turns +90 about Z: +Y -> -X
+    trans = np.broadcast_to(sk.offsets, (1, 3, 3)).copy()
+    trans[0, 0] = [5.0, 0, 0]
+    pos = fk.joint_positions(Motion(sk, 30, rot, trans))[0]
+    np.testing.assert_allclose(pos, [[5, 0, 0], [5, 1, 0], [3, 1, 0]], atol=1e-12)
+    g = fk.forward_kinematics(Motion(sk, 30, rot, trans))[0]
+    np.testing.assert_allclose(g[2, 3], [0, 0, 0, 1])
+    np.testing.assert_allclose(g[2, :3, :3], quat_to_matrix(rot[0, 1]), atol=1e-12)
+
+
+def test_matches_per_frame_reference_on_beat():
+    sk = beat_skeleton()
+    rng = np.random.default_rng(3)
+    rot = quat_normalize(rng.normal(size=(6, sk.n_joints, 4)))
+    trans = np.broadcast_to(sk.offsets, (6, sk.n_joints, 3)).copy()
+    trans[:, 0] = rng.normal(size=(6, 3)) * 10
+    got = fk.forward_kinematics(Motion(sk, 15, rot, trans))
+    for f in range(6):
+        ref = np.zeros((sk.n_joints, 4, 4))
+        for j in range(sk.n_joints):
+            local = np.eye(4)
+            local[:3, :3] = quat_to_matrix(rot[f, j])
+            local[:3, 3] = trans[f, j]
+            p = sk.parents[j]
+            ref[j] = local if p < 0 else ref[p] @ local
+        np.testing.assert_allclose(got[f], ref, atol=1e-9)
+    np.testing.assert_allclose(fk.joint_positions(Motion(sk, 15, rot, trans)), got[..., :3, 3], atol=1e-12)
+
+
+def test_rest_transforms_respect_rest_rotations_and_height():
+    sk = chain()
+    assert fk.figure_height(sk) == 3.0
+    rest = np.tile([0.0, 0, 0, 1], (3, 1))
+    rest[0] = euler_to_quat([0.0, 0, 90.0], "XYZ")  # root turned: chain lies along -X
+    sk2 = Skeleton(sk.names, sk.parents, sk.offsets, rest_rotations=rest)
+    np.testing.assert_allclose(fk.rest_joint_positions(sk2)[2], [-3, 0, 0], atol=1e-12)
+    assert abs(fk.figure_height(sk2)) < 1e-12
+    # BEAT is ~180 cm from toe to head end site
+    assert 170 < fk.figure_height(beat_skeleton()) < 190
+
+
+def test_unit_guess():
+    assert fk.guess_unit_scale(181.5) == 0.01
+    assert fk.guess_unit_scale(1.75) == 1.0
+    assert fk.guess_unit_scale(63.0) is None

@@ -1,0 +1,119 @@
+"""Rotation conversions against independently built matrices, plus hypothesis round trips."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from studyapp.motion import rotations as R
+
+
+def axis_matrix(axis: str, deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return {
+        "X": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]),
+        "Y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+        "Z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]),
+    }[axis]
+
+
+angles3 = st.tuples(*[st.floats(-180, 180, allow_nan=False)] * 3)
+unit_quats = arrays(np.float64, 4, elements=st.floats(-1, 1, allow_nan=False)).filter(lambda q: np.linalg.norm(q) > 0.1)
+
+
+@pytest.mark.parametrize("order", R.ORDERS)
+def test_euler_is_intrinsic_product_in_channel_order(order):
+    ang = np.array([31.0, -47.0, 112.0])
+    expect = axis_matrix(order[0], ang[0]) @ axis_matrix(order[1], ang[1]) @ axis_matrix(order[2], ang[2])
+    np.testing.assert_allclose(R.quat_to_matrix(R.euler_to_quat(ang, order)), expect, atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(order=st.sampled_from(R.ORDERS), ang=angles3)
+def test_euler_round_trip_all_orders_via_matrices(order, ang):
+    # compare matrices, not angles: at gimbal lock the angles are not unique but the rotation is
+    q = R.euler_to_quat(np.array(ang), order)
+    back = R.euler_to_quat(R.quat_to_euler(q, order), order)
+    np.testing.assert_allclose(R.quat_to_matrix(back), R.quat_to_matrix(q), atol=1e-9)
+
+
+@pytest.mark.parametrize("order", ["XYZ", "ZXY", "ZYX", "YXZ"])
+def test_euler_gimbal_lock_still_reproduces_rotation(order):
+    ang = np.array([[30.0, 90.0, 40.0], [10.0, -90.0, -70.0]])
+    q = R.euler_to_quat(ang, order)
+    back = R.quat_to_euler(q, order)
+    np.testing.assert_allclose(R.quat_to_matrix(R.euler_to_quat(back, order)), R.quat_to_matrix(q), atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(q=unit_quats)
+def test_representation_round_trips(q):
+    q = q / np.linalg.norm(q)
+    m = R.quat_to_matrix(q)
+    for rep in ("axis_angle", "quat", "quat_wxyz", "sixd", "matrix"):
+        back = R.to_quat(R.from_quat(q, rep), rep)
+        np.testing.assert_allclose(R.quat_to_matrix(back), m, atol=1e-9, err_msg=rep)
+    np.testing.assert_allclose(R.quat_to_matrix(R.matrix_to_quat(m)), m, atol=1e-9)
+
+
+def test_sixd_layout_is_first_two_columns():
+    m = axis_matrix("Z", 30) @ axis_matrix("X", 50)
+    d6 = R.matrix_to_sixd(m)
+    np.testing.assert_allclose(d6, [m[0, 0], m[1, 0], m[2, 0], m[0, 1], m[1, 1], m[2, 1]])
+    # Gram-Schmidt: scaled / skewed columns still give the same rotation
+    noisy = np.concatenate([d6[:3] * 3.0, d6[3:] * 0.5 + d6[:3] * 0.2])
+    np.testing.assert_allclose(R.sixd_to_matrix(noisy), m, atol=1e-12)
+
+
+def test_axis_angle_and_multiply_against_matrices():
+    v = np.array([0.0, 0.0, math.pi / 2])
+    np.testing.assert_allclose(R.quat_to_matrix(R.axis_angle_to_quat(v)), axis_matrix("Z", 90), atol=1e-12)
+    a, b = R.euler_to_quat([20.0, 0, 0], "XYZ"), R.euler_to_quat([0.0, 35.0, 0], "XYZ")
+    np.testing.assert_allclose(R.quat_to_matrix(R.quat_multiply(a, b)), axis_matrix("X", 20) @ axis_matrix("Y", 35), atol=1e-12)
+    np.testing.assert_allclose(R.quat_multiply(a, R.quat_inverse(a)), [0, 0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(R.quat_to_axis_angle(R.axis_angle_to_quat(v)), v, atol=1e-12)
+
+
+def test_batched_shapes_and_empty():
+    ang = np.random.default_rng(0).uniform(-180, 180, (5, 7, 3))
+    q = R.euler_to_quat(ang, "ZXY")
+    assert q.shape == (5, 7, 4) and R.quat_to_matrix(q).shape == (5, 7, 3, 3)
+    assert R.quat_to_sixd(q).shape == (5, 7, 6) and R.sixd_to_quat(R.quat_to_sixd(q)).shape == (5, 7, 4)
+    assert R.euler_to_quat(np.zeros((0, 3)), "XYZ").shape == (0, 4)
+
+
+def test_slerp_halfway_and_short_arc():
+    q0 = R.euler_to_quat([0.0, 0, 0], "XYZ")
+    q1 = R.euler_to_quat([0.0, 0, 90.0], "XYZ")
+    mid = R.quat_slerp(q0, q1, 0.5)
+    np.testing.assert_allclose(R.quat_to_matrix(mid), axis_matrix("Z", 45), atol=1e-12)
+    # -q1 is the same rotation: slerp must still take the 45 degree path
+    np.testing.assert_allclose(R.quat_to_matrix(R.quat_slerp(q0, -q1, 0.5)), axis_matrix("Z", 45), atol=1e-12)
+    np.testing.assert_allclose(R.quat_slerp(q0, q1, np.array([0.0, 1.0]))[1], q1, atol=1e-12)
+
+
+def test_quat_between_maps_directions():
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(20, 3)), rng.normal(size=(20, 3))
+    q = R.quat_between(a, b)
+    got = R.quat_rotate(q, a / np.linalg.norm(a, axis=1, keepdims=True))
+    np.testing.assert_allclose(got, b / np.linalg.norm(b, axis=1, keepdims=True), atol=1e-9)
+    opp = R.quat_between([1.0, 0, 0], [-1.0, 0, 0])
+    np.testing.assert_allclose(R.quat_rotate(opp, [1.0, 0, 0]), [-1, 0, 0], atol=1e-12)
+
+
+def test_bad_input_raises():
+    with pytest.raises(ValueError):
+        R.euler_to_quat([0, 0, 0], "XXY")
+    with pytest.raises(ValueError):
+        R.to_quat(np.zeros((3, 5)), "sixd")
+    with pytest.raises(ValueError):
+        R.to_quat(np.zeros(3), "euler")
+    with pytest.raises(ValueError):
+        R.quat_normalize(np.zeros(4))
+    with pytest.raises(ValueError):
+        R.to_quat(np.zeros(3), "bogus")

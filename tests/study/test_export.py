@@ -1,0 +1,96 @@
+"""The tidy export: one row per participant x trial x criterion x condition, checked against the raw tables."""
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from studyapp.study.bots import run_bot_session
+from studyapp.study.design import load_design
+from studyapp.study.export import CORE_COLUMNS, export_dataframe, questionnaire_dataframe
+from studyapp.study.storage import ResultsDB
+from studyapp.study.synthetic import write_synthetic_study
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> tuple[Path, object]:
+    folder = tmp_path_factory.mktemp("export")
+    design = load_design(write_synthetic_study(folder, n_stimuli=4, attention_check=True, questionnaire=True),
+                         check_files=False)
+    db_path = folder / "r.sqlite"
+    db = ResultsDB(db_path, design)
+    run_bot_session(design, db, "P1", "ordered", 1, groups={"device": "vr"})
+    run_bot_session(design, db, "P2", "random", 2, groups={"device": "desktop"})
+    db.close()
+    return db_path, design
+
+
+def test_long_table_shape_columns_and_values(results) -> None:
+    db_path, design = results
+    df = export_dataframe(db_path)
+    n_trials = 1 + 4 + 1  # practice + rated + attention check
+    assert len(df) == 2 * n_trials * 3 * 3
+    assert list(df.columns[: len(CORE_COLUMNS)]) == list(CORE_COLUMNS)
+    assert list(df.columns[-2:]) == ["design_hash", "app_version"]
+    assert {"speaker", "device", "ordering_version"} <= set(df.columns)
+    assert (df["design_hash"] == design.design_hash).all()
+    # tags and groups come from the design and the participants
+    tags = {s.id: s.tags["speaker"] for s in design.stimuli}
+    assert (df["speaker"] == df["stimulus"].map(tags)).all()
+    assert set(zip(df["participant"], df["device"])) == {("P1", "vr"), ("P2", "desktop")}
+    assert (df["ordering_version"] == "v1").all()
+    # each block ranks the three conditions 1, 2, 3
+    blocks = df.groupby(["participant", "trial_index", "criterion"])
+    assert (blocks["rank"].apply(sorted).map(tuple) == (1.0, 2.0, 3.0)).all()
+    assert (blocks["condition"].nunique() == 3).all()
+    # the ordered bot ranks conditions in design order: synced 1, lagged 2, static 3, on every criterion
+    p1 = df[df["participant"] == "P1"]
+    assert (p1["rank"] == p1["condition"].map({"synced": 1.0, "lagged": 2.0, "static": 3.0})).all()
+    # flags: practice kept and flagged; attention_passed only on attention checks
+    assert df.loc[df["is_practice"], "trial_index"].eq(0).all()
+    assert df.loc[~df["is_attention_check"], "attention_passed"].isna().all()
+    assert df.loc[(df["participant"] == "P1") & df["is_attention_check"], "attention_passed"].eq(True).all()
+    assert len(export_dataframe(db_path, include_practice=False)) == 2 * (n_trials - 1) * 9
+
+
+def test_export_matches_raw_tables(results) -> None:
+    db_path, _ = results
+    df = export_dataframe(db_path)
+    con = sqlite3.connect(db_path)
+    raw = con.execute("SELECT r.condition, r.criterion, SUM(r.rank), COUNT(*) FROM responses r "
+                      "GROUP BY r.condition, r.criterion").fetchall()
+    slots = con.execute("SELECT participant, trial_index, slot_left, slot_middle, slot_right FROM trials").fetchall()
+    con.close()
+    got = df.groupby(["condition", "criterion"])["rank"].agg(["sum", "count"])
+    for cond, crit, total, n in raw:
+        assert got.loc[(cond, crit), "sum"] == total and got.loc[(cond, crit), "count"] == n
+    # the slot column says where the condition was shown
+    where = {(p, t): (a, b, c) for p, t, a, b, c in slots}
+    assert all(where[(r.participant, r.trial_index)][r.slot] == r.condition for r in df.itertuples())
+
+
+def test_csv_round_trip_through_results_analysis(results, tmp_path: Path) -> None:
+    from results_analysis.loader import load_results
+
+    db_path, _ = results
+    df = export_dataframe(db_path)
+    out = tmp_path / "r.csv"
+    df.to_csv(out, index=False)
+    back = load_results(out)
+    assert len(back) == len(df)
+    assert back["rank"].tolist() == df["rank"].astype(float).tolist()
+    assert back["attention_passed"][df["is_attention_check"].to_numpy()].tolist() == \
+        df.loc[df["is_attention_check"], "attention_passed"].astype(bool).tolist()
+
+
+def test_questionnaire_table(results) -> None:
+    db_path, _ = results
+    q = questionnaire_dataframe(db_path)
+    assert len(q) == 2 * 3
+    likert = q[q["kind"] == "likert"]
+    assert likert["value"].between(1, 7).all() and (likert["scale"] == "experience").all()
+    text = q[q["kind"] == "text"]
+    assert text["value"].isna().all() and (text["text"] == "(scripted participant)").all()
+    assert isinstance(q, pd.DataFrame)

@@ -1,0 +1,119 @@
+"""ResultsDB: durability settings, row assignment, atomic answers, and refusing wrong or damaged files."""
+from __future__ import annotations
+
+import os
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from studyapp import __version__
+from studyapp.errors import InputError
+from studyapp.study.storage import DuplicateAnswerError, Response, ResultsDB, TrialRecord, now_iso
+
+
+def _trial(pid: str, k: int) -> TrialRecord:
+    return TrialRecord(participant=pid, trial_index=k, stimulus=f"s{k}", is_practice=False, is_attention_check=False,
+                       slots=("a", "b", "c"), answered_at=now_iso(), plays=1)
+
+
+def _ranks(order=(1, 2, 3)) -> list[Response]:
+    return [Response(crit, cond, slot, r) for crit in ("realism", "diversity")
+            for slot, (cond, r) in enumerate(zip("abc", order))]
+
+
+def test_pragmas_and_stamps(tmp_path: Path) -> None:
+    db = ResultsDB(tmp_path / "r.sqlite", design_hash="h1", title="T")
+    con = db.connection
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert con.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
+    assert con.execute("PRAGMA foreign_keys").fetchone()[0] == 1
+    db.add_participant("P1", n_rows=3)
+    db.save_trial(_trial("P1", 0), _ranks())
+    for table in ("participants", "trials", "responses"):
+        stamps = {tuple(r) for r in con.execute(f"SELECT design_hash, app_version FROM {table}")}
+        assert stamps == {("h1", __version__)}, table
+    db.close()
+
+
+def test_rows_go_to_the_least_used_row(tmp_path: Path) -> None:
+    db = ResultsDB(tmp_path / "r.sqlite", design_hash="h", title="T")
+    assert [db.add_participant(f"P{i}", n_rows=3).latin_row for i in range(3)] == [0, 1, 2]
+    assert db.add_participant("X", n_rows=3, row=0).latin_row == 0
+    # rows 1 and 2 now have one participant each, row 0 has two: next is 1, then 2, then 0 again.
+    assert [db.add_participant(f"Q{i}", n_rows=3).latin_row for i in range(3)] == [1, 2, 0]
+    assert db.row_counts(3) == [3, 2, 2]
+    with pytest.raises(InputError, match="row 5"):
+        db.add_participant("bad", n_rows=3, row=5)
+    db.close()
+    # the rows are stored, not recomputed: a reopened database gives the same rows
+    again = ResultsDB(tmp_path / "r.sqlite", design_hash="h")
+    assert again.participant("Q0").latin_row == 1
+    again.close()
+
+
+def test_answer_is_all_or_nothing_and_never_overwritten(tmp_path: Path) -> None:
+    db = ResultsDB(tmp_path / "r.sqlite", design_hash="h", title="T")
+    db.add_participant("P1", n_rows=1)
+    db.save_trial(_trial("P1", 0), _ranks((1, 2, 3)))
+    with pytest.raises(DuplicateAnswerError):
+        db.save_trial(_trial("P1", 0), _ranks((3, 2, 1)))
+    assert [r["rank"] for r in db.responses("P1") if r["criterion"] == "realism"] == [1.0, 2.0, 3.0]
+    # a trial whose last rank violates a constraint leaves neither the trial nor its other ranks behind
+    bad = _ranks() + [Response("realism", "a", 7, 1)]
+    with pytest.raises(sqlite3.IntegrityError):
+        db.save_trial(_trial("P1", 1), bad)
+    assert db.answered_trials("P1") == {0}
+    assert len(db.responses("P1")) == 6
+    db.close()
+
+
+def test_other_design_is_refused(tmp_path: Path) -> None:
+    ResultsDB(tmp_path / "r.sqlite", design_hash="a" * 64, title="T").close()
+    with pytest.raises(InputError) as err:
+        ResultsDB(tmp_path / "r.sqlite", design_hash="b" * 64)
+    assert str(tmp_path / "r.sqlite") in str(err.value) and "another design" in str(err.value)
+
+
+def test_not_sqlite_and_foreign_schema_are_refused(tmp_path: Path) -> None:
+    text = tmp_path / "notes.sqlite"
+    text.write_text("participant,rank\nP1,1\n")
+    with pytest.raises(InputError, match="not an SQLite database") as err:
+        ResultsDB(text, design_hash="h")
+    assert str(text) in str(err.value)
+    other = tmp_path / "other.sqlite"
+    with sqlite3.connect(other) as con:
+        con.execute("CREATE TABLE answers (x)")
+    with pytest.raises(InputError, match="not a studyapp results database"):
+        ResultsDB(other, design_hash="h")
+    old = tmp_path / "old.sqlite"
+    ResultsDB(old, design_hash="h", title="T").close()
+    with sqlite3.connect(old) as con:
+        con.execute("UPDATE schema_version SET version = 99")
+    with pytest.raises(InputError, match="schema version 99"):
+        ResultsDB(old, design_hash="h")
+
+
+def test_overwritten_bytes_are_detected(tmp_path: Path) -> None:
+    path = tmp_path / "r.sqlite"
+    db = ResultsDB(path, design_hash="h", title="T")
+    db.add_participant("P1", n_rows=1)
+    for k in range(40):
+        db.save_trial(_trial("P1", k), _ranks())
+    db.close()  # checkpoints the WAL into the main file
+    assert not Path(str(path) + "-wal").exists() or os.path.getsize(str(path) + "-wal") == 0
+    size = path.stat().st_size
+    page = 4096
+    assert size > 4 * page
+    with open(path, "r+b") as fh:  # scribble over the middle of two b-tree pages
+        for p in (2, size // page - 1):
+            fh.seek(p * page + 8)
+            fh.write(b"\xa5" * 600)
+    with pytest.raises(InputError) as err:
+        ResultsDB(path, design_hash="h")
+    assert str(path) in str(err.value) and "damaged" in str(err.value)
+
+
+def test_missing_file_without_design(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="not found"):
+        ResultsDB(tmp_path / "nope.sqlite", create=False)

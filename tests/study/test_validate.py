@@ -1,0 +1,309 @@
+"""Design validation: broken designs written to temp folders, each problem reported once with file and key."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.io import wavfile
+
+from studyapp.face.animation import FaceAnimation
+from studyapp.face.io import save_face_csv
+from studyapp.motion.beat import beat_skeleton
+from studyapp.motion.bvh import write_bvh
+from studyapp.motion.skeleton import Motion, Skeleton
+from studyapp.study.design import DesignError, Problem, load_design, validate_design
+
+FPS = 30.0
+SECONDS = 2.0
+
+GOOD = '''title = "Tiny"
+instructions = "Rank them."
+practice = ["s1"]
+
+[[conditions]]
+id = "a"
+motion = "motion/a/{stimulus}.bvh"
+
+[[conditions]]
+id = "b"
+motion = "motion/b/{stimulus}.bvh"
+
+[[conditions]]
+id = "c"
+motion = "motion/c/{stimulus}.bvh"
+
+[[stimuli]]
+id = "s1"
+audio = "audio/s1.wav"
+face = "face/s1.csv"
+tags = { speaker = "x" }
+
+[[stimuli]]
+id = "s2"
+audio = "audio/s2.wav"
+face = "face/s2.csv"
+tags = { speaker = "y" }
+
+[[attention_checks]]
+stimulus = "s2"
+kind = "frozen"
+
+[ordering]
+method = "balanced-latin-square"
+seed = 5
+
+[slots]
+labels = "ABC"
+'''
+
+
+def write_motion(path: Path, seconds: float = SECONDS, skeleton: Skeleton | None = None) -> None:
+    sk = skeleton or beat_skeleton()
+    m = Motion.rest(sk, int(round(seconds * FPS)), FPS)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_bvh(m, path)
+
+
+def write_audio(path: Path, seconds: float = SECONDS) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    t = np.arange(int(16000 * seconds)) / 16000
+    wavfile.write(path, 16000, (0.3 * np.sin(2 * np.pi * 150 * t) * 32767).astype(np.int16))
+
+
+@pytest.fixture(scope="module")
+def study_files(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("study")
+    for sid in ("s1", "s2"):
+        write_audio(root / "audio" / f"{sid}.wav")
+        (root / "face").mkdir(exist_ok=True)
+        save_face_csv(FaceAnimation.neutral(int(SECONDS * FPS), FPS), root / "face" / f"{sid}.csv")
+        for c in "abc":
+            write_motion(root / "motion" / c / f"{sid}.bvh")
+    return root
+
+
+@pytest.fixture()
+def study(study_files: Path, tmp_path: Path) -> Path:
+    """A fresh, valid copy of the tiny study (tests break it in their own copy)."""
+    import shutil
+
+    dst = tmp_path / "study"
+    shutil.copytree(study_files, dst)
+    (dst / "design.toml").write_text(GOOD)
+    return dst
+
+
+def problems_for(study: Path, text: str) -> list[Problem]:
+    (study / "design.toml").write_text(text)
+    return validate_design(study / "design.toml")
+
+
+def only(problems: list[Problem], key: str) -> Problem:
+    hits = [p for p in problems if p.key == key]
+    assert len(hits) == 1, (key, [str(p) for p in problems])
+    return hits[0]
+
+
+def test_valid_design_loads(study: Path) -> None:
+    assert validate_design(study / "design.toml") == []
+    d = load_design(study / "design.toml")
+    assert d.condition_ids == ["a", "b", "c"] and [s.id for s in d.stimuli] == ["s1", "s2"]
+    assert d.stimuli[0].audio == (study / "audio" / "s1.wav").resolve()
+    assert d.criterion_ids == ["realism", "synchronization", "diversity"]
+    assert d.slot_labels == ("A", "B", "C") and d.seed == 5 and d.practice == ["s1"]
+    assert d.playback.allow_replay and not d.playback.allow_ties
+    assert d.attention_checks[0].expected == {"criterion": "realism", "rank": 3}
+    assert len(d.design_hash) == 64
+
+
+def test_hash_changes_with_any_referenced_file(study: Path) -> None:
+    h0 = load_design(study / "design.toml").design_hash
+    assert load_design(study / "design.toml").design_hash == h0
+    write_motion(study / "motion" / "b" / "s2.bvh", SECONDS + 0.05)  # same length within tolerance, new bytes
+    h1 = load_design(study / "design.toml").design_hash
+    assert h1 != h0
+    (study / "design.toml").write_text(GOOD + "\n# a comment\n")
+    assert load_design(study / "design.toml").design_hash not in (h0, h1)
+
+
+def test_toml_syntax_error_has_line_and_column(study: Path) -> None:
+    probs = problems_for(study, GOOD.replace('id = "b"', 'id = b"'))
+    assert len(probs) == 1
+    assert probs[0].line == 10 and "line 10, column" in probs[0].key and "syntax" in probs[0].message
+    assert probs[0].path.endswith("design.toml")
+
+
+def test_unknown_keys_suggest_the_right_one(study: Path) -> None:
+    text = GOOD.replace('title = "Tiny"', 'titel = "Tiny"').replace('audio = "audio/s2.wav"', 'audoi = "audio/s2.wav"')
+    probs = problems_for(study, text)
+    p = only(probs, "titel")
+    assert "did you mean 'title'" in p.fix and p.line == 1
+    p = only(probs, "stimuli[1].audoi")
+    assert "did you mean 'audio'" in p.fix and p.line == 25
+    only(probs, "title")            # and title is now missing
+    only(probs, "stimuli[1].audio")  # and so is the audio
+
+
+def test_wrong_types(study: Path) -> None:
+    text = GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.bvh"\nfps = "thirty"')
+    text += "\n[playback]\nallow_ties = \"yes\"\n"
+    probs = problems_for(study, text)
+    assert "number" in only(probs, "conditions[0].fps").message
+    assert "true or false" in only(probs, "playback.allow_ties").message
+    assert len(probs) == 2
+
+
+def test_each_missing_file_is_listed(study: Path) -> None:
+    (study / "motion" / "b" / "s2.bvh").unlink()
+    (study / "motion" / "c" / "s1.bvh").unlink()
+    (study / "face" / "s1.csv").unlink()
+    probs = validate_design(study / "design.toml")
+    motion = [p for p in probs if p.key.endswith(".motion")]
+    assert sorted(p.key for p in motion) == ["conditions[1].motion", "conditions[2].motion"]
+    assert any("'b'" in p.message and "'s2'" in p.message for p in motion)
+    assert any("'c'" in p.message and "'s1'" in p.message for p in motion)
+    assert "not found" in only(probs, "stimuli[0].face").message
+    assert len(probs) == 3
+    with pytest.raises(DesignError) as err:
+        load_design(study / "design.toml")
+    assert len(err.value.problems) == 3 and "design.toml" in str(err.value) and "3 problems" in str(err.value)
+
+
+def test_duration_mismatch_names_every_file(study: Path) -> None:
+    write_motion(study / "motion" / "c" / "s2.bvh", SECONDS - 0.5)
+    p = only(validate_design(study / "design.toml"), "stimuli[1]")
+    assert "0.500 s" in p.message and "s2.wav" in p.message and "motion:c" in p.message and "s2.csv" in p.message
+    # A declared duration_s only needs every file to be long enough.
+    text = GOOD.replace('face = "face/s2.csv"', 'face = "face/s2.csv"\nduration_s = 1.4')
+    assert problems_for(study, text) == []
+    text = GOOD.replace('face = "face/s2.csv"', 'face = "face/s2.csv"\nduration_s = 1.9')
+    assert "motion:c" in only(problems_for(study, text), "stimuli[1].duration_s").message
+
+
+def test_condition_counts(study: Path) -> None:
+    two = GOOD.replace('[[conditions]]\nid = "c"\nmotion = "motion/c/{stimulus}.bvh"\n', "")
+    assert "exactly 3" in only(problems_for(study, two), "conditions").message
+    one = two.replace('[[conditions]]\nid = "b"\nmotion = "motion/b/{stimulus}.bvh"\n', "")
+    p = only(problems_for(study, one), "conditions")
+    assert "at least 2" in p.message and "exactly 3" in p.message
+    four = GOOD.replace("[[stimuli]]", '[[conditions]]\nid = "d"\nmotion = "motion/a/{stimulus}.bvh"\n\n[[stimuli]]', 1)
+    assert "exactly 3" in only(problems_for(study, four), "conditions").message
+
+
+def test_duplicates_and_unknown_references(study: Path) -> None:
+    text = GOOD.replace('id = "c"', 'id = "a"').replace('stimulus = "s2"', 'stimulus = "s3"')
+    text = text.replace('practice = ["s1"]', 'practice = ["s9"]')
+    probs = problems_for(study, text)
+    assert "duplicate" in only(probs, "conditions[2].id").message
+    p = only(probs, "attention_checks[0].stimulus")
+    assert "'s3'" in p.message and "s2" in p.fix
+    assert "'s9'" in only(probs, "practice[0]").message
+
+
+def test_bad_values(study: Path) -> None:
+    text = GOOD.replace('method = "balanced-latin-square"', 'method = "balanced-latin"')
+    text = text.replace('labels = "ABC"', 'labels = "XYZ"\nassignment = "even"')
+    text = text.replace('kind = "frozen"', 'kind = "known-worst"')
+    text = text.replace('motion = "motion/b/{stimulus}.bvh"', 'motion = "motion/b/clip.bvh"')
+    probs = problems_for(study, text)
+    assert "balanced-latin-square" in only(probs, "ordering.method").fix
+    only(probs, "slots.labels")
+    only(probs, "slots.assignment")
+    assert "condition" in only(probs, "attention_checks[0].condition").message
+    assert "{stimulus}" in only(probs, "conditions[1].motion").message
+
+
+def test_motion_and_model_are_exclusive(study: Path) -> None:
+    text = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{stimulus}.bvh"\nmodel = "m.onnx"')
+    assert "not both" in only(problems_for(study, text), "conditions[2]").message
+    text = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', "fps = 15")
+    assert "exactly one" in only(problems_for(study, text), "conditions[2]").message
+
+
+def test_unreadable_motion_is_reported(study: Path) -> None:
+    (study / "motion" / "a" / "s1.bvh").write_text("HIERARCHY\nROOT Hips\n{\n OFFSET 0 0\n")
+    p = only(validate_design(study / "design.toml"), "conditions[0].motion")
+    assert "s1" in p.message and "cannot read" in p.message
+
+
+def test_unretargetable_skeleton_and_name_map_fix(study: Path) -> None:
+    odd = Skeleton(("root", "torso", "head", "armL", "armR"), np.array([-1, 0, 1, 1, 1]),
+                   np.array([[0, 90, 0], [0, 20, 0], [0, 30, 0], [10, 25, 0], [-10, 25, 0]], float))
+    for sid in ("s1", "s2"):
+        write_motion(study / "motion" / "c" / f"{sid}.bvh", skeleton=odd)
+    p = only(validate_design(study / "design.toml"), "conditions[2]")
+    assert "retarget" in p.message and "Hips" in p.message and "LeftUpperLeg" in p.message and "name_map" in p.fix
+    # Mapping some joints by hand leaves only the bones still missing; bad entries are reported one by one.
+    text = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{stimulus}.bvh"\n'
+                        '[conditions.name_map]\nroot = "Hips"\ntorso = "Spine"\nhead = "Head"\nnose = "Head"\n'
+                        'armL = "LeftElbowBone"')
+    probs = problems_for(study, text)
+    p = only(probs, "conditions[2]")
+    assert "Hips" not in p.message.split("bones")[1] and "LeftUpperArm" in p.message
+    assert "nose" in only(probs, "conditions[2].name_map.nose").message
+    assert "LeftElbowBone" in only(probs, "conditions[2].name_map.armL").message
+
+
+def test_many_problems_in_one_run(study: Path) -> None:
+    text = GOOD.replace('title = "Tiny"', 'titl = "Tiny"').replace('id = "c"', 'id = "b"')
+    text = text.replace('stimulus = "s2"', 'stimulus = "nope"') + "\n[playback]\nreplay = true\n"
+    (study / "audio" / "s2.wav").unlink()
+    probs = problems_for(study, text)
+    keys = {p.key for p in probs}
+    assert {"titl", "title", "conditions[2].id", "attention_checks[0].stimulus", "playback.replay",
+            "stimuli[1].audio"} <= keys
+    assert all(p.path.endswith("design.toml") and p.message for p in probs)
+
+
+def run_cli(capsys, *args: str) -> tuple[int, str, str]:
+    """Run this area's sub-commands in-process, through argparse exactly as ``studyapp`` registers them."""
+    import argparse
+
+    from studyapp.study import design_cli
+
+    parser = argparse.ArgumentParser(prog="studyapp")
+    design_cli.register(parser.add_subparsers())
+    ns = parser.parse_args(list(args))
+    capsys.readouterr()
+    code = ns.func(ns)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_cli_validate_text_and_json(study: Path, capsys) -> None:
+    code, out, _ = run_cli(capsys, "validate", str(study / "design.toml"))
+    assert code == 0 and "OK" in out
+    (study / "motion" / "b" / "s2.bvh").unlink()
+    (study / "design.toml").write_text(GOOD.replace("seed = 5", "seed = 5\nshuffle = true"))
+    code, out, err = run_cli(capsys, "validate", str(study / "design.toml"))
+    assert code == 1 and "2 problems" in err
+    lines = out.strip().splitlines()
+    assert len(lines) == 2 and all("design.toml" in ln for ln in lines)
+    assert any("ordering.shuffle" in ln and "unknown key" in ln for ln in lines)
+    code, out, _ = run_cli(capsys, "validate", "--json", str(study / "design.toml"))
+    items = json.loads(out)
+    assert code == 1 and {i["key"] for i in items} == {"ordering.shuffle", "conditions[1].motion"}
+    assert all(set(i) >= {"file", "key", "message", "fix"} for i in items)
+
+
+def test_cli_schedule_writes_plan_and_balance(study: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "plan.csv"
+    code, stdout, _ = run_cli(capsys, "schedule", str(study / "design.toml"), "--participants", "6", "--csv", str(out))
+    assert code == 0
+    df = pd.read_csv(out)
+    assert list(df.columns) == ["participant", "row", "trial_index", "stimulus", "is_practice",
+                                "is_attention_check", "slot_left", "slot_middle", "slot_right"]
+    assert len(df) == 6 * 4 and df.participant.nunique() == 6  # practice + 2 rated + 1 check each
+    assert "Conditions (rows) x slots" in stdout and "left" in stdout
+    from studyapp.study.schedule import balance_counts
+
+    counts = balance_counts(df)
+    # Two rated clips, six participants: each clip 3 times at each position; 4 rated trials per condition-slot.
+    assert (counts["position_x_stimulus"].to_numpy() == 3).all()
+    assert (counts["slot_x_condition"].to_numpy() == 4).all()
+    assert counts["slot_x_condition"].to_string() in stdout
