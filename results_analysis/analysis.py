@@ -24,7 +24,8 @@ from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary, scale_reliability
 from results_analysis.ranks import RankBlocks, rank_blocks
-from results_analysis.validate import validate_results
+from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
+from results_analysis.validate import check_complete, validate_structure
 
 
 @dataclass
@@ -40,6 +41,7 @@ class CriterionAnalysis:
     posthoc: dict[str, pd.DataFrame]
     critical_difference: float
     bradley_terry: pd.DataFrame
+    skillings_mack: SkillingsMackResult | None = None
 
 
 @dataclass
@@ -57,6 +59,7 @@ class Analysis:
     n_practice_rows: int
     dropped_incomplete: int
     incomplete: str
+    incomplete_blocks: int = 0
     groups: dict[str, pd.DataFrame] = field(default_factory=dict)
     questionnaire_items: pd.DataFrame | None = None
     questionnaire_reliability: pd.DataFrame | None = None
@@ -76,7 +79,7 @@ def group_columns(df: pd.DataFrame) -> list[str]:
 
 def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "trial",
                       alpha: float = 0.05, conover: bool = False, n_boot: int = 2000, ci: float = 0.95,
-                      seed: int = 0) -> CriterionAnalysis:
+                      seed: int = 0, skillings_mack_test: bool = False) -> CriterionAnalysis:
     """Analyse one criterion of a validated, exclusion-applied tidy frame.
 
     >>> from results_analysis.simulate import simulate_results
@@ -85,6 +88,10 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     >>> a.friedman.n_blocks, a.sensitivity.n_blocks
     (48, 12)
     """
+    sm = None
+    if skillings_mack_test:
+        sm = skillings_mack(rank_blocks(df, criterion, block="trial", conditions=conditions,
+                                        complete_only=False).values)
     blocks = rank_blocks(df, criterion, block=block, conditions=conditions)
     if blocks.n < 2:
         raise AnalysisInputError(df.attrs.get("source"), f"criterion {criterion}",
@@ -102,7 +109,7 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
         criterion=criterion, blocks=blocks, friedman=fr, sensitivity=sens, sensitivity_block=other,
         summary=condition_summary(trial_blocks, n_boot=n_boot, ci=ci, seed=seed),
         posthoc=post, critical_difference=critical_difference(blocks.k, blocks.n, alpha),
-        bradley_terry=bradley_terry(trial_blocks, n_boot=n_boot // 2, ci=ci, seed=seed))
+        bradley_terry=bradley_terry(trial_blocks, n_boot=n_boot // 2, ci=ci, seed=seed), skillings_mack=sm)
 
 
 def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], criteria: Sequence[str],
@@ -144,17 +151,21 @@ def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str
     """Validate, apply exclusions and analyse every criterion (see module docstring).
 
     ``incomplete='drop'`` deletes trials that do not rank every condition (listwise deletion) instead of
-    stopping with an error. Warnings (e.g. mixed design hashes) are collected in ``Analysis.warnings``
+    stopping with an error; ``incomplete='skillings-mack'`` adds the Skillings-Mack test over all trials
+    (incomplete ones included) per criterion, while the Friedman, post-hoc and descriptive statistics use
+    the complete trials. Warnings (e.g. mixed design hashes) are collected in ``Analysis.warnings``
     and also re-emitted.
     """
     df = normalize_results(df)  # frames from studyapp's export_dataframe come with their own dtypes
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        checked = validate_results(df, incomplete=incomplete)
+        checked = validate_structure(df)
     notes = [str(w.message) for w in caught]
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     kept, excluded = apply_exclusions(checked, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
+    # Completeness is judged on what is analysed: an excluded participant's broken trial does not matter.
+    kept = check_complete(kept, incomplete=incomplete)
     if kept.empty:
         raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
                                  "(practice and attention-check trials are never analysed)")
@@ -162,8 +173,9 @@ def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str
     if len(conditions) < 2:
         raise AnalysisInputError(df.attrs.get("source"), "column 'condition'", "fewer than 2 conditions")
     criteria = list(dict.fromkeys(kept["criterion"]))
+    sm = incomplete == "skillings-mack"
     results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
-                                    n_boot=n_boot, ci=ci, seed=seed) for c in criteria}
+                                    n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm) for c in criteria}
     by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block) for g in groups}
     items = reliability = None
     if questionnaire is not None and len(questionnaire):
@@ -175,7 +187,8 @@ def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str
                     n_participants=int(kept["participant"].nunique()),
                     n_trials=int(kept[key].drop_duplicates().shape[0]), exclusions=excluded,
                     attention=attention_summary(checked), n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)),
-                    dropped_incomplete=int(checked.attrs.get("dropped_incomplete", 0)), incomplete=incomplete,
+                    dropped_incomplete=int(kept.attrs.get("dropped_incomplete", 0)), incomplete=incomplete,
+                    incomplete_blocks=int(kept.attrs.get("incomplete_blocks", 0)),
                     groups=by_group, questionnaire_items=items, questionnaire_reliability=reliability,
                     warnings=notes, source=df.attrs.get("source"), design_hashes=[str(h) for h in hashes],
                     n_boot=n_boot, seed=seed, ci=ci, conover=conover)

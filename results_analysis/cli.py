@@ -28,8 +28,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exclude-failed-attention", action="store_true",
                    help="exclude participants who failed any attention check")
     p.add_argument("--exclude", default="", metavar="P1,P2", help="comma-separated participants to exclude")
-    p.add_argument("--incomplete", choices=("error", "drop"), default="error",
-                   help="a trial that does not rank every condition: stop (default) or drop it (listwise deletion)")
+    p.add_argument("--incomplete", choices=("error", "drop", "skillings-mack"), default="error",
+                   help="a trial that does not rank every condition: stop (default), drop it (listwise deletion), "
+                   "or add the Skillings-Mack test over all trials (other statistics on complete trials)")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
     p.add_argument("--conover", action="store_true", help="add Conover's Friedman post-hoc tests")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")

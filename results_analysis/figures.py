@@ -13,12 +13,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import numpy as np
+import pandas as pd
+from matplotlib.colors import to_rgb
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.colors import to_rgb  # noqa: E402
+# Figures are built with the object-oriented API (no pyplot), so importing this package never switches
+# the matplotlib backend of the caller (a notebook, or the app's own UI) and works headless.
 
 _STYLE = {
     "font.size": 9, "axes.titlesize": 10, "axes.titleweight": "bold", "axes.labelsize": 9,
@@ -30,9 +31,13 @@ _STYLE = {
 CONDITION_COLORS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
 
 
+def _figure(size: tuple[float, float]) -> Figure:
+    return Figure(figsize=size)
+
+
 def rank_colors(k: int) -> list[tuple[float, float, float]]:
     """Sequential blues, darkest for rank 1 (best)."""
-    cmap = plt.get_cmap("Blues")
+    cmap = matplotlib.colormaps["Blues"]
     return [cmap(v)[:3] for v in np.linspace(0.9, 0.3, k)]
 
 
@@ -46,7 +51,6 @@ def save(fig, out_dir: Path, name: str) -> list[Path]:
     paths = [out_dir / f"{name}.png", out_dir / f"{name}.svg"]
     for p in paths:
         fig.savefig(p, bbox_inches="tight", facecolor="white", dpi=200)
-    plt.close(fig)
     return paths
 
 
@@ -59,14 +63,14 @@ def rank_share_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] 
 
     ``summaries``: criterion -> :func:`results_analysis.descriptives.condition_summary` table.
     """
-    with plt.rc_context(_STYLE):
+    with matplotlib.rc_context(_STYLE):
         crits = list(summaries)
         first = summaries[crits[0]]
         conds = _order(first, conditions)
         k = len([c for c in first.columns if c.startswith("share_rank_")])
         colors = rank_colors(k)
-        fig, axes = plt.subplots(1, len(crits), figsize=(2.3 * len(crits) + 0.6, 0.42 * len(conds) + 1.5),
-                                 sharey=True, squeeze=False)
+        fig = _figure((2.3 * len(crits) + 0.6, 0.42 * len(conds) + 1.5))
+        axes = fig.subplots(1, len(crits), sharey=True, squeeze=False)
         for ax, crit in zip(axes[0], crits):
             s = summaries[crit].set_index("condition").reindex(conds)
             left = np.zeros(len(conds))
@@ -136,12 +140,13 @@ def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: flo
     left; thick black bars join conditions whose mean ranks differ by less than the CD. ``order`` fixes
     the colour of each condition (the same as in the other figures).
     """
-    with plt.rc_context(_STYLE):
+    with matplotlib.rc_context(_STYLE):
         crits = list(results)
         k = len(next(iter(results.values()))[0])
         half = (k + 1) // 2
         panel_h = 0.75 + 0.3 * half
-        fig, axes = plt.subplots(len(crits), 1, figsize=(6.4, panel_h * len(crits)), squeeze=False)
+        fig = _figure((6.4, panel_h * len(crits)))
+        axes = fig.subplots(len(crits), 1, squeeze=False)
         for ax, crit in zip(axes[:, 0], crits):
             mean_rank, cd = results[crit]
             names = list(mean_rank)
@@ -181,7 +186,7 @@ def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: flo
             sorted_vals = vals[by_rank]
             for c_i, (a, b) in enumerate(cliques(sorted_vals, cd)):
                 y = -0.22 - 0.16 * c_i
-                ax.plot([sorted_vals[a] - 0.03, sorted_vals[b] + 0.03], [y, y], color="black", lw=3,
+                ax.plot([sorted_vals[a] - 0.05, sorted_vals[b] + 0.05], [y, y], color="black", lw=3,
                         solid_capstyle="round")
         fig.text(0.5, 0.0, f"Mean rank (1 = best). Bars join conditions the Nemenyi test does not separate "
                  f"(α = {alpha:g}).", ha="center", va="bottom", fontsize=7.5, color="#444444")
@@ -192,12 +197,12 @@ def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: flo
 def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] | None = None, *,
                      ci: float = 0.95):
     """Mean rank per condition with its bootstrap interval, one panel per criterion (1 = best, on the left)."""
-    with plt.rc_context(_STYLE):
+    with matplotlib.rc_context(_STYLE):
         crits = list(summaries)
         conds = _order(summaries[crits[0]], conditions)
         k = len(conds)
-        fig, axes = plt.subplots(1, len(crits), figsize=(2.3 * len(crits) + 0.6, 0.42 * k + 1.3),
-                                 sharey=True, squeeze=False)
+        fig = _figure((2.3 * len(crits) + 0.6, 0.42 * k + 1.3))
+        axes = fig.subplots(1, len(crits), sharey=True, squeeze=False)
         y = np.arange(k)[::-1]
         for ax, crit in zip(axes[0], crits):
             s = summaries[crit].set_index("condition").reindex(conds)
@@ -227,12 +232,12 @@ def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] |
 
 def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = None, *, ci: float = 0.95):
     """Bradley-Terry strengths (sum to 1) with bootstrap intervals, one panel per criterion."""
-    with plt.rc_context(_STYLE):
+    with matplotlib.rc_context(_STYLE):
         crits = list(tables)
         conds = _order(tables[crits[0]], conditions)
         k = len(conds)
-        fig, axes = plt.subplots(1, len(crits), figsize=(2.3 * len(crits) + 0.6, 0.42 * k + 1.3),
-                                 sharey=True, squeeze=False)
+        fig = _figure((2.3 * len(crits) + 0.6, 0.42 * k + 1.3))
+        axes = fig.subplots(1, len(crits), sharey=True, squeeze=False)
         y = np.arange(k)[::-1]
         top = max(float(t["ci_high"].max()) if t["ci_high"].notna().any() else float(t["strength"].max())
                   for t in tables.values())

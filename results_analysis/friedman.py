@@ -76,15 +76,13 @@ def friedman_ranks(ranks: np.ndarray, *, tie_correction: bool = True) -> Friedma
 def _tie_sum(ranks: np.ndarray) -> float:
     """sum over blocks and tied groups of t^3 - t, from average ranks (tied values share a rank)."""
     s = np.sort(ranks, axis=1)
-    total = 0.0
     n, k = s.shape
     # Run lengths of equal values per row, vectorized over rows.
     starts = np.ones((n, k), dtype=bool)
     starts[:, 1:] = ~np.isclose(s[:, 1:], s[:, :-1])
     run_id = np.cumsum(starts, axis=1) - 1 + (np.arange(n) * k)[:, None]
     t = np.bincount(run_id.ravel(), minlength=n * k).astype(float)
-    total = float(np.sum(t ** 3 - t))
-    return total
+    return float(np.sum(t ** 3 - t))
 
 
 def kendall_w(ranks: np.ndarray, *, tie_correction: bool = True) -> float:

@@ -122,12 +122,15 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
     else:
         q = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
         q["_where"] = [f"line {i + 2}" for i in range(len(q))]
+    if "kind" in q.columns:
+        # Free-text answers have no number to summarise.
+        q = q[q["kind"].fillna("likert").astype(str).str.lower() != "text"].copy()
     missing = [c for c in ("participant", "item", "value") if c not in q.columns]
     if missing:
         raise AnalysisInputError(path, f"column(s) {', '.join(missing)}", "missing required column(s)")
     if "scale" not in q.columns:
-        q["scale"] = "scale"
-    q["scale"] = q["scale"].fillna("scale")
+        q["scale"] = "questionnaire"
+    q["scale"] = q["scale"].fillna("questionnaire").replace("", "questionnaire")
     for col in ("participant", "item", "scale"):
         q[col] = q[col].astype(str)
     num = pd.to_numeric(q["value"], errors="coerce")
@@ -136,6 +139,7 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
         i = int(np.argmax(bad.to_numpy()))
         raise AnalysisInputError(path, f"{q['_where'].iloc[i]}, column 'value'", f"{q['value'].iloc[i]!r} is not a number")
     q["value"] = num.astype(float)
+    q = q[q["value"].notna()].copy()  # unanswered items
     dup = q.duplicated(["participant", "item"], keep=False)
     if dup.any():
         rows = q.loc[dup, "_where"].tolist()[:2]

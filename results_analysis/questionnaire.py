@@ -1,7 +1,6 @@
 """Questionnaire answers: per-item summaries and Cronbach's alpha per scale."""
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 
 

@@ -53,7 +53,7 @@ def within_block_ranks(values: np.ndarray) -> np.ndarray:
 
 
 def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "trial",
-                conditions: list[str] | None = None) -> RankBlocks:
+                conditions: list[str] | None = None, complete_only: bool = True) -> RankBlocks:
     """Build the blocks x conditions rank matrix of one criterion from a validated tidy frame.
 
     >>> import pandas as pd
@@ -74,9 +74,15 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "trial",
         key = ["participant"]
         wide = sub.pivot_table(index=key, columns="condition", values="rank", aggfunc="mean", observed=True)
     wide = wide.reindex(columns=conditions)
-    # Blocks that lack a condition are dropped (listwise deletion); validation decides whether that may happen.
-    wide = wide.dropna(axis=0, how="any")
+    # Blocks that lack a condition are dropped (listwise deletion) unless ``complete_only`` is false, for
+    # the Skillings-Mack test, which reads the NaNs; validation decides whether incomplete blocks may exist.
+    if complete_only:
+        wide = wide.dropna(axis=0, how="any")
     values = wide.to_numpy(dtype=float)
     participants = wide.index.get_level_values("participant").astype(str).to_numpy()
-    return RankBlocks(values=values, ranks=within_block_ranks(values) if len(values) else values,
-                      conditions=list(conditions), participants=participants, block=block)
+    ranks = values
+    if len(values):
+        ranks = within_block_ranks(values) if complete_only else np.where(
+            np.isnan(values), np.nan, rankdata(np.where(np.isnan(values), np.inf, values), axis=1, method="average"))
+    return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants,
+                      block=block)

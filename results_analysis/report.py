@@ -73,12 +73,17 @@ def stats_dict(a: Analysis) -> dict:
             entry["sensitivity"] = {"block": c.sensitivity_block, "n_blocks": s.n_blocks, "chi2": s.chi2,
                                     "df": s.df, "p": s.p, "kendall_w": s.kendall_w,
                                     "mean_rank": dict(zip(a.conditions, s.mean_rank))}
+        if c.skillings_mack is not None:
+            sm = c.skillings_mack
+            entry["skillings_mack"] = {"statistic": sm.statistic, "df": sm.df, "p": sm.p, "n_blocks": sm.n_blocks,
+                                       "n_missing": sm.n_missing}
         out[crit] = entry
     out["_meta"] = {
         "source": a.source, "block": a.block, "conditions": a.conditions, "criteria": list(a.criteria),
         "n_participants": a.n_participants, "n_trials": a.n_trials, "alpha": a.alpha,
         "excluded": a.exclusions.to_dict("records"), "incomplete_blocks": a.incomplete,
-        "dropped_incomplete": a.dropped_incomplete, "design_hashes": a.design_hashes, "warnings": a.warnings,
+        "dropped_incomplete": a.dropped_incomplete, "incomplete_kept_for_skillings_mack": a.incomplete_blocks,
+        "design_hashes": a.design_hashes, "warnings": a.warnings,
         "bootstrap": {"n_boot": a.n_boot, "seed": a.seed, "ci": a.ci, "resampled": "participants"},
         "wilcoxon": {"zero_method": "wilcox (zero differences dropped)",
                      "exact_if": f"at most {WILCOXON_EXACT_MAX_N} non-zero differences and no ties",
@@ -229,6 +234,10 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
                 "participant" else "single trials as blocks")
         text[0] += (f" With {what} the test {'agreed' if agree else 'disagreed'}: χ²({sv.df}) = {_num(sv.chi2)}, "
                     f"{fmt_p(sv.p)}, W = {_num(sv.kendall_w)}, n = {sv.n_blocks}.")
+    if c.skillings_mack is not None:
+        sm = c.skillings_mack
+        text[0] += (f" Including the incomplete trials ({sm.n_missing} missing rank(s) over {sm.n_blocks} trials), the "
+                    f"Skillings–Mack test gave SM({sm.df}) = {_num(sm.statistic)}, {fmt_p(sm.p)}.")
     nem = c.posthoc["nemenyi"]
     parts = []
     for r in nem.itertuples():
@@ -273,16 +282,22 @@ def methods_paragraph(a: Analysis) -> str:
     sens = ("As a sensitivity check the test was repeated with participants as blocks (mean rank per "
             "participant and condition, re-ranked within participant)." if a.block == "trial" else
             "As a sensitivity check the test was repeated with single trials as blocks.")
-    incomplete = ("Every analysed trial ranked every condition (incomplete trials would have stopped the analysis)."
-                  if a.incomplete == "error" else
-                  f"Trials that did not rank every condition were removed (listwise deletion; "
-                  f"{a.dropped_incomplete} trial-criterion block(s) removed); no Skillings–Mack test was used.")
+    if a.incomplete == "error":
+        incomplete = "Every analysed trial ranked every condition (incomplete trials would have stopped the analysis)."
+    elif a.incomplete == "drop":
+        incomplete = (f"Trials that did not rank every condition were removed (listwise deletion; "
+                      f"{a.dropped_incomplete} trial-criterion block(s) removed); no Skillings–Mack test was used.")
+    else:
+        incomplete = (f"{a.incomplete_blocks} trial-criterion block(s) did not rank every condition: the Skillings–Mack "
+                      "test (missing ranks set to the block's mean rank, generalised-inverse covariance, χ²(k−1)) "
+                      "was computed over all trials, and the Friedman, post-hoc and descriptive statistics over the "
+                      "complete trials (listwise deletion).")
     return (
         f"Practice trials and attention-check (catch) trials were not analysed. {excl} The analysis covers "
         f"{a.n_participants} participants and {a.n_trials} trials. For each criterion, the {k} conditions were "
         f"compared with a Friedman test with {block}; tied ranks received average ranks and the statistic was "
         f"corrected for ties. Effect size is Kendall's W = χ²/(n(k−1)); the Iman–Davenport statistic "
-        f"F = (n−1)χ²/(n(k−1)−χ²) with ({k - 1}, ({k - 1})(n−1)) degrees of freedom is also reported. {sens} "
+        f"F = (n−1)χ²/(n(k−1)−χ²) with ({k - 1}, {k - 1}(n−1)) degrees of freedom is also reported. {sens} "
         f"Post-hoc, mean ranks were compared with the Nemenyi single-step test (studentized range with infinite "
         f"degrees of freedom; critical difference CD = q_α/√2 · √(k(k+1)/(6n)), q_α/√2 = "
         f"{nemenyi_q_alpha(k, a.alpha):.3f} for k = {k} at α = {_alpha(a.alpha)}), and with two-sided Wilcoxon "
@@ -350,6 +365,7 @@ def build_document(a: Analysis, title: str) -> Document:
             cols = ["level", "criterion", "n_blocks", "n_participants", "chi2", "p", "kendall_w"] + \
                    [f"mean_rank_{x}" for x in a.conditions]
             show = t[cols].rename(columns={f"mean_rank_{x}": f"mean rank {x}" for x in a.conditions})
+            show["p"] = [_p_cell(p) for p in show["p"]]
             doc.table(show, f"Friedman test per level of '{g}' (blocks: {a.block}s).")
     if a.questionnaire_reliability is not None:
         doc.h(1, "Questionnaire")
@@ -365,5 +381,11 @@ def build_document(a: Analysis, title: str) -> Document:
     else:
         doc.table(a.exclusions, "Excluded participants and why. Practice and attention-check trials are never analysed.")
     if len(a.attention):
-        doc.table(a.attention, "Attention checks per participant (before exclusions).")
+        failed = a.attention[a.attention["failed"] > 0]
+        doc.p(f"{len(a.attention)} participants saw {int(a.attention['checks'].sum())} attention-check trials; "
+              f"{len(failed)} failed at least one"
+              + (" (excluded with --exclude-failed-attention)." if a.exclusions["reason"].str.contains("attention").any()
+                 else " (kept: --exclude-failed-attention was not used)." if len(failed) else "."))
+        if len(failed):
+            doc.table(failed, "Participants who failed attention checks.")
     return doc

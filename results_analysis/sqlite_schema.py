@@ -53,11 +53,16 @@ def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFr
 
 
 def questionnaire_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:
-    """Questionnaire answers (participant, item, scale, value). The database stores no scales: an item
-    named ``scale.item`` or ``scale:item`` belongs to ``scale``, any other item to the scale ``questionnaire``."""
-    rows = pd.read_sql_query("SELECT rowid AS _rowid, participant, item, value FROM questionnaire", con)
+    """Questionnaire answers (participant, item, scale, kind, value). The scale is the stored ``scale`` column
+    when the database has one; otherwise (or when it is empty) an item named ``scale.item`` or
+    ``scale:item`` belongs to ``scale`` and any other item to the scale ``questionnaire``."""
+    have = {r[1] for r in con.execute("PRAGMA table_info(questionnaire)")}
+    extra = ", ".join(c for c in ("scale", "kind") if c in have)
+    rows = pd.read_sql_query(f"SELECT rowid AS _rowid, participant, item, value{', ' + extra if extra else ''} "
+                             "FROM questionnaire", con)
     rows["_where"] = [f"questionnaire row {r}" for r in rows.pop("_rowid")]
-    rows["scale"] = [_scale_of(i) for i in rows["item"]]
+    stored = rows["scale"] if "scale" in rows.columns else pd.Series([None] * len(rows), dtype=object)
+    rows["scale"] = [s if isinstance(s, str) and s.strip() else _scale_of(i) for s, i in zip(stored, rows["item"])]
     return rows
 
 

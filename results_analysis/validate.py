@@ -14,6 +14,10 @@ from results_analysis.errors import AnalysisInputError
 from results_analysis.loader import REQUIRED_COLUMNS
 
 
+#: What to do with a rated trial that does not rank every condition.
+INCOMPLETE_MODES = ("error", "drop", "skillings-mack")
+
+
 class MixedDesignWarning(UserWarning):
     """The results come from more than one study design (different design hashes)."""
 
@@ -24,13 +28,23 @@ def trial_key(df: pd.DataFrame) -> list[str]:
     return ["participant", "trial_index"]
 
 
+def rated_mask(df: pd.DataFrame) -> pd.Series:
+    """Rows of rated trials: neither practice nor attention check (those may show other conditions)."""
+    mask = pd.Series(True, index=df.index)
+    for col in ("is_practice", "is_attention_check"):
+        if col in df.columns:
+            mask &= ~df[col].astype(bool)
+    return mask
+
+
 def validate_results(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFrame:
-    """Check a tidy results frame; return it, without incomplete trials when ``incomplete='drop'``.
+    """Check a tidy results frame; return it, without incomplete rated trials when ``incomplete='drop'``.
 
     Raises :class:`AnalysisInputError` for missing columns, duplicated rows (the same trial, criterion
     and condition twice), ranks outside 1..k and, unless ``incomplete='drop'`` (listwise deletion), for a
-    trial that does not rank every condition on a criterion. Warns with :class:`MixedDesignWarning` when
-    the design hashes differ.
+    rated trial that does not rank every condition on a criterion. Warns with :class:`MixedDesignWarning`
+    when the design hashes differ. Practice and attention-check trials are checked for duplicates and
+    ranks within their own trial only: they may show other conditions (e.g. a frozen avatar).
 
     >>> import pandas as pd
     >>> df = pd.DataFrame({"participant": "P1", "trial_index": 0, "stimulus": "c1", "criterion": "realism",
@@ -40,14 +54,22 @@ def validate_results(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataF
     ...
     results_analysis.errors.AnalysisInputError: <data frame>: row 3, column 'rank': rank 5 is outside 1..3 (3 conditions)
     """
-    if incomplete not in ("error", "drop"):
-        raise ValueError("incomplete must be 'error' or 'drop'")
+    return check_complete(validate_structure(df), incomplete=incomplete)
+
+
+def _where(df: pd.DataFrame) -> pd.Series:
+    if "_where" in df.columns:
+        return df["_where"]
+    return pd.Series([f"row {i + 1}" for i in range(len(df))], index=df.index)
+
+
+def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
+    """Columns, ranks (numbers within range), duplicates and design hashes; see :func:`validate_results`."""
     src = df.attrs.get("source")
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
         raise AnalysisInputError(src, f"column(s) {', '.join(missing)}", "missing required column(s)")
-    where = df["_where"] if "_where" in df.columns else pd.Series([f"row {i + 1}" for i in range(len(df))],
-                                                                   index=df.index)
+    where = _where(df)
     if df.empty:
         raise AnalysisInputError(src, None, "no rows")
     rank = pd.to_numeric(df["rank"], errors="coerce")
@@ -66,32 +88,16 @@ def validate_results(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataF
                                  f"{_fmt(first['trial_index'])}, criterion {first['criterion']}, condition "
                                  f"{first['condition']} appears more than once")
 
-    conditions = sorted(df["condition"].unique())
-    k = len(conditions)
-    bad = (rank < 1) | (rank > k)
+    rated = rated_mask(df)
+    k_rated = int(df.loc[rated, "condition"].nunique())
+    # Rated trials: 1..k over the study's conditions; other trials: 1..(conditions shown in that trial).
+    per_trial = df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
+    bound = np.where(rated, max(k_rated, 1), per_trial)
+    bad = (rank < 1) | (rank > bound)
     if bad.any():
         i = int(np.argmax(bad.to_numpy()))
         raise AnalysisInputError(src, f"{where.iloc[i]}, column 'rank'",
-                                 f"rank {_fmt(rank.iloc[i])} is outside 1..{k} ({k} conditions)")
-
-    counts = df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
-    short = counts < k
-    if short.any():
-        if incomplete == "drop":
-            n_dropped = int(df.loc[short, key + ["criterion"]].drop_duplicates().shape[0])
-            attrs = dict(df.attrs)
-            df = df.loc[~short].copy()
-            df.attrs.update(attrs)
-            df.attrs["dropped_incomplete"] = n_dropped
-        else:
-            i = int(np.argmax(short.to_numpy()))
-            row = df.iloc[i]
-            have = set(df.loc[(df[key + ["criterion"]] == row[key + ["criterion"]]).all(axis=1), "condition"])
-            lacks = ", ".join(sorted(set(conditions) - have))
-            raise AnalysisInputError(src, f"{where.iloc[i]} (participant {row['participant']}, trial "
-                                     f"{_fmt(row['trial_index'])}, criterion {row['criterion']})",
-                                     f"the trial does not rank every condition: {lacks} missing "
-                                     "(use incomplete='drop' / --incomplete drop for listwise deletion)")
+                                 f"rank {_fmt(rank.iloc[i])} is outside 1..{bound[i]} ({bound[i]} conditions)")
 
     if "design_hash" in df.columns:
         hashes = sorted(h for h in df["design_hash"].dropna().unique())
@@ -99,7 +105,46 @@ def validate_results(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataF
             per = df.groupby("design_hash")["participant"].nunique()
             detail = ", ".join(f"{h} ({per[h]} participant{'s' if per[h] != 1 else ''})" for h in hashes)
             warnings.warn(f"{src or '<data frame>'}: column 'design_hash': results mix {len(hashes)} study "
-                          f"designs: {detail}", MixedDesignWarning, stacklevel=2)
+                          f"designs: {detail}", MixedDesignWarning, stacklevel=3)
+    return df
+
+
+def check_complete(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFrame:
+    """Every rated trial must rank every condition on each criterion; ``incomplete='drop'`` instead removes
+    the incomplete trial-criterion blocks (listwise deletion) and records how many in
+    ``attrs['dropped_incomplete']``; ``incomplete='skillings-mack'`` keeps them (counted in
+    ``attrs['incomplete_blocks']``) for the Skillings-Mack test."""
+    if incomplete not in INCOMPLETE_MODES:
+        raise ValueError(f"incomplete must be one of {INCOMPLETE_MODES}")
+    src = df.attrs.get("source")
+    where = _where(df)
+    rated = rated_mask(df)
+    conditions = sorted(df.loc[rated, "condition"].unique())
+    k = len(conditions)
+    key = trial_key(df)
+    counts = df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
+    short = rated & (counts < k)
+    attrs = dict(df.attrs)
+    if short.any():
+        if incomplete == "skillings-mack":
+            df.attrs["incomplete_blocks"] = int(df.loc[short, key + ["criterion"]].drop_duplicates().shape[0])
+            df.attrs["dropped_incomplete"] = 0
+            return df
+        if incomplete == "drop":
+            n_dropped = int(df.loc[short, key + ["criterion"]].drop_duplicates().shape[0])
+            df = df.loc[~short].copy()
+            df.attrs.update(attrs)
+            df.attrs["dropped_incomplete"] = n_dropped
+            return df
+        i = int(np.argmax(short.to_numpy()))
+        row = df.iloc[i]
+        have = set(df.loc[(df[key + ["criterion"]] == row[key + ["criterion"]]).all(axis=1), "condition"])
+        lacks = ", ".join(sorted(set(conditions) - have))
+        raise AnalysisInputError(src, f"{where.iloc[i]} (participant {row['participant']}, trial "
+                                 f"{_fmt(row['trial_index'])}, criterion {row['criterion']})",
+                                 f"the trial does not rank every condition: {lacks} missing "
+                                 "(use --incomplete drop for listwise deletion or --incomplete skillings-mack)")
+    df.attrs["dropped_incomplete"] = 0
     return df
 
 

@@ -38,7 +38,8 @@ void main() {
     if (!gl_FrontFacing) n = -n;
     vec3 v = normalize(u_camera_pos - v_world);
     vec3 albedo = to_linear(v_color) * u_base_factor.rgb;
-    if (u_has_texture) albedo *= texture(u_base_color, v_uv).rgb;  // sRGB texture sampled as linear-ish
+    // uv < 0 marks parts of a textured avatar that have no texture
+    if (u_has_texture && v_uv.x >= 0.0) albedo *= to_linear(texture(u_base_color, v_uv).rgb);
 
     float wrap = 0.0, shin = 16.0, spec_k = 0.05;
     if (v_material == 0) { wrap = 0.35; shin = 28.0; spec_k = 0.10; }        // skin

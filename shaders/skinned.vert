@@ -1,6 +1,6 @@
 #version 330 core
 // Linear-blend skinning + ARKit morph targets on the GPU, GL 3.3 core (no SSBOs).
-// Bone palettes live in a float texture: row = slot, texel 4*j+k = column k of joint j's matrix.
+// The bone palette of the slot being drawn is a uniform block (one buffer per slot; std140 mat4 array).
 // Morph deltas live in a float texture indexed by (morph * rows + vertex's morph row), only for
 // vertices some morph moves; the CPU sends the list of morphs whose weight is non-zero this frame.
 
@@ -12,8 +12,8 @@ in vec4 in_weights;
 in int in_morph_row;     // -1: no morph moves this vertex
 in vec2 in_uv;
 
-uniform sampler2D u_palette;
-uniform int u_slot_row;
+const int MAX_BONES = 256;  // must match MAX_BONES in studyapp/render/gpu.py
+layout(std140) uniform Bones { mat4 u_bones[MAX_BONES]; };
 uniform sampler2D u_morph_pos;
 uniform sampler2D u_morph_nrm;
 uniform int u_morph_rows;
@@ -31,12 +31,7 @@ out vec2 v_uv;
 
 const int MORPH_TEX_W = 2048;
 
-mat4 bone(int j) {
-    return mat4(texelFetch(u_palette, ivec2(4 * j + 0, u_slot_row), 0),
-                texelFetch(u_palette, ivec2(4 * j + 1, u_slot_row), 0),
-                texelFetch(u_palette, ivec2(4 * j + 2, u_slot_row), 0),
-                texelFetch(u_palette, ivec2(4 * j + 3, u_slot_row), 0));
-}
+mat4 bone(int j) { return u_bones[j]; }
 
 void main() {
     vec3 p = in_position;

@@ -73,6 +73,7 @@ class SilentClock:
 
     def __init__(self, *, virtual: bool = False, reason: str = "no audio output device") -> None:
         self.virtual = virtual
+        self.reason = reason
         self.device_name = f"none ({reason})"
         self._virtual_now = 0.0
         self._duration = 0.0

@@ -239,8 +239,8 @@ class AudioPlayer:
             dac = now + float(self._stream.latency)
         elif now > 0.0 and len(self._latencies) < 4096:
             self._latencies.append(dac - now)
-        if running:
-            self._last = (gen, start, dac, frames)
+        if running and n > 0:  # anchor the clock only on buffers that carry clip samples
+            self._last = (gen, start, dac, n)
 
     # -- clock -----------------------------------------------------------------------------------
     def position_s(self) -> float:

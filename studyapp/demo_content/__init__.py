@@ -28,8 +28,8 @@ from studyapp.face.io import save_face_csv
 FPS = 30.0
 #: Length of every demo clip in seconds.
 CLIP_SECONDS = 10.0
-#: Decimal places kept in BVH angles (0.1 degree moves a hand by under a millimetre).
-BVH_DECIMALS = 1
+#: Decimal places kept in BVH angles (0.01 degree: quantization steps far below what a viewer can see, no jitter).
+BVH_DECIMALS = 2
 #: Decimal places kept in face weights.
 FACE_DECIMALS = 4
 

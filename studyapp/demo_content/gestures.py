@@ -42,7 +42,7 @@ _REST_WRIST = 6.0
 _FINGER_CURL = {"1": 14.0, "2": 18.0}
 
 
-def _strokes(t: np.ndarray, centers: np.ndarray, amps: np.ndarray, rise_s: float = 0.2, fall_s: float = 0.07) -> np.ndarray:
+def _strokes(t: np.ndarray, centers: np.ndarray, amps: np.ndarray, rise_s: float = 0.3, fall_s: float = 0.07) -> np.ndarray:
     """Sum of beat strokes: a slow preparation up to ``amps[i]``, then a fast return that is fastest at ``centers[i]``.
 
     Each stroke is two half-Gaussians meeting at the apex ``fall_s`` before the centre (value and slope
@@ -75,18 +75,20 @@ def _gesture_drive(energy: np.ndarray, fps: float, rng: np.random.Generator) -> 
     units = _units(act > 0.5)
     # Per gesture unit: which hand(s) and where in gesture space; smoothed so units blend, never jump.
     w_r, w_l = np.full(n, 0.6), np.full(n, 0.6)
-    fwd, elbow, abduct, inward = np.full(n, 24.0), np.full(n, 55.0), np.full(n, 10.0), np.full(n, 25.0)
+    fwd, elbow, abduct, inward = np.full(n, 10.0), np.full(n, 76.0), np.full(n, 4.0), np.full(n, 25.0)
     for a, b in units:
         mode = rng.choice(3, p=[0.45, 0.25, 0.3])
         w_r[a:b], w_l[a:b] = [(1.0, 0.3), (0.3, 1.0), (1.0, 1.0)][mode]
-        fwd[a:b] = rng.uniform(15.0, 38.0)
-        elbow[a:b] = rng.uniform(30.0, 55.0)
-        abduct[a:b] = rng.uniform(4.0, 14.0)
-        inward[a:b] = rng.uniform(18.0, 40.0)
+        # Upper arms stay near the body (elbows low); the forearms bring the hands up in front of the chest.
+        fwd[a:b] = rng.uniform(4.0, 16.0)
+        elbow[a:b] = rng.uniform(68.0, 86.0)
+        abduct[a:b] = rng.uniform(0.0, 8.0)
+        inward[a:b] = rng.uniform(15.0, 35.0)
     w_r, w_l, fwd, elbow, abduct, inward = (smooth(x, fps, 0.2) for x in (w_r, w_l, fwd, elbow, abduct, inward))
-    # Raising the hands into gesture space is slow compared with the strokes (about a second), as in real
-    # gesture preparation; the fast motion is reserved for the strokes.
-    act = smooth(act, fps, 0.3)
+    # Raising the hands into gesture space is slow compared with the strokes, so the fast motion belongs to
+    # the strokes; it is centred just after the voice starts (not in the silence before it) so that even the
+    # lift's motion is in time with speech rather than ahead of it.
+    act = delay(smooth(act, fps, 0.3), fps, 0.15, hold_first=True)
 
     # A stroke on every syllable peak, scaled by its loudness so stressed syllables get the big beats
     # and weak ones barely a flick (squared: 0.5 relative loudness -> a quarter of the amplitude).
@@ -96,21 +98,25 @@ def _gesture_drive(energy: np.ndarray, fps: float, rng: np.random.Generator) -> 
     # Loudness relative to this clip's typical stressed syllable (the upper quartile of peaks), so one
     # shout does not shrink every other beat.
     ref = np.percentile(strength, 75) if peaks.size else 1.0
-    amp = np.clip(strength / ref, 0.0, 1.3) ** 2 * rng.uniform(0.75, 1.25, size=peaks.size)
+    amp = np.clip(strength / ref, 0.0, 1.15) ** 2 * rng.uniform(0.75, 1.25, size=peaks.size)
     # Each stroke mixes three directions differently: an up-down beat (elbow), a forward push (shoulder
     # flexion) and an outward flick (abduction); the mix is drawn per stroke so no two beats are alike.
     mix = rng.dirichlet([3.0, 1.0, 1.0], size=peaks.size) if peaks.size else np.zeros((0, 3))
     # Beats: the hand rises (elbow flexes) during the preparation and strikes down on the stressed peak.
-    beat_elbow = _strokes(t, tp, 34.0 * amp * mix[:, 0])
+    beat_elbow = _strokes(t, tp, 24.0 * amp * mix[:, 0])
     beat_fwd = _strokes(t, tp, 20.0 * amp * mix[:, 1])
     beat_out = _strokes(t, tp, 16.0 * amp * mix[:, 2])
     beat_wrist = _strokes(t, tp, -14.0 * amp)
+    # Between strokes the hands keep "rolling" with the voice: a small circular motion whose phase advances
+    # with the energy, so its speed is proportional to loudness and it stops when the voice stops.
+    phase = 2 * np.pi * 2.5 * np.cumsum(smooth(energy, fps, 0.03)) / fps
+    roll_a, roll_b = np.sin(phase), np.cos(phase) - 1.0
     # The head lifts slightly with the preparation and drops with the stroke: a nod on the stress.
     nod = _strokes(t, tp, -3.0 * amp * rng.uniform(0.5, 1.2, size=peaks.size), rise_s=0.25, fall_s=0.1)
     return {
         "act": act, "w_r": w_r, "w_l": w_l, "fwd": fwd, "elbow": elbow, "abduct": abduct, "inward": inward,
         "beat_elbow": beat_elbow, "beat_fwd": beat_fwd, "beat_out": beat_out, "beat_wrist": beat_wrist,
-        "nod": nod,
+        "nod": nod, "roll_a": roll_a, "roll_b": roll_b,
     }
 
 
@@ -137,7 +143,7 @@ def gesture_motion(skeleton: Skeleton, energy: np.ndarray, fps: float, seed: int
 
     if condition == "static":
         z = np.zeros(n)
-        g = {k: z for k in ("act", "w_r", "w_l", "beat_elbow", "beat_fwd", "beat_out", "beat_wrist", "nod")}
+        g = {k: z for k in ("act", "w_r", "w_l", "beat_elbow", "beat_fwd", "beat_out", "beat_wrist", "nod", "roll_a", "roll_b")}
         g.update(fwd=z, elbow=z, abduct=z, inward=z)
         idle_amp = 1.2
     else:
@@ -158,8 +164,8 @@ def gesture_motion(skeleton: Skeleton, energy: np.ndarray, fps: float, seed: int
         beat = w * act
         put(f"{side}Arm", 0, _REST_FORWARD - lift * g["fwd"] - beat * g["beat_fwd"] + idle_amp * drift[f"arm_{key}"])
         put(f"{side}Arm", 1, sgn * lift * g["inward"])
-        put(f"{side}Arm", 2, sgn * (_REST_DOWN - lift * g["abduct"] - beat * g["beat_out"]))
-        put(f"{side}ForeArm", 1, sgn * (_REST_ELBOW + lift * g["elbow"] + beat * g["beat_elbow"]
+        put(f"{side}Arm", 2, sgn * (_REST_DOWN - lift * g["abduct"] - beat * g["beat_out"] - 6.0 * beat * g["roll_a"]))
+        put(f"{side}ForeArm", 1, sgn * (_REST_ELBOW + lift * g["elbow"] + beat * g["beat_elbow"] + 7.0 * beat * g["roll_b"]
                                         + idle_amp * 1.5 * drift[f"elb_{key}"]))
         put(f"{side}Hand", 2, sgn * (_REST_WRIST + beat * g["beat_wrist"]))
         for finger in ("Index", "Middle", "Ring", "Pinky"):

@@ -45,13 +45,18 @@ def speech_energy(audio: AudioClip, fps: float) -> np.ndarray:
     return (rms / peak if peak > 0 else rms).astype(np.float64)
 
 
-def delay(signal: np.ndarray, fps: float, seconds: float) -> np.ndarray:
-    """The signal shifted later by ``seconds`` (rounded to frames), zero-filled at the start, same length."""
-    k = int(round(seconds * fps))
+def delay(signal: np.ndarray, fps: float, seconds: float, hold_first: bool = False) -> np.ndarray:
+    """The signal shifted later by ``seconds`` (rounded to frames), same length.
+
+    The frames before the shifted start are zero (silence before the clip), or, with ``hold_first``, the
+    first value (for smooth control signals, which must not jump).
+    """
+    k = min(int(round(seconds * fps)), signal.size)
     if k <= 0:
         return signal.copy()
-    out = np.zeros_like(signal)
-    out[k:] = signal[:-k] if k < signal.size else 0
+    out = np.empty_like(signal)
+    out[:k] = signal[0] if hold_first else 0
+    out[k:] = signal[: signal.size - k]
     return out
 
 
@@ -60,10 +65,18 @@ def smooth(signal: np.ndarray, fps: float, sigma_s: float) -> np.ndarray:
     return gaussian_filter1d(np.asarray(signal, np.float64), sigma_s * fps, mode="nearest")
 
 
-def speech_activity(energy: np.ndarray, fps: float, threshold: float = 0.08, bridge_s: float = 0.25) -> np.ndarray:
-    """``(F,)`` in ``[0, 1]``: 1 while someone speaks, smoothly 0 in pauses longer than about ``2 * bridge_s``."""
+def speech_activity(energy: np.ndarray, fps: float, threshold: float = 0.08, hold_s: float = 0.5,
+                    sigma_s: float = 0.25) -> np.ndarray:
+    """``(F,)`` in ``[0, 1]``: rises as the voice starts, stays up through short pauses, falls after it stops.
+
+    The voice counts as on where the lightly smoothed energy exceeds ``threshold``; it is held on for
+    ``hold_s`` after each voiced frame (so the fall comes after the phrase ends, never before), then
+    smoothed with a Gaussian of ``sigma_s`` seconds.
+    """
     on = (smooth(energy, fps, 0.03) > threshold).astype(np.float64)
-    return np.clip(smooth(on, fps, bridge_s) * 1.8, 0.0, 1.0)
+    k = max(1, int(round(hold_s * fps)))
+    held = (np.convolve(on, np.ones(k))[: on.size] > 0).astype(np.float64)
+    return np.clip(smooth(held, fps, sigma_s) * 1.5, 0.0, 1.0)
 
 
 def stress_peaks(energy: np.ndarray, fps: float, min_height: float = 0.45, min_gap_s: float = 0.3) -> np.ndarray:

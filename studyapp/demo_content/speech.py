@@ -30,7 +30,6 @@ VOWELS: dict[str, tuple[float, float, float]] = {
     "@": (500.0, 1500.0, 2500.0),
 }
 _BANDWIDTHS = np.array([90.0, 110.0, 170.0])
-_FORMANT_GAINS = np.array([1.0, 0.55, 0.3])
 
 
 @dataclass(frozen=True)
@@ -166,11 +165,12 @@ def synthesize_speech(voice: Voice, seed: int, duration_s: float = 10.0,
         live = fk < nyquist_guard
         if not live.any():
             break
-        # Sum of second-order resonance magnitudes at this harmonic, with a -6 dB/octave source tilt.
-        gain = np.zeros(n)
+        # Cascade of three second-order resonators (unit gain at 0 Hz, peaks of F/B at each formant), as in a
+        # Klatt-style formant synthesizer, on a source falling 6 dB per octave.
+        gain = np.ones(n)
         for j in range(3):
             fj = formants[:, j]
-            gain += _FORMANT_GAINS[j] * fj * _BANDWIDTHS[j] / np.sqrt((fj ** 2 - fk ** 2) ** 2 + (_BANDWIDTHS[j] * fk) ** 2)
+            gain *= fj ** 2 / np.sqrt((fj ** 2 - fk ** 2) ** 2 + (_BANDWIDTHS[j] * fk) ** 2)
         voiced += np.where(live, gain / k, 0.0) * np.sin(k * phase)
     voiced /= np.abs(voiced).max() + 1e-12
 

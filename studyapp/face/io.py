@@ -3,7 +3,7 @@
 Formats (chosen by content first, extension second):
 
 * **Live Link Face CSV** (Epic's iPhone app): ``Timecode, BlendShapeCount``, 52 PascalCase shapes in the app's
-  own column order, ``HeadYaw, HeadPitch, HeadRoll`` (kept as head rotation) and six eye angles (ignored).
+  own column order, ``HeadYaw, HeadPitch, HeadRoll`` (kept as head rotation, values as written) and six eye angles (ignored).
   Timecodes are ``HH:MM:SS:FF.fff`` (frame plus sub-frame fraction) at the timecode rate, which is not the
   capture rate: a 30 fps take on a 60 fps timecode steps the frame field by 2. The rate is derived from the
   time stamps themselves.
@@ -67,7 +67,8 @@ def _load(path: Path, fps: float | None) -> tuple[FaceAnimation, str]:
         raise InputError(path, None, f"fps must be a positive number, got {fps!r}")
     if not path.is_file():
         raise InputError(path, None, "file not found" if not path.exists() else "not a regular file")
-    head = path.open("rb").read(8)
+    with path.open("rb") as f:
+        head = f.read(8)
     if head.startswith(b"\x93NUMPY"):
         return _load_npy(path, fps), "npy"
     if head.startswith(b"PK"):
@@ -104,17 +105,19 @@ def _read_csv(path: Path, text: str) -> tuple[list[str], list[tuple[int, list[st
     reader = csv.reader(io.StringIO(text), delimiter=delimiter)
     header: list[str] | None = None
     rows: list[tuple[int, list[str]]] = []
+    trailing = False
     try:
         for cells in reader:
             if not cells or all(not c.strip() for c in cells):
                 continue
-            # A trailing delimiter leaves an empty last cell; writers do it, it is not a column.
-            if len(cells) > 1 and not cells[-1].strip():
-                cells = cells[:-1]
             if header is None:
-                header = [c.strip() for c in cells]
+                # Some writers end every line with a delimiter; the empty last cell is then not a column.
+                trailing = len(cells) > 1 and not cells[-1].strip()
+                header = [c.strip() for c in (cells[:-1] if trailing else cells)]
                 header_line = reader.line_num
                 continue
+            if trailing and len(cells) == len(header) + 1 and not cells[-1].strip():
+                cells = cells[:-1]
             if len(cells) != len(header):
                 raise InputError(path, f"line {reader.line_num}",
                                  f"row has {len(cells)} fields but the header (line {header_line}) has {len(header)}")
@@ -133,6 +136,12 @@ def _read_csv(path: Path, text: str) -> tuple[list[str], list[tuple[int, list[st
 
 def _numeric(path: Path, header: list[str], rows: list[tuple[int, list[str]]], cols: list[int]) -> np.ndarray:
     """``(F, len(cols))`` floats from the given columns; a bad cell is reported by line and column name."""
+    try:  # fast path: numpy parses the whole block; the cell-by-cell loop below only runs to name a bad cell
+        out = np.array([[cells[c] for c in cols] for _, cells in rows], dtype=np.float64).reshape(len(rows), len(cols))
+        if np.isfinite(out).all():
+            return out
+    except ValueError:
+        pass
     out = np.empty((len(rows), len(cols)), dtype=np.float64)
     for r, (line, cells) in enumerate(rows):
         for c, col in enumerate(cols):
@@ -449,8 +458,8 @@ def _fmt(v: float, decimals: int) -> str:
 def save_face_csv(face: FaceAnimation, path: str | Path, decimals: int = 6) -> None:
     """Write a plain CSV: ``time`` (seconds) and the 52 ARKit names in Apple order (+ head angles if any).
 
-    Values are printed with ``decimals`` places and trailing zeros trimmed, so the file is small and exactly
-    reproducible; :func:`load_face` reads it back to within ``0.5 * 10**-decimals``.
+    Values are printed with ``decimals`` places (time stamps with at least 9) and trailing zeros trimmed,
+    so the file is small and exactly reproducible; :func:`load_face` reads it back to within ``0.5 * 10**-decimals``.
     """
     path = Path(path)
     header = ["time", *ARKIT_NAMES]
@@ -460,7 +469,8 @@ def save_face_csv(face: FaceAnimation, path: str | Path, decimals: int = 6) -> N
         cols += list(face.head_rotation.astype(np.float64).T)
     table = np.stack(cols, axis=1) if face.n_frames else np.zeros((0, len(header)))
     lines = [",".join(header)]
-    lines += [",".join(_fmt(v, decimals) for v in row) for row in table.tolist()]
+    # Time stamps get 9 places whatever ``decimals`` is: the reader derives the frame rate from them.
+    lines += [",".join([_fmt(row[0], max(decimals, 9))] + [_fmt(v, decimals) for v in row[1:]]) for row in table.tolist()]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8", newline="\n")
 
 

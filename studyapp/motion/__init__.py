@@ -5,6 +5,8 @@ from studyapp.motion.bvh import BvhData, read_bvh, read_bvh_channels, write_bvh
 from studyapp.motion.fk import figure_height, forward_kinematics, global_transforms, joint_positions
 from studyapp.motion.io import load_motion, summarize_motion
 from studyapp.motion.resample import check_duration, resample, trim
+from studyapp.motion.arrays import load_rotation_array, save_motion_npz
+from studyapp.motion.retarget import detect_name_map, retarget
 
 __all__ = [
     "Motion",
@@ -26,4 +28,8 @@ __all__ = [
     "check_duration",
     "resample",
     "trim",
+    "load_rotation_array",
+    "save_motion_npz",
+    "detect_name_map",
+    "retarget",
 ]

@@ -164,7 +164,7 @@ def load_rotation_array(
     if len(names) != n_j:
         raise InputError(
             path, where,
-            f"array has {n_j} joints ({data.shape[1] * width if data.ndim == 3 else ''} values per frame) but "
+            f"array has {n_j} joints ({n_j * width} values per frame) but "
             f"{len(names)} joint names are mapped ({'given' if joints is not None else 'template'}); "
             f"pass the joint list the columns follow",
         )
@@ -210,8 +210,9 @@ def save_motion_npz(motion: Motion, path: str | Path) -> None:
 
     Arrays: ``rotations`` ``(F, J, 4)`` local quaternions in ``quaternion_order`` ``'xyzw'``,
     ``translations`` ``(F, J, 3)`` local, ``positions`` ``(F, J, 3)`` world joint positions, ``joints``
-    (names), ``parents``, ``offsets``, ``rest_rotations``, ``fps``, ``unit_scale`` (NaN if unknown) and
-    ``channels`` (the BVH channel layout, one space-separated string per joint).
+    (names), ``parents``, ``offsets``, ``rest_rotations``, ``fps``, ``unit_scale`` (NaN if unknown),
+    ``channels`` (the BVH channel layout, one space-separated string per joint) and the BVH end sites
+    as ``end_site_joints`` / ``end_site_offsets``.
     """
     sk = motion.skeleton
     np.savez_compressed(
@@ -226,6 +227,8 @@ def save_motion_npz(motion: Motion, path: str | Path) -> None:
         fps=np.float64(motion.fps),
         unit_scale=np.float64(np.nan if sk.unit_scale is None else sk.unit_scale),
         channels=np.array([" ".join(c) for c in sk.channels], dtype=str),
+        end_site_joints=np.array(sorted(sk.end_sites), dtype=np.int64),
+        end_site_offsets=np.array([sk.end_sites[k] for k in sorted(sk.end_sites)], dtype=np.float64).reshape(-1, 3),
         quaternion_order=np.array("xyzw"),
     )
 
@@ -260,9 +263,12 @@ def load_motion_npz(path: str | Path, fps: float | None = None) -> Motion:
         names = tuple(str(n) for n in z["joints"])
         chans = tuple(tuple(str(c).split()) for c in z["channels"]) if "channels" in keys else ()
         unit = float(z["unit_scale"]) if "unit_scale" in keys else float("nan")
+        ends = {}
+        if "end_site_joints" in keys and "end_site_offsets" in keys:
+            ends = {int(j): np.asarray(o, dtype=np.float64) for j, o in zip(z["end_site_joints"], z["end_site_offsets"])}
         try:
             sk = Skeleton(
-                names, z["parents"], z["offsets"], chans, {}, None if np.isnan(unit) else unit,
+                names, z["parents"], z["offsets"], chans, ends, None if np.isnan(unit) else unit,
                 z["rest_rotations"] if "rest_rotations" in keys else None,
             )
         except ValueError as exc:

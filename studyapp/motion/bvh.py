@@ -27,7 +27,6 @@ something wrong does a line-by-line pass run, to name the offending line.
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import math
 import re
@@ -37,7 +36,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from studyapp.errors import InputError
 from studyapp.motion.fk import figure_height, guess_unit_scale
@@ -51,6 +49,7 @@ __all__ = [
     "read_bvh",
     "read_bvh_channels",
     "parse_bvh_text",
+    "parse_bvh_bytes",
     "write_bvh",
     "format_bvh",
     "motion_from_channels",
@@ -105,16 +104,20 @@ class BvhData:
 
 
 # Raw channels of motions made by read_bvh, so that write_bvh can write the file's own numbers
-# (exact round trip, no Euler re-decomposition) while the motion is unchanged.
-_RAW: "weakref.WeakKeyDictionary[Motion, tuple[np.ndarray, bytes, float, float]]" = weakref.WeakKeyDictionary()
+# (exact round trip, no Euler re-decomposition) while the motion is unchanged. Whether it changed is
+# checked when writing (rebuilding the motion from the raw channels), which keeps reading cheap.
+_RAW: "weakref.WeakKeyDictionary[Motion, tuple[Skeleton, np.ndarray, float]]" = weakref.WeakKeyDictionary()
 
 
-def _fingerprint(motion: Motion) -> bytes:
-    h = hashlib.blake2b(digest_size=16)
-    h.update(np.ascontiguousarray(motion.rotations).data)
-    h.update(np.ascontiguousarray(motion.translations).data)
-    h.update(repr((motion.skeleton.channels, motion.skeleton.names)).encode())
-    return h.digest()
+def _raw_channels_if_unchanged(motion: Motion) -> np.ndarray | None:
+    cached = _RAW.get(motion)
+    if cached is None or cached[0] is not motion.skeleton:
+        return None
+    skeleton, channels, _ = cached
+    rebuilt = motion_from_channels(skeleton, channels, motion.fps)
+    if np.array_equal(rebuilt.rotations, motion.rotations) and np.array_equal(rebuilt.translations, motion.translations):
+        return channels
+    return None
 
 
 def _fps_from_frame_time(frame_time: float) -> float:
@@ -138,7 +141,7 @@ def _motion_with_raw(data: BvhData, fps: float | None) -> Motion:
     elif not (fps > 0 and math.isfinite(fps)):
         raise InputError(data.path, "fps", f"fps must be a positive number, got {fps}")
     motion = motion_from_channels(data.skeleton, data.channels, fps, source=data.path)
-    _RAW[motion] = (data.channels, _fingerprint(motion), data.frame_time, float(fps))
+    _RAW[motion] = (motion.skeleton, data.channels, data.frame_time)
     return motion
 
 
@@ -165,20 +168,47 @@ def read_bvh_channels(path: str | Path) -> BvhData:
         raise InputError(path, None, f"cannot read file: {exc.strerror or exc}") from None
     if b"\x00" in raw[:4096]:
         raise InputError(path, "line 1", "not a BVH file (binary data); expected text starting with HIERARCHY")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    return parse_bvh_text(text, path)
+    return parse_bvh_bytes(raw, path)
 
 
 def parse_bvh_text(text: str, path: str = "<string>") -> BvhData:
     """Parse the text of a BVH file (``path`` is only used in messages)."""
-    lines = text.splitlines()
+    return parse_bvh_bytes(text.encode("utf-8"), path)
+
+
+_MOTION_RE = re.compile(rb"(?m)^[ \t]*MOTION[ \t]*\r?$")
+_FRAME_TIME_LINE_RE = re.compile(rb"(?im)^[ \t]*Frame[ \t]*Time\b[^\n]*$")
+
+
+def _decode(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def parse_bvh_bytes(raw: bytes, path: str = "<bytes>") -> BvhData:
+    """Parse the bytes of a BVH file.
+
+    Only the header (up to the ``Frame Time`` line) is decoded and split into lines; the frame data
+    goes to the vectorized parser as one block, which is what keeps large files fast.
+    """
+    head, data = raw, b""
+    m = _MOTION_RE.search(raw)
+    ft = _FRAME_TIME_LINE_RE.search(raw, m.end()) if m else None
+    if ft is not None:
+        head, data = raw[: ft.end()], raw[ft.end():]
+        data = data[2:] if data.startswith(b"\r\n") else data[1:] if data.startswith((b"\n", b"\r")) else data
+        lines = _decode(head).splitlines()
+    else:
+        # no well-formed header: the line-based parser below reports what is missing where
+        lines = _decode(raw).splitlines()
     motion_line, skeleton = _parse_hierarchy(lines, path)
     frames, frame_time, data_start = _parse_motion_header(lines, motion_line, path)
     n_channels = sum(len(c) for c in skeleton.channels)
-    channels = _parse_frames(lines, data_start, n_channels, path)
+    if ft is None:
+        data = "\n".join(lines[data_start:]).encode("utf-8")
+    channels = _parse_frames(data, data_start, n_channels, path)
     notes: list[str] = []
     if frames is not None and frames != channels.shape[0]:
         notes.append(
@@ -292,6 +322,11 @@ def _parse_hierarchy(lines: list[str], path: str) -> tuple[int, Skeleton]:
             got = []
             for _ in range(count):
                 ctok, cl = take(None, f"channel name of joint {name!r}")
+                if ctok.upper() in ("JOINT", "END", "}", "{", "OFFSET", "CHANNELS"):
+                    raise InputError(
+                        path, f"line {cln}",
+                        f"joint {name!r} declares {count} channels but lists {len(got)}: {' '.join(got) or 'none'}",
+                    )
                 canon = _CANON.get(ctok.lower())
                 if canon is None:
                     raise InputError(
@@ -378,27 +413,25 @@ def _parse_motion_header(lines: list[str], motion_line: int, path: str) -> tuple
     return frames, frame_time, i + 1
 
 
-def _parse_frames(lines: list[str], start: int, n_channels: int, path: str) -> np.ndarray:
-    body = lines[start:]
-    n_lines = sum(1 for ln in body if ln.strip()) if len(body) < 64 else None
-    if n_channels == 0:
-        if any(ln.strip() for ln in body):
-            raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
-        return np.zeros((0, 0))
-    data = _fast_frames(body, n_channels)
-    if data is not None and (n_lines is None or n_lines == data.shape[0]):
-        return data
-    return _slow_frames(body, start, n_channels, path)
-
-
-def _fast_frames(body: list[str], n_channels: int) -> np.ndarray | None:
-    """Vectorized parse; ``None`` when anything looks wrong (the slow pass then names the line)."""
-    blob = "\n".join(body).encode("utf-8", "replace")
-    if not blob.strip():
+def _parse_frames(data: bytes, start: int, n_channels: int, path: str) -> np.ndarray:
+    """Frame values ``(F, C)`` from the data block whose first line is file line ``start + 1``."""
+    if not data.strip():
         return np.zeros((0, n_channels))
+    if n_channels == 0:
+        raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
+    fast = _fast_frames(data, n_channels)
+    if fast is not None:
+        return fast
+    return _slow_frames(_decode(data).splitlines(), start, n_channels, path)
+
+
+def _fast_frames(blob: bytes, n_channels: int) -> np.ndarray | None:
+    """Vectorized parse; ``None`` when anything looks wrong (the slow pass then names the line)."""
+    import pandas as pd  # imported here: pandas is slow to import and only this function needs it
+
     try:
         frame = pd.read_csv(io.BytesIO(blob), sep=r"\s+", header=None, engine="c", dtype=np.float64)
-    except (ValueError, pd.errors.ParserError):
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
         return None
     if frame.shape[1] != n_channels:
         return None
@@ -472,8 +505,15 @@ def motion_from_channels(skeleton: Skeleton, data: np.ndarray, fps: float, sourc
         raise ValueError(f"channel data must be (frames, {n_ch}), got {data.shape}")
     f, j = data.shape[0], skeleton.n_joints
     trans = np.broadcast_to(skeleton.offsets, (f, j, 3)).copy()
-    rot = np.empty((f, j, 4))
-    rot[:] = skeleton.rest_rotations
+    full = [x for x in layout if x[3] is not None and len(x[3]) == 3]
+    if len(full) == j and len({x[3] for x in full}) == 1:
+        # the common case (BEAT, Mixamo): one order on every joint, one conversion, no scatter
+        cols = np.array([x[4] for x in full])
+        rot = euler_to_quat(data[:, cols], full[0][3])
+        layout = [(jj, pcols, paxes, None, rcols) for jj, pcols, paxes, _, rcols in layout]
+    else:
+        rot = np.empty((f, j, 4))
+        rot[:] = skeleton.rest_rotations
     by_order: dict[str, list[tuple[int, list[int]]]] = {}
     for jj, pcols, paxes, order, rcols in layout:
         if pcols:
@@ -619,7 +659,7 @@ def write_bvh(motion: Motion | BvhData, path: str | Path, order: str | None = No
             text = format_bvh(motion.skeleton, motion.channels, motion.frame_time, precision)
             Path(path).write_text(text)
             return
-        motion = motion.to_motion(1.0 / motion.frame_time if motion.frame_time > 0 else 30.0)
+        motion = motion.to_motion()
     skeleton = motion.skeleton
     channels = None
     frame_time = 1.0 / float(motion.fps)
@@ -628,11 +668,9 @@ def write_bvh(motion: Motion | BvhData, path: str | Path, order: str | None = No
         if skeleton.channels == motion.skeleton.channels:
             skeleton = motion.skeleton
     if skeleton is motion.skeleton:
-        cached = _RAW.get(motion)
-        if cached is not None and cached[1] == _fingerprint(motion):
-            channels = cached[0]
+        channels = _raw_channels_if_unchanged(motion)
     cached = _RAW.get(motion)
-    if cached is not None and cached[3] == float(motion.fps):
+    if cached is not None and cached[2] > 0 and _fps_from_frame_time(cached[2]) == float(motion.fps):
         frame_time = cached[2]  # keep the header's own spelling (0.008333 stays 0.008333)
     if channels is None:
         target = motion if skeleton is motion.skeleton else Motion(

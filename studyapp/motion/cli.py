@@ -74,7 +74,7 @@ def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
     if ext in _FACE_EXT:
         from studyapp.face.io import summarize as face_summarize
 
-        return {"kind": "face", **face_summarize(path)}
+        return {"kind": "face", **(face_summarize(path) if fps is None else face_summarize(path, fps=fps))}
     if ext in _AUDIO_EXT:
         from studyapp.audio.wav import summarize as wav_summarize
 
@@ -84,11 +84,15 @@ def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
     return {"kind": "motion", **summarize_motion(path, fps=fps)}
 
 
-def _text(value: Any) -> str:
+def _text(value: Any, nested: bool = False) -> str:
+    if nested and isinstance(value, dict):
+        return "(" + ", ".join(f"{k} {_text(v, True)}" for k, v in value.items()) + ")"
+    if nested and isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_text(v, True) for v in value) + "]"
     if isinstance(value, float):
         return f"{value:.6g}" if math.isfinite(value) else str(value)
     if isinstance(value, dict):
-        return ", ".join(f"{k}: {_text(v)}" for k, v in value.items()) or "-"
+        return ", ".join(f"{k}: {_text(v, True)}" for k, v in value.items()) or "-"
     if isinstance(value, (list, tuple)):
         if len(value) > 12:
             return ", ".join(_text(v) for v in value[:12]) + f", ... ({len(value)} in all)"

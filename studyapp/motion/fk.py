@@ -1,7 +1,8 @@
 """Forward kinematics: local joint rotations/translations to world transforms, all frames at once.
 
-Joints are depth-first (``parents[j] < j``), so one pass over the joints fills every frame: each step
-is a batched ``(F, 3, 3)`` product, never a Python loop over frames.
+Joints are depth-first (``parents[j] < j``), so parents are always computed before their children:
+all joints of one tree depth are done together for every frame at once, never a Python loop over
+frames.
 
 >>> import numpy as np
 >>> from studyapp.motion.skeleton import Skeleton, Motion
@@ -12,6 +13,8 @@ is a batched ``(F, 3, 3)`` product, never a Python loop over frames.
 2.0
 """
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 
@@ -29,34 +32,44 @@ __all__ = [
 ]
 
 
-def _depth_levels(parents: np.ndarray) -> list[np.ndarray]:
-    """Joint indices grouped by depth below the root(s), shallowest first."""
+@lru_cache(maxsize=64)
+def _levels_cached(parents_bytes: bytes) -> tuple[np.ndarray, ...]:
+    parents = np.frombuffer(parents_bytes, dtype=np.int64)
     depth = np.zeros(len(parents), dtype=np.int64)
     for k, p in enumerate(parents):
         if p >= 0:
             depth[k] = depth[p] + 1
-    return [np.flatnonzero(depth == d) for d in range(int(depth.max(initial=0)) + 1)]
+    return tuple(np.flatnonzero(depth == d) for d in range(int(depth.max(initial=0)) + 1))
+
+
+def _depth_levels(parents: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Joint indices grouped by depth below the root(s), shallowest first (cached per hierarchy:
+    the viewer runs forward kinematics every frame on the same skeleton)."""
+    return _levels_cached(np.ascontiguousarray(parents, dtype=np.int64).tobytes())
 
 
 def _matrix_components(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices of quaternions ``(4, ...)`` (component-first) as ``(3, 3, ...)``."""
-    n2 = np.einsum("i...,i...->...", q, q)
-    s = 2.0 / np.where(n2 > 0, n2, 1.0)
+    """Rotation matrices of unit quaternions ``(4, ...)`` (component-first) as ``(3, 3, ...)``.
+
+    Motion rotations are unit by contract, so no normalisation pass here (this is the hot loop).
+    """
     x, y, z, w = q
-    xs, ys, zs = x * s, y * s, z * s
-    wx, wy, wz = w * xs, w * ys, w * zs
-    xx, xy, xz = x * xs, x * ys, x * zs
-    yy, yz, zz = y * ys, y * zs, z * zs
     m = np.empty((3, 3) + q.shape[1:])
-    m[0, 0] = 1.0 - (yy + zz)
-    m[0, 1] = xy - wz
-    m[0, 2] = xz + wy
-    m[1, 0] = xy + wz
-    m[1, 1] = 1.0 - (xx + zz)
-    m[1, 2] = yz - wx
-    m[2, 0] = xz - wy
-    m[2, 1] = yz + wx
-    m[2, 2] = 1.0 - (xx + yy)
+    x2, y2, z2 = x + x, y + y, z + z
+    xx, yy, zz = x * x2, y * y2, z * z2
+    np.subtract(1.0, yy + zz, out=m[0, 0])
+    np.subtract(1.0, xx + zz, out=m[1, 1])
+    np.subtract(1.0, xx + yy, out=m[2, 2])
+    del xx, yy, zz
+    xy, wz = x * y2, w * z2
+    np.subtract(xy, wz, out=m[0, 1])
+    np.add(xy, wz, out=m[1, 0])
+    xz, wy = x * z2, w * y2
+    np.add(xz, wy, out=m[0, 2])
+    np.subtract(xz, wy, out=m[2, 0])
+    yz, wx = y * z2, w * x2
+    np.subtract(yz, wx, out=m[1, 2])
+    np.add(yz, wx, out=m[2, 1])
     return m
 
 
@@ -64,8 +77,8 @@ def _global_rt(parents: np.ndarray, rotations: np.ndarray, translations: np.ndar
     """World rotations ``(3, 3, J, F)`` and positions ``(3, J, F)`` from local ``(F, J, 4)`` / ``(F, J, 3)``.
 
     Component-first, frame-last layout with all joints of one depth handled together: numpy's
-    ``matmul`` on stacks of 3x3 matrices is slow, while a broadcast multiply-and-sum over long
-    contiguous frame rows is a handful of vector operations per tree level (about 15 for BEAT).
+    ``matmul`` on stacks of 3x3 matrices is slow (one tiny product at a time), while an ``einsum``
+    over long contiguous frame rows is two vector operations per tree level (15 levels for BEAT).
     """
     local_r = _matrix_components(np.ascontiguousarray(rotations.transpose(2, 1, 0)))
     local_t = np.ascontiguousarray(translations.transpose(2, 1, 0))
@@ -78,8 +91,8 @@ def _global_rt(parents: np.ndarray, rotations: np.ndarray, translations: np.ndar
             g_t[:, level] = local_t[:, level]
             continue
         pr = g_r[:, :, par]
-        g_r[:, :, level] = (pr[:, :, None] * local_r[None, :, :, level]).sum(axis=1)
-        g_t[:, level] = (pr * local_t[None, :, level]).sum(axis=1) + g_t[:, par]
+        g_r[:, :, level] = np.einsum("iknf,kjnf->ijnf", pr, local_r[:, :, level])
+        g_t[:, level] = np.einsum("iknf,knf->inf", pr, local_t[:, level]) + g_t[:, par]
     return g_r, g_t
 
 

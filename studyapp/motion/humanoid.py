@@ -5,7 +5,8 @@ one shared set of humanoid bones. Maps here are ``{rig joint name: humanoid bone
 but the humanoid set lacks (BEAT's ``Spine2``, ``Neck1``, finger metacarpals, end joints) are left
 out and their rotations get composed into the next mapped bone by :mod:`studyapp.motion.retarget`.
 
-Built-in maps: ``"beat"`` (BEAT 75 joints), ``"mixamo"`` (``mixamorig:`` prefix), ``"vrm0"``
+A map may name one bone for several joints of a chain (BEAT ``Neck`` and ``Neck1``); the joint
+deepest in the hierarchy gets the bone. Built-in maps: ``"beat"`` (BEAT 75 joints), ``"mixamo"`` (``mixamorig:`` prefix), ``"vrm0"``
 (``J_Bip_C_Hips`` node names of VRoid/VRM 0.x models), ``"vrm1"`` (VRM 1.0 humanoid names such as
 ``hips``, ``upperChest``, ``leftUpperArm``; the thumb is Metacarpal/Proximal/Distal there) and
 ``"unity"`` (the humanoid names themselves). Names match case-insensitively.
@@ -94,8 +95,10 @@ def _beat_map() -> dict[str, str]:
         "Spine1": "Chest",
         # Spine2 has no humanoid counterpart: its rotation is composed into UpperChest
         "Spine3": "UpperChest",
+        # Neck and Neck1 both name the humanoid Neck: where a rig has both, the upper one (Neck1)
+        # takes the bone and the lower one's rotation is composed into it
         "Neck": "Neck",
-        # Neck1 is composed into Head
+        "Neck1": "Neck",
         "Head": "Head",
     }
     beat_finger = {"Thumb": "Thumb", "Index": "Index", "Middle": "Middle", "Ring": "Ring", "Little": "Pinky"}

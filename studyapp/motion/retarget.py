@@ -10,7 +10,8 @@ rotations, ``Y`` a turn about +Y that makes the two rigs face the same way (VRM 
 others +Z) and ``C`` a per-bone rest correction: the shortest rotation taking the target bone's
 rest direction (towards its mapped child) onto the source bone's, so a T-pose source drives an
 A-pose target correctly. Because only global rotations are copied, the rotation of a source joint
-without a counterpart (BEAT ``Spine2``, ``Neck1``) ends up in the next mapped bone below it.
+without a counterpart (BEAT ``Spine2``, ``Neck``) ends up in the next mapped bone below it
+(``UpperChest``, ``Neck`` = BEAT ``Neck1``).
 Unmapped target joints keep their rest local rotation. The hips move by the source hips' displacement
 scaled by the ratio of hip heights (which also converts units).
 
@@ -29,7 +30,7 @@ import numpy as np
 
 from studyapp.errors import InputError
 from studyapp.motion.fk import global_transforms, rest_global_transforms
-from studyapp.motion.humanoid import BUILTIN_MAPS, HUMANOID_BONES, HUMANOID_PARENT, REQUIRED_BONES
+from studyapp.motion.humanoid import BUILTIN_MAPS, HUMANOID_BONES, REQUIRED_BONES
 from studyapp.motion.rotations import matrix_to_quat, quat_between, quat_inverse, quat_multiply, quat_rotate
 from studyapp.motion.skeleton import Motion, Skeleton
 
@@ -66,13 +67,18 @@ def _strip_namespace(name: str) -> str:
 
 
 def _apply_map(names: tuple[str, ...], table: dict[str, str]) -> dict[str, str]:
-    """Match a built-in table to joint names: exact (case-insensitive) first, then without namespace prefix."""
+    """Match a built-in table to joint names: exact (case-insensitive) first, then without namespace prefix.
+
+    Joints are visited deepest-first (reverse depth-first order), so when a table names one bone for
+    two joints of a chain (BEAT ``Neck``, ``Neck1``) the upper joint gets it and the lower one's
+    rotation is composed into it by :func:`retarget`.
+    """
     exact = {k.lower(): v for k, v in table.items()}
     bare = {_strip_namespace(k).lower(): v for k, v in table.items()}
     out: dict[str, str] = {}
     used: set[str] = set()
     for pass_table, key in ((exact, str.lower), (bare, lambda n: _strip_namespace(n).lower())):
-        for n in names:
+        for n in reversed(names):
             if n in out:
                 continue
             bone = pass_table.get(key(n))
@@ -254,4 +260,4 @@ def retarget(
         # hips' parent (e.g. an armature node) is never animated: express the point in its rest frame
         pg = t_g0[ph]
         trans[:, th] = (hips_world - pg[:3, 3]) @ np.linalg.inv(pg[:3, :3]).T
-    return Motion(target, source.fps, rot, trans, source=source.source)
+    return Motion(target, float(source.fps), rot, trans, source=source.source)

@@ -18,10 +18,8 @@ array([0., 1., 0.])
 """
 from __future__ import annotations
 
-import warnings
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp  # noqa: F401  (Slerp re-exported for callers)
 
 __all__ = [
     "REPRESENTATIONS",
@@ -63,6 +61,13 @@ REPRESENTATIONS: dict[str, int] = {
     "sixd": 6,
     "matrix": 9,
 }
+
+
+def _rotation_class():
+    # scipy.spatial takes ~0.3 s to import; only the matrix / rotation-vector conversions need it
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
 
 
 def _check_order(order: str) -> str:
@@ -117,9 +122,23 @@ def euler_to_quat(angles: np.ndarray, order: str, degrees: bool = True) -> np.nd
     a = np.asarray(angles, dtype=np.float64)
     if a.shape[-1:] != (3,):
         raise ValueError(f"expected trailing shape (3,), got {a.shape}")
-    half = np.radians(a) * 0.5 if degrees else a * 0.5
-    q = quat_multiply(_axis_quat(o[0], half[..., 0]), _axis_quat(o[1], half[..., 1]))
-    q = quat_multiply(q, _axis_quat(o[2], half[..., 2]))
+    half = a * (np.pi / 360.0) if degrees else a * 0.5
+    if o[0] == o[2]:
+        q = quat_multiply(_axis_quat(o[0], half[..., 0]), _axis_quat(o[1], half[..., 1]))
+        q = quat_multiply(q, _axis_quat(o[2], half[..., 2]))
+    else:
+        # closed form of q_i(a) * q_j(b) * q_k(c); s flips the cross terms for odd permutations
+        i, j, k = ("XYZ".index(c) for c in o)
+        s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+        c, sn = np.cos(half), np.sin(half)
+        ca, cb, cc = c[..., 0], c[..., 1], c[..., 2]
+        sa, sb, sc = sn[..., 0], sn[..., 1], sn[..., 2]
+        cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
+        q = np.empty(a.shape[:-1] + (4,))
+        q[..., i] = sacb * cc + s * casb * sc
+        q[..., j] = casb * cc - s * sacb * sc
+        q[..., k] = cacb * sc + s * sasb * cc
+        q[..., 3] = cacb * cc - s * sasb * sc
     # scipy's convention (w >= 0) keeps results comparable with Rotation.as_quat
     return np.where(q[..., 3:4] < 0, -q, q)
 
@@ -127,31 +146,33 @@ def euler_to_quat(angles: np.ndarray, order: str, degrees: bool = True) -> np.nd
 def quat_to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     """Quaternions ``(..., 4)`` to intrinsic Euler angles ``(..., 3)`` in ``order``'s axis order.
 
-    Tait-Bryan orders (three different axes, all BVH orders) are decomposed here in closed form; the
-    middle angle is in ``[-90, 90]`` degrees. At gimbal lock the decomposition is not unique: the
-    third angle is set to zero and the first one absorbs the rest, so the angles still reproduce
-    the rotation. Proper Euler orders (``"ZXZ"``) go through scipy.
+    Closed form from the rotation matrix. Tait-Bryan orders (three different axes, all BVH orders)
+    give a middle angle in ``[-90, 90]`` degrees, proper Euler orders (``"ZXZ"``) one in ``[0, 180]``.
+    At gimbal lock the decomposition is not unique: the third angle is set to zero and the first
+    absorbs the rest, so the angles still reproduce the rotation (to about 1e-8).
     """
     o = _check_order(order)
     q = np.asarray(q, dtype=np.float64)
     if q.shape[-1:] != (4,):
         raise ValueError(f"expected trailing shape (4,), got {q.shape}")
-    if o[0] == o[2]:
-        flat, lead = _flat(q, (4,))
-        if flat.shape[0] == 0:
-            return np.zeros(lead + (3,))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            e = Rotation.from_quat(flat).as_euler(o, degrees=degrees)
-        return e.reshape(lead + (3,))
-    i, j, k = ("XYZ".index(c) for c in o)
+    i, j = "XYZ".index(o[0]), "XYZ".index(o[1])
+    k = 3 - i - j
     s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
     m = quat_to_matrix(q)
-    cos_b = np.hypot(m[..., i, i], m[..., i, j])
-    b = np.arctan2(s * m[..., i, k], cos_b)
-    locked = cos_b < 1e-9
-    a = np.where(locked, np.arctan2(s * m[..., k, j], m[..., j, j]), np.arctan2(-s * m[..., j, k], m[..., k, k]))
-    c = np.where(locked, 0.0, np.arctan2(-s * m[..., i, j], m[..., i, i]))
+    if o[0] != o[2]:
+        sin_b_abs = np.hypot(m[..., i, i], m[..., i, j])  # |cos b| for Tait-Bryan
+        b = np.arctan2(s * m[..., i, k], sin_b_abs)
+        free_a = np.arctan2(-s * m[..., j, k], m[..., k, k])
+        free_c = np.arctan2(-s * m[..., i, j], m[..., i, i])
+    else:
+        sin_b_abs = np.hypot(m[..., i, j], m[..., i, k])
+        b = np.arctan2(sin_b_abs, m[..., i, i])
+        free_a = np.arctan2(m[..., j, i], -s * m[..., k, i])
+        free_c = np.arctan2(m[..., i, j], s * m[..., i, k])
+    # below ~sqrt(machine eps) the two free angles are ill-conditioned: treat as locked
+    locked = sin_b_abs < 1e-8
+    a = np.where(locked, np.arctan2(s * m[..., k, j], m[..., j, j]), free_a)
+    c = np.where(locked, 0.0, free_c)
     out = np.stack([a, b, c], axis=-1)
     return np.degrees(out) if degrees else out
 
@@ -191,7 +212,7 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     flat, lead = _flat(m, (3, 3))
     if flat.shape[0] == 0:
         return np.zeros(lead + (4,))
-    return Rotation.from_matrix(flat).as_quat(canonical=True).reshape(lead + (4,))
+    return _rotation_class().from_matrix(flat).as_quat(canonical=True).reshape(lead + (4,))
 
 
 def axis_angle_to_quat(v: np.ndarray) -> np.ndarray:
@@ -199,7 +220,7 @@ def axis_angle_to_quat(v: np.ndarray) -> np.ndarray:
     flat, lead = _flat(v, (3,))
     if flat.shape[0] == 0:
         return np.zeros(lead + (4,))
-    return Rotation.from_rotvec(flat).as_quat().reshape(lead + (4,))
+    return _rotation_class().from_rotvec(flat).as_quat().reshape(lead + (4,))
 
 
 def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
@@ -207,7 +228,7 @@ def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
     flat, lead = _flat(q, (4,))
     if flat.shape[0] == 0:
         return np.zeros(lead + (3,))
-    return Rotation.from_quat(flat).as_rotvec().reshape(lead + (3,))
+    return _rotation_class().from_quat(flat).as_rotvec().reshape(lead + (3,))
 
 
 def sixd_to_matrix(d6: np.ndarray) -> np.ndarray:

@@ -100,7 +100,9 @@ class Avatar:
         self.joints = np.ascontiguousarray(self.joints, np.uint16).reshape(v, 4)
         w = np.asarray(self.weights, np.float32).reshape(v, 4)
         s = w.sum(axis=1, keepdims=True)
-        self.weights = np.ascontiguousarray(np.where(s > 0, w / np.where(s > 0, s, 1), [[1, 0, 0, 0]]), np.float32)
+        if np.abs(s - 1).max(initial=0) > 1e-5:  # normalise, but leave normalised weights bit-exact
+            w = np.where(s > 0, w / np.where(s > 0, s, 1), [[1, 0, 0, 0]])
+        self.weights = np.ascontiguousarray(w, np.float32)
         self.inverse_bind = np.ascontiguousarray(self.inverse_bind, np.float32).reshape(-1, 4, 4)
         self.morph_names = tuple(self.morph_names)
         m = len(self.morph_names)
@@ -498,15 +500,20 @@ def _face_features(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _head_grid() -> tuple[np.ndarray, np.ndarray]:
     """Longitudes and latitudes of the head surface: dense over the face, extra rows at the mouth slit."""
-    lon_front = np.radians(np.arange(-62, 62.01, 1.7))
-    lon_back = np.radians(np.linspace(62, 298, 26)[1:-1])
+    # about 2 degrees (3 mm) over the eyes, nose and mouth, coarser towards the ears and the back
+    lon_mid = np.arange(-26, 26.01, 2.0)
+    lon_side = np.arange(29.5, 62.01, 4.0)
+    lon_front = np.radians(np.concatenate([-lon_side[::-1], lon_mid, lon_side]))
+    lon_back = np.radians(np.linspace(62, 298, 18)[1:-1])
     lon = np.concatenate([lon_front, lon_back])
     lon = np.where(lon > np.pi, lon - 2 * np.pi, lon)
     order = np.argsort(np.mod(lon + np.pi, 2 * np.pi))
     lon = lon[order]
     lat = list(np.radians(np.linspace(-89, -75, 3)))
-    lat += list(np.radians(np.arange(-72, 42, 1.45)))
-    lat += list(np.radians(np.linspace(45, 89, 13)))
+    lat += list(np.radians(np.arange(-72, -50, 3.0)))
+    lat += list(np.radians(np.arange(-50, 14, 1.6)))
+    lat += list(np.radians(np.arange(14, 44, 3.0)))
+    lat += list(np.radians(np.linspace(47, 89, 9)))
     lat = np.array(sorted(lat))
     # the mouth slit: five rows packed together at the lip line (they spread when the jaw opens)
     b = _HEAD_R[1]
@@ -906,19 +913,20 @@ def _build_body(mb: _MeshBuilder) -> None:
     spine_bones = ["Hips", "Spine", "Chest", "UpperChest", "Neck", "LeftShoulder", "RightShoulder"]
     # torso: sections from the crotch to the base of the neck (y, half width, half depth, z centre)
     prof = np.array([
-        [0.800, 0.060, 0.050, 0.000],
-        [0.860, 0.140, 0.085, 0.000],
+        [0.790, 0.100, 0.070, 0.000],
+        [0.850, 0.155, 0.090, 0.000],
         [0.930, 0.168, 0.100, -0.004],
         [0.990, 0.165, 0.098, -0.002],
         [1.060, 0.145, 0.092, 0.004],
         [1.120, 0.140, 0.094, 0.010],
         [1.190, 0.148, 0.100, 0.014],
         [1.260, 0.158, 0.106, 0.014],
-        [1.320, 0.168, 0.104, 0.008],
-        [1.370, 0.178, 0.094, -0.002],
-        [1.405, 0.170, 0.080, -0.010],
-        [1.440, 0.120, 0.065, -0.016],
-        [1.470, 0.062, 0.052, -0.018],
+        [1.320, 0.170, 0.104, 0.008],
+        [1.380, 0.182, 0.096, -0.002],
+        [1.425, 0.178, 0.084, -0.010],
+        [1.455, 0.150, 0.072, -0.014],
+        [1.478, 0.095, 0.060, -0.016],
+        [1.495, 0.062, 0.052, -0.018],
     ])
     ys = np.linspace(prof[0, 0], prof[-1, 0], 34)
     hw = np.interp(ys, prof[:, 0], prof[:, 1])
@@ -933,14 +941,14 @@ def _build_body(mb: _MeshBuilder) -> None:
         v[:, 2] += 0.010 * _gauss((x - sx * 0.065) ** 2 + (y - 1.27) ** 2 * 1.5, 0.04) * (z > 0)
         v[:, 2] -= 0.008 * _gauss((x - sx * 0.07) ** 2 + (y - 1.30) ** 2, 0.04) * (z < 0)
     # trapezius slopes from the neck down to the shoulders
-    top = _smoothstep(1.36, 1.46, y)
-    v[:, 1] -= 0.025 * top * _smoothstep(0.03, 0.17, np.abs(x))
+    top = _smoothstep(1.40, 1.49, y)
+    v[:, 1] -= 0.030 * top * _smoothstep(0.04, 0.16, np.abs(x))
     col = np.where((v[:, 1] < 1.02)[:, None], TROUSERS, SHIRT)
     belt = np.abs(v[:, 1] - 1.02) < 0.012
     col[belt] = TROUSERS * 0.6
     # collar: skin at the neckline
     # a soft round collar: skin shows in a small curve below the neck
-    collar = (_smoothstep(1.405, 1.435, v[:, 1] + 0.35 * v[:, 0] ** 2 / 0.06) * _smoothstep(0.0, 0.03, v[:, 2]))
+    collar = _smoothstep(0.0, 0.010, v[:, 1] - (1.440 + 6.0 * v[:, 0] ** 2)) * _smoothstep(0.0, 0.03, v[:, 2])
     col = col * (1 - collar[:, None]) + SKIN * collar[:, None]
     bias = {"LeftShoulder": 1.25, "RightShoulder": 1.25, "Neck": 1.3}
     mb.add(v, f, col, MAT_CLOTH, bones=spine_bones + ["LeftUpperArm", "RightUpperArm"],
@@ -954,14 +962,14 @@ def _build_body(mb: _MeshBuilder) -> None:
     # arms: one tube from the shoulder to the wrist (sleeve), the hand separately
     for side, sx in (("Left", 1), ("Right", -1)):
         a, e, w = P(f"{side}UpperArm"), P(f"{side}LowerArm"), P(f"{side}Hand")
-        sh = a + np.array([-sx * 0.03, -0.008, 0.0])
+        sh = a + np.array([-sx * 0.03, -0.012, 0.0])
         s = np.linspace(0, 1, 30)
         upper_len = np.linalg.norm(e - sh)
         total = upper_len + np.linalg.norm(w - e)
         d = s * total
         path = np.where((d < upper_len)[:, None], sh + (e - sh) * (d / upper_len)[:, None],
                         e + (w - e) * ((d - upper_len) / (total - upper_len))[:, None])
-        ru = np.interp(s, [0, 0.08, 0.25, 0.5, 0.56, 0.75, 1.0], [0.044, 0.047, 0.044, 0.037, 0.038, 0.035, 0.026])
+        ru = np.interp(s, [0, 0.08, 0.25, 0.5, 0.56, 0.75, 1.0], [0.040, 0.045, 0.043, 0.037, 0.038, 0.035, 0.026])
         rs = np.interp(s, [0, 0.08, 0.25, 0.5, 0.56, 0.75, 1.0], [0.046, 0.048, 0.042, 0.036, 0.039, 0.036, 0.030])
         v, f = _tube(path, rs, ru, [0, 0, 1.0], n_around=22, cap_start=True, cap_end=True)
         col = np.tile(SHIRT, (len(v), 1))

@@ -61,15 +61,17 @@ class Camera:
 
 #: Smallest box always shown (metres, around an avatar standing at the origin): head to upper thighs,
 #: hands at a relaxed width. Gestures wider or higher than this enlarge the frame for all slots alike.
-MIN_BOX = (np.array([-0.42, 0.62, -0.2]), np.array([0.42, 1.90, 0.2]))
+MIN_BOX = (np.array([-0.42, 0.62, -0.2]), np.array([0.42, 1.80, 0.2]))
 
 
 def fit_camera(points: np.ndarray, aspect: float, fov_y: float = 24.0, margin: float = 0.06,
-               min_box: tuple[np.ndarray, np.ndarray] = MIN_BOX, percentile: float = 99.5) -> Camera:
+               min_box: tuple[np.ndarray, np.ndarray] = MIN_BOX, percentile: float = 99.5,
+               top_reserve: float = 0.0) -> Camera:
     """A front camera (slightly above chest height) that shows every point, with ``margin`` metres to spare.
 
     ``points`` is ``(N, 3)`` world positions (all slots, all frames). Extremes beyond the ``percentile``
-    are ignored so one glitching frame cannot shrink every avatar.
+    are ignored so one glitching frame cannot shrink every avatar. ``top_reserve`` keeps that fraction of
+    the frame height free at the top (for slot labels).
     """
     pts = np.asarray(points, np.float64).reshape(-1, 3)
     if len(pts):
@@ -83,6 +85,8 @@ def fit_camera(points: np.ndarray, aspect: float, fov_y: float = 24.0, margin: f
         lo, hi = min_box
     lo = lo - margin
     hi = hi + margin
+    hi = hi.copy()
+    hi[1] += (hi[1] - lo[1]) * top_reserve / max(1e-6, 1 - top_reserve)
     half_w = max(abs(lo[0]), abs(hi[0]))
     half_h = (hi[1] - lo[1]) / 2
     tan_y = np.tan(np.radians(fov_y) / 2)

@@ -8,6 +8,7 @@ from studyapp.render.avatar import Avatar
 
 MORPH_TEX_W = 2048  # must match MORPH_TEX_W in shaders/skinned.vert
 MAX_ACTIVE_MORPHS = 52  # size of the u_morph_ids / u_morph_w arrays in shaders/skinned.vert
+MAX_BONES = 256  # size of the Bones uniform block in shaders/skinned.vert (16 KiB: every GL 3.3 driver)
 
 
 def morph_texture_data(deltas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -79,7 +80,7 @@ class AvatarMesh:
         else:
             self.texture = ctx.texture((1, 1), 4, bytes([255, 255, 255, 255]))
         self.has_texture = avatar.texture is not None and avatar.uv is not None
-        self.palette = PaletteTexture(ctx, self.n_joints, palette_rows)
+        self.palette = PaletteBuffers(ctx, self.n_joints, palette_rows)
         self._bare_vao: moderngl.VertexArray | None = None
 
     @staticmethod
@@ -107,26 +108,40 @@ class AvatarMesh:
         self.palette.release()
 
 
-class PaletteTexture:
-    """Bone palettes of up to ``rows`` slots in one float texture (texel 4*j+k = column k of joint j)."""
+class PaletteBuffers:
+    """Bone palettes of up to ``rows`` slots, one uniform buffer each (bound to the ``Bones`` block).
+
+    A uniform block beats a float texture here: llvmpipe gathers uniforms much faster than it runs
+    ``texelFetch`` in the vertex shader, and every GPU handles 256 std140 mat4 (16 KiB).
+    """
 
     def __init__(self, ctx: moderngl.Context, n_joints: int, rows: int = 3) -> None:
+        if n_joints > MAX_BONES:
+            raise ValueError(f"avatar has {n_joints} joints; the renderer supports at most {MAX_BONES}")
         self.n_joints = n_joints
         self.rows = rows
-        self.texture = ctx.texture((4 * n_joints, rows), 4, dtype="f4")
-        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.buffers = [ctx.buffer(reserve=64 * n_joints, dynamic=True) for _ in range(rows)]
         self._data = np.zeros((rows, n_joints, 4, 4), np.float32)
         self._data[:] = np.eye(4, dtype=np.float32)
+        self._dirty = [True] * rows
 
     def set_row(self, row: int, palette: np.ndarray) -> None:
-        # numpy matrices are row-major; GLSL mat4(c0, c1, c2, c3) takes columns
+        # numpy matrices are row-major; std140 mat4 arrays store columns
         self._data[row] = np.swapaxes(palette, -1, -2)
+        self._dirty[row] = True
 
     def upload(self) -> None:
-        self.texture.write(self._data.tobytes())
+        for row, buf in enumerate(self.buffers):
+            if self._dirty[row]:
+                buf.write(self._data[row].tobytes())
+                self._dirty[row] = False
+
+    def bind(self, row: int, binding: int = 0) -> None:
+        self.buffers[row].bind_to_uniform_block(binding)
 
     def release(self) -> None:
-        self.texture.release()
+        for b in self.buffers:
+            b.release()
 
 
 def rasterize_label(text: str, height_px: int) -> np.ndarray:
@@ -144,7 +159,7 @@ def rasterize_label(text: str, height_px: int) -> np.ndarray:
     fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, facecolor="black")
     canvas = FigureCanvasAgg(fig)
     fig.text(0.5, 0.5, text, color="white", ha="center", va="center", fontsize=height_px * 0.62 * 72 / dpi,
-             family="DejaVu Sans", weight="semibold")
+             family="DejaVu Sans", weight="bold")
     canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())
     return np.ascontiguousarray(rgba[..., 0])

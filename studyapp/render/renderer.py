@@ -1,9 +1,10 @@
 """Draw a trial: up to three skinned, morphing avatars side by side, identically framed and lit.
 
-Per frame the CPU only blends two precomputed palettes per slot, writes one small float texture (all
-slots' palettes) and sets the handful of non-zero morph weights; skinning and morphing run in the vertex
+Per frame the CPU only blends two precomputed palettes per slot, writes them to three small uniform
+buffers and sets the handful of non-zero morph weights; skinning and morphing run in the vertex
 shader. Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
-caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's).
+caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's). On software
+rasterisers (llvmpipe) an FXAA pass replaces MSAA by default (see :class:`Renderer`).
 
 Example (headless)::
 
@@ -48,19 +49,44 @@ def slot_viewports(viewport: tuple[int, int, int, int], n: int) -> list[tuple[in
     return [(edges[i], y, edges[i + 1] - edges[i], h) for i in range(n)]
 
 
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
+
+
+def is_software_renderer(ctx: moderngl.Context) -> bool:
+    """True for CPU rasterisers (Mesa llvmpipe/softpipe, SwiftShader), where MSAA is very expensive."""
+    name = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(s in name for s in SOFTWARE_RENDERERS)
+
+
 class Renderer:
     """Draws :class:`~studyapp.render.scene.TrialScene` frames into any framebuffer of ``ctx``.
 
-    ``samples`` is the MSAA sample count (0 draws straight into the target without anti-aliasing).
+    Parameters
+    ----------
+    samples:
+        MSAA sample count (0: no multisampling).
+    software_aa:
+        What to do on a software rasteriser (llvmpipe), where multisampling costs about three times the
+        frame time: ``"fxaa"`` (default) replaces MSAA by one FXAA pass, ``"msaa"`` keeps MSAA anyway.
+        On GPUs MSAA is always used as asked.
+
+    ``antialiasing`` tells which method is in use: ``"msaa"``, ``"fxaa"`` or ``"none"``.
     """
 
-    def __init__(self, ctx: moderngl.Context, samples: int = 4) -> None:
+    def __init__(self, ctx: moderngl.Context, samples: int = 4, software_aa: str = "fxaa") -> None:
         self.ctx = ctx
-        self.samples = min(int(samples), ctx.max_samples) if samples else 0
+        if software_aa not in ("fxaa", "msaa"):
+            raise ValueError(f"software_aa must be 'fxaa' or 'msaa', got {software_aa!r}")
+        samples = min(int(samples), ctx.max_samples) if samples else 0
+        self.fxaa = bool(samples) and software_aa == "fxaa" and is_software_renderer(ctx)
+        self.samples = 0 if self.fxaa else samples
+        self.antialiasing = "fxaa" if self.fxaa else ("msaa" if self.samples else "none")
         vert = read_shader("fullscreen.vert")
         self.prog = ctx.program(vertex_shader=read_shader("skinned.vert"), fragment_shader=read_shader("skinned.frag"))
         self.bg_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("background.frag"))
         self.blit_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("blit.frag"))
+        self.fxaa_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa.frag"))
+        self._fxaa_vao = ctx.vertex_array(self.fxaa_prog, [])
         self.floor_prog = ctx.program(vertex_shader=read_shader("floor.vert"), fragment_shader=read_shader("floor.frag"))
         self.label_prog = ctx.program(vertex_shader=read_shader("label.vert"), fragment_shader=read_shader("label.frag"))
         self._empty_vao = ctx.vertex_array(self.bg_prog, [])
@@ -72,7 +98,7 @@ class Renderer:
         self.bg_prog["u_top"].value = BACKGROUND_TOP
         self.bg_prog["u_bottom"].value = BACKGROUND_BOTTOM
         self.floor_prog["u_floor"].value = FLOOR_COLOR
-        self.prog["u_palette"].value = 0
+        self.prog["Bones"].binding = 0
         self.prog["u_morph_pos"].value = 1
         self.prog["u_morph_nrm"].value = 2
         self.prog["u_base_color"].value = 3
@@ -108,7 +134,7 @@ class Renderer:
     def _ensure_buffers(self, size: tuple[int, int]) -> None:
         if self._size == size:
             return
-        for fb in (self._msaa, self._resolve):
+        for fb in {id(f): f for f in (self._msaa, self._resolve) if f is not None}.values():
             if fb is not None:
                 for att in list(fb.color_attachments) + [fb.depth_attachment]:
                     if att is not None:
@@ -118,15 +144,23 @@ class Renderer:
         if self.samples:
             self._msaa = ctx.framebuffer([ctx.renderbuffer(size, 4, samples=self.samples)],
                                          ctx.depth_renderbuffer(size, samples=self.samples))
+            self._resolve = ctx.framebuffer([ctx.texture(size, 4)])
         else:
-            self._msaa = ctx.framebuffer([ctx.renderbuffer(size, 4)], ctx.depth_renderbuffer(size))
-        self._resolve = ctx.framebuffer([ctx.texture(size, 4)])
+            # single-sampled: draw straight into a texture that FXAA or the blit reads
+            color = ctx.texture(size, 4)
+            color.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            color.repeat_x = color.repeat_y = False
+            self._msaa = ctx.framebuffer([color], ctx.depth_renderbuffer(size))
+            self._resolve = self._msaa
         self._size = size
 
     # -- drawing --------------------------------------------------------------------------------
     def draw_trial(self, scene, t: float, target_fbo: moderngl.Framebuffer,
-                   viewport: tuple[int, int, int, int] | None = None) -> None:
-        """Draw ``scene`` at ``t`` seconds into ``viewport`` (x, y, w, h; default: all) of ``target_fbo``."""
+                   viewport: tuple[int, int, int, int] | None = None, *, figures: bool = True) -> None:
+        """Draw ``scene`` at ``t`` seconds into ``viewport`` (x, y, w, h; default: all) of ``target_fbo``.
+
+        ``figures=False`` draws only the backdrop, floor and labels (what a frame looks like without avatars).
+        """
         if viewport is None:
             viewport = (0, 0, *target_fbo.size)
         x, y, w, h = (int(v) for v in viewport)
@@ -134,25 +168,36 @@ class Renderer:
         fbo = self._msaa
         fbo.use()
         fbo.clear(*BACKGROUND_BOTTOM, 1.0, depth=1.0)
-        self._draw_slots(scene, t, (0, 0, w, h))
-        self._present(target_fbo, (x, y, w, h))
+        self._draw_slots(scene, t, (0, 0, w, h), figures)
+        self._present(target_fbo, (x, y, w, h), scene.n_slots)
 
-    def _present(self, target: moderngl.Framebuffer, viewport: tuple[int, int, int, int]) -> None:
+    def _present(self, target: moderngl.Framebuffer, viewport: tuple[int, int, int, int], n_slots: int = 1) -> None:
         x, y, w, h = viewport
         ctx = self.ctx
-        if (x, y) == (0, 0) and tuple(target.size) == (w, h):
+        if not self.fxaa and (x, y) == (0, 0) and tuple(target.size) == (w, h):
             ctx.copy_framebuffer(target, self._msaa)  # resolves MSAA in one blit
             return
-        ctx.copy_framebuffer(self._resolve, self._msaa)
+        if self.samples:
+            ctx.copy_framebuffer(self._resolve, self._msaa)
         target.use()
         target.viewport = (x, y, w, h)
         ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
         self._resolve.color_attachments[0].use(0)
-        self.blit_prog["u_image"].value = 0
-        self._blit_vao.render(moderngl.TRIANGLES, vertices=3)
+        if self.fxaa:
+            self.fxaa_prog["u_image"].value = 0
+            self.fxaa_prog["u_texel"].value = (1.0 / w, 1.0 / h)
+            # one pass per slot, clamped to it, so one slot's edges never bleed into the next
+            for sx, _, sw, _ in slot_viewports((0, 0, w, h), n_slots):
+                target.viewport = (x + sx, y, sw, h)
+                self.fxaa_prog["u_rect"].value = (sx / w, 0.0, sw / w, 1.0)
+                self.fxaa_prog["u_bounds"].value = ((sx + 0.5) / w, 0.5 / h, (sx + sw - 0.5) / w, 1 - 0.5 / h)
+                self._fxaa_vao.render(moderngl.TRIANGLES, vertices=3)
+        else:
+            self.blit_prog["u_image"].value = 0
+            self._blit_vao.render(moderngl.TRIANGLES, vertices=3)
         target.viewport = (0, 0, *target.size)
 
-    def _draw_slots(self, scene, t: float, viewport: tuple[int, int, int, int]) -> None:
+    def _draw_slots(self, scene, t: float, viewport: tuple[int, int, int, int], figures: bool = True) -> None:
         ctx = self.ctx
         fbo = self._msaa
         vps = slot_viewports(viewport, scene.n_slots)
@@ -193,15 +238,15 @@ class Renderer:
             ctx.enable(moderngl.DEPTH_TEST)
             mesh = meshes[i]
             self._set_morphs(frames[i])
-            self.prog["u_slot_row"].value = i
             self.prog["u_morph_rows"].value = mesh.morph_rows
             self.prog["u_has_texture"].value = mesh.has_texture
             self.prog["u_base_factor"].value = tuple(float(v) for v in scene.avatars[i].base_color_factor)
-            mesh.palette.texture.use(0)
+            mesh.palette.bind(i, 0)
             mesh.morph_pos.use(1)
             mesh.morph_nrm.use(2)
             mesh.texture.use(3)
-            mesh.vao.render(moderngl.TRIANGLES)
+            if figures:
+                mesh.vao.render(moderngl.TRIANGLES)
             ctx.disable(moderngl.DEPTH_TEST)
             if scene.labels:
                 self._draw_label(scene.labels[i], vp)
@@ -253,7 +298,7 @@ class Renderer:
             fbo.viewport = vp
             vao.render(moderngl.TRIANGLES)
         self.ctx.disable(moderngl.DEPTH_TEST)
-        self._present(target_fbo, (0, 0, w, h))
+        self._present(target_fbo, (0, 0, w, h), scene.n_slots)
 
     def release(self) -> None:
         for mesh in self._meshes.values():

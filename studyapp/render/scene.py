@@ -69,7 +69,12 @@ class TrialScene:
         return max(s.duration for s in self.slots)
 
 
-def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar: Avatar, aspect: float) -> Camera:
+#: Fraction of the frame height kept free above the heads when slot labels are shown.
+LABEL_SPACE = 0.09
+
+
+def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar: Avatar, aspect: float,
+                 top_reserve: float = 0.0) -> Camera:
     """The shared camera for these slots: fitted to every joint of every slot over the whole clip.
 
     Joint positions are padded with the avatar's reach beyond its joints (head top, fingertips) so the
@@ -86,7 +91,7 @@ def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar:
     # the head top and the fingertips stick out beyond the joints
     extra = pts.copy()
     extra[:, 1] += pad_top
-    return fit_camera(np.concatenate([pts, extra]), aspect)
+    return fit_camera(np.concatenate([pts, extra]), aspect, top_reserve=top_reserve)
 
 
 def make_scene(slots, avatar: Avatar | tuple[Avatar, ...], labels: tuple[str, ...] | None = None,
@@ -96,7 +101,7 @@ def make_scene(slots, avatar: Avatar | tuple[Avatar, ...], labels: tuple[str, ..
     avatars = tuple(avatar) if isinstance(avatar, (tuple, list)) else (avatar,) * len(slots)
     if aspect is None:
         aspect = THREE_SLOT_ASPECT if len(slots) == 3 else (1280 / len(slots)) / 720
-    camera = frame_camera(slots, avatars[0], aspect)
+    camera = frame_camera(slots, avatars[0], aspect, top_reserve=LABEL_SPACE if labels else 0.0)
     return TrialScene(slots=slots, avatars=avatars, labels=labels, camera=camera)
 
 

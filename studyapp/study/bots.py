@@ -39,7 +39,7 @@ def _criterion_ids(criteria: Sequence[Any]) -> list[str]:
 def _ranks_from_scores(scores: Sequence[float]) -> dict[int, int]:
     # Higher score -> better (lower) rank; equal scores keep slot order so the result is deterministic.
     order = sorted(range(3), key=lambda i: (-float(scores[i]), i))
-    return {slot: pos + 1 for pos, slot in enumerate(order)}
+    return {slot: order.index(slot) + 1 for slot in range(3)}
 
 
 def choose_ranking(

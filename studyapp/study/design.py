@@ -30,7 +30,7 @@ import string
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from studyapp.errors import InputError
 
@@ -378,11 +378,19 @@ class _Collector:
             if len(parts) == 1:
                 return start + 1
             rest = parts[1:]
-        name = rest[0][0]
-        for i in range(start, end):
-            if re.match(rf"^\s*\[?\s*[\w.\-\[]*?{re.escape(name)}\s*[=\]]", self.lines[i]):
-                return i + 1
-        return start + 1
+            # The table ends at the next header that is not one of its own sub-tables.
+            nxt = [i for i, ln in enumerate(self.lines) if i > start and re.match(r"^\s*\[", ln)
+                   and not re.match(rf"^\s*\[\s*{re.escape(head)}\.", ln)]
+            end = nxt[0] if nxt else end
+        found = start
+        for name, _ in rest:  # each deeper part is searched for after the line of the one before
+            for i in range(found, end):
+                if re.match(rf"^\s*\[?\s*[\w.\-\[]*?{re.escape(name)}\s*[=\]]", self.lines[i]):
+                    found = i
+                    break
+            else:
+                break
+        return found + 1
 
 
 def _did_you_mean(word: str, options: Sequence[str]) -> str:
@@ -399,7 +407,12 @@ def _check_table(col: _Collector, table: Any, schema: dict, where: str) -> dict:
     for key, value in table.items():
         kpath = f"{where}.{key}" if where else key
         if key not in schema:
-            col.add(kpath, f"unknown key {key!r}", _did_you_mean(key, schema))
+            if where and key in _TOP and not where.startswith(("conditions", "stimuli")):
+                # TOML puts every key after a [table] header into that table: a classic slip.
+                col.add(kpath, f"unknown key {key!r} in [{where.split('[')[0]}]",
+                        f"`{key}` is a top-level key: move it above the first [table] header")
+            else:
+                col.add(kpath, f"unknown key {key!r}", _did_you_mean(key, schema))
             continue
         types, _ = schema[key]
         ok = isinstance(value, types) and not (bool not in types and isinstance(value, bool))
@@ -451,7 +464,7 @@ def resolve(design: Design | Path | str, relpath: str | Path) -> Path:
     >>> resolve(Path("/studies/a.toml"), "clips/c1.wav").as_posix()
     '/studies/clips/c1.wav'
     """
-    base = Path(design.path if isinstance(design, Design) else design).resolve().parent
+    base = Path(getattr(design, "path", design)).resolve().parent
     p = Path(os.path.expanduser(str(relpath)))
     return p if p.is_absolute() else (base / p).resolve()
 
@@ -492,6 +505,8 @@ def _file_digest(path: Path) -> str:
         st = path.stat()
     except OSError:
         return "missing"
+    if not path.is_file():
+        return "not a file"
     key = (str(path), st.st_mtime_ns, st.st_size)
     if key not in _HASH_CACHE:
         h = hashlib.sha256()
@@ -555,7 +570,9 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
     # -- conditions
     conditions: list[Condition] = []
     ids_ok = [e.get("id") for _, e in conds if e.get("id")]
-    if len(conds) < 2:
+    if "conditions" not in top:
+        pass  # reported as a missing required key
+    elif len(conds) < 2:
         col.add("conditions", f"{len(conds)} condition(s) given; a comparison needs at least 2, and the "
                 "three-slot viewer needs exactly 3", "add [[conditions]] blocks until there are 3")
     elif len(conds) != 3:
@@ -584,9 +601,9 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
             col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
         if "motion" in e:
             fields = pattern_fields(e["motion"])
-            if "stimulus" not in fields:
-                col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} placeholder, so every "
-                        "stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
+            if not fields:
+                col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
+                        "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
             if not e["motion"].lower().endswith(MOTION_SUFFIXES):
                 col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
                         "convert them first (studyapp convert) or fix the pattern's extension")
@@ -606,7 +623,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
 
     # -- stimuli
     stimuli: list[Stimulus] = []
-    if not stims:
+    if "stimuli" in top and not stims:
         col.add("stimuli", "no stimuli", "add [[stimuli]] blocks with id, audio and face")
     for i, e in stims:
         key = f"stimuli[{i}]"
@@ -626,7 +643,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
                 in_rotation=bool(e.get("in_rotation", True)),
             ))
     stim_ids = [s.id for s in stimuli]
-    if stims and not any(s.in_rotation for s in stimuli) and stimuli:
+    if stimuli and not any(s.in_rotation for s in stimuli):
         col.add("stimuli", "every stimulus has in_rotation = false: there are no rated trials",
                 "set in_rotation = true (the default) on the clips to be rated")
 
@@ -744,10 +761,21 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         questionnaire=items, max_attention_failures=maxfail, seed=int(ordering.get("seed", 1)), groups=groups,
     )
     files = referenced_files(design, col)
-    if check_files and not col.problems:
+    if check_files:
         from studyapp.study.stimuli import check_stimulus_files
 
-        for key, message, fix in check_stimulus_files(design):
+        # File contents are checked even when the design has other problems, so one run reports them all.
+        # A design with problems may be only partly built; should a check trip over that, say so instead of
+        # crashing, since fixing the reported problems comes first anyway.
+        partial = bool(col.problems)
+        try:
+            found = check_stimulus_files(design)
+        except Exception as exc:
+            if not partial:
+                raise
+            found = [("", f"stimulus files not checked ({type(exc).__name__}: {exc})",
+                      "fix the problems above and validate again")]
+        for key, message, fix in found:
             col.add(key, message, fix)
     design.design_hash = _design_hash(data, {k: p for k, p in files.items()})
     return design, col.problems
@@ -771,14 +799,14 @@ def referenced_files(design: Design, col: _Collector | None = None) -> dict[str,
             files[f"conditions[{i}].model"] = model_path(design, c)
         if c.template is not None:
             files[f"conditions[{i}].template"] = resolve(design, c.template)
-        if c.motion is not None and "stimulus" in pattern_fields(c.motion):
+        if c.motion is not None and pattern_fields(c.motion):
             for s in design.stimuli:
                 try:
                     files[f"conditions[{i}].motion[{s.id}]"] = motion_path(design, c, s)
                 except (KeyError, IndexError, ValueError) as exc:
                     if col is not None:
-                        col.add(f"conditions[{i}].motion", f"pattern {c.motion!r} uses {exc} which stimulus "
-                                f"{s.id!r} has no tag for", f"add it to stimuli tags or use only {{stimulus}}")
+                        col.add(f"conditions[{i}].motion", f"pattern {c.motion!r} uses {exc} but stimulus "
+                                f"{s.id!r} has no such tag", "add the tag to that stimulus or use only {stimulus}")
     if design.avatar != "builtin":
         files["avatar.model"] = resolve(design, design.avatar)
     for k, v in design.avatar_by_speaker.items():

@@ -14,7 +14,10 @@ Trial sequence, in this order (``trial_index`` counts from 0 over all of them):
 1. practice trials, in the order of ``practice`` (marked ``is_practice``);
 2. the rotation stimuli in the row's order, with the attention checks inserted: with ``m`` rated trials
    and ``c`` checks, check ``i`` (0-based, design order) comes right after rated trial
-   ``max(1, (i + 1) * m // (c + 1))`` -- spread evenly, never before the first rated trial.
+   ``k = max(1, (i + 1) * m // (c + 1))`` -- spread evenly, never before the first rated trial. When the
+   rated trial just before or just after that place shows the check's own clip, the check moves to the
+   nearest place (``k + 1``, ``k - 1``, ``k + 2``, ...) where neither neighbour does, so a participant
+   never sees the same clip twice in a row (it stays at ``k`` if there is no such place).
 
 A ``frozen`` attention check replaces the condition in slot ``(row + i) mod 3`` by
 ``"frozen:<that condition's id>"`` (see :class:`studyapp.study.design.AttentionCheck`).
@@ -95,6 +98,24 @@ def attention_positions(n_rated: int, n_checks: int) -> list[int]:
     return [max(1, (i + 1) * n_rated // (n_checks + 1)) if n_rated else 0 for i in range(n_checks)]
 
 
+def place_check(nominal: int, order: list[str], stimulus_id: str) -> int:
+    """Rated trials before a check: ``nominal`` moved off any neighbour showing the same clip.
+
+    >>> place_check(2, ["a", "b", "c", "d"], "b"), place_check(2, ["a", "b", "c", "d"], "x")
+    (3, 2)
+    """
+    m = len(order)
+
+    def clear(k: int) -> bool:
+        return order[k - 1] != stimulus_id and (k >= m or order[k] != stimulus_id)
+
+    for delta in range(0, m + 1):
+        for k in ((nominal + delta, nominal - delta) if delta else (nominal,)):
+            if 1 <= k <= m and clear(k):
+                return k
+    return nominal
+
+
 def participant_schedule(design: Design, participant_id: str, row: int | None = None) -> list[TrialPlan]:
     """Every trial of one participant, in presentation order (see the module notes for the rules)."""
     if row is None:
@@ -120,7 +141,8 @@ def participant_schedule(design: Design, participant_id: str, row: int | None = 
     entries: list[tuple[str, tuple[str, str, str], bool, bool]] = []
     for sid, perm in zip(design.practice, practice_perms):
         entries.append((sid, arrange(perm), True, False))
-    after = attention_positions(len(order), len(design.attention_checks))
+    after = [place_check(k, order, c.stimulus)
+             for k, c in zip(attention_positions(len(order), len(design.attention_checks)), design.attention_checks)]
     for t, (sid, perm) in enumerate(zip(order, rated_perms)):
         entries.append((sid, arrange(perm), False, False))
         for i, check in enumerate(design.attention_checks):

@@ -277,6 +277,8 @@ class Session:
         self.n_trials: int = len(self.plans) - self.n_practice
         answered = db.answered_trials(self.participant_id)
         self.resumed: bool = bool(answered)
+        if answered:
+            self._check_same_schedule()
         self._pos = next((i for i, p in enumerate(self.plans) if p.trial_index not in answered), len(self.plans))
         self.session_id: int = db.start_session(self.participant_id, {**machine_basics(), "app_version": __version__})
         self.state: State = State.WELCOME
@@ -285,6 +287,19 @@ class Session:
         self._reset_trial()
 
     # ------------------------------------------------------------------ setup helpers
+    def _check_same_schedule(self) -> None:
+        # A resumed participant must see the rest of the schedule they started; if the stored answers do
+        # not match today's plan (scheduling code or design order changed), continuing would mix orders.
+        by_index = {p.trial_index: p for p in self.plans}
+        for t in self.db.trials(self.participant_id):
+            plan = by_index.get(t["trial_index"])
+            stored = (t["stimulus"], (t["slot_left"], t["slot_middle"], t["slot_right"]))
+            if plan is None or stored != (plan.stimulus_id, tuple(plan.slots)):
+                raise InputError(self.db.path, f"participant {self.participant_id}, trial {t['trial_index']}",
+                                 "the stored answer does not match this participant's schedule (was the design's "
+                                 "order or the studyapp version changed?); continue with the original version, "
+                                 "or use a new participant id")
+
     def _reset_trial(self) -> None:
         self._shown_wall: str | None = None
         self._shown_mono: float | None = None

@@ -76,13 +76,27 @@ def parse_groups(items: list[str]) -> dict[str, str]:
     return groups
 
 
+def load_design_for_run(design_path: Path, results: Path) -> Any:
+    """The design, fully validated (every stimulus file read and checked) before its first session.
+
+    Later sessions on the same results database skip re-reading the files: the design hash, which covers
+    the bytes of every referenced file, must equal the one stored with the database, so the files are
+    exactly those validated when the database was created. Resuming after a crash then takes a moment,
+    not a full validation.
+    """
+    from studyapp.study.design import load_design
+
+    if results.exists() and results.stat().st_size > 0:
+        return load_design(design_path, check_files=False)  # ResultsDB compares the hash
+    return load_design(design_path)
+
+
 def _print_saved(plan: Any) -> None:
     # Printed only after the commit returned, so the kill tests may hold the database to it.
     print(f"saved trial {plan.trial_index}", flush=True)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from studyapp.study.design import load_design
     from studyapp.study.session import prepare_participant
     from studyapp.study.storage import ResultsDB
 
@@ -101,7 +115,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             raise StudyappError("--no-render and --offscreen need a scripted participant: add --bot random|ordered|careful")
     elif args.bot:
         args.no_render = True  # a bot without a window mode: the fast session-level run
-    design = load_design(design_path)
+    design = load_design_for_run(design_path, results)
     db = ResultsDB(results, design)
     print(f"Results database: {results}", flush=True)
     finished_files: list[Path] = []
@@ -195,6 +209,8 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
     print(f"Wrote {info.path} ({info.n_files} files, {info.size_bytes / 1e6:.1f} MB)")
     print(f"Key (opaque ids -> conditions and files), keep it private: {info.key_path}")
     print(f"The key is also stored in {results}, so `studyapp merge` can map results back.")
+    for w in info.warnings:
+        print(f"warning: {w}")
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
     return 0

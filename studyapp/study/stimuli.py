@@ -59,6 +59,7 @@ class TrialMedia:
     labels: slot labels shown to the participant (``("A", "B", "C")``) or None.
     duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
     criteria: the design's criterion ids, in order (what the participant ranks the slots on).
+    name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
     """
 
     plan: TrialPlan
@@ -69,6 +70,7 @@ class TrialMedia:
     labels: tuple[str, str, str] | None
     duration_s: float
     criteria: tuple[str, ...] = ()
+    name_maps: tuple[dict[str, str], dict[str, str], dict[str, str]] = ({}, {}, {})
 
     @property
     def avatar_spec(self) -> str:
@@ -79,15 +81,35 @@ class TrialMedia:
     def slots(self) -> tuple[str, str, str]:
         return self.plan.slots
 
+    @property
+    def name_map(self) -> dict[str, str] | None:
+        """The one name map of all three slots when they agree (usual: all empty), else None: use ``name_maps``."""
+        first = self.name_maps[0]
+        return dict(first) if all(m == first for m in self.name_maps) else None
+
 
 # ---------------------------------------------------------------------------------------------------------
 # A small thread-safe LRU cache (the UI may preload the next trial on a worker thread)
 
 
+def _nbytes(value: Any) -> int:
+    """Approximate memory held by a cached value (its numpy arrays)."""
+    if isinstance(value, np.ndarray):
+        return value.nbytes
+    if isinstance(value, TrialMedia):
+        return 0  # its parts are accounted for in the file cache
+    arrays = [getattr(value, a, None) for a in ("rotations", "translations", "samples", "weights", "head_rotation")]
+    return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
+
+
 class _LRU:
-    def __init__(self, size: int) -> None:
+    """Least-recently-used cache bounded by entry count and by the bytes of the arrays it holds."""
+
+    def __init__(self, size: int, max_bytes: int) -> None:
         self.size = size
-        self._data: OrderedDict[Hashable, Any] = OrderedDict()
+        self.max_bytes = max_bytes
+        self._data: OrderedDict[Hashable, tuple[Any, int]] = OrderedDict()
+        self._bytes = 0
         self._lock = threading.Lock()
         self.hits = 0
         self.misses = 0
@@ -97,24 +119,41 @@ class _LRU:
             if key in self._data:
                 self._data.move_to_end(key)
                 self.hits += 1
-                return self._data[key]
+                return self._data[key][0]
         value = make()  # outside the lock: loading may take a while and must not block other lookups
+        weight = _nbytes(value)
         with self._lock:
             self.misses += 1
-            self._data[key] = value
+            if key in self._data:
+                self._bytes -= self._data[key][1]
+            self._data[key] = (value, weight)
             self._data.move_to_end(key)
-            while len(self._data) > self.size:
-                self._data.popitem(last=False)
+            self._bytes += weight
+            # Keep at least the newest entry, however large: the trial on screen needs it.
+            while len(self._data) > 1 and (len(self._data) > self.size or self._bytes > self.max_bytes):
+                _, (_, w) = self._data.popitem(last=False)
+                self._bytes -= w
         return value
 
     def clear(self) -> None:
         with self._lock:
             self._data.clear()
+            self._bytes = 0
             self.hits = self.misses = 0
 
+    @property
+    def n_bytes(self) -> int:
+        return self._bytes
 
-_FILES = _LRU(48)   # decoded files (audio, faces, motions, templates)
-_MEDIA = _LRU(8)    # assembled TrialMedia (the current trial, its replays, a preloaded next one)
+    def __len__(self) -> int:
+        return len(self._data)
+
+
+#: Decoded files (audio, faces, motions, templates, live model output). 48 entries cover a study of 8 clips x
+#: 3 conditions with room to spare; the byte budget keeps studies of long 120 fps clips from filling memory.
+_FILES = _LRU(48, 768 << 20)
+#: Assembled TrialMedia: the current trial, its replays, a preloaded next one.
+_MEDIA = _LRU(8, 1 << 62)
 
 
 def clear_cache() -> None:
@@ -125,8 +164,8 @@ def clear_cache() -> None:
 
 def cache_info() -> dict[str, int]:
     """Hits and misses of the file and trial caches since the last :func:`clear_cache`."""
-    return {"file_hits": _FILES.hits, "file_misses": _FILES.misses,
-            "media_hits": _MEDIA.hits, "media_misses": _MEDIA.misses}
+    return {"file_hits": _FILES.hits, "file_misses": _FILES.misses, "file_bytes": _FILES.n_bytes,
+            "files": len(_FILES), "media_hits": _MEDIA.hits, "media_misses": _MEDIA.misses}
 
 
 def _file_id(path: Path) -> tuple[str, int, int]:
@@ -254,9 +293,10 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     duration = stimulus.duration_s if stimulus.duration_s is not None else audio.duration
     face = load_stimulus_face(stimulus, duration)
     motions = tuple(slot_motion(design, cid, stimulus, duration) for cid in plan.slots)
+    maps = tuple(dict(design.condition(cid.removeprefix(FROZEN_PREFIX)).name_map) for cid in plan.slots)
     return TrialMedia(plan=plan, audio=audio, face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
-                      criteria=tuple(design.criterion_ids))
+                      criteria=tuple(design.criterion_ids), name_maps=maps)  # type: ignore[arg-type]
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -371,8 +371,15 @@ class ResultsDB:
 
         def __exit__(self, exc_type, exc, tb) -> None:
             if exc_type is None:
-                self.con.execute("COMMIT")
-            else:
+                try:
+                    self.con.execute("COMMIT")
+                    return
+                except sqlite3.Error:
+                    # e.g. disk full: leave no half-open transaction behind, then report the failure
+                    if self.con.in_transaction:
+                        self.con.execute("ROLLBACK")
+                    raise
+            if self.con.in_transaction:
                 self.con.execute("ROLLBACK")
 
     def transaction(self) -> "ResultsDB._Tx":

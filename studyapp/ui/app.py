@@ -65,11 +65,12 @@ class StudyApp:
         self.layer = ImGuiLayer(ctx)
         self.ui = Painter()
         self.ui.layer = self.layer
-        self.input = queue or InputQueue()
+        self.input = queue if queue is not None else InputQueue()
         self.input.on_focus = self._on_focus
         self.predictor = FlipPredictor(refresh_hz)
         self.slot_names = tuple(design.slot_labels) if design.slot_labels else DEFAULT_SLOT_NAMES
         self._renderer = None
+        self._scene_cache = None
         self._view: TrialView | None = None
         self._scene_req: tuple | None = None
         self._pending: list[str] = []
@@ -158,8 +159,15 @@ class StudyApp:
     def screen_key(self) -> str:
         """A name for what is on screen (screenshots, tests): ``welcome``, ``trials:ranking``, ..."""
         state = self.session.state.value
-        view = self._view if self.session.current_trial() is not None else None
+        plan = self.session.current_trial()
+        view = self._view
+        if plan is None or view is None or view.plan.trial_index != plan.trial_index:
+            view = None
+        if plan is not None and view is None:
+            return f"{state}:loading"
         if view is None:
+            if state == "env_check" and self.env_report is None:
+                return "env_check:measuring"
             return state
         if not view.loaded:
             return f"{state}:loading"
@@ -212,7 +220,11 @@ class StudyApp:
             scene, t, (x, y, w, h) = self._scene_req
             if w >= 1 and h >= 1:
                 viewport = (int(x), int(self.fb_size[1] - y - h), int(w), int(h))  # GL: origin bottom-left
-                self.renderer.draw_trial(scene, t, fbo, viewport)
+                if self._scene_cache is None:
+                    from studyapp.ui.scene_cache import SceneCache
+
+                    self._scene_cache = SceneCache(self.ctx)
+                self._scene_cache.draw(self.renderer, scene, t, fbo, viewport, self.fb_size)
                 fbo.use()
         self.ctx.viewport = (0, 0, *self.fb_size)
         self.layer.render(self.fb_size)
@@ -248,6 +260,8 @@ class StudyApp:
         view = self._view
         if view is not None and view.playing_id:
             view.stop()
+        if self._scene_cache is not None:
+            self._scene_cache.release()
         self.layer.shutdown()
 
 

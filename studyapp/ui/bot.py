@@ -74,13 +74,15 @@ class UIBot:
 
     # -- frame loop ----------------------------------------------------------------------------------
     def frame(self) -> None:
-        self.app.frame(self.target.fbo, self.size, self.t, 1.0)
-        self.frames += 1
-        self.t += 1.0 / 60.0
+        """One frame at virtual time ``t``: the clip advances first, then the frame is drawn and
+        "flipped" at that same instant (virtual time does not pass while drawing)."""
         view = self.app._view
         if view is not None and view.playing_id and not self.clock.paused:
             self.clock.advance(max(view.duration_s / FRAMES_PER_PLAY, 1.0 / 60.0))
+        self.app.frame(self.target.fbo, self.size, self.t, 1.0)
         self.app.after_flip(self.t)
+        self.frames += 1
+        self.t += 1.0 / 60.0
 
     def screenshot(self, name: str) -> np.ndarray:
         rgb = self.target.read_rgb()
@@ -118,7 +120,7 @@ class UIBot:
     def _stable(self, key: str) -> bool:
         stable = getattr(self, "_prev_key", None) == key
         self._prev_key = key
-        return stable and not key.endswith(":loading")
+        return stable and not key.endswith((":loading", ":measuring"))
 
     def close(self) -> None:
         self.app.shutdown()
@@ -138,10 +140,13 @@ class UIBot:
         w, h = self.size
 
         def step(left: int = tries) -> None:
-            _, y0, _, y1 = self._rect(key)
+            x0, y0, x1, y1 = self._rect(key)
             if left <= 0 or (y0 >= 0 and y1 <= h):
                 return
-            q.mouse_move(w / 2, h / 2)
+            # The wheel scrolls the window under the mouse: alternate between the item's edge of the
+            # screen (bottom panels) and the middle of the screen (scrolling page bodies).
+            y = min(max(y0, 2), h - 2) if left % 2 else h / 2
+            q.mouse_move(min(max((x0 + x1) / 2, 2), w - 2), y)
             q.scroll(0.0, -1.0 if y1 > h else 1.0)
             self.steps.appendleft(lambda: step(left - 1))
             self.steps.appendleft(lambda: None)

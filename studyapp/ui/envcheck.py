@@ -8,7 +8,7 @@ window call :func:`gather`, so the experimenter's pre-flight check and the in-ap
 >>> r = EnvReport(gl_renderer="llvmpipe", gl_version_code=450, refresh_hz=60.0, audio_device="NullSink",
 ...               audio_latency_ms=40.0, render_fps=45.0)
 >>> [c.status for c in evaluate(r)], verdict(evaluate(r))[0]
-(['pass', 'pass', 'pass', 'pass', 'pass'], True)
+(['pass', 'pass', 'pass', 'pass'], True)
 """
 from __future__ import annotations
 
@@ -75,8 +75,8 @@ def evaluate(r: EnvReport) -> list[Check]:
     else:
         checks.append(Check("OpenGL", "pass", f"{r.gl_renderer} (OpenGL {r.gl_version_code / 100:.1f})"))
     if r.refresh_hz is None:
-        checks.append(Check("Display", "warn", "no display found" if r.display is None
-                            else "refresh rate unknown"))
+        checks.append(Check("Display", "warn", "no display found: only offscreen runs are possible"
+                            if r.display is None else "refresh rate unknown"))
     elif r.refresh_hz < MIN_REFRESH_HZ:
         checks.append(Check("Display", "warn", f"{r.refresh_hz:.0f} Hz refresh; motion may look choppy"))
     else:
@@ -100,8 +100,6 @@ def evaluate(r: EnvReport) -> list[Check]:
         target = r.refresh_hz or 60.0
         status = "pass" if r.render_fps >= min(target, 60.0) * 0.5 else "warn"
         checks.append(Check("Rendering", status, f"{r.render_fps:.0f} fps for three avatars"))
-    checks.append(Check("Screen", "pass" if r.display else "warn",
-                        f"display {r.display}" if r.display else "no display: only offscreen runs possible"))
     return checks
 
 
@@ -157,7 +155,7 @@ def audio_facts(report: EnvReport, device: int | str | None = None, clock: Any =
         report.audio_latency_ms = round(clock.output_latency_s * 1000.0, 1)
         return
     if clock is not None:  # a SilentClock: the app already knows there is no usable output
-        report.audio_error = f"no audio output ({clock.device_name})"
+        report.audio_error = f"no sound: {getattr(clock, 'reason', clock.device_name)}"
         return
     try:
         player = AudioPlayer(device)

@@ -27,8 +27,8 @@ def ui_scale(framebuffer_size: tuple[int, int], content_scale: float = 1.0) -> f
 
     >>> ui_scale((1280, 720)), ui_scale((3840, 2160)), ui_scale((1280, 720), 2.0)
     (1.0, 3.0, 2.0)
-    >>> ui_scale((640, 360))   # small windows stay legible
-    0.8
+    >>> ui_scale((640, 360))   # small windows keep the monitor's text size (legible, may scroll)
+    1.0
     """
     w, h = framebuffer_size
     by_height = min(h / DESIGN_HEIGHT, w / (DESIGN_HEIGHT * 16 / 9) * 1.15)

@@ -51,7 +51,7 @@ class RankingState:
 
     def ranks(self) -> dict[str, dict[int, int]]:
         """``{criterion: {slot: rank 1..3}}`` for every complete criterion."""
-        return {c: {int(s): i + 1 for i, s in enumerate(p)} for c, p in self.order.items() if None not in p}
+        return {c: {s: p.index(s) + 1 for s in range(3)} for c, p in self.order.items() if None not in p}
 
     # -- edits -------------------------------------------------------------------------------------
     def drop(self, criterion: str, slot: int, place: int) -> None:

@@ -55,29 +55,35 @@ class Painter:
             self.imgui.text_colored(self.imgui.ImVec4(*color), s.replace("%", "%%"))
         self._item_rect(key)
 
-    def wrapped(self, s: str, *, key: Any = None) -> None:
+    def wrapped(self, s: str, *, key: Any = None, wrap_x: float = 0.0) -> None:
+        """Text wrapped at ``wrap_x`` (window-local x; 0: the window's right edge)."""
         self.record(s)
-        self.imgui.push_text_wrap_pos(0.0)
+        self.imgui.push_text_wrap_pos(wrap_x)
         self.imgui.text_unformatted(s)
         self.imgui.pop_text_wrap_pos()
         self._item_rect(key)
 
-    def muted(self, s: str) -> None:
+    def muted(self, s: str, *, wrap_x: float = 0.0, size: float = 1.0) -> None:
+        """Secondary text (grey), wrapped at ``wrap_x``, ``size`` times the body size."""
         self.record(s)
         imgui = self.imgui
         imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(0.70, 0.72, 0.77, 1.0))
-        imgui.push_text_wrap_pos(0.0)
+        if size != 1.0:
+            imgui.push_font(None, imgui.get_style().font_size_base * size)
+        imgui.push_text_wrap_pos(wrap_x)
         imgui.text_unformatted(s)
         imgui.pop_text_wrap_pos()
+        if size != 1.0:
+            imgui.pop_font()
         imgui.pop_style_color()
 
-    def heading(self, s: str, size: float = 1.6, *, key: Any = None) -> None:
+    def heading(self, s: str, size: float = 1.6, *, key: Any = None, wrap_x: float = 0.0) -> None:
         """Bold text ``size`` times the body size."""
         self.record(s)
         imgui = self.imgui
         font = self.layer.font_bold if self.layer else None
         imgui.push_font(font, imgui.get_style().font_size_base * size)
-        imgui.push_text_wrap_pos(0.0)
+        imgui.push_text_wrap_pos(wrap_x)
         imgui.text_unformatted(s)
         imgui.pop_text_wrap_pos()
         imgui.pop_font()

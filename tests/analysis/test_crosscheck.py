@@ -185,3 +185,38 @@ def test_participant_block_uses_mean_rank_per_participant() -> None:
                .unstack()[blocks.conditions])
     assert blocks.values == pytest.approx(by_hand.to_numpy())
     assert friedman_ranks(blocks.ranks).chi2 == pytest.approx(stats.friedmanchisquare(*by_hand.to_numpy().T).statistic)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(3, 5), st.integers(3, 25), st.integers(0, 10_000))
+def test_skillings_mack_without_missing_is_friedman_uncorrected(k: int, n: int, seed: int) -> None:
+    from results_analysis.skillings_mack import skillings_mack
+
+    values = np.random.default_rng(seed).normal(size=(n, k))  # continuous: no ties
+    sm = skillings_mack(values)
+    assert sm.statistic == pytest.approx(friedman_ranks(within_block_ranks(values), tie_correction=False).chi2,
+                                         rel=1e-9, abs=1e-9)
+    assert sm.n_missing == 0 and sm.df == k - 1
+
+
+def test_skillings_mack_on_a_balanced_incomplete_design_is_durbin() -> None:
+    """For a BIBD, Skillings-Mack reduces to Durbin's test: D = 12(t-1)/(r t (k-1)(k+1)) sum R_j^2
+    - 3 r (t-1)(k+1)/(k-1) with t treatments, blocks of size k, each treatment r times."""
+    from itertools import combinations as comb
+
+    from results_analysis.skillings_mack import skillings_mack
+
+    rng = np.random.default_rng(12)
+    t, k = 5, 3
+    design = list(comb(range(t), k)) * 2
+    values = np.full((len(design), t), np.nan)
+    for i, b in enumerate(design):
+        values[i, list(b)] = rng.normal(size=k) + 0.4 * np.array(b)
+    r = len(design) * k // t
+    rank_sums = np.zeros(t)
+    for i, b in enumerate(design):
+        rank_sums[list(b)] += stats.rankdata(values[i, list(b)])
+    durbin = 12 * (t - 1) / (r * t * (k - 1) * (k + 1)) * (rank_sums ** 2).sum() - 3 * r * (t - 1) * (k + 1) / (k - 1)
+    res = skillings_mack(values)
+    assert res.statistic == pytest.approx(durbin)
+    assert res.p == pytest.approx(stats.chi2.sf(durbin, t - 1))

@@ -149,3 +149,31 @@ def test_console_script_is_installed(tmp_path: Path) -> None:
         pytest.skip("console script not installed in this environment")
     r = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "--block" in r.stdout and "--exclude-failed-attention" in r.stdout
+
+
+def test_edge_cases_two_conditions_and_complete_ties(tmp_path: Path) -> None:
+    two = simulate_results(8, 3, conditions=["A", "B"], strengths=[3.0, 1.0], seed=2)
+    a = analyze(two, tmp_path / "two", n_boot=100)
+    rated = two[~two.is_practice & ~two.is_attention_check & (two.criterion == "realism")]
+    wide = rated.pivot(index=["participant", "trial_index"], columns="condition", values="rank")
+    # k = 2: Friedman's chi2 equals the squared sign-test z (no ties possible within a block)
+    wins = int((wide["A"] < wide["B"]).sum())
+    n = len(wide)
+    assert a.criteria["realism"].friedman.chi2 == pytest.approx((2 * wins - n) ** 2 / n)
+    tied = simulate_results(5, 2, seed=3)
+    tied["rank"] = 1.0
+    t = analyze(tied, tmp_path / "tied", n_boot=50).criteria["realism"]
+    assert t.friedman.chi2 == 0.0 and t.friedman.p == 1.0
+    assert (t.posthoc["wilcoxon_holm"]["p"] == 1.0).all()
+    assert t.bradley_terry["strength"].to_numpy() == pytest.approx(np.full(3, 1 / 3))
+    assert json.loads((tmp_path / "tied" / "stats.json").read_text())["realism"]["chi2"] == 0.0
+
+
+def test_package_never_imports_studyapp(tmp_path: Path) -> None:
+    code = ("import sys; sys.modules['studyapp'] = None\n"
+            "from results_analysis import analyze, simulate_results\n"
+            f"analyze(simulate_results(4, 2, seed=1), {str(tmp_path / 'o')!r}, n_boot=20)\n"
+            "assert not any(m == 'studyapp' or m.startswith('studyapp.') for m in sys.modules if sys.modules[m])\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "o" / "report.html").exists()

@@ -145,8 +145,9 @@ def test_sqlite_database_gives_the_same_frame_as_the_schema_says(tmp_path: Path)
                 slots=("A", "B", "C"), answered_at="2026-01-01T00:00:00", plays=2, response_time_s=3.5,
                 attention_passed=(pid != "P3") if check else None), responses)
             expected += [(pid, t, r.criterion, r.condition, r.rank) for r in responses]
-    db.save_questionnaire("P1", {"ease.q1": 4, "ease.q2": 5})
-    db.save_questionnaire("P2", {"ease.q1": 2, "ease.q2": 3})
+    kinds = {"q1": ("likert", "ease"), "q2": ("likert", "ease"), "note": ("text", None)}
+    db.save_questionnaire("P1", {"q1": 4, "q2": 5, "note": "nice"}, kinds)
+    db.save_questionnaire("P2", {"q1": 2, "q2": 3, "note": "ok"}, kinds)
     db.close()
     df = load_results(tmp_path / "r.sqlite")
     got = sorted(zip(df.participant, df.trial_index.astype(int), df.criterion, df.condition, df["rank"]))
@@ -160,4 +161,47 @@ def test_sqlite_database_gives_the_same_frame_as_the_schema_says(tmp_path: Path)
                      questionnaire=load_questionnaire(tmp_path / "r.sqlite"))
     assert list(a.exclusions["participant"]) == ["P3"]
     assert a.criteria["realism"].friedman.n_blocks == 4  # 2 rated trials x 2 kept participants
-    assert a.questionnaire_reliability.iloc[0]["scale"] == "ease"
+    assert a.questionnaire_reliability.to_dict("records") == [
+        {"scale": "ease", "n_items": 2, "n_participants": 2, "alpha": pytest.approx(2 * (1 - 2 / 4))}]
+    # the text item is not summarised
+    assert set(load_questionnaire(tmp_path / "r.sqlite")["item"]) == {"q1", "q2"}
+
+
+def test_sqlite_loader_agrees_with_studyapp_export(tmp_path: Path) -> None:
+    """Our own reader of the database and studyapp's exporter (via its CSV) give the same tidy frame."""
+    storage = pytest.importorskip("studyapp.study.storage")
+    export = pytest.importorskip("studyapp.study.export")
+    from types import SimpleNamespace
+
+    design = SimpleNamespace(design_hash="h2", title="t", stimuli=[SimpleNamespace(id="c1", tags={"speaker": "a"})],
+                             conditions=[SimpleNamespace(id=c) for c in "XYZ"])
+    db = storage.ResultsDB(tmp_path / "r.sqlite", design)
+    for pid in ("P1", "P2"):
+        db.add_participant(pid, n_rows=1, groups={"device": "vr"})
+        for t in range(3):
+            db.save_trial(storage.TrialRecord(
+                participant=pid, trial_index=t, stimulus="c1", is_practice=t == 0, is_attention_check=t == 1,
+                slots=("Z", "X", "Y"), answered_at="2026-01-01T00:00:00", plays=1, response_time_s=1.0 + t,
+                attention_passed=True if t == 1 else None),
+                [storage.Response("realism", c, s, float(s + 1)) for s, c in enumerate("ZXY")])
+    db.close()
+    csv = tmp_path / "export.csv"
+    export.export_dataframe(tmp_path / "r.sqlite").to_csv(csv, index=False)
+    ours = load_results(tmp_path / "r.sqlite").drop(columns="_where")
+    theirs = load_results(csv).drop(columns="_where")
+    cols = sorted(theirs.columns)
+    assert sorted(ours.columns) == cols
+    key = ["participant", "trial_index", "criterion", "condition"]
+    pd.testing.assert_frame_equal(ours[cols].sort_values(key).reset_index(drop=True),
+                                  theirs[cols].sort_values(key).reset_index(drop=True), check_dtype=False)
+
+
+def test_skillings_mack_mode_keeps_incomplete_trials(clean: pd.DataFrame) -> None:
+    bad = clean.drop(index=[4, 13])  # two trials lose one condition each (criteria may differ)
+    a = run_analysis(bad, incomplete="skillings-mack", n_boot=50)
+    n_incomplete = sum(c.friedman.n_blocks < 12 for c in a.criteria.values())
+    assert a.incomplete_blocks == 2 and n_incomplete >= 1
+    for c in a.criteria.values():
+        sm = c.skillings_mack
+        assert sm is not None and sm.n_blocks == 12  # all trials, incomplete ones included
+        assert sm.n_missing == 12 - c.friedman.n_blocks

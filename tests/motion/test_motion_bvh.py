@@ -136,6 +136,7 @@ BAD = {
     "missing open brace": (SMALL_BVH.replace("\tJOINT Spine\n\t{", "\tJOINT Spine"), 7, "expected '\\{'"),
     "empty motion": (SMALL_BVH.split("1.0 90.0")[0], 19, "no motion data"),
     "no motion section": (SMALL_BVH.split("MOTION")[0], None, "MOTION"),
+    "channel count too high": (SMALL_BVH.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation"), 9, "declares 4 channels but lists 3"),
     "bad offset": (SMALL_BVH.replace("OFFSET 0.0 10.0 0.0", "OFFSET 0.0 ten 0.0"), 8, "number"),
     "not bvh": ("name,value\na,1\n", 1, "not a BVH file"),
     "bad frame time": (SMALL_BVH.replace("Frame Time: 0.0333333", "Frame Time: fast"), 18, "frame time"),

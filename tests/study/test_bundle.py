@@ -64,6 +64,8 @@ def test_bundle_hides_conditions_and_file_names(lab, tmp_path: Path) -> None:
         assert manifest["files"][n] == hashlib.sha256(zf.read(n)).hexdigest()
     # rows continue the lab's balance (rows 0 and 1 are taken once each)
     assert info.roster == {"R01": 2, "R02": 3, "R03": 4, "R04": 5}
+    # the default diversity explanation says "not static": the experimenter is warned about visible texts
+    assert any("'static'" in w and "criteria.diversity" in w for w in info.warnings)
     key = json.loads(info.key_path.read_text())
     assert sorted(key["conditions"].values()) == sorted(REAL_CONDITIONS)
     assert ResultsDB(results, design).bundle_key(info.bundle_hash)["design_hash"] == design.design_hash
@@ -149,3 +151,23 @@ def test_tampered_bundle_is_refused(lab, tmp_path: Path) -> None:
     victim.write_bytes(b"changed")
     again = open_bundle(info.path, cache=tmp_path / "cache4")
     assert victim.read_bytes() != b"changed" and again.design_path.is_file()
+
+
+def test_live_model_is_bundled_without_revealing_metadata(tmp_path: Path) -> None:
+    import onnx
+
+    from studyapp.resources import designs_dir
+
+    source = designs_dir() / "live_model_example.toml"
+    original = onnx.load(str(designs_dir() / "models" / "reference_gesture.onnx"))
+    info = make_bundle(source, tmp_path / "live.zip", results=tmp_path / "live.sqlite")
+    opened = open_bundle(info.path, cache=tmp_path / "cache")
+    design = load_design(opened.design_path)  # validates the stripped model against the model contract
+    live = [c for c in design.conditions if c.model]
+    assert len(live) == 1 and re.fullmatch(r"media/m_[0-9a-f]{12}\.onnx", live[0].model)
+    model = onnx.load(str(opened.folder / live[0].model))
+    meta = {p.key: p.value for p in model.metadata_props}
+    assert model.graph.name == "model" and model.producer_name == "" and not any("description" in k for k in meta)
+    kept = {p.key: p.value for p in original.metadata_props if "description" not in p.key}
+    assert meta == kept
+    assert "reference" not in opened.design_path.read_text()

@@ -85,7 +85,13 @@ def test_sigkill_at_random_points_loses_and_duplicates_nothing(tmp_path: Path) -
     assert ref.wait(timeout=120) == 0, ref.stderr.read()
     ref.stdout.close()
     ref.stderr.close()
-    startup, first_answer = stamps["Results database"], stamps["saved trial"]
+    gap = stamps["saved trial"] - stamps["Results database"]  # database open -> first answer committed
+    # Start-up of a later run (the design is fully validated only before the first session): probe it with
+    # the finished reference participant, which is refused right after the database is opened.
+    t0 = time.monotonic()
+    probe = subprocess.run(_cmd(design, ref_db, 0.0), capture_output=True, text=True, env=env, timeout=120)
+    startup = time.monotonic() - t0
+    assert probe.returncode == 2 and "already completed" in probe.stderr
     ref_trials, ref_ranks, ref_quest = _answers(ref_db)
     assert len(ref_trials) == N_STIMULI + 1 and len(ref_ranks) == (N_STIMULI + 1) * 3 * 3 and len(ref_quest) == 3
 
@@ -121,7 +127,7 @@ def test_sigkill_at_random_points_loses_and_duplicates_nothing(tmp_path: Path) -
                     reported.add(int(line.split()[-1]))
                 if line is None or line.startswith(wanted):
                     break
-            time.sleep(rng.uniform(0.0, first_answer - startup if mode == "opened" else 0.08))
+            time.sleep(rng.uniform(0.0, gap if mode == "opened" else 0.08))
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGKILL)
             kills += 1
@@ -170,5 +176,5 @@ def test_sigkill_at_random_points_loses_and_duplicates_nothing(tmp_path: Path) -
     n_sessions = con.execute("SELECT COUNT(*) FROM sessions").fetchone()[0]
     con.close()
     assert n_sessions >= answering_kills + 1  # each of those runs was a session of its own
-    print(f"{kills} kills ({answering_kills} after new answers) over {runs} runs; start-up {startup:.2f} s, first answer "
-          f"after {first_answer:.2f} s")
+    print(f"{kills} kills ({answering_kills} after new answers) over {runs} runs; start-up {startup:.2f} s, "
+          f"first answer {gap:.2f} s after the database is open")

@@ -203,3 +203,17 @@ def test_questionnaire_validation(study) -> None:
     assert s2.state is State.QUESTIONNAIRE and db.questionnaire("P03") == []
     s2.submit_questionnaire({"q1": 2, "q2": 3})
     assert {q["item"]: q["kind"] for q in db.questionnaire("P03")} == {"q1": "likert", "q2": "likert", "comments": "text"}
+
+
+def test_resume_refuses_a_schedule_that_no_longer_matches(study) -> None:
+    design, db = study
+    s = Session(design, db, "P09")
+    _start(s)
+    _watch(s)
+    s.submit_ranking(_rank_all(design))
+    plans = list(s.plans)
+    swapped = [plans[0].__class__(p.trial_index, p.stimulus_id, tuple(reversed(p.slots)), p.is_practice,
+                                  p.is_attention_check, p.row) for p in plans]
+    with pytest.raises(InputError, match="does not match"):
+        Session(design, db, "P09", plans=swapped)
+    assert Session(design, db, "P09", plans=plans).answered == 1

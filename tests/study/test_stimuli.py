@@ -23,7 +23,7 @@ from studyapp.study.schedule import TrialPlan, participant_schedule
 from studyapp.study.stimuli import TrialMedia, frozen_motion, load_head, load_trial_media
 
 FPS = 30.0
-SECONDS = 4.0
+SECONDS = 10.0
 CONDS = ("synced", "lagged", "static")
 
 DESIGN = '''title = "Stimuli test"
@@ -56,7 +56,7 @@ labels = "LMR"
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> Path:
-    """Two 4 s clips of synthetic speech with the demo's three kinds of motion (the demo generator's code)."""
+    """Two 10 s clips of synthetic speech with the demo's three kinds of motion (the demo generator's code)."""
     root = tmp_path_factory.mktemp("stim")
     sk = beat_skeleton()
     for seed, (sid, spk) in enumerate((("a", "spk1"), ("b", "spk2")), start=11):
@@ -94,6 +94,7 @@ def test_media_in_slot_order(design, study: Path) -> None:
     assert media.face.n_frames == int(SECONDS * FPS) and media.face.weights[-1].max() == pytest.approx(1.0)
     assert media.labels == ("L", "M", "R") and media.avatar == media.avatar_spec == "builtin"
     assert media.duration_s == pytest.approx(SECONDS) and media.criteria == ("realism", "synchronization", "diversity")
+    assert media.name_maps == ({}, {}, {}) and media.name_map == {}
 
 
 def test_duration_and_missing_face(design) -> None:
@@ -206,7 +207,8 @@ def test_careful_penalises_jitter_and_ignores_units(design) -> None:
     from studyapp.motion.skeleton import Skeleton
 
     sk = smooth.skeleton
-    metres = Motion(Skeleton(sk.names, sk.parents, sk.offsets / 100, sk.channels, unit_scale=1.0), smooth.fps,
+    metres = Motion(Skeleton(sk.names, sk.parents, sk.offsets / 100, sk.channels,
+                             {j: v / 100 for j, v in sk.end_sites.items()}, unit_scale=1.0), smooth.fps,
                     smooth.rotations, smooth.translations / 100)
     c = scores_from_measures(motion_measures(metres, energy, media.duration_s))
     for k in a:
@@ -216,3 +218,25 @@ def test_careful_penalises_jitter_and_ignores_units(design) -> None:
 def test_frozen_motion_length() -> None:
     m = Motion.rest(beat_skeleton(), 5, 15.0)
     assert frozen_motion(m, 2.0).n_frames == 30 and frozen_motion(m, 0.01).n_frames == 1
+
+
+def test_file_cache_is_bounded_by_bytes_and_count() -> None:
+    cache = stimuli._LRU(size=3, max_bytes=1000)
+    made = []
+
+    def make(n):
+        made.append(n)
+        return np.zeros(n, np.uint8)
+
+    a = cache.get("a", lambda: make(400))
+    assert cache.get("a", lambda: make(1)) is a and made == [400]
+    cache.get("b", lambda: make(400))
+    cache.get("c", lambda: make(400))      # 1200 bytes > 1000: the oldest ("a") goes
+    assert len(cache) == 2 and cache.n_bytes == 800
+    cache.get("a", lambda: make(400))
+    assert made == [400, 400, 400, 400]    # "a" had to be made again
+    cache.get("huge", lambda: make(5000))  # larger than the budget: kept alone, it is the one in use
+    assert len(cache) == 1 and cache.n_bytes == 5000
+    for k in "wxyz":
+        cache.get(k, lambda: make(1))
+    assert len(cache) == 3                 # the count bound

@@ -117,3 +117,37 @@ def test_overwritten_bytes_are_detected(tmp_path: Path) -> None:
 def test_missing_file_without_design(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="not found"):
         ResultsDB(tmp_path / "nope.sqlite", create=False)
+
+
+def test_database_left_empty_by_a_killed_creation_is_created_again(tmp_path: Path) -> None:
+    path = tmp_path / "r.sqlite"
+    con = sqlite3.connect(path)
+    con.execute("PRAGMA journal_mode=WAL")  # writes the header; the schema transaction never ran
+    con.close()
+    assert path.stat().st_size > 0
+    db = ResultsDB(path, design_hash="h", title="T")
+    assert db.add_participant("P1", n_rows=2).latin_row == 0
+    db.close()
+    with pytest.raises(InputError, match="empty"):
+        empty = tmp_path / "e.sqlite"
+        sqlite3.connect(empty).execute("PRAGMA journal_mode=WAL").fetchone()
+        ResultsDB(empty)
+
+
+def test_concurrent_processes_keep_rows_balanced(tmp_path: Path) -> None:
+    """Three lab PCs registering participants on one database at once: the least-used-row choice is atomic."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "shared.sqlite"
+    ResultsDB(path, design_hash="h", title="T").close()
+    code = ("import sys; from studyapp.study.storage import ResultsDB\n"
+            "db = ResultsDB(sys.argv[1], design_hash='h')\n"
+            "for k in range(8): db.add_participant(f'{sys.argv[2]}{k}', n_rows=6)\n"
+            "db.close()\n")
+    procs = [subprocess.Popen([sys.executable, "-c", code, str(path), name]) for name in ("A", "B", "C")]
+    assert [p.wait(timeout=120) for p in procs] == [0, 0, 0]
+    db = ResultsDB(path, design_hash="h")
+    assert db.row_counts(6) == [4] * 6
+    assert len(db.participants()) == 24
+    db.close()

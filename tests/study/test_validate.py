@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -218,6 +216,18 @@ def test_bad_values(study: Path) -> None:
     assert "{stimulus}" in only(probs, "conditions[1].motion").message
 
 
+def test_top_level_key_after_a_table_and_tag_patterns(study: Path) -> None:
+    text = GOOD.replace('practice = ["s1"]\n', "") + 'practice = ["s1"]\n'
+    p = only(problems_for(study, text), "slots.practice")
+    assert "top-level" in p.fix and p.line == text.splitlines().index('practice = ["s1"]') + 1
+    # {speaker} is a tag placeholder: every stimulus needs the tag.
+    tagged = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{stimulus}{suffix}.bvh"')
+    tagged = tagged.replace('tags = { speaker = "x" }', 'tags = { speaker = "x", suffix = "" }')
+    p = only(problems_for(study, tagged), "conditions[2].motion")
+    assert "'suffix'" in p.message and "'s2'" in p.message
+    assert problems_for(study, tagged.replace('tags = { speaker = "y" }', 'tags = { speaker = "y", suffix = "" }')) == []
+
+
 def test_motion_and_model_are_exclusive(study: Path) -> None:
     text = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{stimulus}.bvh"\nmodel = "m.onnx"')
     assert "not both" in only(problems_for(study, text), "conditions[2]").message
@@ -253,10 +263,11 @@ def test_many_problems_in_one_run(study: Path) -> None:
     text = GOOD.replace('title = "Tiny"', 'titl = "Tiny"').replace('id = "c"', 'id = "b"')
     text = text.replace('stimulus = "s2"', 'stimulus = "nope"') + "\n[playback]\nreplay = true\n"
     (study / "audio" / "s2.wav").unlink()
+    write_motion(study / "motion" / "a" / "s1.bvh", SECONDS + 1.0)
     probs = problems_for(study, text)
     keys = {p.key for p in probs}
     assert {"titl", "title", "conditions[2].id", "attention_checks[0].stimulus", "playback.replay",
-            "stimuli[1].audio"} <= keys
+            "stimuli[1].audio", "stimuli[0]"} <= keys  # stimuli[0]: the duration mismatch, found all the same
     assert all(p.path.endswith("design.toml") and p.message for p in probs)
 
 
@@ -307,3 +318,43 @@ def test_cli_schedule_writes_plan_and_balance(study: Path, tmp_path: Path, capsy
     assert (counts["position_x_stimulus"].to_numpy() == 3).all()
     assert (counts["slot_x_condition"].to_numpy() == 4).all()
     assert counts["slot_x_condition"].to_string() in stdout
+
+
+def test_empty_file_names_each_required_key_once(study: Path) -> None:
+    probs = problems_for(study, "# nothing here\n")
+    assert sorted(p.key for p in probs) == ["conditions", "stimuli", "title"]
+    assert all("required" in p.message for p in probs)
+
+
+def test_problem_text_is_one_line_with_file_line_key_and_fix(study: Path) -> None:
+    p = only(problems_for(study, GOOD.replace("seed = 5", "seed = 5.5")), "ordering.seed")
+    text = str(p)
+    assert "\n" not in text and text.startswith(f"{study / 'design.toml'}:{p.line}: ordering.seed: ")
+    assert "integer" in text and "-- fix: " in text
+
+
+def test_any_mangled_design_gives_problems_not_crashes(study: Path) -> None:
+    """Drop lines, retype values: validation must always answer with problems (or none), never a traceback."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    lines = GOOD.splitlines()
+    values = st.sampled_from(['"x"', "1", "-3", "true", "[1, 2]", "{ a = 1 }", '"{bogus}.bvh"', "1.5", '""'])
+
+    @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(drop=st.sets(st.integers(0, len(lines) - 1), max_size=6),
+           retype=st.dictionaries(st.integers(0, len(lines) - 1), values, max_size=3))
+    def check(drop, retype):
+        out = []
+        for i, ln in enumerate(lines):
+            if i in drop:
+                continue
+            if i in retype and " = " in ln:
+                ln = ln.split(" = ")[0] + " = " + retype[i]
+            out.append(ln)
+        probs = problems_for(study, "\n".join(out) + "\n")
+        assert all(isinstance(p, Problem) and p.message for p in probs)
+        if not drop and not retype:
+            assert probs == []
+
+    check()

@@ -1,4 +1,8 @@
-"""Layout shared by the full-page screens: a centred, readable column over a calm background."""
+"""Layout shared by the full-page screens: a centred, readable column over a calm background.
+
+A page is a scrolling body (with a visible scrollbar when the text is longer than the window) and a
+fixed footer holding the page's main button, so "Continue" is always on screen, at any window size.
+"""
 from __future__ import annotations
 
 from typing import Any
@@ -9,38 +13,57 @@ PAGE_FLAGS = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_move
               | imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_bring_to_front_on_focus)
 #: Widest text column (at scale 1); longer lines are hard to read.
 COLUMN_PX = 860.0
+FOOTER_PX = 84.0
+
+_body_open = False
 
 
 def page_begin(app: Any, name: str) -> float:
-    """Open a full-window page with a centred column; returns the column width in pixels."""
+    """Open a full-window page and its scrolling body; returns the column width in pixels."""
+    global _body_open
     w, h = app.fb_size
     s = app.scale
     col = min(w - 48 * s, COLUMN_PX * s)
     pad_x = max(24 * s, (w - col) / 2)
     imgui.set_next_window_pos((0, 0))
     imgui.set_next_window_size((float(w), float(h)))
-    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(pad_x, 36 * s))
+    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(0, 0))
     imgui.begin(f"##page_{name}", None, PAGE_FLAGS)
     imgui.pop_style_var()
+    # The body spans the full width (scrollbar at the window edge) and pads the column inside.
+    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(pad_x, 32 * s))
+    imgui.begin_child("##body", imgui.ImVec2(0, -FOOTER_PX * s), imgui.ChildFlags_.always_use_window_padding)
+    imgui.pop_style_var()
+    _body_open = True
+    app.page_pad_x = pad_x
     return col
 
 
+def _end_body() -> None:
+    global _body_open
+    if _body_open:
+        imgui.end_child()
+        _body_open = False
+
+
 def page_end() -> None:
+    _end_body()
     imgui.end()
 
 
 def primary_row(app: Any, label: str, key: str, *, enabled: bool = True, hint: str = "") -> bool:
-    """The page's main button (bigger, green) with an optional keyboard hint next to it.
+    """The page's main button (green) in the fixed footer, with an optional hint next to it.
 
     Enter presses it too, so every page works from the keyboard alone.
     """
     s = app.scale
-    imgui.spacing()
+    _end_body()
     imgui.separator()
-    imgui.spacing()
+    pad_x = getattr(app, "page_pad_x", 24 * s)
+    imgui.set_cursor_pos(imgui.ImVec2(pad_x, imgui.get_cursor_pos_y() + 14 * s))
     pressed = app.ui.button(label, key=key, enabled=enabled, size=(260 * s, 48 * s), primary=True)
     if hint:
-        imgui.same_line()
+        imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
         app.ui.muted(hint)
     if enabled and app.key_pressed("enter"):

@@ -32,14 +32,15 @@ def draw(app: Any) -> None:
         ui.heading(f"{qi + 1}. {q.text}", 1.05, key=("question", q.id))
         if q.kind == "likert":
             left, right = q.anchors
-            ui.muted(left)
+            imgui.align_text_to_frame_padding()
+            ui.text(left, color=(0.70, 0.72, 0.77, 1.0))
             imgui.same_line(0, 14 * s)
             for v in range(1, int(q.points) + 1):
                 if ui.radio(f"{v}##{q.id}", answers.get(q.id) == v, key=("likert", q.id, v)):
                     answers[q.id] = v
                     app.question_active = qi
                 imgui.same_line(0, 12 * s)
-            ui.muted(right)
+            ui.text(right, color=(0.70, 0.72, 0.77, 1.0))
         else:
             old = answers.get(q.id, "") or ""
             if active and app.focus_text:

@@ -15,15 +15,38 @@ from imgui_bundle import imgui
 
 from studyapp.ui.input import digit_key
 
-ROW_PX = 96.0
-HEADER_PX = 34.0
-FOOTER_PX = 62.0
+ROW_PX = 86.0
+GAP_PX = 6.0
 PLACE_NAMES = ("1st (best)", "2nd", "3rd (worst)")
 
 
 def height(app: Any) -> float:
-    s = app.scale
-    return (HEADER_PX + ROW_PX * len(app.design.criteria) + FOOTER_PX) * s
+    """Pixels the ranking rows need below the transport row."""
+    return (ROW_PX + GAP_PX) * len(app.design.criteria) * app.scale + 8 * app.scale
+
+
+def _box_text(app: Any, caption: str, value: str, filled: bool) -> None:
+    """Two centred lines in the last item: a small caption and the figure placed there (bold)."""
+    ui = app.ui
+    ui.record(caption)
+    ui.record(value)
+    a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+    dl = imgui.get_window_draw_list()
+    base = imgui.get_style().font_size_base * app.scale
+    cap_size, val_size = base * 0.85, base * (1.25 if filled else 0.9)
+    bold = app.layer.font_bold if filled else app.layer.font
+    imgui.push_font(app.layer.font, cap_size / app.scale)
+    cw = imgui.calc_text_size(caption).x
+    imgui.pop_font()
+    imgui.push_font(bold, val_size / app.scale)
+    vw = imgui.calc_text_size(value).x
+    imgui.pop_font()
+    cx = (a.x + b.x) / 2
+    top = a.y + (b.y - a.y - cap_size - val_size - 2) / 2
+    grey = imgui.get_color_u32(imgui.ImVec4(0.80, 0.82, 0.86, 1.0))
+    white = imgui.get_color_u32(imgui.ImVec4(1.0, 1.0, 1.0, 1.0 if filled else 0.45))
+    dl.add_text(app.layer.font, cap_size, imgui.ImVec2(cx - cw / 2, top), grey, caption)
+    dl.add_text(bold, val_size, imgui.ImVec2(cx - vw / 2, top + cap_size + 2), white, value)
 
 
 def _keys(app: Any, view: Any) -> None:
@@ -46,47 +69,42 @@ def draw(app: Any, view: Any) -> None:
     s = app.scale
     r = view.ranking
     names = app.slot_names
-    keys = ", ".join(f"{i + 1} = {n}" for i, n in enumerate(names))
-    imgui.separator()
-    ui.muted(f"For each question, drag the letters into the boxes from best to worst, or click them in order. "
-             f"Keys: {keys}; Up/Down change the question; Backspace clears it.")
+    place_w, box_h, chip_w = 132 * s, 60 * s, 60 * s
     avail_w = imgui.get_content_region_avail().x
-    text_w = max(220 * s, avail_w - (3 * 150 + 3 * 70 + 70) * s)
+    text_w = max(240 * s, avail_w - 3 * place_w - 3 * chip_w - 150 * s)
     for ci, crit in enumerate(app.design.criteria):
         active = ci == r.active
-        bg = (0.22, 0.25, 0.31, 1.0) if active else (0.17, 0.18, 0.21, 1.0)
+        bg = (0.21, 0.25, 0.32, 1.0) if active else (0.16, 0.17, 0.20, 1.0)
         imgui.push_style_color(imgui.Col_.child_bg, imgui.ImVec4(*bg))
-        imgui.begin_child(f"##crit{ci}", imgui.ImVec2(0, (ROW_PX - 8) * s),
-                          imgui.ChildFlags_.borders, imgui.WindowFlags_.no_scrollbar)
+        imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(12 * s, 8 * s))
+        imgui.begin_child(f"##crit{ci}", imgui.ImVec2(0, ROW_PX * s),
+                          imgui.ChildFlags_.borders | imgui.ChildFlags_.always_use_window_padding,
+                          imgui.WindowFlags_.no_scrollbar)
+        imgui.pop_style_var()
         imgui.pop_style_color()
         if imgui.is_window_hovered() and imgui.is_mouse_clicked(0):
             r.active = ci
-        # question text
-        imgui.begin_group()
-        imgui.push_text_wrap_pos(imgui.get_cursor_pos_x() + text_w)
-        done = r.is_complete(crit.id)
-        ui.heading(f"{crit.label}{'  - done' if done else ''}", 1.1, key=("crit", crit.id))
-        ui.text(crit.question)
+        # the question: label, question, explanation, wrapped inside the text column
+        x0 = imgui.get_cursor_pos_x()
+        top = imgui.get_cursor_pos_y()
+        wrap = x0 + text_w
+        ui.heading(crit.label + ("  (keyboard)" if active else ""), 1.05, key=("crit", crit.id), wrap_x=wrap)
+        imgui.same_line(0, 10 * s)
+        ui.wrapped(crit.question, wrap_x=wrap)
         if crit.explanation:
-            ui.muted(crit.explanation)
-        imgui.pop_text_wrap_pos()
-        imgui.end_group()
-        # places
-        row_top = imgui.get_item_rect_min().y
-        imgui.same_line(text_w + 30 * s)
-        imgui.set_cursor_screen_pos(imgui.ImVec2(imgui.get_cursor_screen_pos().x, row_top + 8 * s))
+            ui.muted(crit.explanation, wrap_x=wrap, size=0.9)
+        # the three places, best to worst
+        imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 20 * s, top + (ROW_PX - 16) * s / 2 - box_h / 2))
         for p in range(3):
             if p:
                 imgui.same_line()
             slot = r.order[crit.id][p]
-            label = f"{PLACE_NAMES[p]}\n{names[slot] if slot is not None else '-'}##place{ci}{p}"
-            if slot is not None:
-                imgui.push_style_color(imgui.Col_.button, imgui.ImVec4(0.20, 0.45, 0.36, 1.0))
-            else:
-                imgui.push_style_color(imgui.Col_.button, imgui.ImVec4(0.24, 0.25, 0.29, 1.0))
-            if ui.button(label, key=("place", crit.id, p), size=(140 * s, 62 * s)) and slot is not None:
+            color = (0.18, 0.46, 0.36, 1.0) if slot is not None else (0.24, 0.25, 0.29, 1.0)
+            imgui.push_style_color(imgui.Col_.button, imgui.ImVec4(*color))
+            if ui.button(f"##place{ci}{p}", key=("place", crit.id, p), size=(place_w, box_h)) and slot is not None:
                 r.click(crit.id, slot)  # take it out again
             imgui.pop_style_color()
+            _box_text(app, PLACE_NAMES[p], names[slot] if slot is not None else "drop here", slot is not None)
             if slot is not None and imgui.begin_drag_drop_source():
                 imgui.set_drag_drop_payload_py_id(f"slot{ci}", slot)
                 ui.text(names[slot])
@@ -98,14 +116,14 @@ def draw(app: Any, view: Any) -> None:
                     r.active = ci
                 imgui.end_drag_drop_target()
         # chips of the figures not placed yet
-        imgui.same_line(0, 30 * s)
+        imgui.same_line(0, 24 * s)
         for slot in range(3):
             if slot:
                 imgui.same_line()
             if r.place_of(crit.id, slot) is not None:
-                imgui.dummy(imgui.ImVec2(62 * s, 62 * s))
+                imgui.dummy(imgui.ImVec2(chip_w, box_h))
                 continue
-            if ui.button(f"{names[slot]}##chip{ci}{slot}", key=("chip", crit.id, slot), size=(62 * s, 62 * s)):
+            if ui.button(f"{names[slot]}##chip{ci}{slot}", key=("chip", crit.id, slot), size=(chip_w, box_h)):
                 r.click(crit.id, slot)
                 r.active = ci
             if imgui.begin_drag_drop_source():
@@ -114,22 +132,32 @@ def draw(app: Any, view: Any) -> None:
                 imgui.end_drag_drop_source()
         imgui.end_child()
     _keys(app, view)
-    # next
-    imgui.spacing()
+
+
+def next_button(app: Any, view: Any) -> None:
+    """The "Next clip" button (right end of the transport row) and why it is disabled, if it is."""
+    ui = app.ui
+    s = app.scale
+    r = view.ranking
     last = app.session.trial_number() >= app.session.phase_total()
     if view.plan.is_practice:
         label = "Start the study" if last else "Next practice clip"
     else:
         label = "Finish" if last else "Next clip"
     enabled = view.can_submit()
-    if ui.button(label, key="next", enabled=enabled, size=(220 * s, 44 * s), primary=True):
-        view.submit()
-    imgui.same_line(0, 16 * s)
-    imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 10 * s)
     if enabled:
-        ui.muted("Press Enter or the button. You cannot come back to this clip.")
+        why = "Enter = next. You cannot come back to this clip."
     elif view.playing_id:
-        ui.muted("Available when the clip has finished.")
+        why = "Available when the clip has finished."
     else:
-        missing = [c.label for c in app.design.criteria if not r.is_complete(c.id)]
-        ui.muted("Still to rank: " + ", ".join(missing))
+        why = "Still to rank: " + ", ".join(c.label for c in app.design.criteria if not r.is_complete(c.id))
+    bw = 210 * s
+    imgui.same_line(0, 20 * s)
+    row_y = imgui.get_cursor_pos_y()
+    x_text = imgui.get_cursor_pos_x()
+    x_button = imgui.get_window_width() - imgui.get_style().window_padding.x - bw
+    imgui.set_cursor_pos_y(row_y + 10 * s)
+    ui.muted(why, wrap_x=x_button - 16 * s)
+    imgui.set_cursor_pos(imgui.ImVec2(max(x_button, x_text), row_y))
+    if ui.button(label, key="next", enabled=enabled, size=(bw, 44 * s), primary=True):
+        view.submit()

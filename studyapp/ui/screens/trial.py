@@ -13,8 +13,8 @@ from imgui_bundle import imgui
 from studyapp.ui.screens import ranking_panel
 from studyapp.ui.screens.common import PAGE_FLAGS
 
-TOP_PX = 50.0
-CONTROLS_PX = 70.0
+TOP_PX = 46.0
+CONTROLS_PX = 68.0
 
 
 def _fmt(t: float) -> str:
@@ -50,7 +50,7 @@ def draw(app: Any) -> None:
     x, y, w, h = rects["top"]
     imgui.set_next_window_pos((x, y))
     imgui.set_next_window_size((w, h))
-    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 12 * s))
+    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 9 * s))
     imgui.begin("##topbar", None, PAGE_FLAGS)
     imgui.pop_style_var()
     ui.heading(session.progress_label(), 1.25, key="progress")
@@ -70,7 +70,7 @@ def draw(app: Any) -> None:
     x, y, w, h = rects["panel"]
     imgui.set_next_window_pos((x, y))
     imgui.set_next_window_size((w, h))
-    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 12 * s))
+    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 10 * s))
     imgui.begin("##panel", None, PAGE_FLAGS)
     imgui.pop_style_var()
     _transport(app, view, t)
@@ -115,9 +115,12 @@ def _transport(app: Any, view: Any, t: float) -> None:
     frac = 0.0 if view.duration_s <= 0 else min(1.0, t / view.duration_s)
     imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 10 * s)
     imgui.progress_bar(frac, imgui.ImVec2(260 * s, 24 * s), f"{_fmt(t)} / {_fmt(view.duration_s)}")
-    imgui.same_line(0, 20 * s)
-    imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
-    ui.muted(_status_text(app, view, state))
+    if view.ranking_open():
+        ranking_panel.next_button(app, view)
+    else:
+        imgui.same_line(0, 20 * s)
+        imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
+        ui.muted(_status_text(app, view, state))
 
 
 def _status_text(app: Any, view: Any, state: str) -> str:

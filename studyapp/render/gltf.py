@@ -1,0 +1,713 @@
+"""glTF 2.0 / GLB / VRM avatars: load skinned meshes with ARKit morph targets, and export GLB.
+
+What is read
+------------
+* ``.gltf`` (JSON with external or ``data:`` URI buffers), ``.glb`` and ``.vrm`` (GLB with a VRM extension).
+* All triangle primitives of all mesh nodes, merged into one mesh. Skinned primitives use the first skin's
+  joints (``JOINTS_0``/``WEIGHTS_0``: unsigned byte/short, float or normalized integer weights); meshes
+  without a skin follow their nearest joint ancestor rigidly.
+* The skin's joints become a :class:`~studyapp.motion.skeleton.Skeleton` (depth-first, metres) whose rest
+  pose is the node TRS rest pose: rotations in ``rest_rotations``, scale (e.g. a centimetre armature)
+  folded into the offsets. Geometry is brought into that rest pose in world space, so the renderer's
+  inverse bind matrices are plain inverses of the rest transforms.
+* Morph targets named in ``mesh.extras.targetNames`` (or the primitive's extras) and matched to ARKit names
+  with :func:`studyapp.face.arkit.match_arkit_name`; other targets are ignored with a note.
+* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow).
+  Several different textures are baked into vertex colours (noted).
+* Sparse accessors. VRM 0.x (``extensions.VRM``) and 1.0 (``extensions.VRMC_vrm``) humanoid bones are
+  renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``).
+
+Unsupported compression extensions (Draco, meshopt, Basis/KTX2) raise :class:`InputError`.
+
+>>> import tempfile, pathlib
+>>> from studyapp.render.avatar import build_default_avatar
+>>> path = pathlib.Path(tempfile.mkdtemp()) / "avatar.glb"
+>>> _ = export_glb(build_default_avatar(), path)
+>>> load_gltf(path).skeleton.names[:2]
+('Hips', 'Spine')
+"""
+from __future__ import annotations
+
+import base64
+import io
+import json
+import struct
+from pathlib import Path
+from urllib.parse import unquote
+
+import numpy as np
+
+from studyapp.errors import InputError
+from studyapp.face.arkit import ARKIT_NAMES, match_arkit_name
+from studyapp.motion.fk import rest_global_transforms
+from studyapp.motion.rotations import matrix_to_quat, quat_to_matrix
+from studyapp.motion.skeleton import Skeleton
+from studyapp.render.avatar import Avatar, vertex_normals
+
+GLB_MAGIC = 0x46546C67  # "glTF"
+CHUNK_JSON = 0x4E4F534A
+CHUNK_BIN = 0x004E4942
+
+_COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_UNSUPPORTED = {
+    "KHR_draco_mesh_compression": "Draco-compressed meshes",
+    "EXT_meshopt_compression": "meshopt-compressed buffers",
+    "KHR_meshopt_compression": "meshopt-compressed buffers",
+    "KHR_texture_basisu": "Basis Universal / KTX2 textures",
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# Container and accessors
+# ---------------------------------------------------------------------------------------------
+
+class _Doc:
+    """A parsed glTF document with its binary buffers, decoding accessors on demand."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise InputError(path, None, f"cannot read avatar file: {exc.strerror or exc}") from None
+        bin_chunk = None
+        if raw[:4] == b"glTF":
+            self.gltf, bin_chunk = self._parse_glb(raw)
+        else:
+            try:
+                self.gltf = json.loads(raw.decode("utf-8-sig"))
+            except UnicodeDecodeError:
+                raise InputError(path, None, "not a glTF file: neither GLB ('glTF' magic) nor UTF-8 JSON") from None
+            except json.JSONDecodeError as exc:
+                raise InputError(path, f"line {exc.lineno}, column {exc.colno}", f"invalid JSON: {exc.msg}") from None
+        if not isinstance(self.gltf, dict):
+            raise InputError(path, None, "the glTF JSON must be an object")
+        version = str(self.gltf.get("asset", {}).get("version", ""))
+        if not version.startswith("2"):
+            raise InputError(path, "key asset.version", f"only glTF 2.0 is supported, file says {version or 'nothing'!r}")
+        used = set(self.gltf.get("extensionsRequired", [])) | set(self.gltf.get("extensionsUsed", []))
+        for ext, what in _UNSUPPORTED.items():
+            if ext in used:
+                raise InputError(path, "key extensionsUsed",
+                                 f"{ext} ({what}) is not supported; re-export the avatar without compression")
+        for i, img in enumerate(self.gltf.get("images", [])):
+            if img.get("mimeType") == "image/ktx2" or str(img.get("uri", "")).lower().endswith(".ktx2"):
+                raise InputError(path, f"key images[{i}]", "KTX2 textures are not supported; use PNG or JPEG")
+        self.buffers = [self._load_buffer(i, b, bin_chunk) for i, b in enumerate(self.gltf.get("buffers", []))]
+        self._cache: dict[int, np.ndarray] = {}
+
+    def _parse_glb(self, raw: bytes) -> tuple[dict, bytes | None]:
+        if len(raw) < 20:
+            raise InputError(self.path, "header", "GLB file is truncated")
+        magic, version, length = struct.unpack_from("<III", raw, 0)
+        if version != 2:
+            raise InputError(self.path, "header", f"GLB version {version}; only 2 is supported")
+        if length > len(raw):
+            raise InputError(self.path, "header", f"GLB says {length} bytes, file has {len(raw)} (truncated?)")
+        pos = 12
+        doc = None
+        binary = None
+        while pos + 8 <= length:
+            clen, ctype = struct.unpack_from("<II", raw, pos)
+            data = raw[pos + 8: pos + 8 + clen]
+            if len(data) != clen:
+                raise InputError(self.path, f"byte {pos}", "GLB chunk runs past the end of the file")
+            if ctype == CHUNK_JSON:
+                try:
+                    doc = json.loads(data.decode("utf-8"))
+                except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                    raise InputError(self.path, "JSON chunk", f"invalid JSON: {exc}") from None
+            elif ctype == CHUNK_BIN and binary is None:
+                binary = bytes(data)
+            pos += 8 + clen  # chunk lengths are 4-byte aligned by the spec
+        if doc is None:
+            raise InputError(self.path, "header", "GLB has no JSON chunk")
+        return doc, binary
+
+    def _load_buffer(self, i: int, spec: dict, bin_chunk: bytes | None) -> bytes:
+        uri = spec.get("uri")
+        where = f"key buffers[{i}]"
+        if uri is None:
+            if bin_chunk is None:
+                raise InputError(self.path, where, "buffer has no uri and the file has no GLB binary chunk")
+            data = bin_chunk
+        elif uri.startswith("data:"):
+            head, _, payload = uri.partition(",")
+            if ";base64" not in head:
+                raise InputError(self.path, where, "only base64 data URIs are supported")
+            try:
+                data = base64.b64decode(payload, validate=False)
+            except ValueError as exc:
+                raise InputError(self.path, where, f"bad base64 data: {exc}") from None
+        else:
+            file = self.path.parent / unquote(uri)
+            if not file.is_file():
+                raise InputError(self.path, where, f"buffer file {uri!r} not found next to the glTF ({file})")
+            data = file.read_bytes()
+        need = int(spec.get("byteLength", len(data)))
+        if len(data) < need:
+            raise InputError(self.path, where, f"buffer has {len(data)} bytes, byteLength says {need}")
+        return data
+
+    def view_bytes(self, index: int) -> tuple[bytes, int, int | None]:
+        views = self.gltf.get("bufferViews", [])
+        if not 0 <= index < len(views):
+            raise InputError(self.path, f"bufferView {index}", "bufferView index out of range")
+        v = views[index]
+        buf = self.buffers[v["buffer"]]
+        off = int(v.get("byteOffset", 0))
+        return buf, off, v.get("byteStride")
+
+    def accessor(self, index: int) -> np.ndarray:
+        """Decode accessor ``index`` to an ``(count, width)`` array (floats when ``normalized``)."""
+        if index in self._cache:
+            return self._cache[index]
+        accs = self.gltf.get("accessors", [])
+        if not 0 <= index < len(accs):
+            raise InputError(self.path, f"accessor {index}", "accessor index out of range")
+        a = accs[index]
+        where = f"accessors[{index}]"
+        try:
+            dtype = np.dtype(_COMPONENT[a["componentType"]])
+            width = _WIDTH[a["type"]]
+            count = int(a["count"])
+        except KeyError as exc:
+            raise InputError(self.path, f"key {where}", f"missing or unknown {exc}") from None
+        if "bufferView" in a:
+            buf, off, stride = self.view_bytes(a["bufferView"])
+            off += int(a.get("byteOffset", 0))
+            elem = dtype.itemsize * width
+            stride = int(stride or elem)
+            end = off + stride * (count - 1) + elem if count else off
+            if end > len(buf):
+                raise InputError(self.path, f"key {where}", "accessor reads past the end of its buffer")
+            if stride == elem:
+                out = np.frombuffer(buf, dtype, count * width, off).reshape(count, width)
+            else:
+                rows = np.frombuffer(buf, np.uint8, stride * (count - 1) + elem, off)
+                idx = (np.arange(count)[:, None] * stride + np.arange(elem)[None]).reshape(-1)
+                out = rows[idx].view(dtype).reshape(count, width)
+            out = out.copy()
+        else:
+            out = np.zeros((count, width), dtype)
+        sparse = a.get("sparse")
+        if sparse:
+            n = int(sparse["count"])
+            si, sv = sparse["indices"], sparse["values"]
+            buf, off, _ = self.view_bytes(si["bufferView"])
+            ind = np.frombuffer(buf, _COMPONENT[si["componentType"]], n, off + int(si.get("byteOffset", 0)))
+            buf, off, _ = self.view_bytes(sv["bufferView"])
+            vals = np.frombuffer(buf, dtype, n * width, off + int(sv.get("byteOffset", 0))).reshape(n, width)
+            ind = ind.astype(np.int64)
+            if n and int(ind.max()) >= count:
+                raise InputError(self.path, f"key {where}.sparse", "sparse index beyond the accessor count")
+            out = out.copy()
+            out[ind.astype(np.int64)] = vals
+        if a.get("normalized") and dtype.kind in "iu":
+            info = np.iinfo(dtype)
+            out = out.astype(np.float32) / info.max
+            if dtype.kind == "i":
+                out = np.maximum(out, -1.0)
+        self._cache[index] = out
+        return out
+
+    def image(self, index: int) -> np.ndarray | None:
+        """An image as ``(H, W, 4) uint8`` (top row first), or None when it cannot be decoded."""
+        imgs = self.gltf.get("images", [])
+        if not 0 <= index < len(imgs):
+            return None
+        img = imgs[index]
+        if "bufferView" in img:
+            buf, off, _ = self.view_bytes(img["bufferView"])
+            length = int(self.gltf["bufferViews"][img["bufferView"]]["byteLength"])
+            data = buf[off: off + length]
+        elif "uri" in img:
+            uri = img["uri"]
+            if uri.startswith("data:"):
+                data = base64.b64decode(uri.partition(",")[2])
+            else:
+                f = self.path.parent / unquote(uri)
+                if not f.is_file():
+                    raise InputError(self.path, f"key images[{index}]", f"texture file {uri!r} not found")
+                data = f.read_bytes()
+        else:
+            return None
+        return decode_image(data, self.path, f"images[{index}]")
+
+
+def decode_image(data: bytes, path: Path | None = None, where: str | None = None) -> np.ndarray:
+    """PNG or JPEG bytes -> ``(H, W, 4) uint8``: PNG via matplotlib, JPEG via Pillow (matplotlib's dependency)."""
+    try:
+        if data[:8] == b"\x89PNG\r\n\x1a\n":
+            import matplotlib.image as mpimg
+
+            arr = mpimg.imread(io.BytesIO(data), format="png")
+        else:
+            from PIL import Image
+
+            arr = np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
+    except Exception as exc:
+        raise InputError(path, where, f"cannot decode texture image: {exc}") from None
+    if arr.dtype != np.uint8:
+        arr = np.clip(np.asarray(arr) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    if arr.ndim == 2:
+        arr = np.stack([arr] * 3, -1)
+    if arr.shape[2] == 3:
+        arr = np.concatenate([arr, np.full(arr.shape[:2] + (1,), 255, np.uint8)], -1)
+    return np.ascontiguousarray(arr[..., :4])
+
+
+# ---------------------------------------------------------------------------------------------
+# Scene graph
+# ---------------------------------------------------------------------------------------------
+
+def _node_matrix(node: dict) -> np.ndarray:
+    if "matrix" in node:
+        return np.array(node["matrix"], np.float64).reshape(4, 4).T  # glTF is column-major
+    m = np.eye(4)
+    s = np.array(node.get("scale", [1, 1, 1]), np.float64)
+    r = np.array(node.get("rotation", [0, 0, 0, 1]), np.float64)
+    m[:3, :3] = quat_to_matrix(r / max(np.linalg.norm(r), 1e-12)) * s[None, :]
+    m[:3, 3] = node.get("translation", [0, 0, 0])
+    return m
+
+
+def _world_matrices(nodes: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """World matrix and parent index of every node (scenes' roots have parent -1)."""
+    n = len(nodes)
+    parent = np.full(n, -1)
+    for i, node in enumerate(nodes):
+        for c in node.get("children", []):
+            parent[c] = i
+    world = np.zeros((n, 4, 4))
+    done = np.zeros(n, bool)
+
+    def solve(i: int) -> np.ndarray:
+        chain = []
+        while i >= 0 and not done[i]:
+            chain.append(i)
+            i = parent[i]
+            if len(chain) > n:
+                raise ValueError("node hierarchy has a cycle")
+        base = world[i] if i >= 0 else np.eye(4)
+        for k in reversed(chain):
+            base = base @ _node_matrix(nodes[k])
+            world[k] = base
+            done[k] = True
+        return base
+
+    for i in range(n):
+        if not done[i]:
+            solve(i)
+    return world, parent
+
+
+def _pascal(bone: str) -> str:
+    return bone[:1].upper() + bone[1:]
+
+
+_VRM1_RENAME = {"ThumbMetacarpal": "ThumbProximal", "ThumbProximal": "ThumbIntermediate"}
+
+
+def _vrm_bone_names(gltf: dict) -> dict[int, str]:
+    """Node index -> Unity humanoid name, from a VRM 0.x or 1.0 extension (empty when not VRM)."""
+    ext = gltf.get("extensions", {})
+    out: dict[int, str] = {}
+    if "VRMC_vrm" in ext:
+        for bone, spec in ext["VRMC_vrm"].get("humanoid", {}).get("humanBones", {}).items():
+            name = _pascal(bone)
+            for old, new in _VRM1_RENAME.items():
+                if name.endswith(old):
+                    name = name[: -len(old)] + new
+                    break
+            out[int(spec["node"])] = name
+    elif "VRM" in ext:
+        for spec in ext["VRM"].get("humanoid", {}).get("humanBones", []):
+            if "node" in spec and "bone" in spec:
+                out[int(spec["node"])] = _pascal(spec["bone"])
+    return out
+
+
+def _rigid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation (scale removed, via SVD) and translation of a 4x4 matrix."""
+    u, _, vt = np.linalg.svd(m[:3, :3])
+    r = u @ vt
+    if np.linalg.det(r) < 0:
+        u[:, -1] *= -1
+        r = u @ vt
+    return r, m[:3, 3].copy()
+
+
+# ---------------------------------------------------------------------------------------------
+# Loader
+# ---------------------------------------------------------------------------------------------
+
+def load_gltf(path: str | Path) -> Avatar:
+    """Load a glTF/GLB/VRM avatar (see the module docstring for what is supported)."""
+    path = Path(path)
+    doc = _Doc(path)
+    g = doc.gltf
+    nodes = g.get("nodes", [])
+    try:
+        world, node_parent = _world_matrices(nodes)
+    except (ValueError, IndexError) as exc:
+        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}") from None
+    notes: list[str] = []
+    skins = g.get("skins", [])
+    mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
+    if not mesh_nodes:
+        raise InputError(path, "key nodes", "no node has a mesh")
+    skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
+    if skin_index is not None and skin_index >= len(skins):
+        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range")
+    joint_nodes = list(skins[skin_index]["joints"]) if skin_index is not None else []
+    if skin_index is not None and len(skins) > 1:
+        notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
+
+    # skeleton: skin joints in depth-first order (parents before children)
+    if not joint_nodes:
+        joint_nodes = [mesh_nodes[0]]
+        notes.append("no skin: the avatar is a static mesh")
+    jset = set(joint_nodes)
+
+    def joint_parent(n: int) -> int:
+        p = node_parent[n]
+        while p >= 0 and p not in jset:
+            p = node_parent[p]
+        return p
+
+    children: dict[int, list[int]] = {}
+    roots = []
+    for n in joint_nodes:
+        p = joint_parent(n)
+        (children.setdefault(p, []) if p >= 0 else roots).append(n)
+    order: list[int] = []
+    stack = list(reversed(roots))
+    while stack:
+        n = stack.pop()
+        order.append(n)
+        stack.extend(reversed(children.get(n, [])))
+    node_to_joint = {n: j for j, n in enumerate(order)}
+    vrm = _vrm_bone_names(g)
+    names: list[str] = []
+    for n in order:
+        name = vrm.get(n) or nodes[n].get("name") or f"joint{n}"
+        if name in names:
+            name = f"{name}_{n}"
+        names.append(name)
+    rots = np.zeros((len(order), 3, 3))
+    pos = np.zeros((len(order), 3))
+    for j, n in enumerate(order):
+        rots[j], pos[j] = _rigid(world[n])
+    parents = np.array([node_to_joint.get(joint_parent(n), -1) for n in order])
+    offsets = np.zeros((len(order), 3))
+    local_q = np.zeros((len(order), 4))
+    for j in range(len(order)):
+        p = parents[j]
+        if p < 0:
+            offsets[j] = pos[j]
+            local_q[j] = matrix_to_quat(rots[j])
+        else:
+            offsets[j] = rots[p].T @ (pos[j] - pos[p])
+            local_q[j] = matrix_to_quat(rots[p].T @ rots[j])
+    skeleton = Skeleton(names=tuple(names), parents=parents, offsets=offsets, unit_scale=1.0,
+                        rest_rotations=local_q)
+    rest = rest_global_transforms(skeleton)
+
+    # geometry
+    skin_ibm = None
+    if skin_index is not None and "inverseBindMatrices" in skins[skin_index]:
+        skin_ibm = doc.accessor(skins[skin_index]["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
+    parts = []
+    textures: dict[int, np.ndarray | None] = {}
+    morph_names_found: set[str] = set()
+    ignored: set[str] = set()
+    for ni in mesh_nodes:
+        node = nodes[ni]
+        mesh = g["meshes"][node["mesh"]]
+        target_names = list(mesh.get("extras", {}).get("targetNames", []))
+        skinned = "skin" in node and skin_index is not None
+        if skinned and node["skin"] != skin_index:
+            notes.append(f"mesh node {ni} uses skin {node['skin']}; bound to skin {skin_index} by joint name")
+        for pi, prim in enumerate(mesh.get("primitives", [])):
+            where = f"meshes[{node['mesh']}].primitives[{pi}]"
+            if prim.get("mode", 4) != 4:
+                notes.append(f"{where}: not triangles (mode {prim.get('mode')}), skipped")
+                continue
+            attrs = prim.get("attributes", {})
+            for ext in prim.get("extensions", {}):
+                if ext in _UNSUPPORTED:
+                    raise InputError(path, f"key {where}.extensions", f"{ext} ({_UNSUPPORTED[ext]}) is not supported")
+            if "POSITION" not in attrs:
+                raise InputError(path, f"key {where}.attributes", "primitive has no POSITION")
+            v = doc.accessor(attrs["POSITION"]).astype(np.float64)
+            nv = len(v)
+            idx = (doc.accessor(prim["indices"]).reshape(-1).astype(np.int64) if "indices" in prim
+                   else np.arange(nv))
+            if len(idx) % 3:
+                raise InputError(path, f"key {where}.indices", f"{len(idx)} indices is not a multiple of 3")
+            if len(idx) and idx.max() >= nv:
+                raise InputError(path, f"key {where}.indices", "index beyond the vertex count")
+            tri = idx.reshape(-1, 3)
+            nrm = doc.accessor(attrs["NORMAL"]).astype(np.float64) if "NORMAL" in attrs else vertex_normals(v, tri).astype(np.float64)
+            if skinned and "JOINTS_0" in attrs and "WEIGHTS_0" in attrs:
+                jj = doc.accessor(attrs["JOINTS_0"]).astype(np.int64)
+                ww = doc.accessor(attrs["WEIGHTS_0"]).astype(np.float64)
+                if jj.max(initial=0) >= len(joint_nodes):
+                    raise InputError(path, f"key {where}.attributes.JOINTS_0", "joint index beyond the skin's joints")
+                jj = np.vectorize(lambda k: node_to_joint[joint_nodes[k]])(jj) if jj.size else jj
+                jj = np.asarray(jj, np.int64).reshape(nv, 4)
+                ibm = skin_ibm if skin_ibm is not None else np.broadcast_to(np.eye(4), (len(joint_nodes), 4, 4))
+                # bind matrix per skin joint: world rest x inverse bind (identity for a clean export)
+                bind_by_joint = np.zeros((len(order), 4, 4))
+                for k, n in enumerate(joint_nodes):
+                    bind_by_joint[node_to_joint[n]] = world[n] @ ibm[k]
+                s = ww.sum(1, keepdims=True)
+                if np.abs(s - 1).max(initial=0) > 1e-5:
+                    ww = np.where(s > 0, ww / np.where(s > 0, s, 1), [[1.0, 0, 0, 0]])
+                blend = np.einsum("vk,vkij->vij", ww, bind_by_joint[jj])
+            else:
+                p = ni
+                while p >= 0 and p not in node_to_joint:
+                    p = node_parent[p]
+                j = node_to_joint.get(p, 0)
+                jj = np.zeros((nv, 4), np.int64)
+                jj[:, 0] = j
+                ww = np.zeros((nv, 4))
+                ww[:, 0] = 1
+                blend = np.broadcast_to(world[ni], (nv, 4, 4))
+            if np.abs(blend - np.eye(4)).max() > 1e-5:
+                v = np.einsum("vij,vj->vi", blend[:, :3, :3], v) + blend[:, :3, 3]
+                nrm = np.einsum("vij,vj->vi", np.linalg.inv(blend[:, :3, :3]).transpose(0, 2, 1), nrm)
+            else:
+                blend = None
+            ln = np.linalg.norm(nrm, axis=1, keepdims=True)
+            if np.abs(ln - 1).max(initial=0) > 1e-5:  # leave unit normals bit-exact
+                nrm = np.where(ln > 1e-12, nrm / np.maximum(ln, 1e-12), [[0, 1.0, 0]])
+            # material
+            mat = g.get("materials", [])[prim["material"]] if "material" in prim else {}
+            pbr = mat.get("pbrMetallicRoughness", {})
+            factor = np.array(pbr.get("baseColorFactor", [1, 1, 1, 1]), np.float64)
+            col = np.tile(factor[:3], (nv, 1))
+            if "COLOR_0" in attrs:
+                c0 = doc.accessor(attrs["COLOR_0"]).astype(np.float64)
+                if c0.dtype.kind != "f" or c0.max() > 1.0 + 1e-6:
+                    c0 = c0 / max(c0.max(), 1.0)
+                col = col * c0[:, :3]
+            material_ids = (doc.accessor(attrs["_MATERIAL"]).reshape(-1).astype(np.uint8)
+                            if "_MATERIAL" in attrs else np.zeros(nv, np.uint8))
+            tex_index = None
+            if "baseColorTexture" in pbr:
+                ti = pbr["baseColorTexture"].get("index")
+                tex = g.get("textures", [])[ti] if ti is not None and ti < len(g.get("textures", [])) else {}
+                if "source" in tex:
+                    tex_index = tex["source"]
+                    if tex_index not in textures:
+                        textures[tex_index] = doc.image(tex_index)
+                else:
+                    notes.append(f"{where}: texture without a PNG/JPEG source ignored")
+            uv = doc.accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
+            # morph targets
+            targets = prim.get("targets", [])
+            names_here = list(prim.get("extras", {}).get("targetNames", target_names))
+            deltas = {}
+            for ti, t in enumerate(targets):
+                raw = names_here[ti] if ti < len(names_here) else f"target{ti}"
+                arkit = match_arkit_name(raw)
+                if arkit is None:
+                    ignored.add(raw)
+                    continue
+                d = doc.accessor(t["POSITION"]).astype(np.float64) if "POSITION" in t else np.zeros((nv, 3))
+                dn = doc.accessor(t["NORMAL"]).astype(np.float64) if "NORMAL" in t else np.zeros((nv, 3))
+                if blend is not None:
+                    d = np.einsum("vij,vj->vi", blend[:, :3, :3], d)
+                    dn = np.einsum("vij,vj->vi", blend[:, :3, :3], dn)
+                prev = deltas.get(arkit)
+                deltas[arkit] = (d, dn) if prev is None else (prev[0] + d, prev[1] + dn)
+                morph_names_found.add(arkit)
+            parts.append(dict(v=v, n=nrm, tri=tri, col=col, j=jj, w=ww, uv=uv, tex=tex_index, deltas=deltas,
+                              mat=material_ids, alpha=factor[3]))
+    if not parts:
+        raise InputError(path, "key meshes", "no triangle primitives to draw")
+    if ignored:
+        notes.append(f"ignored {len(ignored)} non-ARKit morph targets: {', '.join(sorted(ignored)[:8])}"
+                     + (" ..." if len(ignored) > 8 else ""))
+
+    # one texture can stay a texture; several are baked into vertex colours
+    used = sorted({p["tex"] for p in parts if p["tex"] is not None and textures.get(p["tex"]) is not None})
+    texture = None
+    if len(used) == 1:
+        texture = textures[used[0]]
+    elif len(used) > 1:
+        notes.append(f"{len(used)} base-colour textures baked into vertex colours")
+        for p in parts:
+            img = textures.get(p["tex"]) if p["tex"] is not None else None
+            if img is not None and p["uv"] is not None:
+                p["col"] = p["col"] * _sample(img, p["uv"])[:, :3]
+                p["tex"] = None
+    offset = 0
+    tris, cols_uv = [], []
+    for p in parts:
+        tris.append(p["tri"] + offset)
+        offset += len(p["v"])
+        if texture is not None:
+            # untextured parts get uv = -1, which the fragment shader reads as 'no texture'
+            cols_uv.append(p["uv"] if (p["tex"] is not None and p["uv"] is not None) else np.full((len(p["v"]), 2), -1.0))
+    V = offset
+    deltas = np.zeros((len(ARKIT_NAMES), V, 3), np.float32)
+    ndeltas = np.zeros((len(ARKIT_NAMES), V, 3), np.float32)
+    start = 0
+    for p in parts:
+        n = len(p["v"])
+        for name, (d, dn) in p["deltas"].items():
+            k = ARKIT_NAMES.index(name)
+            deltas[k, start:start + n] = d
+            ndeltas[k, start:start + n] = dn
+        start += n
+    missing = [n for n in ARKIT_NAMES if n not in morph_names_found]
+    if missing and morph_names_found:
+        notes.append(f"{len(missing)} ARKit shapes missing (they stay neutral)")
+    elif not morph_names_found:
+        notes.append("no ARKit morph targets: the face will not animate")
+    return Avatar(
+        skeleton=skeleton,
+        vertices=np.concatenate([p["v"] for p in parts]),
+        normals=np.concatenate([p["n"] for p in parts]),
+        indices=np.concatenate(tris),
+        colors=np.concatenate([p["col"] for p in parts]),
+        joints=np.concatenate([p["j"] for p in parts]),
+        weights=np.concatenate([p["w"] for p in parts]),
+        inverse_bind=np.linalg.inv(rest),
+        morph_names=ARKIT_NAMES,
+        morph_deltas=deltas,
+        morph_normal_deltas=ndeltas,
+        material=np.concatenate([p["mat"] for p in parts]),
+        uv=np.concatenate(cols_uv) if texture is not None else None,
+        texture=texture,
+        name=path.stem,
+        notes=tuple(notes),
+    )
+
+
+def _sample(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    h, w = img.shape[:2]
+    x = np.clip((np.mod(uv[:, 0], 1.0) * w).astype(int), 0, w - 1)
+    y = np.clip((np.mod(uv[:, 1], 1.0) * h).astype(int), 0, h - 1)  # glTF uv origin is the image's top left
+    return img[y, x].astype(np.float64) / 255.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Export
+# ---------------------------------------------------------------------------------------------
+
+class _BinWriter:
+    def __init__(self) -> None:
+        self.data = bytearray()
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+
+    def view(self, raw: bytes, target: int | None = None) -> int:
+        while len(self.data) % 4:
+            self.data.append(0)
+        v = {"buffer": 0, "byteOffset": len(self.data), "byteLength": len(raw)}
+        if target:
+            v["target"] = target
+        self.data.extend(raw)
+        self.views.append(v)
+        return len(self.views) - 1
+
+    def accessor(self, arr: np.ndarray, kind: str, component: int, target: int | None = None,
+                 minmax: bool = False, normalized: bool = False) -> int:
+        arr = np.ascontiguousarray(arr)
+        view = self.view(arr.tobytes(), target)
+        acc = {"bufferView": view, "componentType": component, "count": int(arr.shape[0]), "type": kind}
+        if normalized:
+            acc["normalized"] = True
+        if minmax:
+            flat = arr.reshape(arr.shape[0], -1)
+            acc["min"] = [float(x) for x in flat.min(0)]
+            acc["max"] = [float(x) for x in flat.max(0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+
+def export_glb(avatar: Avatar, path: str | Path) -> Path:
+    """Write ``avatar`` as a GLB: joint nodes, one skinned mesh with ARKit morph targets (``targetNames``),
+    vertex colours, the material id as the custom ``_MATERIAL`` attribute and the base-colour texture."""
+    path = Path(path)
+    sk = avatar.skeleton
+    w = _BinWriter()
+    ARRAY, ELEMENT = 34962, 34963
+    nodes = []
+    for j in range(sk.n_joints):
+        node = {"name": sk.names[j], "translation": [float(x) for x in sk.offsets[j]]}
+        q = sk.rest_rotations[j]
+        if not np.allclose(q, [0, 0, 0, 1]):
+            node["rotation"] = [float(x) for x in q]
+        kids = sk.children(j)
+        if kids:
+            node["children"] = kids
+        nodes.append(node)
+    attrs = {
+        "POSITION": w.accessor(avatar.vertices.astype(np.float32), "VEC3", 5126, ARRAY, minmax=True),
+        "NORMAL": w.accessor(avatar.normals.astype(np.float32), "VEC3", 5126, ARRAY),
+        "COLOR_0": w.accessor(avatar.colors.astype(np.float32), "VEC3", 5126, ARRAY),
+        "JOINTS_0": w.accessor(avatar.joints.astype(np.uint16), "VEC4", 5123, ARRAY),
+        "WEIGHTS_0": w.accessor(avatar.weights.astype(np.float32), "VEC4", 5126, ARRAY),
+        "_MATERIAL": w.accessor(avatar.material.astype(np.uint8).reshape(-1, 1), "SCALAR", 5121, ARRAY),
+    }
+    if avatar.uv is not None:
+        attrs["TEXCOORD_0"] = w.accessor(avatar.uv.astype(np.float32), "VEC2", 5126, ARRAY)
+    indices = w.accessor(avatar.indices.astype(np.uint32).reshape(-1, 1), "SCALAR", 5125, ELEMENT)
+    targets = []
+    for m in range(len(avatar.morph_names)):
+        t = {"POSITION": w.accessor(avatar.morph_deltas[m].astype(np.float32), "VEC3", 5126, ARRAY, minmax=True)}
+        if avatar.morph_normal_deltas is not None:
+            t["NORMAL"] = w.accessor(avatar.morph_normal_deltas[m].astype(np.float32), "VEC3", 5126, ARRAY)
+        targets.append(t)
+    ibm = np.ascontiguousarray(avatar.inverse_bind.astype(np.float32).transpose(0, 2, 1)).reshape(-1, 16)
+    ibm_acc = w.accessor(ibm, "MAT4", 5126)
+    material = {"name": "base", "pbrMetallicRoughness": {
+        "baseColorFactor": [float(x) for x in avatar.base_color_factor], "metallicFactor": 0.0, "roughnessFactor": 0.8}}
+    gltf: dict = {
+        "asset": {"version": "2.0", "generator": "studyapp"},
+        "scene": 0,
+        "materials": [material],
+    }
+    if avatar.texture is not None:
+        import matplotlib.image as mpimg
+
+        png = io.BytesIO()
+        mpimg.imsave(png, avatar.texture, format="png")
+        iv = w.view(png.getvalue())
+        gltf["images"] = [{"bufferView": iv, "mimeType": "image/png"}]
+        gltf["samplers"] = [{"magFilter": 9729, "minFilter": 9987}]
+        gltf["textures"] = [{"source": 0, "sampler": 0}]
+        material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    mesh_node = len(nodes)
+    nodes.append({"name": avatar.name or "avatar", "mesh": 0, "skin": 0})
+    roots = [j for j in range(sk.n_joints) if sk.parents[j] < 0]
+    gltf["scenes"] = [{"nodes": roots + [mesh_node]}]
+    gltf["nodes"] = nodes
+    gltf["meshes"] = [{"name": avatar.name or "avatar", "primitives": [
+        {"attributes": attrs, "indices": indices, "material": 0, "mode": 4, "targets": targets}],
+        "weights": [0.0] * len(avatar.morph_names),
+        "extras": {"targetNames": list(avatar.morph_names)}}]
+    gltf["skins"] = [{"joints": list(range(sk.n_joints)), "inverseBindMatrices": ibm_acc, "skeleton": roots[0]}]
+    gltf["accessors"] = w.accessors
+    gltf["bufferViews"] = w.views
+    while len(w.data) % 4:
+        w.data.append(0)
+    gltf["buffers"] = [{"byteLength": len(w.data)}]
+    js = json.dumps(gltf, separators=(",", ":")).encode("utf-8")
+    js += b" " * (-len(js) % 4)
+    total = 12 + 8 + len(js) + 8 + len(w.data)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        f.write(struct.pack("<III", GLB_MAGIC, 2, total))
+        f.write(struct.pack("<II", len(js), CHUNK_JSON))
+        f.write(js)
+        f.write(struct.pack("<II", len(w.data), CHUNK_BIN))
+        f.write(bytes(w.data))
+    return path

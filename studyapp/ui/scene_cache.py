@@ -1,0 +1,85 @@
+"""Keeps the last 3D view in a texture so unchanged frames cost one textured quad, not a re-render.
+
+While the participant ranks (or the clip is paused) the avatars do not move, yet the UI still redraws
+every frame; re-rendering three skinned, multisampled avatars each time would keep a laptop's CPU or
+GPU busy for nothing (and slow the offscreen bot tenfold on a software renderer).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import moderngl
+import numpy as np
+
+_VERT = """
+#version 330
+in vec2 in_pos;
+out vec2 v_uv;
+uniform vec4 u_rect;  // x, y, w, h in normalized device coordinates
+void main() {
+    v_uv = in_pos;
+    gl_Position = vec4(u_rect.xy + in_pos * u_rect.zw, 0.0, 1.0);
+}
+"""
+_FRAG = """
+#version 330
+in vec2 v_uv;
+out vec4 f_color;
+uniform sampler2D u_image;
+void main() { f_color = vec4(texture(u_image, v_uv).rgb, 1.0); }
+"""
+
+
+class SceneCache:
+    """Renders ``renderer.draw_trial`` into its own texture when (scene, time, size) change."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self.prog = ctx.program(vertex_shader=_VERT, fragment_shader=_FRAG)
+        quad = np.array([0, 0, 1, 0, 0, 1, 1, 1], dtype="f4")
+        self.vbo = ctx.buffer(quad.tobytes())
+        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f", "in_pos")])
+        self.tex: moderngl.Texture | None = None
+        self.fbo: moderngl.Framebuffer | None = None
+        self.key: tuple | None = None
+        self.renders = 0
+
+    def _ensure(self, size: tuple[int, int]) -> None:
+        if self.tex is not None and self.tex.size == size:
+            return
+        self.release_target()
+        self.tex = self.ctx.texture(size, 4)
+        self.tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.fbo = self.ctx.framebuffer([self.tex])
+        self.key = None
+
+    def draw(self, renderer: Any, scene: Any, t: float, target: moderngl.Framebuffer,
+             viewport: tuple[int, int, int, int], target_size: tuple[int, int]) -> None:
+        """Draw the scene at ``t`` into ``viewport`` (GL pixels, origin bottom-left) of ``target``."""
+        x, y, w, h = (int(v) for v in viewport)
+        self._ensure((w, h))
+        key = (id(scene), round(float(t), 6), w, h)
+        if key != self.key:
+            renderer.draw_trial(scene, t, self.fbo, (0, 0, w, h))
+            self.key = key
+            self.renders += 1
+        target.use()
+        ctx = self.ctx
+        ctx.viewport = (0, 0, *target_size)
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
+        tw, th = target_size
+        self.prog["u_rect"].value = (2 * x / tw - 1, 2 * y / th - 1, 2 * w / tw, 2 * h / th)
+        self.tex.use(0)
+        self.prog["u_image"].value = 0
+        self.vao.render(moderngl.TRIANGLE_STRIP)
+
+    def release_target(self) -> None:
+        for obj in (self.fbo, self.tex):
+            if obj is not None:
+                obj.release()
+        self.fbo = self.tex = None
+
+    def release(self) -> None:
+        self.release_target()
+        for obj in (self.vao, self.vbo, self.prog):
+            obj.release()

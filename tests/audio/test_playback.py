@@ -1,0 +1,184 @@
+"""Audio output as the master clock: device selection, format conversion, and the clock on a real
+(null PulseAudio) output that is paced in real time like a sound card."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from studyapp.audio.clock import SilentClock
+from studyapp.audio.playback import (
+    AudioDeviceError,
+    OutputDevice,
+    Pcm,
+    _to_stream_format,
+    open_clock,
+    resolve_device,
+    sound_check_tone,
+)
+
+SCRIPT = Path("/work/shared/scripts/start-null-audio.sh")
+if not SCRIPT.exists():
+    SCRIPT = Path(__file__).resolve().parents[2] / ".ci" / "start-null-audio.sh"
+
+
+def _rescan():
+    import sounddevice as sd
+
+    sd._terminate()
+    sd._initialize()
+
+
+@pytest.fixture(scope="module")
+def null_sink():
+    """Start a PulseAudio null sink (or use the one CI started) and export its environment."""
+    if shutil.which("pulseaudio") is None:
+        pytest.skip("pulseaudio is not installed: no null audio sink to play to")
+    started = None
+    saved = {k: os.environ.get(k) for k in ("PULSE_SERVER", "XDG_RUNTIME_DIR")}
+    if not os.environ.get("PULSE_SERVER"):
+        out = subprocess.run(["bash", str(SCRIPT)], capture_output=True, text=True, timeout=30)
+        env = dict(tok.split("=", 1) for tok in out.stdout.replace("export ", "").split() if "=" in tok)
+        env = {k: v.strip("'\"") for k, v in env.items()}
+        if "PULSE_SERVER" not in env:
+            pytest.skip(f"null audio sink did not start: {out.stdout} {out.stderr}")
+        started = int(env.pop("AUDIO_NULL_PID"))
+        os.environ.update(env)
+    _rescan()
+    yield os.environ["PULSE_SERVER"]
+    if started is not None:
+        os.kill(started, 15)
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        _rescan()
+
+
+DEVICES = [
+    OutputDevice(0, "HDA Intel PCH: ALC3246 Analog", "ALSA", 2, 48000.0, 0.01, 0.05, False),
+    OutputDevice(3, "pulse", "ALSA", 32, 44100.0, 0.01, 0.03, False),
+    OutputDevice(7, "default", "ALSA", 32, 44100.0, 0.01, 0.03, True),
+]
+
+
+def test_resolve_device_by_index_name_and_default():
+    assert resolve_device(None, DEVICES).index == 7
+    assert resolve_device(3, DEVICES).name == "pulse"
+    assert resolve_device("3", DEVICES).name == "pulse"
+    assert resolve_device("alc3246", DEVICES).index == 0
+    assert resolve_device("DEFAULT", DEVICES).index == 7
+
+
+def test_resolve_device_errors_list_the_outputs():
+    with pytest.raises(AudioDeviceError, match="0: HDA Intel.*3: pulse.*7: default"):
+        resolve_device("headphones", DEVICES)
+    with pytest.raises(AudioDeviceError, match="no audio output device with index 9"):
+        resolve_device(9, DEVICES)
+    with pytest.raises(AudioDeviceError, match="no audio output device found"):
+        resolve_device(None, [])
+
+
+def test_stream_format_resamples_and_maps_channels():
+    rate = 16000
+    t = np.arange(rate) / rate
+    mono = Pcm((0.5 * np.sin(2 * np.pi * 440 * t)).astype(np.float32)[:, None], rate)
+    out = _to_stream_format(mono, 48000, 2)
+    assert out.shape == (48000, 2) and out.dtype == np.float32
+    assert np.array_equal(out[:, 0], out[:, 1])
+    # the 440 Hz tone is still a 440 Hz tone at the new rate (independent check by FFT)
+    spec = np.abs(np.fft.rfft(out[:, 0]))
+    assert np.argmax(spec) == pytest.approx(440, abs=1)
+    stereo = Pcm(np.stack([np.ones(10), -np.ones(10)], axis=1).astype(np.float32), 48000)
+    assert np.allclose(_to_stream_format(stereo, 48000, 1)[:, 0], 0.0)  # down-mix averages
+
+
+def test_sound_check_tone_has_no_clicks():
+    tone = sound_check_tone(1000.0, 0.5, 48000)
+    s = tone.samples[:, 0]
+    assert abs(s[0]) < 1e-3 and abs(s[-1]) < 1e-3 and 0.29 < np.abs(s).max() <= 0.3
+
+
+def test_silent_clock_real_time_follows_monotonic():
+    clock = SilentClock()
+    clock.play(None, duration_s=10.0)
+    t0 = time.monotonic()
+    time.sleep(0.05)
+    elapsed = time.monotonic() - t0
+    assert clock.position_s() == pytest.approx(elapsed, abs=0.02)
+    clock.stop()
+    assert not clock.playing and clock.position_s() == 0.0
+
+
+def test_silent_clock_virtual_pause_replay():
+    c = SilentClock(virtual=True)
+    c.play(None, 1.0, duration_s=3.0)
+    c.advance(0.5)
+    assert c.position_s() == pytest.approx(1.5)
+    c.pause()
+    c.advance(2.0)
+    assert c.paused and c.position_s() == pytest.approx(1.5)
+    c.resume()
+    c.advance(10.0)
+    assert c.finished and c.position_s() == 3.0
+    c.replay()
+    assert c.position_s() == 0.0 and c.playing
+
+
+@pytest.mark.audio
+def test_player_clock_follows_real_time_on_null_sink(null_sink):
+    from studyapp.audio.playback import AudioPlayer, list_output_devices
+
+    assert list_output_devices(), "the null sink should appear as an output"
+    clip = Pcm(np.zeros((16000 * 4, 1), np.float32), 16000)
+    with AudioPlayer() as player:
+        assert player.wait_until_flowing(5.0)
+        assert 0.0 < player.output_latency_s < 0.5
+        player.play(clip)
+        assert player.position_s() == 0.0
+        time.sleep(0.4)  # past the start latency
+        p0, t0 = player.position_s(), time.monotonic()
+        time.sleep(0.5)
+        p1, t1 = player.position_s(), time.monotonic()
+        # the audio clock advances with wall time (it is paced by the sink, not by us)
+        assert p1 - p0 == pytest.approx(t1 - t0, abs=0.08)
+        assert player.playing and not player.finished
+        player.pause()
+        frozen = player.position_s()
+        time.sleep(0.2)
+        assert player.paused and player.position_s() == frozen
+        player.resume()
+        time.sleep(0.4)
+        assert player.position_s() > frozen
+        player.stop()
+        assert not player.playing
+
+
+@pytest.mark.audio
+def test_player_reaches_the_end(null_sink):
+    from studyapp.audio.playback import AudioPlayer
+
+    with AudioPlayer() as player:
+        player.wait_until_flowing(5.0)
+        player.play(sound_check_tone(duration_s=0.3, sample_rate=player.rate))
+        t_end = time.monotonic() + 3.0
+        while not player.finished and time.monotonic() < t_end:
+            time.sleep(0.02)
+        assert player.finished and player.position_s() == pytest.approx(player.duration_s)
+
+
+def test_open_clock_without_device_is_silent_and_says_so(monkeypatch):
+    import studyapp.audio.playback as pb
+
+    monkeypatch.setattr(pb, "list_output_devices", lambda: [])
+    clock, message = open_clock(None)
+    assert isinstance(clock, SilentClock)
+    assert "no audio output device" in message and "--audio-device" in message
+    with pytest.raises(AudioDeviceError):
+        open_clock("USB headset")  # a device asked for by name must exist

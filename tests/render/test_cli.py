@@ -1,0 +1,55 @@
+"""`studyapp view --offscreen` and `studyapp render` through the real command line."""
+from __future__ import annotations
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from conftest import SAMPLES
+from studyapp.cli import main
+from studyapp.resources import demo_design
+
+pytestmark = pytest.mark.gl
+
+
+def test_view_offscreen_writes_a_frame(tmp_path, capsys):
+    out = tmp_path / "frame.png"
+    rc = main(["view", str(SAMPLES / "beat75_diffsheg_output_excerpt.bvh"), "--fps", "15",
+               "--face", str(SAMPLES / "beat_face51_diffsheg_gt_excerpt.json"),
+               "--offscreen", "--out", str(out), "--size", "240x180", "--time", "0.1"])
+    assert rc == 0 and out.is_file()
+    img = mpimg.imread(out)
+    assert img.shape[:2] == (180, 240)
+    rgb = img[..., :3]
+    # a figure in the middle, backdrop at the edges
+    assert np.abs(rgb[60:160, 100:140] - rgb[5, 5]).sum(-1).max() > 0.3
+
+
+def test_view_reports_a_bad_motion_file(tmp_path, capsys):
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n")
+    rc = main(["view", str(bad), "--offscreen", "--out", str(tmp_path / "x.png")])
+    assert rc == 2
+    assert "broken.bvh" in capsys.readouterr().err
+
+
+def test_render_a_participants_trial_still(tmp_path):
+    out = tmp_path / "trial.png"
+    rc = main(["render", str(demo_design()), "--participant", "P01", "--trial", "0", "--time", "0.5",
+               "--out", str(out), "--size", "384x216"])
+    assert rc == 0
+    img = mpimg.imread(out)[..., :3]
+    assert img.shape[:2] == (216, 384)
+    # three figures: every third differs from its own backdrop corner
+    for x0 in (0, 128, 256):
+        third = img[:, x0:x0 + 128]
+        assert np.abs(third - third[-1:, :1]).sum(-1).max() > 0.3
+
+
+def test_render_needs_time_for_png_and_checks_trial(tmp_path, capsys):
+    assert main(["render", str(demo_design()), "--participant", "P01", "--trial", "0",
+                 "--out", str(tmp_path / "t.png")]) == 2
+    assert "--time" in capsys.readouterr().err
+    assert main(["render", str(demo_design()), "--participant", "P01", "--trial", "999", "--time", "0",
+                 "--out", str(tmp_path / "t.png")]) == 2
+    assert "999" in capsys.readouterr().err

@@ -1,0 +1,58 @@
+"""MP4 (H.264 + AAC) and PNG output, checked by decoding the files again."""
+from __future__ import annotations
+
+import av
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from conftest import RELAXED, posed
+from studyapp.audio.wav import AudioClip
+from studyapp.render.pose import prepare_slot
+from studyapp.render.scene import make_scene
+from studyapp.render.video import render_still, render_video
+
+pytestmark = pytest.mark.gl
+
+
+@pytest.fixture(scope="module")
+def scene(avatar):
+    wave = posed(avatar, RELAXED, 12, fps=30.0)
+    slot = prepare_slot(avatar, wave, None)
+    return make_scene([slot] * 3, avatar, labels=("A", "B", "C"))
+
+
+def test_video_has_h264_video_and_aac_audio(tmp_path, scene, renderer):
+    t = np.arange(16000 // 2) / 16000
+    clip = AudioClip(0.3 * np.sin(2 * np.pi * 440 * t).astype(np.float32), 16000)  # 0.5 s, BEAT's 16 kHz mono
+    out = render_video(scene, clip, tmp_path / "clip.mp4", size=(192, 108), fps=30, renderer=renderer)
+    with av.open(str(out)) as f:
+        v = f.streams.video[0]
+        a = f.streams.audio[0]
+        assert v.codec_context.name == "h264" and v.codec_context.pix_fmt == "yuv420p"
+        assert (v.codec_context.width, v.codec_context.height) == (192, 108)
+        assert a.codec_context.name == "aac" and a.codec_context.sample_rate == 16000
+        frames = [fr.to_ndarray(format="rgb24") for fr in f.decode(video=0)]
+    assert len(frames) == 15  # max(motion 0.4 s, audio 0.5 s) at 30 fps
+    still = render_still(scene, 0.0, tmp_path / "f0.png", size=(192, 108), renderer=renderer)
+    # lossy, but the same picture
+    assert np.abs(frames[0].astype(int) - still.astype(int)).mean() < 4
+    with av.open(str(out)) as f:
+        pcm = np.concatenate([fr.to_ndarray().reshape(-1) for fr in f.decode(audio=0)])
+    assert 0.2 < np.abs(pcm).max() < 0.4  # the tone made it into the file
+
+
+def test_still_png_matches_the_frame(tmp_path, scene, renderer):
+    img = render_still(scene, 0.2, tmp_path / "still.png", size=(200, 120), renderer=renderer)
+    back = mpimg.imread(tmp_path / "still.png")
+    assert back.shape[:2] == (120, 200)
+    assert np.array_equal((back[..., :3] * 255).round().astype(np.uint8), img)
+
+
+def test_video_without_audio(tmp_path, scene, renderer):
+    out = render_video(scene, None, tmp_path / "silent.mp4", size=(97, 55), fps=10, renderer=renderer)
+    with av.open(str(out)) as f:
+        assert len(f.streams.audio) == 0
+        v = f.streams.video[0]
+        assert (v.codec_context.width, v.codec_context.height) == (96, 54)  # even sizes for yuv420p
+        assert sum(1 for _ in f.decode(video=0)) == 4

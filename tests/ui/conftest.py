@@ -1,0 +1,129 @@
+"""Fixtures for the participant UI tests: a GL context, a tiny study, a virtual X display, null audio."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+SHARED_AUDIO = Path("/work/shared/scripts/start-null-audio.sh")
+REPO_AUDIO = Path(__file__).resolve().parents[2] / ".ci" / "start-null-audio.sh"
+
+
+@pytest.fixture(scope="session")
+def gl_ctx():
+    from studyapp.render.context import create_offscreen_context
+
+    try:
+        return create_offscreen_context()
+    except Exception as exc:  # no EGL/OSMesa: the GL tests cannot run here
+        pytest.skip(f"no headless OpenGL context: {exc}")
+
+
+@pytest.fixture
+def tiny_study(tmp_path):
+    """A complete 1-second-clip study (practice + 2 clips + questionnaire) and its results database."""
+    from studyapp.study.design import load_design
+    from studyapp.study.storage import ResultsDB
+    from studyapp.study.synthetic import write_synthetic_study
+
+    path = write_synthetic_study(tmp_path / "study", n_stimuli=2, questionnaire=True)
+    # Condition ids named like the published models, so the leak checks look for realistic secrets.
+    text = path.read_text()
+    for old, new in (("synced", "FaceCapGes"), ("lagged", "DiffSHEG"), ("static", "CaMN")):
+        text = text.replace(f'id = "{old}"', f'id = "{new}"')
+    path.write_text(text)
+    design = load_design(path)
+    db = ResultsDB(tmp_path / "results.sqlite", design)
+    yield design, db
+    db.close()
+
+
+@pytest.fixture
+def secrets_of():
+    """Function: the strings of a design a participant must never see."""
+    return _secrets_of
+
+
+def _secrets_of(design) -> list[str]:
+    # Condition ids, live-model file names, and the published models' names.
+    out = {"FaceCapGes", "DiffSHEG", "CaMN"}
+    for c in design.conditions:
+        out.add(c.id)
+        if c.model:
+            out.add(Path(c.model).stem)
+    return sorted(out)
+
+
+@pytest.fixture
+def xvfb_display():
+    """A private Xvfb display (1280x800x24) for the window tests; DISPLAY is set while the test runs."""
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (apt install xvfb)")
+    for n in range(140, 200):
+        if not os.path.exists(f"/tmp/.X11-unix/X{n}") and not os.path.exists(f"/tmp/.X{n}-lock"):
+            break
+    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    for _ in range(100):
+        if os.path.exists(f"/tmp/.X11-unix/X{n}"):
+            break
+        time.sleep(0.05)
+    old = os.environ.get("DISPLAY")
+    os.environ["DISPLAY"] = f":{n}"
+    try:
+        yield f":{n}"
+    finally:
+        if old is None:
+            os.environ.pop("DISPLAY", None)
+        else:
+            os.environ["DISPLAY"] = old
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+@pytest.fixture
+def null_audio():
+    """A PulseAudio null sink (real-time paced), its environment exported while the test runs."""
+    script = SHARED_AUDIO if SHARED_AUDIO.exists() else REPO_AUDIO
+    if shutil.which("pulseaudio") is None:
+        pytest.skip("pulseaudio is not installed (apt install pulseaudio): no null audio sink")
+    if os.environ.get("PULSE_SERVER"):  # the CI script already started one
+        _rescan_portaudio()
+        yield os.environ["PULSE_SERVER"]
+        return
+    out = subprocess.run(["bash", str(script)], capture_output=True, text=True, timeout=30)
+    env = {}
+    for token in out.stdout.replace("export ", "").split():
+        if "=" in token:
+            k, v = token.split("=", 1)
+            env[k] = v.strip("'\"")
+    if "PULSE_SERVER" not in env:
+        pytest.skip(f"null audio sink did not start: {out.stdout} {out.stderr}")
+    old = {k: os.environ.get(k) for k in env}
+    os.environ.update({k: v for k, v in env.items() if k != "AUDIO_NULL_PID"})
+    _rescan_portaudio()
+    try:
+        yield env["PULSE_SERVER"]
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        try:
+            os.kill(int(env["AUDIO_NULL_PID"]), 15)
+        except (KeyError, ValueError, ProcessLookupError):
+            pass
+        _rescan_portaudio()
+
+
+def _rescan_portaudio() -> None:
+    # PortAudio lists devices once, at initialisation: re-initialise so the new sound server is seen.
+    import sounddevice as sd
+
+    sd._terminate()
+    sd._initialize()

@@ -1,0 +1,176 @@
+"""The REAL participant window (GLFW + Mesa GLX) under Xvfb, driven by xdotool like a participant.
+
+The test starts its own Xvfb display, opens the window through :class:`studyapp.ui.app.WindowRunner`,
+clicks, drags and types with xdotool (X events -> GLFW callbacks -> ui/input.py -> ImGui), takes
+screenshots of the X screen with ImageMagick's ``import`` and checks what they show.
+"""
+from __future__ import annotations
+
+import shutil
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+pytestmark = [pytest.mark.display, pytest.mark.gl]
+
+
+def _need(tool: str) -> str:
+    path = shutil.which(tool) or (f"/usr/bin/{tool}" if shutil.os.path.exists(f"/usr/bin/{tool}") else None)
+    if path is None:
+        pytest.skip(f"{tool} is not installed")
+    return path
+
+
+class Driver:
+    """Runs frames of the window and sends X input with xdotool."""
+
+    def __init__(self, runner, tmp_path):
+        self.runner = runner
+        self.app = runner.app
+        self.tmp = tmp_path
+        self.xdotool = _need("xdotool")
+        self.imp = "/usr/bin/import" if shutil.os.path.exists("/usr/bin/import") else _need("import")
+        self.wid = None
+        for _ in range(50):
+            self.frames(2)
+            out = subprocess.run([self.xdotool, "search", "--name", "^studyapp$"], capture_output=True, text=True)
+            if out.stdout.strip():
+                self.wid = out.stdout.split()[0]
+                break
+        assert self.wid, "xdotool cannot find the window titled 'studyapp'"
+
+    def frames(self, n: int = 3) -> None:
+        for _ in range(n):
+            assert self.runner.step()
+            time.sleep(0.01)  # let the X server deliver queued events before the next poll
+
+    def until(self, pred, limit_s: float = 30.0) -> None:
+        t_end = time.monotonic() + limit_s
+        while not pred():
+            assert time.monotonic() < t_end, f"timed out on screen {self.app.screen_key()!r}"
+            self.frames(1)
+
+    def xdo(self, *args) -> None:
+        subprocess.run([self.xdotool, *map(str, args)], check=True, timeout=10)
+
+    def center(self, key):
+        x0, y0, x1, y1 = self.app.ui.rects[key]
+        return int((x0 + x1) / 2), int((y0 + y1) / 2)
+
+    def click(self, key) -> None:
+        x, y = self.center(key)
+        self.xdo("mousemove", "--window", self.wid, x, y)
+        self.frames(2)
+        self.xdo("click", "1")
+        self.frames(4)
+
+    def drag(self, src, dst) -> None:
+        (ax, ay), (bx, by) = self.center(src), self.center(dst)
+        self.xdo("mousemove", "--window", self.wid, ax, ay)
+        self.frames(2)
+        self.xdo("mousedown", "1")
+        self.frames(2)
+        for f in (0.1, 0.4, 0.8, 1.0):
+            self.xdo("mousemove", "--window", self.wid, int(ax + (bx - ax) * f), int(ay + (by - ay) * f))
+            self.frames(2)
+        self.xdo("mouseup", "1")
+        self.frames(4)
+
+    def key(self, name: str) -> None:
+        self.xdo("key", "--window", self.wid, name)
+        self.frames(4)
+
+    def screenshot(self, name: str) -> np.ndarray:
+        import matplotlib.image as mimage
+
+        self.frames(2)
+        path = self.tmp / f"{name}.png"
+        subprocess.run([self.imp, "-window", "root", str(path)], check=True, timeout=30)
+        img = mimage.imread(str(path))[..., :3]
+        img = (img * 255).astype(np.uint8) if img.dtype != np.uint8 else img
+        geo = subprocess.run([self.xdotool, "getwindowgeometry", self.wid], capture_output=True, text=True).stdout
+        pos = geo.split("Position:")[1].split()[0].split(",")
+        x, y = int(pos[0]), int(pos[1])
+        w, h = self.app.fb_size
+        return img[y:y + h, x:x + w]
+
+
+def thirds_with_figures(img: np.ndarray, top: int, bottom: int) -> list[int]:
+    """Dark (figure) pixels in each third of the rows top..bottom of a light background."""
+    dark = img[top:bottom].astype(int).sum(axis=2) < 250
+    w = dark.shape[1]
+    return [int(dark[:, k * w // 3:(k + 1) * w // 3].sum()) for k in range(3)]
+
+
+def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_path, secrets_of):
+    from studyapp.audio.clock import SilentClock
+    from studyapp.study.session import Session
+    from studyapp.ui.app import WindowRunner
+    from studyapp.ui.widgets import Painter
+
+    design, db = tiny_study
+    session = Session(design, db, "W1")
+    try:
+        runner = WindowRunner(design, session, SilentClock(), size=(1280, 720))
+    except Exception as exc:
+        pytest.skip(f"no GLX window under Xvfb: {exc}")
+    try:
+        d = Driver(runner, tmp_path)
+        app = d.app
+        import glfw
+
+        assert glfw.get_window_title(runner.window.handle) == "studyapp" if hasattr(glfw, "get_window_title") \
+            else True
+        d.until(lambda: "consent" in app.ui.rects)
+        d.frames(2)
+        d.click("consent")                       # xdotool click -> GLFW mouse callbacks
+        d.until(lambda: app.screen_key() == "instructions")
+        d.frames(3)
+        d.key("Return")                          # keyboard path: Enter continues
+        d.until(lambda: app.screen_key() == "env_check")
+        d.frames(3)
+        d.click("continue")
+        d.until(lambda: app.screen_key() == "practice:ready")
+        d.frames(3)
+        d.click("play")
+        d.until(lambda: app.screen_key() == "practice:playing", 10)
+        shot = d.screenshot("trial_playing")
+        h = shot.shape[0]
+        counts = thirds_with_figures(shot, int(0.1 * h), int(0.85 * h))
+        assert all(c > 500 for c in counts), counts
+        d.until(lambda: app.screen_key() == "practice:ranking", 30)
+        d.frames(3)
+        shot = d.screenshot("trial_ranking")
+        assert np.median(shot[int(0.6 * h):].astype(int).sum(axis=2)) < 200  # the dark ranking panel
+        assert all(c > 100 for c in thirds_with_figures(shot, int(0.08 * h), int(0.45 * h)))
+        crits = [c.id for c in design.criteria]
+        # 1st question by dragging: right figure best, then left, then middle
+        for place, slot in enumerate((2, 0, 1)):
+            d.drag(("chip", crits[0], slot), ("place", crits[0], place))
+        # 2nd by clicking in order best -> worst
+        for slot in (1, 2, 0):
+            d.click(("chip", crits[1], slot))
+        # 3rd with the keyboard: choose the question, then 3, 1, 2
+        d.click(("crit", crits[2]))
+        for k in ("3", "1", "2"):
+            d.key(k)
+        d.frames(3)
+        assert app.screen_key() == "practice:ranked", app.screen_key()
+        shot = d.screenshot("trial_ranked")
+        d.click("next")
+        d.until(lambda: db.trials("W1"), 10)
+        ranks = {(r["criterion"], r["slot"]): r["rank"] for r in db.responses("W1")}
+        assert [ranks[(crits[0], s)] for s in range(3)] == [2, 3, 1]
+        assert [ranks[(crits[1], s)] for s in range(3)] == [3, 1, 2]
+        assert [ranks[(crits[2], s)] for s in range(3)] == [2, 3, 1]
+        trial = db.trials("W1")[0]
+        assert trial["frames_shown"] > 0 and trial["worst_av_offset_ms"] is not None
+        p = Painter()
+        for s in app.ui.drawn:
+            p.record(s)
+        assert p.leaks(secrets_of(design)) == []
+    finally:
+        runner.close()
+        session.close()
