@@ -139,7 +139,7 @@ def _render_first_trial(design, plan, out: Path, *, video: bool) -> dict[str, Pa
     if video:
         written["video"] = out / "first_trial.mp4"
         render_video(scene, media.audio, written["video"], size=(1280, 720), fps=30,
-                     duration_s=min(4.0, scene.duration))
+                     duration=min(4.0, scene.duration))
     return written
 
 

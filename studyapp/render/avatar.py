@@ -913,9 +913,9 @@ def _build_body(mb: _MeshBuilder) -> None:
     spine_bones = ["Hips", "Spine", "Chest", "UpperChest", "Neck", "LeftShoulder", "RightShoulder"]
     # torso: sections from the crotch to the base of the neck (y, half width, half depth, z centre)
     prof = np.array([
-        [0.790, 0.100, 0.070, 0.000],
-        [0.850, 0.155, 0.090, 0.000],
-        [0.930, 0.168, 0.100, -0.004],
+        [0.800, 0.060, 0.050, 0.000],
+        [0.870, 0.150, 0.088, 0.000],
+        [0.930, 0.170, 0.100, -0.004],
         [0.990, 0.165, 0.098, -0.002],
         [1.060, 0.145, 0.092, 0.004],
         [1.120, 0.140, 0.094, 0.010],
@@ -928,7 +928,8 @@ def _build_body(mb: _MeshBuilder) -> None:
         [1.478, 0.095, 0.060, -0.016],
         [1.495, 0.062, 0.052, -0.018],
     ])
-    ys = np.linspace(prof[0, 0], prof[-1, 0], 34)
+    # rows every ~1.5 cm, with extra rows at the belt so the shirt/trousers edge stays crisp
+    ys = np.unique(np.concatenate([np.linspace(prof[0, 0], prof[-1, 0], 44), 1.02 + np.array([-0.02, -0.013, -0.006, 0.0, 0.006, 0.013, 0.02])]))
     hw = np.interp(ys, prof[:, 0], prof[:, 1])
     hd = np.interp(ys, prof[:, 0], prof[:, 2])
     zc = np.interp(ys, prof[:, 0], prof[:, 3])
@@ -944,7 +945,7 @@ def _build_body(mb: _MeshBuilder) -> None:
     top = _smoothstep(1.40, 1.49, y)
     v[:, 1] -= 0.030 * top * _smoothstep(0.04, 0.16, np.abs(x))
     col = np.where((v[:, 1] < 1.02)[:, None], TROUSERS, SHIRT)
-    belt = np.abs(v[:, 1] - 1.02) < 0.012
+    belt = np.abs(v[:, 1] - 1.02) < 0.0095
     col[belt] = TROUSERS * 0.6
     # collar: skin at the neckline
     # a soft round collar: skin shows in a small curve below the neck
@@ -984,10 +985,10 @@ def _build_body(mb: _MeshBuilder) -> None:
     for side, sx in (("Left", 1), ("Right", -1)):
         hip, knee, ankle = P(f"{side}UpperLeg"), P(f"{side}LowerLeg"), P(f"{side}Foot")
         s = np.linspace(0, 1, 24)
-        top = hip + np.array([0, 0.06, 0])
+        top = hip + np.array([0, 0.03, 0])  # starts inside the pelvis
         path = np.where((s < 0.5)[:, None], top + (knee - top) * (s / 0.5)[:, None],
                         knee + (ankle - knee) * ((s - 0.5) / 0.5)[:, None])
-        r = np.interp(s, [0, 0.2, 0.5, 0.7, 0.95, 1], [0.085, 0.080, 0.058, 0.056, 0.045, 0.044])
+        r = np.interp(s, [0, 0.2, 0.5, 0.7, 0.95, 1], [0.078, 0.074, 0.056, 0.055, 0.045, 0.044])
         v, f = _tube(path, r, r * 1.05, [1.0, 0, 0], n_around=18, cap_start=False, cap_end=False)
         mb.add(v, f, TROUSERS, MAT_CLOTH, bones=["Hips", f"{side}UpperLeg", f"{side}LowerLeg", f"{side}Foot"])
         toe = P(f"{side}Toes")

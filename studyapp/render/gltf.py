@@ -15,7 +15,8 @@ What is read
 * ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow).
   Several different textures are baked into vertex colours (noted).
 * Sparse accessors. VRM 0.x (``extensions.VRM``) and 1.0 (``extensions.VRMC_vrm``) humanoid bones are
-  renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``).
+  renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``); VRM 0.x models, which face
+  -Z, are turned to face +Z.
 
 Unsupported compression extensions (Draco, meshopt, Basis/KTX2) raise :class:`InputError`.
 
@@ -354,6 +355,10 @@ def load_gltf(path: str | Path) -> Avatar:
     except (ValueError, IndexError) as exc:
         raise InputError(path, "key nodes", f"bad node hierarchy: {exc}") from None
     notes: list[str] = []
+    if "VRM" in g.get("extensions", {}):
+        # VRM 0.x models face -Z; turn them to face +Z like every other avatar (and the camera)
+        world = np.diag([-1.0, 1.0, -1.0, 1.0])[None] @ world
+        notes.append("VRM 0.x: turned 180 degrees to face +Z")
     skins = g.get("skins", [])
     mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
     if not mesh_nodes:

@@ -147,18 +147,19 @@ class PaletteBuffers:
 def rasterize_label(text: str, height_px: int) -> np.ndarray:
     """White-on-black coverage image ``(H, W) uint8`` of ``text`` (matplotlib's Agg and bundled DejaVu Sans).
 
-    >>> img = rasterize_label("A", 32); img.shape[0] == 32 and img.max() > 200
+    >>> img = rasterize_label("A", 32); img.shape[0] == 32 and bool(img.max() > 200)
     True
     """
     from matplotlib.figure import Figure
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     height_px = max(8, int(height_px))
-    width_px = max(height_px, int(height_px * (0.68 * len(text) + 0.6)))
+    width_px = max(height_px, int(height_px * (0.75 * len(text) + 0.6)))
     dpi = 100
     fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, facecolor="black")
     canvas = FigureCanvasAgg(fig)
-    fig.text(0.5, 0.5, text, color="white", ha="center", va="center", fontsize=height_px * 0.62 * 72 / dpi,
+    # the em is ~1.4x the capital height: capitals fill about two thirds of the label height
+    fig.text(0.5, 0.5, text, color="white", ha="center", va="center", fontsize=height_px * 0.95 * 72 / dpi,
              family="DejaVu Sans", weight="bold")
     canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())

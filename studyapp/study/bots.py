@@ -42,6 +42,19 @@ def _ranks_from_scores(scores: Sequence[float]) -> dict[int, int]:
     return {slot: order.index(slot) + 1 for slot in range(3)}
 
 
+#: Perception noise of the careful bot, in units of the trial's score range (Thurstone case V). Real viewers
+#: disagree where motions are close and agree where one is clearly worse; a noiseless bot would make every
+#: simulated participant identical and the statistics degenerate (W = 1, zero-width intervals).
+CAREFUL_NOISE_SD = 0.3
+
+
+def _perceived(scores: Sequence[float], rng: np.random.Generator) -> np.ndarray:
+    v = np.asarray(scores, dtype=np.float64)
+    spread = float(v.max() - v.min())
+    normed = (v - v.min()) / spread if spread > 0 else np.zeros_like(v)
+    return normed + rng.normal(0.0, CAREFUL_NOISE_SD, size=v.shape)
+
+
 def choose_ranking(
     policy: str,
     plan: Any,
@@ -74,7 +87,7 @@ def choose_ranking(
         out = {}
         for c in crits:
             if c in scores:
-                out[c] = _ranks_from_scores(scores[c])
+                out[c] = _ranks_from_scores(_perceived(scores[c], rng))
             else:
                 out[c] = {i: int(r) for i, r in enumerate(rng.permutation(3) + 1)}
         return out

@@ -1,7 +1,6 @@
 """The built-in avatar: a humanoid skeleton, sane skin weights and 52 ARKit morphs that move the right parts."""
 from __future__ import annotations
 
-import time
 
 import numpy as np
 
@@ -97,7 +96,6 @@ def test_jaw_open_drops_the_chin_and_blinks_close_the_lids(avatar):
 
 
 def test_build_is_cached_and_read_only():
-    t0 = time.perf_counter()
     a = build_default_avatar()
     b = build_default_avatar()
     assert a is b

@@ -191,6 +191,33 @@ def test_vrm_humanoid_bones_get_unity_names(tmp_path, version, expect):
     gltf, data = bar_gltf(vrm=version)
     av = load_gltf(write_gltf(tmp_path, gltf, data, "bar.vrm", "glb"))
     assert av.skeleton.names == expect
+    # VRM 0.x faces -Z and is turned around; VRM 1.0 already faces +Z
+    plain = load_gltf(write_gltf(tmp_path, *bar_gltf(), "plain.gltf"))
+    flip = np.array([-1, 1, -1]) if version == "0" else np.ones(3)
+    assert np.allclose(av.vertices, plain.vertices * flip, atol=1e-6)
+    assert np.allclose(skinning_palettes(av, Motion.rest(av.skeleton, 1)), np.eye(4), atol=1e-6)
+
+
+@pytest.mark.gl
+def test_textured_gltf_renders_its_texture(tmp_path, renderer):
+    from studyapp.render.context import OffscreenTarget
+    from studyapp.render.camera import Camera
+    from studyapp.render.scene import make_scene
+
+    centres = []
+    for textured in (False, True):
+        av = load_gltf(write_gltf(tmp_path, *bar_gltf(texture=textured)))
+        scene = make_scene([prepare_slot(av, Motion.rest(av.skeleton, 1), None)], av)
+        scene.camera = Camera(eye=np.array([0.0, 0.2, 1.0]), target=np.array([0.0, 0.2, 0.0]), fov_y=30)
+        target = OffscreenTarget(renderer.ctx, (64, 64))
+        renderer.draw_trial(scene, 0.0, target.fbo)
+        centres.append(target.read_rgb().astype(int)[24:40, 29:35].reshape(-1, 3).mean(0))
+        target.release()
+    plain, red = centres
+    # factor (0.5, 0.25, 1) alone is blue-violet; times the red texture it has no blue or green left
+    # (what green/blue remains is the white specular and rim light)
+    assert plain[2] > plain[0] > plain[1]
+    assert red[0] - red[2] > 80 and red[0] > plain[0] - 10 and red[2] < plain[2] - 80
 
 
 @pytest.mark.parametrize("ext", ["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_texture_basisu"])

@@ -97,6 +97,25 @@ class Driver:
         return img[y:y + h, x:x + w]
 
 
+def release_egl_context() -> None:
+    """Un-bind any EGL context earlier tests left current on this thread.
+
+    Mesa refuses glXMakeCurrent (X error BadAccess, which Xlib turns into exit(1)) while an EGL context
+    is current in the same thread; a participant's process never has one, the test process does.
+    """
+    import ctypes
+
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return
+    egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
+    egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    dpy = egl.eglGetCurrentDisplay()
+    if dpy:
+        egl.eglMakeCurrent(dpy, None, None, None)
+
+
 def thirds_with_figures(img: np.ndarray, top: int, bottom: int) -> list[int]:
     """Dark (figure) pixels in each third of the rows top..bottom of a light background."""
     dark = img[top:bottom].astype(int).sum(axis=2) < 250
@@ -112,6 +131,7 @@ def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_pat
 
     design, db = tiny_study
     session = Session(design, db, "W1")
+    release_egl_context()
     try:
         runner = WindowRunner(design, session, SilentClock(), size=(1280, 720))
     except Exception as exc:
