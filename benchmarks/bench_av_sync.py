@@ -82,7 +82,7 @@ def main(argv: list[str]) -> int:
         while not player.finished:
             now = time.perf_counter()
             audible = player.position_s()
-            delivered = player._read / player.rate  # what the device was handed: no latency compensation
+            delivered = player.delivered_s  # what the device was handed: no latency compensation
             predicted = predictor.predict(now)
             drawn = min(media_time_for_flip(audible, now, predicted), player.duration_s)
             while time.perf_counter() - now < render_cost:

@@ -4,8 +4,9 @@ Prints, measured in the same run so a busy machine still gives a fair ratio:
 * fps of the real renderer (skinning + morphs + lighting + MSAA resolve + read-back),
 * Python CPU milliseconds per frame spent issuing it (palette blend/upload, uniforms, draw calls), as the
   calling thread's CPU time around ``draw_trial`` (llvmpipe's raster threads are not counted),
-* fps of a bare moderngl draw of the same triangles (positions only, trivial shader, same MSAA target
-  and read-back) and the ratio real / bare.
+* the same without anti-aliasing,
+* fps of a bare moderngl draw of the same triangles (positions only, trivial shader, no anti-aliasing,
+  same read-back) and the ratios to it.
 """
 from __future__ import annotations
 
@@ -94,15 +95,18 @@ def main() -> int:
     print(f"anti-aliasing: {renderer.antialiasing}" + (" (MSAA replaced on this software rasteriser)" if renderer.fxaa else ""))
     target = OffscreenTarget(ctx, SIZE)
     fps, cpu_ms = measure(lambda t: renderer.draw_trial(scene, t, target.fbo), target, SECONDS)
+    plain = Renderer(ctx, samples=0)  # no anti-aliasing at all
+    noaa_fps, noaa_cpu = measure(lambda t: plain.draw_trial(scene, t, target.fbo), target, SECONDS)
     bare_prog = ctx.program(vertex_shader=read_shader("bare.vert"), fragment_shader=read_shader("bare.frag"))
-    bare_fps, bare_cpu = measure(lambda t: renderer.draw_bare(avatar, scene, target.fbo, bare_prog), target, SECONDS)
+    bare_fps, bare_cpu = measure(lambda t: plain.draw_bare(avatar, scene, target.fbo, bare_prog), target, SECONDS)
     print(f"avatar: {avatar.n_vertices} vertices, {avatar.n_triangles} triangles, {avatar.skeleton.n_joints} joints, "
           f"52 morphs; build {build_s * 1000:.0f} ms (cached after)")
     print(f"prepare_slot (10 s clip, retarget-free, 60 fps palettes): {prep_ms:.0f} ms per slot")
     print(f"{'':24s}{'fps':>8s}{'CPU ms/frame':>15s}")
-    print(f"{'renderer (full)':24s}{fps:8.1f}{cpu_ms:15.2f}")
+    print(f"{'renderer (full, ' + renderer.antialiasing + ')':24s}{fps:8.1f}{cpu_ms:15.2f}")
+    print(f"{'renderer, no AA':24s}{noaa_fps:8.1f}{noaa_cpu:15.2f}")
     print(f"{'bare moderngl draw':24s}{bare_fps:8.1f}{bare_cpu:15.2f}")
-    print(f"ratio full / bare fps: {fps / bare_fps:.2f}   (load average now: {os.getloadavg()[0]:.1f} "
+    print(f"ratio full / bare fps: {fps / bare_fps:.2f}, no-AA / bare: {noaa_fps / bare_fps:.2f}   (load average now: {os.getloadavg()[0]:.1f} "
           f"on {os.cpu_count()} cores; absolute fps drop when others use the CPU)")
     return 0
 

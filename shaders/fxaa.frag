@@ -16,17 +16,22 @@ float luma(vec3 c) { return dot(c, vec3(0.299, 0.587, 0.114)); }
 
 vec3 tap(vec2 uv) { return texture(u_image, clamp(uv, u_bounds.xy, u_bounds.zw)).rgb; }
 
+// the five neighbourhood taps are exact texels: texelFetch is much cheaper than filtering on llvmpipe
+vec3 pix(ivec2 p, ivec4 box) { return texelFetch(u_image, clamp(p, box.xy, box.zw), 0).rgb; }
+
 void main() {
     vec2 uv = u_rect.xy + v_uv * u_rect.zw;
-    vec3 nw = tap(uv + vec2(-1.0, -1.0) * u_texel);
-    vec3 ne = tap(uv + vec2(1.0, -1.0) * u_texel);
-    vec3 sw = tap(uv + vec2(-1.0, 1.0) * u_texel);
-    vec3 se = tap(uv + vec2(1.0, 1.0) * u_texel);
-    vec3 m = tap(uv);
+    ivec2 p = ivec2(uv / u_texel);
+    ivec4 box = ivec4(u_bounds / u_texel.xyxy);
+    vec3 nw = pix(p + ivec2(-1, -1), box);
+    vec3 ne = pix(p + ivec2(1, -1), box);
+    vec3 sw = pix(p + ivec2(-1, 1), box);
+    vec3 se = pix(p + ivec2(1, 1), box);
+    vec3 m = pix(p, box);
     float lnw = luma(nw), lne = luma(ne), lsw = luma(sw), lse = luma(se), lm = luma(m);
     float lmin = min(lm, min(min(lnw, lne), min(lsw, lse)));
     float lmax = max(lm, max(max(lnw, lne), max(lsw, lse)));
-    if (lmax - lmin < 0.02) { frag_color = vec4(m, 1.0); return; }  // flat area: leave it alone
+    if (lmax - lmin < 0.04) { frag_color = vec4(m, 1.0); return; }  // flat area: leave it alone
     vec2 dir = vec2(-((lnw + lne) - (lsw + lse)), (lnw + lsw) - (lne + lse));
     float reduce = max((lnw + lne + lsw + lse) * 0.25 * REDUCE_MUL, REDUCE_MIN);
     float rcp_min = 1.0 / (min(abs(dir.x), abs(dir.y)) + reduce);

@@ -4,7 +4,8 @@
 
 in vec3 v_world;
 in vec3 v_normal;
-in vec3 v_color;
+in vec3 v_albedo;        // linear colour (converted per vertex: cheaper than per pixel)
+flat in vec3 v_shading;  // material: wrap, shininess, specular strength
 flat in int v_material;
 in vec2 v_uv;
 
@@ -37,16 +38,10 @@ void main() {
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) n = -n;
     vec3 v = normalize(u_camera_pos - v_world);
-    vec3 albedo = to_linear(v_color) * u_base_factor.rgb;
+    vec3 albedo = v_albedo * u_base_factor.rgb;
     // uv < 0 marks parts of a textured avatar that have no texture
     if (u_has_texture && v_uv.x >= 0.0) albedo *= to_linear(texture(u_base_color, v_uv).rgb);
-
-    float wrap = 0.0, shin = 16.0, spec_k = 0.05;
-    if (v_material == 0) { wrap = 0.35; shin = 28.0; spec_k = 0.10; }        // skin
-    else if (v_material == 1) { wrap = 0.2; shin = 8.0; spec_k = 0.025; }    // cloth
-    else if (v_material == 2) { wrap = 0.1; shin = 160.0; spec_k = 0.9; }    // eye
-    else if (v_material == 3) { wrap = 0.25; shin = 12.0; spec_k = 0.06; }   // hair
-    else if (v_material == 4) { wrap = 0.3; shin = 40.0; spec_k = 0.25; }    // teeth
+    float wrap = v_shading.x, shin = v_shading.y, spec_k = v_shading.z;
 
     float nk = dot(n, KEY_DIR);
     float dk = max((nk + wrap) / (1.0 + wrap), 0.0);
@@ -57,12 +52,11 @@ void main() {
         diffuse += KEY_COL * vec3(0.25, 0.06, 0.03) * max(1.0 - abs(nk) * 2.0, 0.0);
     }
     vec3 hemi = mix(GROUND, SKY, 0.5 + 0.5 * n.y) * 0.55;
-    float fres = pow(1.0 - max(dot(n, v), 0.0), 3.0);
+    float f1 = 1.0 - max(dot(n, v), 0.0);
+    float fres = f1 * f1 * f1;
     vec3 rim = RIM_COL * fres * max(dot(n, RIM_DIR) + 0.3, 0.0) * 0.6;
     vec3 h = normalize(KEY_DIR + v);
     float spec = pow(max(dot(n, h), 0.0), shin) * spec_k * (shin + 8.0) / 25.0;
-    vec3 hf = normalize(FILL_DIR + v);
-    spec += pow(max(dot(n, hf), 0.0), shin) * spec_k * 0.3 * (shin + 8.0) / 25.0;
     vec3 col = albedo * (diffuse + hemi) + rim * mix(albedo, vec3(0.5), 0.5) + KEY_COL * spec * 0.5;
     frag_color = vec4(tonemap(col), 1.0);
 }

@@ -6,7 +6,8 @@
 
 in vec3 in_position;
 in vec3 in_normal;
-in vec4 in_color;        // rgb + material id
+in vec4 in_color;        // linear rgb + material id
+in vec3 in_shading;      // material: wrap, shininess, specular strength
 in ivec4 in_joints;
 in vec4 in_weights;
 in int in_morph_row;     // -1: no morph moves this vertex
@@ -25,7 +26,8 @@ uniform mat4 u_model;
 
 out vec3 v_world;
 out vec3 v_normal;
-out vec3 v_color;
+out vec3 v_albedo;
+flat out vec3 v_shading;
 flat out int v_material;
 out vec2 v_uv;
 
@@ -44,13 +46,17 @@ void main() {
             n += u_morph_w[i] * texelFetch(u_morph_nrm, tc, 0).xyz;
         }
     }
-    mat4 skin = in_weights.x * bone(in_joints.x) + in_weights.y * bone(in_joints.y)
-              + in_weights.z * bone(in_joints.z) + in_weights.w * bone(in_joints.w);
+    // most vertices follow one or two bones; skipping zero weights saves work on CPU rasterisers
+    mat4 skin = in_weights.x * bone(in_joints.x);
+    if (in_weights.y > 0.0) skin += in_weights.y * bone(in_joints.y);
+    if (in_weights.z > 0.0) skin += in_weights.z * bone(in_joints.z);
+    if (in_weights.w > 0.0) skin += in_weights.w * bone(in_joints.w);
     vec4 world = u_model * skin * vec4(p, 1.0);
     v_world = world.xyz;
     v_normal = mat3(u_model) * mat3(skin) * n;
-    v_color = in_color.rgb;
+    v_albedo = in_color.rgb;
     v_material = int(in_color.a + 0.5);
+    v_shading = in_shading;
     v_uv = in_uv;
     gl_Position = u_view_proj * world;
 }

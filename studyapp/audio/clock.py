@@ -40,6 +40,8 @@ class MediaClock(Protocol):
     @property
     def duration_s(self) -> float: ...
     @property
+    def started(self) -> bool: ...
+    @property
     def playing(self) -> bool: ...
     @property
     def paused(self) -> bool: ...
@@ -132,6 +134,11 @@ class SilentClock:
     @property
     def playing(self) -> bool:
         return self._active and self._paused_at is None and not self.finished
+
+    @property
+    def started(self) -> bool:
+        """Time runs from the moment of :meth:`play` (there is no device to wait for)."""
+        return self._active
 
     @property
     def paused(self) -> bool:

@@ -207,6 +207,7 @@ class AudioPlayer:
         self._paused_at: float | None = None
         self._last: tuple[int, int, float, int] | None = None  # (gen, first sample, dac time, frames)
         self._latencies: list[float] = []
+        self._converted: tuple | None = None  # (key, clip, stream-format samples) of the last clip played
         self.callbacks = 0
         self.frames_total = 0     # frames the device asked for since the stream started (pacing check)
         self.underflows = 0
@@ -259,6 +260,18 @@ class AudioPlayer:
         return float(min(max(pos, self._start_s), self.duration_s))
 
     @property
+    def delivered_s(self) -> float:
+        """Clip time handed to the device so far (ahead of what is audible by the output latency)."""
+        return self._read / float(self.rate)
+
+    @property
+    def started(self) -> bool:
+        """The device has taken this run's first samples: the clock moves with the sound from now on
+        (before that, frames show the start and there is nothing to be in sync with yet)."""
+        last = self._last
+        return self._active and last is not None and last[0] == self._gen
+
+    @property
     def output_latency_s(self) -> float:
         """Measured delay from callback to DAC (median), or PortAudio's reported latency before any."""
         if self._latencies:
@@ -272,13 +285,22 @@ class AudioPlayer:
     # -- transport -------------------------------------------------------------------------------
     def play(self, clip: Any, start_s: float = 0.0, *, duration_s: float | None = None) -> None:
         """Play ``clip`` (``samples`` (N[, C]) + ``sample_rate``) from ``start_s`` seconds."""
+        key = (id(clip), duration_s)
+        if self._converted is not None and self._converted[0] == key and self._converted[1] is clip:
+            buf = self._converted[2]  # a replay: no second resampling of the same clip
+        else:
+            buf = self._prepare(clip, duration_s)
+            self._converted = (key, clip, buf)
+        with self._lock:
+            self._buf = buf
+            self._start_pos(start_s)
+
+    def _prepare(self, clip: Any, duration_s: float | None) -> np.ndarray:
         buf = _to_stream_format(clip, self.rate, self.channels)
         if duration_s is not None:  # align the audio to the trial length (silence pads, extra is cut)
             n = int(round(duration_s * self.rate))
             buf = buf[:n] if len(buf) >= n else np.concatenate([buf, np.zeros((n - len(buf), self.channels), np.float32)])
-        with self._lock:
-            self._buf = buf
-            self._start_pos(start_s)
+        return buf
 
     def _start_pos(self, start_s: float) -> None:
         # caller holds the lock
@@ -379,4 +401,4 @@ def open_clock(device: int | str | None = None, *, required: bool = False) -> tu
         return SilentClock(reason="no audio output device"), (
             f"WARNING: {exc} Choose an output with --audio-device (see `studyapp doctor`)."
         )
-    return player, f"audio output: {player.device_name} (latency {player.output_latency_s * 1000:.0f} ms)"
+    return player, f"audio output: {player.device_name} (its latency is measured and compensated)"

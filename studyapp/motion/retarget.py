@@ -13,7 +13,8 @@ A-pose target correctly. Because only global rotations are copied, the rotation 
 without a counterpart (BEAT ``Spine2``, ``Neck``) ends up in the next mapped bone below it
 (``UpperChest``, ``Neck`` = BEAT ``Neck1``).
 Unmapped target joints keep their rest local rotation. The hips move by the source hips' displacement
-scaled by the ratio of hip heights (which also converts units).
+from rest (or from the first frame, for files that keep the standing height in the hips' channels) scaled
+by the ratio of hip heights (which also converts units).
 
 >>> from studyapp.motion.beat import beat_skeleton
 >>> from studyapp.motion.skeleton import Motion
@@ -251,7 +252,15 @@ def retarget(
         scale = source.skeleton.unit_scale / target.unit_scale
     else:
         scale = 1.0
-    disp = quat_rotate(yaw, s_glob[:, sh, :3, 3] - s_pos0[sh]) * scale
+    # The hips travel relative to where the source stands at rest. Some exporters (BEAT, DiffSHEG's demo
+    # conversions) keep the skeleton's rest hips on the floor and put the standing height in the hips'
+    # position channels; a displacement from that rest would lift the target by a whole hip height. When
+    # the first frame stands about one hip height above the rest hips, that height is part of the rest.
+    s_ref = s_pos0[sh].copy()
+    lift = float(s_glob[0, sh, 1, 3] - s_ref[1])
+    if h_s > 1e-9 and abs(lift - h_s) < 0.2 * h_s:
+        s_ref[1] += h_s
+    disp = quat_rotate(yaw, s_glob[:, sh, :3, 3] - s_ref) * scale
     hips_world = t_pos0[th] + disp
     ph = int(target.parents[th])
     if ph < 0:

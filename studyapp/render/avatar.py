@@ -67,6 +67,9 @@ class Avatar:
         Optional ``(V, 2)`` texture coordinates and ``(H, W, 4) uint8`` base-colour image (top row first).
     base_color_factor:
         RGBA multiplier of the base colour (glTF ``baseColorFactor``).
+    double_sided:
+        Draw back faces too (glTF ``doubleSided``). The built-in avatar is made of closed, outward-facing
+        surfaces, so it is drawn with back-face culling (a fifth less work on CPU rasterisers).
     name:
         Free text for logs (never shown to participants).
     notes:
@@ -88,6 +91,7 @@ class Avatar:
     uv: np.ndarray | None = None
     texture: np.ndarray | None = None
     base_color_factor: np.ndarray = field(default_factory=lambda: np.ones(4, np.float32))
+    double_sided: bool = False
     name: str = "avatar"
     notes: tuple[str, ...] = ()
 
@@ -315,6 +319,18 @@ def _tube(path: np.ndarray, r_side: np.ndarray, r_up: np.ndarray, side_hint, n_a
     return v, faces
 
 
+def _outward(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Faces wound counter-clockwise seen from outside (the renderer culls back faces).
+
+    Uses the signed volume (positive when normals point out of a closed surface); open shells (lids,
+    hair, the torso with its open bottom) still give a clear sign because they enclose their centre.
+    """
+    c = verts.mean(axis=0)
+    a, b, d = verts[faces[:, 0]] - c, verts[faces[:, 1]] - c, verts[faces[:, 2]] - c
+    volume = np.einsum("ij,ij->i", a, np.cross(b, d)).sum()
+    return faces if volume >= 0 else faces[:, [0, 2, 1]]
+
+
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance of points ``p`` (N,3) to segments ``a->b`` (B,3): (N,B)."""
     ab = b - a
@@ -379,6 +395,7 @@ class _MeshBuilder:
             normals: np.ndarray | None = None, power: float = 4.0, bias: dict[str, float] | None = None) -> np.ndarray:
         verts = np.asarray(verts, np.float64)
         nv = len(verts)
+        faces = _outward(verts, np.asarray(faces, np.int64))
         if joints is None:
             joints, weights = self.weights_for(verts, bones, power, bias)
         col = np.broadcast_to(np.asarray(color, np.float64), (nv, 3)).copy()
@@ -408,8 +425,8 @@ HAIR = np.array([0.20, 0.14, 0.10])
 BROW = np.array([0.22, 0.15, 0.11])
 LIPS = np.array([0.70, 0.42, 0.40])
 MOUTH = np.array([0.16, 0.06, 0.06])
-SCLERA = np.array([0.93, 0.92, 0.90])
-IRIS = np.array([0.30, 0.22, 0.14])
+SCLERA = np.array([0.86, 0.84, 0.82])
+IRIS = np.array([0.24, 0.16, 0.10])
 PUPIL = np.array([0.03, 0.03, 0.03])
 TEETH = np.array([0.92, 0.90, 0.84])
 TONGUE = np.array([0.72, 0.38, 0.38])
@@ -501,17 +518,17 @@ def _face_features(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _head_grid() -> tuple[np.ndarray, np.ndarray]:
     """Longitudes and latitudes of the head surface: dense over the face, extra rows at the mouth slit."""
     # about 2 degrees (3 mm) over the eyes, nose and mouth, coarser towards the ears and the back
-    lon_mid = np.arange(-26, 26.01, 2.0)
-    lon_side = np.arange(29.5, 62.01, 4.0)
+    lon_mid = np.arange(-26, 26.01, 2.36)
+    lon_side = np.arange(30.5, 62.01, 4.5)
     lon_front = np.radians(np.concatenate([-lon_side[::-1], lon_mid, lon_side]))
-    lon_back = np.radians(np.linspace(62, 298, 18)[1:-1])
+    lon_back = np.radians(np.linspace(62, 298, 15)[1:-1])
     lon = np.concatenate([lon_front, lon_back])
     lon = np.where(lon > np.pi, lon - 2 * np.pi, lon)
     order = np.argsort(np.mod(lon + np.pi, 2 * np.pi))
     lon = lon[order]
     lat = list(np.radians(np.linspace(-89, -75, 3)))
     lat += list(np.radians(np.arange(-72, -50, 3.0)))
-    lat += list(np.radians(np.arange(-50, 14, 1.6)))
+    lat += list(np.radians(np.arange(-50, 14, 1.9)))
     lat += list(np.radians(np.arange(14, 44, 3.0)))
     lat += list(np.radians(np.linspace(47, 89, 9)))
     lat = np.array(sorted(lat))
@@ -540,7 +557,7 @@ def _build_head(mb: _MeshBuilder, centre: np.ndarray) -> dict[str, np.ndarray]:
     x, y, z = pv[:, 0], pv[:, 1], pv[:, 2]
     col = np.tile(SKIN, (len(pv), 1))
     # hair is painted on the scalp (a soft hairline) and the cap below only adds volume
-    hair_amt = _smoothstep(-0.03, 0.03, (LAT - _hairline(LON)).reshape(-1))
+    hair_amt = _smoothstep(-0.07, 0.05, (LAT - _hairline(LON)).reshape(-1))
     col = col * (1 - hair_amt[:, None]) + HAIR * 0.92 * hair_amt[:, None]
     lm = lipmask.reshape(-1)
     col = col * (1 - lm[:, None]) + LIPS * lm[:, None]
@@ -576,8 +593,8 @@ def _build_head(mb: _MeshBuilder, centre: np.ndarray) -> dict[str, np.ndarray]:
     eye_locals = []
     for side, sx in (("Left", 1), ("Right", -1)):
         ec = _eye_centre(sx)
-        th = np.linspace(0, np.pi, 18)
-        ph = np.linspace(0, 2 * np.pi, 28, endpoint=False)
+        th = np.linspace(0, np.pi, 14)
+        ph = np.linspace(0, 2 * np.pi, 20, endpoint=False)
         TH, PH = np.meshgrid(th, ph, indexing="ij")
         d = np.stack([np.sin(TH) * np.cos(PH), np.sin(TH) * np.sin(PH), np.cos(TH)], -1).reshape(-1, 3)
         # slight inward gaze (convergence) looks more alive than parallel eyes
@@ -586,11 +603,11 @@ def _build_head(mb: _MeshBuilder, centre: np.ndarray) -> dict[str, np.ndarray]:
         # cornea bulge
         v = v + (d * 0.0012 * _smoothstep(0.55, 0.0, ang)[:, None])
         c = np.tile(SCLERA, (len(d), 1))
-        iris = _smoothstep(0.50, 0.44, ang)
+        iris = _smoothstep(0.56, 0.50, ang)
         c = c * (1 - iris[:, None]) + IRIS * iris[:, None]
-        ring = _gauss((ang - 0.46) ** 2, 0.03)
+        ring = _gauss((ang - 0.53) ** 2, 0.03)
         c = c * (1 - 0.5 * ring[:, None])
-        pupil = _smoothstep(0.22, 0.17, ang)
+        pupil = _smoothstep(0.24, 0.19, ang)
         c = c * (1 - pupil[:, None]) + PUPIL * pupil[:, None]
         f = _grid_faces(len(th), len(ph))
         f = f[:, [0, 2, 1]]
@@ -603,7 +620,7 @@ def _build_head(mb: _MeshBuilder, centre: np.ndarray) -> dict[str, np.ndarray]:
         for which in ("upper", "lower"):
             v, f, frac = _lid(sx, which, open_=True)
             c = np.tile(SKIN * np.array([0.93, 0.86, 0.84]), (len(v), 1))
-            lash = _smoothstep(0.12, 0.0, frac)
+            lash = _smoothstep(0.2, 0.0, frac)
             c = c * (1 - 0.85 * lash[:, None]) + HAIR * 0.5 * 0.85 * lash[:, None] if which == "upper" else c * (1 - 0.35 * lash[:, None]) + (SKIN * 0.6) * 0.35 * lash[:, None]
             jj, ww = head_weights(len(v))
             mb.add(v + centre, f, c, MAT_SKIN, joints=jj, weights=ww, group=f"lid_{which}{side}")
@@ -625,8 +642,8 @@ def _build_head(mb: _MeshBuilder, centre: np.ndarray) -> dict[str, np.ndarray]:
         jj, ww = head_weights(len(v))
         mb.add(v + centre, f, SKIN * 0.95, MAT_SKIN, joints=jj, weights=ww)
     # hair cap: the skull surface pushed outwards above a hairline that is high in front, low at the back
-    hl_lon = np.radians(np.linspace(-180, 180, 72, endpoint=False))
-    v_frac = np.linspace(0, 1, 22)
+    hl_lon = np.radians(np.linspace(-180, 180, 52, endpoint=False))
+    v_frac = np.linspace(0, 1, 16)
     LON2, VF = np.meshgrid(hl_lon, v_frac)
     hairline = _hairline(LON2) + np.radians(6.0)
     front = np.clip(np.cos(LON2), 0, 1)
@@ -699,8 +716,8 @@ def _lid_alpha(which: str, edge: float, frac: np.ndarray) -> np.ndarray:
 
 
 def _lid(sx: int, which: str, edge: float | None = None, open_: bool = True):
-    beta = np.radians(np.linspace(-78, 78, 22))
-    frac = np.linspace(0, 1, 12) ** 1.4
+    beta = np.radians(np.linspace(-78, 78, 16))
+    frac = np.linspace(0, 1, 10) ** 1.4
     F, B = np.meshgrid(frac, beta, indexing="ij")
     e = _LID_EDGES[which][0] if edge is None else edge
     d = _lid_arc(_lid_alpha(which, e, F), B)
@@ -913,8 +930,8 @@ def _build_body(mb: _MeshBuilder) -> None:
     spine_bones = ["Hips", "Spine", "Chest", "UpperChest", "Neck", "LeftShoulder", "RightShoulder"]
     # torso: sections from the crotch to the base of the neck (y, half width, half depth, z centre)
     prof = np.array([
-        [0.800, 0.060, 0.050, 0.000],
-        [0.870, 0.150, 0.088, 0.000],
+        [0.800, 0.050, 0.045, 0.000],
+        [0.870, 0.140, 0.072, 0.000],
         [0.930, 0.170, 0.100, -0.004],
         [0.990, 0.165, 0.098, -0.002],
         [1.060, 0.145, 0.092, 0.004],
@@ -929,13 +946,13 @@ def _build_body(mb: _MeshBuilder) -> None:
         [1.495, 0.062, 0.052, -0.018],
     ])
     # rows every ~1.5 cm, with extra rows at the belt so the shirt/trousers edge stays crisp
-    ys = np.unique(np.concatenate([np.linspace(prof[0, 0], prof[-1, 0], 44), 1.02 + np.array([-0.02, -0.013, -0.006, 0.0, 0.006, 0.013, 0.02])]))
+    ys = np.unique(np.concatenate([np.linspace(prof[0, 0], prof[-1, 0], 34), 1.02 + np.array([-0.02, -0.013, -0.006, 0.0, 0.006, 0.013, 0.02])]))
     hw = np.interp(ys, prof[:, 0], prof[:, 1])
     hd = np.interp(ys, prof[:, 0], prof[:, 2])
     zc = np.interp(ys, prof[:, 0], prof[:, 3])
     path = np.stack([np.zeros_like(ys), ys, zc], -1)
     # the open bottom hides between the legs; the top is closed under the neck
-    v, f = _tube(path, hw, hd, [1.0, 0, 0], n_around=40, cap_start=False, cap_end=True, squareness=0.35)
+    v, f = _tube(path, hw, hd, [1.0, 0, 0], n_around=32, cap_start=False, cap_end=True, squareness=0.35)
     # chest and shoulder blades: a little relief so the light catches form
     x, y, z = v[:, 0], v[:, 1], v[:, 2]
     for sx in (1, -1):
@@ -955,16 +972,16 @@ def _build_body(mb: _MeshBuilder) -> None:
     mb.add(v, f, col, MAT_CLOTH, bones=spine_bones + ["LeftUpperArm", "RightUpperArm"],
            bias={**bias, "LeftUpperArm": 1.6, "RightUpperArm": 1.6})
     # neck
-    ys = np.linspace(1.38, 1.59, 12)
+    ys = np.linspace(1.38, 1.59, 9)
     path = np.stack([np.zeros_like(ys), ys, -0.02 + 0.02 * (ys - 1.40)], -1)
     r = 0.064 - 0.010 * _smoothstep(1.40, 1.52, ys)
-    v, f = _tube(path, r, r * 0.95, [1.0, 0, 0], n_around=20, cap_start=False, cap_end=False)
+    v, f = _tube(path, r, r * 0.95, [1.0, 0, 0], n_around=16, cap_start=False, cap_end=False)
     mb.add(v, f, SKIN, MAT_SKIN, bones=["UpperChest", "Neck", "Head"], bias={"Head": 1.4})
     # arms: one tube from the shoulder to the wrist (sleeve), the hand separately
     for side, sx in (("Left", 1), ("Right", -1)):
         a, e, w = P(f"{side}UpperArm"), P(f"{side}LowerArm"), P(f"{side}Hand")
         sh = a + np.array([-sx * 0.03, -0.012, 0.0])
-        s = np.linspace(0, 1, 30)
+        s = np.linspace(0, 1, 23)
         upper_len = np.linalg.norm(e - sh)
         total = upper_len + np.linalg.norm(w - e)
         d = s * total
@@ -972,7 +989,7 @@ def _build_body(mb: _MeshBuilder) -> None:
                         e + (w - e) * ((d - upper_len) / (total - upper_len))[:, None])
         ru = np.interp(s, [0, 0.08, 0.25, 0.5, 0.56, 0.75, 1.0], [0.040, 0.045, 0.043, 0.037, 0.038, 0.035, 0.026])
         rs = np.interp(s, [0, 0.08, 0.25, 0.5, 0.56, 0.75, 1.0], [0.046, 0.048, 0.042, 0.036, 0.039, 0.036, 0.030])
-        v, f = _tube(path, rs, ru, [0, 0, 1.0], n_around=22, cap_start=True, cap_end=True)
+        v, f = _tube(path, rs, ru, [0, 0, 1.0], n_around=18, cap_start=True, cap_end=True)
         col = np.tile(SHIRT, (len(v), 1))
         along = (v - sh) @ ((w - sh) / np.linalg.norm(w - sh))
         col[along > total - 0.035] = SKIN
@@ -984,20 +1001,20 @@ def _build_body(mb: _MeshBuilder) -> None:
     # legs and shoes (simple: the framing is mostly upper body)
     for side, sx in (("Left", 1), ("Right", -1)):
         hip, knee, ankle = P(f"{side}UpperLeg"), P(f"{side}LowerLeg"), P(f"{side}Foot")
-        s = np.linspace(0, 1, 24)
+        s = np.linspace(0, 1, 14)
         top = hip + np.array([0, 0.03, 0])  # starts inside the pelvis
         path = np.where((s < 0.5)[:, None], top + (knee - top) * (s / 0.5)[:, None],
                         knee + (ankle - knee) * ((s - 0.5) / 0.5)[:, None])
         r = np.interp(s, [0, 0.2, 0.5, 0.7, 0.95, 1], [0.078, 0.074, 0.056, 0.055, 0.045, 0.044])
-        v, f = _tube(path, r, r * 1.05, [1.0, 0, 0], n_around=18, cap_start=False, cap_end=False)
+        v, f = _tube(path, r, r * 1.05, [1.0, 0, 0], n_around=12, cap_start=False, cap_end=False)
         mb.add(v, f, TROUSERS, MAT_CLOTH, bones=["Hips", f"{side}UpperLeg", f"{side}LowerLeg", f"{side}Foot"])
         toe = P(f"{side}Toes")
         fpath = np.array([ankle + [0, -0.03, -0.07], ankle + [0, -0.045, 0.0], toe + [0, -0.01, 0.0], toe + [0, -0.012, 0.065]])
-        fs = np.linspace(0, 1, 10)
+        fs = np.linspace(0, 1, 7)
         fp = np.array([np.interp(fs, np.linspace(0, 1, 4), fpath[:, k]) for k in range(3)]).T
         rs = np.interp(fs, [0, 0.4, 0.8, 1], [0.040, 0.046, 0.048, 0.036])
         ru = np.interp(fs, [0, 0.4, 0.8, 1], [0.050, 0.045, 0.030, 0.024])
-        v, f = _tube(fp, rs, ru, [1.0, 0, 0], n_around=14)
+        v, f = _tube(fp, rs, ru, [1.0, 0, 0], n_around=10)
         v[:, 1] = np.maximum(v[:, 1], 0.0)
         mb.add(v, f, SHOES, MAT_CLOTH, bones=[f"{side}Foot", f"{side}Toes"])
 
@@ -1008,12 +1025,12 @@ def _build_hand(mb: _MeshBuilder, side: str, sx: int) -> None:
     wrist = P(f"{side}Hand")
     # palm: a flattened rounded box from the wrist to the knuckles
     knuckle_x = P(f"{side}MiddleProximal")[0]
-    s = np.linspace(0, 1, 10)
+    s = np.linspace(0, 1, 7)
     path = np.stack([wrist[0] + sx * (-0.012 + s * (abs(knuckle_x - wrist[0]) + 0.012)),
                      np.full_like(s, wrist[1] - 0.002), wrist[2] + 0.0 * s - 0.003], -1)
     half_width = np.interp(s, [0, 0.3, 1], [0.030, 0.040, 0.044])
     half_thick = np.interp(s, [0, 0.4, 1], [0.017, 0.016, 0.012])
-    v, f = _tube(path, half_width, half_thick, [0, 0, 1.0], n_around=20, squareness=0.5)
+    v, f = _tube(path, half_width, half_thick, [0, 0, 1.0], n_around=16, squareness=0.5)
     thumb_side = v[:, 2] > wrist[2]
     v[thumb_side, 1] -= 0.003 * _smoothstep(0.0, 0.4, (v[thumb_side, 0] - wrist[0]) * sx / 0.09)
     mb.add(v, f, SKIN, MAT_SKIN, bones=[f"{side}LowerArm", f"{side}Hand", f"{side}ThumbProximal",
@@ -1029,11 +1046,11 @@ def _build_hand(mb: _MeshBuilder, side: str, sx: int) -> None:
             poly = np.vstack([wrist + np.array([sx * 0.012, -0.008, 0.012]), poly])
         seg_len = np.linalg.norm(np.diff(poly, axis=0), axis=1)
         cum = np.concatenate([[0], np.cumsum(seg_len)])
-        t = np.linspace(0, cum[-1], 16)
+        t = np.linspace(0, cum[-1], 11)
         path = np.array([np.interp(t, cum, poly[:, k]) for k in range(3)]).T
         r0 = _FINGER_RADIUS[finger]
         prof = r0 * np.interp(t / cum[-1], [0, 0.5, 1], [1.1 if finger == "Thumb" else 1.0, 0.92, 0.80])
-        v, f = _tube(path, prof, prof * 0.88, [0, 0, 1.0], n_around=10, cap_start=True, cap_end=True)
+        v, f = _tube(path, prof, prof * 0.88, [0, 0, 1.0], n_around=8, cap_start=True, cap_end=True)
         bones = names + [f"{side}Hand"]
         mb.add(v, f, SKIN, MAT_SKIN, bones=bones, bias={f"{side}Hand": 1.6}, power=6.0)
 

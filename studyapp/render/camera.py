@@ -61,7 +61,7 @@ class Camera:
 
 #: Smallest box always shown (metres, around an avatar standing at the origin): head to upper thighs,
 #: hands at a relaxed width. Gestures wider or higher than this enlarge the frame for all slots alike.
-MIN_BOX = (np.array([-0.42, 0.62, -0.2]), np.array([0.42, 1.80, 0.2]))
+MIN_BOX = (np.array([-0.34, 0.70, -0.2]), np.array([0.34, 1.80, 0.2]))
 
 
 def fit_camera(points: np.ndarray, aspect: float, fov_y: float = 24.0, margin: float = 0.06,

@@ -12,7 +12,8 @@ What is read
   inverse bind matrices are plain inverses of the rest transforms.
 * Morph targets named in ``mesh.extras.targetNames`` (or the primitive's extras) and matched to ARKit names
   with :func:`studyapp.face.arkit.match_arkit_name`; other targets are ignored with a note.
-* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow).
+* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow);
+  ``doubleSided`` on any material turns back-face culling off for the avatar.
   Several different textures are baked into vertex colours (noted).
 * Sparse accessors. VRM 0.x (``extensions.VRM``) and 1.0 (``extensions.VRMC_vrm``) humanoid bones are
   renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``); VRM 0.x models, which face
@@ -393,6 +394,11 @@ def load_gltf(path: str | Path) -> Avatar:
         n = stack.pop()
         order.append(n)
         stack.extend(reversed(children.get(n, [])))
+    from studyapp.render.gpu import MAX_BONES
+
+    if len(order) > MAX_BONES:
+        raise InputError(path, f"key skins[{skin_index}].joints",
+                         f"{len(order)} joints; the renderer supports at most {MAX_BONES} (remove unused bones)")
     node_to_joint = {n: j for j, n in enumerate(order)}
     vrm = _vrm_bone_names(g)
     names: list[str] = []
@@ -532,7 +538,7 @@ def load_gltf(path: str | Path) -> Avatar:
                 deltas[arkit] = (d, dn) if prev is None else (prev[0] + d, prev[1] + dn)
                 morph_names_found.add(arkit)
             parts.append(dict(v=v, n=nrm, tri=tri, col=col, j=jj, w=ww, uv=uv, tex=tex_index, deltas=deltas,
-                              mat=material_ids, alpha=factor[3]))
+                              mat=material_ids, alpha=factor[3], double=bool(mat.get("doubleSided", False))))
     if not parts:
         raise InputError(path, "key meshes", "no triangle primitives to draw")
     if ignored:
@@ -590,6 +596,7 @@ def load_gltf(path: str | Path) -> Avatar:
         material=np.concatenate([p["mat"] for p in parts]),
         uv=np.concatenate(cols_uv) if texture is not None else None,
         texture=texture,
+        double_sided=any(p["double"] for p in parts),
         name=path.stem,
         notes=tuple(notes),
     )
@@ -673,7 +680,7 @@ def export_glb(avatar: Avatar, path: str | Path) -> Path:
         targets.append(t)
     ibm = np.ascontiguousarray(avatar.inverse_bind.astype(np.float32).transpose(0, 2, 1)).reshape(-1, 16)
     ibm_acc = w.accessor(ibm, "MAT4", 5126)
-    material = {"name": "base", "pbrMetallicRoughness": {
+    material = {"name": "base", "doubleSided": bool(avatar.double_sided), "pbrMetallicRoughness": {
         "baseColorFactor": [float(x) for x in avatar.base_color_factor], "metallicFactor": 0.0, "roughnessFactor": 0.8}}
     gltf: dict = {
         "asset": {"version": "2.0", "generator": "studyapp"},

@@ -38,6 +38,17 @@ def morph_texture_data(deltas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rows, tex.reshape(h, MORPH_TEX_W, 4)
 
 
+#: Per material id (``MAT_*`` in avatar.py): light wrap (soft terminator), shininess, specular strength.
+MATERIAL_SHADING = np.array([
+    [0.35, 28.0, 0.10],   # skin
+    [0.20, 8.0, 0.025],   # cloth
+    [0.10, 160.0, 0.90],  # eye
+    [0.25, 12.0, 0.06],   # hair
+    [0.30, 40.0, 0.25],   # teeth
+    [0.00, 16.0, 0.05],   # anything else
+], np.float32)
+
+
 class AvatarMesh:
     """Vertex buffers, morph textures and base-colour texture of one avatar, shared by every slot."""
 
@@ -56,19 +67,23 @@ class AvatarMesh:
         self.morph_nrm = ctx.texture((MORPH_TEX_W, ntex.shape[0]), 4, ntex.tobytes(), dtype="f4")
         for t in (self.morph_pos, self.morph_nrm):
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        color = np.concatenate([avatar.colors, avatar.material[:, None].astype(np.float32)], axis=1)
+        # sRGB -> linear and the material table are resolved here, once, not per vertex per frame
+        linear = np.power(np.clip(avatar.colors, 0, None), 2.2)
+        color = np.concatenate([linear, avatar.material[:, None].astype(np.float32)], axis=1)
+        shading = MATERIAL_SHADING[np.minimum(avatar.material, len(MATERIAL_SHADING) - 1)]
         uv = avatar.uv if avatar.uv is not None else np.zeros((v, 2), np.float32)
         self._buffers = {
             "in_position": ctx.buffer(avatar.vertices.tobytes()),
             "in_normal": ctx.buffer(avatar.normals.tobytes()),
             "in_color": ctx.buffer(np.ascontiguousarray(color, np.float32).tobytes()),
+            "in_shading": ctx.buffer(np.ascontiguousarray(shading, np.float32).tobytes()),
             "in_joints": ctx.buffer(avatar.joints.astype(np.int32).tobytes()),
             "in_weights": ctx.buffer(avatar.weights.tobytes()),
             "in_morph_row": ctx.buffer(rows.tobytes()),
             "in_uv": ctx.buffer(np.ascontiguousarray(uv, np.float32).tobytes()),
         }
         self.index_buffer = ctx.buffer(avatar.indices.astype(np.uint32).tobytes())
-        fmt = {"in_position": "3f", "in_normal": "3f", "in_color": "4f", "in_joints": "4i", "in_weights": "4f",
+        fmt = {"in_position": "3f", "in_normal": "3f", "in_color": "4f", "in_shading": "3f", "in_joints": "4i", "in_weights": "4f",
                "in_morph_row": "i", "in_uv": "2f"}
         content = [(self._buffers[name], fmt[name], name) for name in fmt if name in program]
         self.vao = ctx.vertex_array(program, content, self.index_buffer, index_element_size=4)

@@ -119,8 +119,7 @@ def to_avatar_skeleton(avatar: Avatar, motion: Motion, name_map: dict[str, str] 
 
     Uses ``studyapp.motion.retarget.retarget`` (humanoid bone names; it scales the hips' travel by the ratio
     of hip heights, which converts centimetres to metres) unless the motion already is on the avatar's
-    skeleton. The hips' travel is then made relative to the first frame, which is placed at the avatar's
-    rest hips, so every slot starts centred and standing on the floor.
+    skeleton. The first frame is centred horizontally on the avatar's rest hips.
     """
     target = avatar.skeleton
     if _same_skeleton(motion.skeleton, target):
@@ -128,13 +127,11 @@ def to_avatar_skeleton(avatar: Avatar, motion: Motion, name_map: dict[str, str] 
     from studyapp.motion.retarget import retarget
 
     out = retarget(motion, target, name_map=name_map)
-    # retarget moves the hips by the source's displacement scaled by the hip-height ratio (metres). Sources
-    # disagree on what that displacement is relative to (BVH rest offset 0 with the height in the channels,
-    # or the height in the offset), so anchor the first frame at the avatar's own rest hips: every slot
-    # starts centred and standing on the floor, and later travel is kept.
+    # Presentation, not retargeting: every slot starts centred on its own floor spot whatever the source's
+    # position on the capture stage was, so no avatar stands off-centre in its third of the screen.
     trans = out.translations.copy()
     for r in np.flatnonzero(target.parents < 0):
-        trans[:, r, :] -= trans[0, r, :] - target.offsets[r]
+        trans[:, r, [0, 2]] -= trans[0, r, [0, 2]] - target.offsets[r, [0, 2]]
     return Motion(target, out.fps, out.rotations, trans, source=out.source or motion.source)
 
 

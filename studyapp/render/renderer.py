@@ -35,6 +35,7 @@ BACKGROUND_TOP = (0.86, 0.87, 0.89)
 BACKGROUND_BOTTOM = (0.66, 0.67, 0.69)
 FLOOR_COLOR = (0.60, 0.61, 0.63)
 LABEL_COLOR = (0.22, 0.23, 0.26, 0.9)
+MAX_CACHED_AVATARS = 4  # GPU meshes kept for avatars not drawn lately (a study normally uses one)
 MORPH_EPS = 1e-4  # weights below this are skipped (invisible, and it keeps the vertex loop short)
 
 
@@ -108,6 +109,7 @@ class Renderer:
         self._msaa: moderngl.Framebuffer | None = None
         self._resolve: moderngl.Framebuffer | None = None
         self._size: tuple[int, int] | None = None
+        self._aa_rects: list[tuple[int, int, int, int]] = []
         self._ids = np.zeros(MAX_ACTIVE_MORPHS, np.int32)
         self._w = np.zeros(MAX_ACTIVE_MORPHS, np.float32)
 
@@ -115,10 +117,12 @@ class Renderer:
     def upload_avatar(self, avatar: Avatar) -> AvatarMesh:
         """GPU buffers of ``avatar`` (created once per avatar object and reused by every slot)."""
         key = id(avatar)
-        mesh = self._meshes.get(key)
+        mesh = self._meshes.pop(key, None)
         if mesh is None or mesh.avatar is not avatar:
             mesh = AvatarMesh(self.ctx, avatar, self.prog)
-            self._meshes[key] = mesh
+        self._meshes[key] = mesh  # most recently used last
+        while len(self._meshes) > MAX_CACHED_AVATARS:
+            self._meshes.pop(next(iter(self._meshes))).release()
         return mesh
 
     def _label_texture(self, text: str, height: int) -> moderngl.Texture:
@@ -184,12 +188,21 @@ class Renderer:
         ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
         self._resolve.color_attachments[0].use(0)
         if self.fxaa:
+            # copy everything, then anti-alias only around the figures (the backdrop is smooth already);
+            # one pass per slot, clamped to it, so one slot's edges never bleed into the next
+            if (x, y) == (0, 0) and tuple(target.size) == (w, h):
+                ctx.copy_framebuffer(target, self._resolve)
+            else:
+                self.blit_prog["u_image"].value = 0
+                self._blit_vao.render(moderngl.TRIANGLES, vertices=3)
+            target.use()
             self.fxaa_prog["u_image"].value = 0
             self.fxaa_prog["u_texel"].value = (1.0 / w, 1.0 / h)
-            # one pass per slot, clamped to it, so one slot's edges never bleed into the next
-            for sx, _, sw, _ in slot_viewports((0, 0, w, h), n_slots):
-                target.viewport = (x + sx, y, sw, h)
-                self.fxaa_prog["u_rect"].value = (sx / w, 0.0, sw / w, 1.0)
+            for (sx, _, sw, _), (rx, ry, rw, rh) in zip(slot_viewports((0, 0, w, h), n_slots), self._aa_rects):
+                if rw <= 0 or rh <= 0:
+                    continue
+                target.viewport = (x + rx, y + ry, rw, rh)
+                self.fxaa_prog["u_rect"].value = (rx / w, ry / h, rw / w, rh / h)
                 self.fxaa_prog["u_bounds"].value = ((sx + 0.5) / w, 0.5 / h, (sx + sw - 0.5) / w, 1 - 0.5 / h)
                 self._fxaa_vao.render(moderngl.TRIANGLES, vertices=3)
         else:
@@ -218,8 +231,10 @@ class Renderer:
         self.prog["u_view_proj"].write(vp_bytes)
         self.prog["u_camera_pos"].value = tuple(float(v) for v in scene.camera.eye)
         self.floor_prog["u_view_proj"].write(vp_bytes)
+        self._aa_rects = []
         for i, vp in enumerate(vps):
             fbo.viewport = vp
+            self._aa_rects.append(self._figure_rect(scene.slots[i].joints_at(t), view_proj, vp) if figures else (0, 0, 0, 0))
             # backdrop
             ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
             self._empty_vao.render(moderngl.TRIANGLES, vertices=3)
@@ -246,11 +261,31 @@ class Renderer:
             mesh.morph_nrm.use(2)
             mesh.texture.use(3)
             if figures:
+                if not scene.avatars[i].double_sided:
+                    ctx.enable(moderngl.CULL_FACE)
+                    ctx.front_face = "ccw"
                 mesh.vao.render(moderngl.TRIANGLES)
+                ctx.disable(moderngl.CULL_FACE)
             ctx.disable(moderngl.DEPTH_TEST)
             if scene.labels:
                 self._draw_label(scene.labels[i], vp)
         fbo.viewport = viewport
+
+    @staticmethod
+    def _figure_rect(joints: np.ndarray, view_proj: np.ndarray, vp: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+        """Pixel rectangle (in the draw buffer) that surely holds the figure: its joints projected, padded
+        by a tenth of the slot height for the head top, hair and fingertips beyond the joints."""
+        x, y, w, h = vp
+        clip = np.c_[joints, np.ones(len(joints))] @ view_proj.T
+        ndc = clip[:, :2] / np.maximum(clip[:, 3:4], 1e-6)
+        px = x + (ndc[:, 0] + 1) * 0.5 * w
+        py = y + (ndc[:, 1] + 1) * 0.5 * h
+        pad = 0.1 * h
+        x0 = int(max(x, np.floor(px.min() - pad)))
+        x1 = int(min(x + w, np.ceil(px.max() + pad)))
+        y0 = int(max(y, np.floor(py.min() - pad)))
+        y1 = int(min(y + h, np.ceil(py.max() + pad)))
+        return x0, y0, max(0, x1 - x0), max(0, y1 - y0)
 
     def _set_morphs(self, weights: np.ndarray) -> None:
         active = np.flatnonzero(np.abs(weights) > MORPH_EPS)[:MAX_ACTIVE_MORPHS]

@@ -112,8 +112,6 @@ def load_avatar(spec: str | Path | None) -> Avatar:
     path = Path(spec)
     if not path.is_file():
         raise InputError(path, None, "avatar file not found (use 'builtin' for the built-in avatar)")
-    from studyapp.render.gltf import load_gltf
-
     return _load_gltf_cached(str(path.resolve()), path.stat().st_mtime_ns)
 
 

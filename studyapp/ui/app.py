@@ -14,11 +14,13 @@ participant (:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`). Each frame:
 from __future__ import annotations
 
 import logging
+import os
 import time
 import wave
 from pathlib import Path
 from typing import Any
 
+from studyapp.errors import StudyappError
 from studyapp.ui.frames import FlipPredictor
 from studyapp.ui.input import InputQueue
 from studyapp.ui.layer import ImGuiLayer
@@ -86,10 +88,14 @@ class StudyApp:
         self.question_active = 0
         self.focus_text = False
         self.typing = False
-        self.results_file: Path | None = None
         self.quit = False
         self.fullscreen_toggle = False
         self.error: str | None = None
+
+    @property
+    def results_file(self) -> Path | None:
+        """The results file a remote (bundle) run wrote at the end (set by the session), else None."""
+        return getattr(self.session, "results_file", None)
 
     # -- resources ---------------------------------------------------------------------------------
     @property
@@ -171,7 +177,7 @@ class StudyApp:
             return state
         if not view.loaded:
             return f"{state}:loading"
-        if view.ranking_open() and not view.playing_id:
+        if view.ranking_open() and not view.in_play:
             return f"{state}:{'ranked' if view.ranking.all_complete() else 'ranking'}"
         return f"{state}:{view.state}"
 
@@ -202,8 +208,6 @@ class StudyApp:
             State.PRACTICE: trial.draw, State.TRIALS: trial.draw, State.QUESTIONNAIRE: questionnaire.draw,
             State.DONE: final.draw, State.ENDED_EARLY: final.draw,
         }
-        from studyapp.errors import StudyappError
-
         try:
             screens[self.session.state](self)
         except StudyappError as exc:  # a refused action (e.g. a ranking the session rejects): say so
@@ -258,7 +262,7 @@ class StudyApp:
 
     def shutdown(self) -> None:
         view = self._view
-        if view is not None and view.playing_id:
+        if view is not None and view.in_play:
             view.stop()
         if self._scene_cache is not None:
             self._scene_cache.release()
@@ -334,29 +338,26 @@ class WindowRunner:
 def run_window(design: Any, db: Any, participant_id: str, fullscreen: bool = False,
                audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720)) -> int:
     """Run the participant's session in a window. Returns 0 when the study was completed (or ended
-    early by the attention rule), 1 when the window was closed before the end (run again to resume)."""
+    early by the attention rule), 1 when the window was closed before the end (run again to resume).
+
+    ``audio_device``: output index or name (default: ``$STUDYAPP_AUDIO_DEVICE``, else the system
+    default); without any output the study runs silently and says so (console and environment check).
+    """
     from studyapp.audio.playback import open_clock
     from studyapp.study.session import Session
 
+    if audio_device is None:  # lets the experimenter pick the output for any front end that calls us
+        audio_device = os.environ.get("STUDYAPP_AUDIO_DEVICE") or None
     clock, message = open_clock(audio_device)
     print(message, flush=True)
     session = Session(design, db, participant_id)
     runner = None
-    hook = getattr(db, "on_participant_finished", None)
     try:
         runner = WindowRunner(design, session, clock, fullscreen=fullscreen, size=size)
-        if callable(hook):  # bundles write a results file at the end: show its path on the last screen
-            def capture(pid: str, _hook=hook, _app=runner.app):
-                path = _hook(pid)
-                _app.results_file = path
-                return path
-            db.on_participant_finished = capture
         runner.run()
     finally:
         if runner is not None:
             runner.close()
-        if callable(hook):
-            db.on_participant_finished = hook
         clock.close()
         session.close()
     if session.finished:

@@ -71,13 +71,15 @@ class UIBot:
         self._planned_for: Any = None
         self.frames = 0
         self.last_rgb: np.ndarray | None = None
+        self._prev_key: str | None = None
+        self._q_planned = False
 
     # -- frame loop ----------------------------------------------------------------------------------
     def frame(self) -> None:
         """One frame at virtual time ``t``: the clip advances first, then the frame is drawn and
         "flipped" at that same instant (virtual time does not pass while drawing)."""
         view = self.app._view
-        if view is not None and view.playing_id and not self.clock.paused:
+        if view is not None and view.in_play and not self.clock.paused:
             self.clock.advance(max(view.duration_s / FRAMES_PER_PLAY, 1.0 / 60.0))
         self.app.frame(self.target.fbo, self.size, self.t, 1.0)
         self.app.after_flip(self.t)
@@ -118,7 +120,7 @@ class UIBot:
         return 0 if self.session.finished else 1
 
     def _stable(self, key: str) -> bool:
-        stable = getattr(self, "_prev_key", None) == key
+        stable = self._prev_key == key
         self._prev_key = key
         return stable and not key.endswith((":loading", ":measuring"))
 
@@ -256,7 +258,7 @@ class UIBot:
     def _plan_questionnaire(self) -> None:
         from studyapp.study.bots import questionnaire_answers, trial_rng
 
-        if getattr(self, "_q_planned", False):
+        if self._q_planned:
             self.wait()
             return
         self._q_planned = True

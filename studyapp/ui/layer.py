@@ -59,6 +59,10 @@ _COLORS = {
     "separator": (0.32, 0.34, 0.40, 1.0),
     "drag_drop_target": (1.0, 0.80, 0.25, 1.0),
     "plot_histogram": (0.35, 0.70, 0.45, 1.0),
+    "scrollbar_bg": (0.10, 0.11, 0.13, 1.0),
+    "scrollbar_grab": (0.46, 0.49, 0.56, 1.0),
+    "scrollbar_grab_hovered": (0.58, 0.62, 0.70, 1.0),
+    "scrollbar_grab_active": (0.66, 0.70, 0.78, 1.0),
 }
 
 
@@ -109,7 +113,7 @@ class ImGuiLayer:
         style.window_rounding = 8.0
         style.child_rounding = 6.0
         style.grab_rounding = 4.0
-        style.scrollbar_size = 16.0
+        style.scrollbar_size = 18.0
         style.frame_border_size = 1.0
         style.scale_all_sizes(scale)
         style.font_size_base = BASE_FONT_PX

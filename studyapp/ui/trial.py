@@ -22,7 +22,7 @@ class TrialView:
         self.ranking = RankingState([c.id for c in app.design.criteria])
         self.recorder: PlayRecorder | None = None
         self.watched = False          # played to the end at least once
-        self.playing_id = False       # a play is registered with the session
+        self.in_play = False          # a play is registered with the session (playing or paused)
         self.drawn_media_s: float | None = None
         self.error: str | None = None
 
@@ -50,24 +50,24 @@ class TrialView:
     @property
     def state(self) -> str:
         """"ready" (never played), "playing", "paused", "ended" (last play reached the end or stopped)."""
-        if not self.playing_id:
+        if not self.in_play:
             return "ended" if self.watched or self.app.session.plays else "ready"
         return "paused" if self.clock.paused else "playing"
 
     def can_play(self) -> bool:
-        return not self.playing_id and self.app.session.can_play() and self.loaded
+        return not self.in_play and self.app.session.can_play() and self.loaded
 
     def play(self) -> None:
         """Start (or replay) the clip from the beginning, with sound."""
         if not self.can_play():
             return
         self.app.session.record_play_started()
-        self.playing_id = True
+        self.in_play = True
         self.recorder = PlayRecorder(refresh_hz=self.app.refresh_hz)
         self.clock.play(self.media.audio, 0.0, duration_s=self.duration_s)
 
     def toggle_pause(self) -> None:
-        if not self.playing_id:
+        if not self.in_play:
             return
         if self.clock.paused:
             self.clock.resume()
@@ -75,30 +75,30 @@ class TrialView:
             self.clock.pause()
 
     def pause(self) -> None:
-        if self.playing_id and not self.clock.paused:
+        if self.in_play and not self.clock.paused:
             self.clock.pause()
 
     def stop(self) -> None:
         """End the current play early (only offered after the clip was watched once)."""
-        if self.playing_id:
+        if self.in_play:
             self._finish(completed=False)
 
     def _finish(self, completed: bool) -> None:
         stats = self.recorder.stats() if self.recorder else None
         self.clock.stop()
-        self.playing_id = False
+        self.in_play = False
         self.app.session.record_play_finished(completed, stats)
         if completed:
             self.watched = True
 
     def update(self) -> None:
         """Once per frame before drawing: notice the end of the clip."""
-        if self.playing_id and not self.clock.paused and self.clock.finished:
+        if self.in_play and not self.clock.paused and self.clock.finished:
             self._finish(completed=True)
 
     def media_time(self, now: float) -> float:
         """Clip time to draw now: the audio clock plus the time until this frame is shown."""
-        if not self.playing_id:
+        if not self.in_play:
             return self.duration_s if self.watched else 0.0
         pos = self.clock.position_s()
         if self.clock.paused:
@@ -107,7 +107,7 @@ class TrialView:
         return min(t, self.duration_s)
 
     def after_flip(self, flip_time: float) -> None:
-        if self.playing_id and self.recorder is not None and self.drawn_media_s is not None \
+        if self.in_play and self.recorder is not None and self.drawn_media_s is not None \
                 and not self.clock.paused:
             self.recorder.flip(flip_time, self.drawn_media_s, self.clock.position_s())
         self.drawn_media_s = None
@@ -118,7 +118,7 @@ class TrialView:
         return self.watched or not bool(self.app.design.playback.must_watch_fully)
 
     def can_submit(self) -> bool:
-        return self.ranking.all_complete() and not self.playing_id and self.app.session.can_rank()
+        return self.ranking.all_complete() and not self.in_play and self.app.session.can_rank()
 
     def submit(self) -> None:
         if self.can_submit():

@@ -51,8 +51,10 @@ class Painter:
         self.record(s)
         if color is None:
             self.imgui.text_unformatted(s)
-        else:
-            self.imgui.text_colored(self.imgui.ImVec4(*color), s.replace("%", "%%"))
+        else:  # text_unformatted: design text may contain "%", which printf-style calls would eat
+            self.imgui.push_style_color(self.imgui.Col_.text, self.imgui.ImVec4(*color))
+            self.imgui.text_unformatted(s)
+            self.imgui.pop_style_color()
         self._item_rect(key)
 
     def wrapped(self, s: str, *, key: Any = None, wrap_x: float = 0.0) -> None:
@@ -125,8 +127,10 @@ class Painter:
         return bool(value)
 
     def input_multiline(self, label: str, value: str, size: tuple[float, float], *, key: Any = None) -> str:
+        """A free-text box; Enter leaves it (Ctrl+Enter starts a new line), so Enter can then submit."""
         self.record(value)
-        _, value = self.imgui.input_text_multiline(label, value, self.imgui.ImVec2(*size))
+        flags = self.imgui.InputTextFlags_.ctrl_enter_for_new_line
+        _, value = self.imgui.input_text_multiline(label, value, self.imgui.ImVec2(*size), flags)
         self._item_rect(key)
         return value
 

@@ -27,7 +27,7 @@ def test_skeleton_is_humanoid_tpose_in_metres():
 
 
 def test_mesh_size_weights_and_bounds(avatar):
-    assert 15_000 <= avatar.n_vertices <= 25_000
+    assert 10_000 <= avatar.n_vertices <= 25_000
     assert np.allclose(avatar.weights.sum(1), 1.0, atol=1e-5)
     assert (avatar.weights >= 0).all()
     lo, hi = avatar.bounds()

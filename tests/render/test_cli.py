@@ -5,7 +5,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from conftest import SAMPLES
+from render_helpers import SAMPLES
 from studyapp.cli import main
 from studyapp.resources import demo_design
 

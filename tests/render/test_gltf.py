@@ -10,7 +10,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from conftest import RELAXED, posed
+from render_helpers import RELAXED, posed
 from studyapp.errors import InputError
 from studyapp.face.arkit import ARKIT_NAMES
 from studyapp.motion.skeleton import Motion
@@ -250,6 +250,7 @@ def test_builtin_avatar_glb_round_trip(tmp_path, avatar):
         assert np.array_equal(getattr(back, attr), getattr(avatar, attr)), attr
     assert np.allclose(back.inverse_bind, avatar.inverse_bind, atol=1e-6)
     assert back.morph_names == avatar.morph_names
+    assert back.double_sided is avatar.double_sided is False  # closed surfaces: drawn with back-face culling
 
 
 @pytest.mark.gl

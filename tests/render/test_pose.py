@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from conftest import RELAXED, SAMPLES, posed, skin_cpu
+from render_helpers import RELAXED, SAMPLES, posed, skin_cpu
 from studyapp.face.animation import FaceAnimation
 from studyapp.face.arkit import ARKIT_NAMES
 from studyapp.motion.bvh import read_bvh
@@ -87,3 +87,27 @@ def test_beat_bvh_retargets_onto_the_avatar_centred_in_metres(avatar):
     assert 1.3 < head[:, 1].min() and head[:, 1].max() < 1.8  # metres, standing
     # the model's motion is not the rest pose: the arms are posed
     assert not np.allclose(slot.palettes[0, avatar.skeleton.index("LeftUpperArm")], np.eye(4), atol=0.05)
+
+
+def test_framing_keeps_every_hand_position_of_every_slot_in_view(avatar):
+    from render_helpers import project
+    from studyapp.render.renderer import slot_viewports
+    from studyapp.render.scene import make_scene
+
+    # one calm slot and one with wide, high gestures: the shared camera must fit both
+    n = 30
+    calm = posed(avatar, RELAXED, n)
+    wide = posed(avatar, RELAXED, n)
+    sk = avatar.skeleton
+    angles = np.linspace(-72, 40, n)  # the left arm sweeps from the side to above the shoulder
+    for f, a in enumerate(angles):
+        j = sk.index("LeftUpperArm")
+        wide.rotations[f, j] = Rotation.from_rotvec(np.radians([0, 0, a])).as_quat()
+    slots = [prepare_slot(avatar, m, None) for m in (calm, wide, calm)]
+    scene = make_scene(slots, avatar, labels=("A", "B", "C"))
+    tips = [sk.index(n) for n in sk.names if n.endswith("Distal")] + [sk.index("Head")]
+    vps = slot_viewports((0, 0, 1280, 720), 3)
+    for slot, vp in zip(slots, vps):
+        pts = project(scene.camera, slot.joint_positions[:, tips].reshape(-1, 3), vp, 720)
+        assert (pts[:, 0] > vp[0]).all() and (pts[:, 0] < vp[0] + vp[2]).all()
+        assert (pts[:, 1] > 0.09 * 720).all() and (pts[:, 1] < 720).all()  # below the label band

@@ -6,7 +6,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from conftest import RELAXED, posed
+from render_helpers import RELAXED, posed
 from studyapp.audio.wav import AudioClip
 from studyapp.render.pose import prepare_slot
 from studyapp.render.scene import make_scene

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import SAMPLES
+from render_helpers import SAMPLES
 
 pytestmark = [pytest.mark.gl, pytest.mark.display]
 
@@ -29,7 +29,7 @@ import json, sys, time
 import glfw
 import numpy as np
 sys.path.insert(0, sys.argv[2])
-from conftest import RELAXED, posed
+from render_helpers import RELAXED, posed
 from studyapp.render.avatar import build_default_avatar
 from studyapp.render.context import Window
 from studyapp.render.pose import prepare_slot

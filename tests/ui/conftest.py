@@ -1,4 +1,4 @@
-"""Fixtures for the participant UI tests: a GL context, a tiny study, a virtual X display, null audio."""
+"""Fixtures for the participant UI tests: a GL context, a tiny study, a virtual X display."""
 from __future__ import annotations
 
 import os
@@ -9,8 +9,6 @@ from pathlib import Path
 
 import pytest
 
-SHARED_AUDIO = Path("/work/shared/scripts/start-null-audio.sh")
-REPO_AUDIO = Path(__file__).resolve().parents[2] / ".ci" / "start-null-audio.sh"
 
 
 @pytest.fixture(scope="session")
@@ -30,7 +28,7 @@ def tiny_study(tmp_path):
     from studyapp.study.storage import ResultsDB
     from studyapp.study.synthetic import write_synthetic_study
 
-    path = write_synthetic_study(tmp_path / "study", n_stimuli=2, questionnaire=True)
+    path = write_synthetic_study(tmp_path / "study", n_stimuli=2, seconds=3.0, questionnaire=True)
     # Condition ids named like the published models, so the leak checks look for realistic secrets.
     text = path.read_text()
     for old, new in (("synced", "FaceCapGes"), ("lagged", "DiffSHEG"), ("static", "CaMN")):
@@ -83,47 +81,3 @@ def xvfb_display():
             os.environ["DISPLAY"] = old
         proc.terminate()
         proc.wait(timeout=10)
-
-
-@pytest.fixture
-def null_audio():
-    """A PulseAudio null sink (real-time paced), its environment exported while the test runs."""
-    script = SHARED_AUDIO if SHARED_AUDIO.exists() else REPO_AUDIO
-    if shutil.which("pulseaudio") is None:
-        pytest.skip("pulseaudio is not installed (apt install pulseaudio): no null audio sink")
-    if os.environ.get("PULSE_SERVER"):  # the CI script already started one
-        _rescan_portaudio()
-        yield os.environ["PULSE_SERVER"]
-        return
-    out = subprocess.run(["bash", str(script)], capture_output=True, text=True, timeout=30)
-    env = {}
-    for token in out.stdout.replace("export ", "").split():
-        if "=" in token:
-            k, v = token.split("=", 1)
-            env[k] = v.strip("'\"")
-    if "PULSE_SERVER" not in env:
-        pytest.skip(f"null audio sink did not start: {out.stdout} {out.stderr}")
-    old = {k: os.environ.get(k) for k in env}
-    os.environ.update({k: v for k, v in env.items() if k != "AUDIO_NULL_PID"})
-    _rescan_portaudio()
-    try:
-        yield env["PULSE_SERVER"]
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-        try:
-            os.kill(int(env["AUDIO_NULL_PID"]), 15)
-        except (KeyError, ValueError, ProcessLookupError):
-            pass
-        _rescan_portaudio()
-
-
-def _rescan_portaudio() -> None:
-    # PortAudio lists devices once, at initialisation: re-initialise so the new sound server is seen.
-    import sounddevice as sd
-
-    sd._terminate()
-    sd._initialize()

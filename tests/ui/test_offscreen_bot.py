@@ -103,3 +103,107 @@ def _leaks(drawn, secrets):
     return p.leaks(secrets)
 
 
+
+
+def test_focus_loss_and_space_pause_playback(tiny_study):
+    from imgui_bundle import imgui
+
+    design, db = tiny_study
+    bot = UIBot(design, db, "P3", "random", 1)
+    try:
+        for _ in range(200):
+            bot.frame()
+            key = bot.app.screen_key()
+            if key == "practice:ready":
+                break
+            bot.steps.popleft()() if bot.steps else bot._plan(key)
+        assert bot.app.screen_key() == "practice:ready"
+        bot.app.input.tap(imgui.Key.space)          # Space starts the clip...
+        for _ in range(3):
+            bot.frame()
+        view = bot.app.trial_view()
+        assert view.state == "playing"
+        bot.app.input.focus(False)                  # ...losing the window focus pauses it
+        bot.frame()
+        assert view.state == "paused" and bot.clock.paused
+        t = bot.clock.position_s()
+        for _ in range(5):
+            bot.frame()
+        assert bot.clock.position_s() == t          # nothing moves while paused
+        bot.app.input.focus(True)
+        bot.app.input.tap(imgui.Key.space)          # Space resumes
+        for _ in range(3):
+            bot.frame()
+        assert view.state == "playing" and bot.clock.position_s() > t
+        assert not view.ranking_open()              # the answers stay closed until the clip ends
+    finally:
+        bot.close()
+
+
+def test_whole_study_with_the_keyboard_only(tiny_study):
+    """Enter / Space / digits / arrows only: every screen can be operated without a mouse."""
+    from imgui_bundle import imgui
+
+    from studyapp.ui.input import digit_key
+
+    design, db = tiny_study
+    bot = UIBot(design, db, "K1", "random", 1)
+    q = bot.app.input
+    K = imgui.Key
+
+    def run(n=3):
+        for _ in range(n):
+            bot.frame()
+
+    def press(key, n=3):
+        q.tap(key)
+        run(n)
+
+    try:
+        run(2)
+        for screen in ("welcome", "instructions"):
+            assert bot.app.screen_key() == screen
+            press(K.enter)
+        run(3)  # the environment check measures, then waits for Enter
+        assert bot.app.screen_key() == "env_check"
+        press(K.enter)
+        orders = {}
+        for _ in range(len(bot.session.plans)):
+            for _ in range(50):
+                if bot.app.screen_key().endswith(":ready"):
+                    break
+                bot.frame()
+            press(K.space)  # play
+            for _ in range(50):
+                if bot.app.screen_key().endswith(":ranking"):
+                    break
+                bot.frame()
+            plan = bot.session.current_trial()
+            order = [(plan.trial_index + k) % 3 for k in range(3)]  # a different order per trial
+            orders[plan.trial_index] = order
+            for _crit in design.criteria:  # the highlight moves on when a question is complete
+                for slot in order:
+                    press(digit_key(slot + 1), 2)
+            assert bot.app.screen_key().endswith(":ranked")
+            press(K.enter, 4)
+        assert bot.app.screen_key() == "questionnaire"
+        press(digit_key(5))                 # first item is selected: 5
+        press(K.down_arrow)
+        press(digit_key(2))
+        press(K.down_arrow)                 # the text item takes the keyboard
+        q.type_text("fine")
+        run(3)
+        press(K.enter)                      # leaves the text box
+        press(K.enter, 4)                   # submits
+        assert bot.session.finished
+    finally:
+        bot.close()
+    ranks = {}
+    for r in db.responses("K1"):
+        ranks.setdefault(r["trial_index"], {}).setdefault(r["criterion"], {})[r["slot"]] = r["rank"]
+    for trial, order in orders.items():
+        for crit in design.criteria:
+            assert [ranks[trial][crit.id][s] for s in order] == [1, 2, 3]
+    answers = {a["item"]: a for a in db.questionnaire("K1")}
+    assert answers["q1"]["value"] in (5, "5") and answers["q2"]["value"] in (2, "2")
+    assert "fine" in str(answers["comments"]["value"])

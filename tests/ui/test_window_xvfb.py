@@ -6,6 +6,7 @@ screenshots of the X screen with ImageMagick's ``import`` and checks what they s
 """
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import time
@@ -17,7 +18,7 @@ pytestmark = [pytest.mark.display, pytest.mark.gl]
 
 
 def _need(tool: str) -> str:
-    path = shutil.which(tool) or (f"/usr/bin/{tool}" if shutil.os.path.exists(f"/usr/bin/{tool}") else None)
+    path = shutil.which(tool) or (f"/usr/bin/{tool}" if os.path.exists(f"/usr/bin/{tool}") else None)
     if path is None:
         pytest.skip(f"{tool} is not installed")
     return path
@@ -31,7 +32,8 @@ class Driver:
         self.app = runner.app
         self.tmp = tmp_path
         self.xdotool = _need("xdotool")
-        self.imp = "/usr/bin/import" if shutil.os.path.exists("/usr/bin/import") else _need("import")
+        # /usr/bin/import: the `convert`/`import` first on PATH may be a stand-in (see DOMAIN.md)
+        self.imp = "/usr/bin/import" if os.path.exists("/usr/bin/import") else _need("import")
         self.wid = None
         for _ in range(50):
             self.frames(2)
@@ -97,8 +99,9 @@ class Driver:
         return img[y:y + h, x:x + w]
 
 
-def release_egl_context() -> None:
-    """Un-bind any EGL context earlier tests left current on this thread.
+def release_egl_context():
+    """Un-bind the EGL context earlier tests left current on this thread; returns a function that
+    binds it again.
 
     Mesa refuses glXMakeCurrent (X error BadAccess, which Xlib turns into exit(1)) while an EGL context
     is current in the same thread; a participant's process never has one, the test process does.
@@ -108,12 +111,18 @@ def release_egl_context() -> None:
     try:
         egl = ctypes.CDLL("libEGL.so.1")
     except OSError:
-        return
-    egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
+        return lambda: None
+    for name in ("eglGetCurrentDisplay", "eglGetCurrentContext"):
+        getattr(egl, name).restype = ctypes.c_void_p
+    egl.eglGetCurrentSurface.restype = ctypes.c_void_p
+    egl.eglGetCurrentSurface.argtypes = [ctypes.c_int]
     egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
-    dpy = egl.eglGetCurrentDisplay()
-    if dpy:
-        egl.eglMakeCurrent(dpy, None, None, None)
+    dpy, ctx = egl.eglGetCurrentDisplay(), egl.eglGetCurrentContext()
+    if not dpy:
+        return lambda: None
+    draw, read = egl.eglGetCurrentSurface(0x3059), egl.eglGetCurrentSurface(0x305A)  # EGL_DRAW, EGL_READ
+    egl.eglMakeCurrent(dpy, None, None, None)
+    return lambda: egl.eglMakeCurrent(dpy, draw, read, ctx)
 
 
 def thirds_with_figures(img: np.ndarray, top: int, bottom: int) -> list[int]:
@@ -131,18 +140,15 @@ def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_pat
 
     design, db = tiny_study
     session = Session(design, db, "W1")
-    release_egl_context()
+    restore_egl = release_egl_context()
     try:
         runner = WindowRunner(design, session, SilentClock(), size=(1280, 720))
     except Exception as exc:
+        restore_egl()
         pytest.skip(f"no GLX window under Xvfb: {exc}")
     try:
         d = Driver(runner, tmp_path)
         app = d.app
-        import glfw
-
-        assert glfw.get_window_title(runner.window.handle) == "studyapp" if hasattr(glfw, "get_window_title") \
-            else True
         d.until(lambda: "consent" in app.ui.rects)
         d.frames(2)
         d.click("consent")                       # xdotool click -> GLFW mouse callbacks
@@ -156,10 +162,13 @@ def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_pat
         d.frames(3)
         d.click("play")
         d.until(lambda: app.screen_key() == "practice:playing", 10)
+        d.key("space")                           # Space pauses (so the screenshot sees the playing layout)
+        assert app.screen_key() == "practice:paused", app.screen_key()
         shot = d.screenshot("trial_playing")
         h = shot.shape[0]
         counts = thirds_with_figures(shot, int(0.1 * h), int(0.85 * h))
         assert all(c > 500 for c in counts), counts
+        d.key("space")                           # ... and resumes
         d.until(lambda: app.screen_key() == "practice:ranking", 30)
         d.frames(3)
         shot = d.screenshot("trial_ranking")
@@ -194,3 +203,4 @@ def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_pat
     finally:
         runner.close()
         session.close()
+        restore_egl()

@@ -53,7 +53,7 @@ def draw(app: Any) -> None:
                 app.typing = True
             answers[q.id] = new
         if active:
-            ui.muted("(selected: use the number keys)" if q.kind == "likert" else "(selected: type your answer)")
+            ui.muted("(selected: press a number key)" if q.kind == "likert" else "(selected: type, then press Enter)")
         imgui.spacing()
     ok = complete(items, answers)
     if primary_row(app, "Submit answers", "submit", enabled=ok,

@@ -88,7 +88,7 @@ def draw(app: Any, view: Any) -> None:
         x0 = imgui.get_cursor_pos_x()
         top = imgui.get_cursor_pos_y()
         wrap = x0 + text_w
-        ui.heading(crit.label + ("  (keyboard)" if active else ""), 1.05, key=("crit", crit.id), wrap_x=wrap)
+        ui.heading(crit.label, 1.05, key=("crit", crit.id), wrap_x=wrap)
         imgui.same_line(0, 10 * s)
         ui.wrapped(crit.question, wrap_x=wrap)
         if crit.explanation:
@@ -117,6 +117,7 @@ def draw(app: Any, view: Any) -> None:
                 imgui.end_drag_drop_target()
         # chips of the figures not placed yet
         imgui.same_line(0, 24 * s)
+        chips_x = imgui.get_cursor_pos_x()
         for slot in range(3):
             if slot:
                 imgui.same_line()
@@ -130,6 +131,9 @@ def draw(app: Any, view: Any) -> None:
                 imgui.set_drag_drop_payload_py_id(f"slot{ci}", slot)
                 ui.text(names[slot])
                 imgui.end_drag_drop_source()
+        if r.is_complete(crit.id):
+            imgui.set_cursor_pos(imgui.ImVec2(chips_x, top + (ROW_PX - 16) * s / 2 - imgui.get_font_size() / 2))
+            ui.muted("Done. Click a box to change it.", size=0.9)
         imgui.end_child()
     _keys(app, view)
 
@@ -147,8 +151,10 @@ def next_button(app: Any, view: Any) -> None:
     enabled = view.can_submit()
     if enabled:
         why = "Enter = next. You cannot come back to this clip."
-    elif view.playing_id:
+    elif view.in_play:
         why = "Available when the clip has finished."
+    elif not any(slot is not None for places in r.order.values() for slot in places):
+        why = "Drag the letters into the boxes, best first; or click them in order."
     else:
         why = "Still to rank: " + ", ".join(c.label for c in app.design.criteria if not r.is_complete(c.id))
     bw = 210 * s

@@ -63,7 +63,8 @@ def draw(app: Any) -> None:
 
     # -- the 3D view: drawn by the renderer before the UI ------------------------------------------
     t = view.media_time(app.now)
-    view.drawn_media_s = t if view.playing_id else None
+    # Only frames drawn while the sound runs count for sync (before the device starts, both show 0).
+    view.drawn_media_s = t if view.in_play and view.clock.started else None
     app.request_scene(view.scene, t, rects["scene"])
 
     # -- panel: transport + ranking -------------------------------------------------------------
@@ -107,7 +108,7 @@ def _transport(app: Any, view: Any, t: float) -> None:
     else:
         if ui.button("Replay", key="replay", size=(bw, bh), enabled=view.can_play()):
             view.play()
-    if view.playing_id and view.watched:
+    if view.in_play and view.watched:
         imgui.same_line()
         if ui.button("Stop", key="stop", size=(110 * s, bh)):
             view.stop()
@@ -138,7 +139,6 @@ def _status_text(app: Any, view: Any, state: str) -> str:
 
 
 def _keys(app: Any, view: Any) -> None:
-    K = imgui.Key
     if app.key_pressed("space"):
         if view.state == "ready":
             view.play()
