@@ -144,14 +144,17 @@ def _render_first_trial(design, plan, out: Path, *, video: bool) -> dict[str, Pa
 
 
 def _analyse(db_path: Path, out: Path, design) -> Path | None:
+    from results_analysis import load_questionnaire
     from results_analysis.report import analyze
     from studyapp.study.export import export_dataframe
 
     df = export_dataframe(db_path)
+    questionnaire = load_questionnaire(db_path)
     if df.empty:
         print("No answers were recorded, so there is nothing to analyse.")
         return None
     if out.exists():
         shutil.rmtree(out)
-    analyze(df, out, title=f"{design.title}: results")
+    analyze(df, out, title=f"{design.title}: results",
+            questionnaire=questionnaire if len(questionnaire) else None)
     return out / "report.html"

@@ -28,6 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--allow-rerun", action="store_true",
                    help="let a participant who finished run again (recorded as <id>-rerun<k>)")
     p.add_argument("--fullscreen", action="store_true", help="open the participant window full screen")
+    p.add_argument("--audio-device", metavar="INDEX|NAME",
+                   help="audio output for the window (index or part of the name; `studyapp doctor` lists them)")
     p.add_argument("--offscreen", action="store_true", help="no window: a scripted participant through the real UI")
     p.add_argument("--bot", choices=BOTS, help="scripted participant policy (with --offscreen or --no-render)")
     p.add_argument("--seed", type=int, default=0, help="seed of the scripted participant")
@@ -162,15 +164,8 @@ def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:
         run_bot_session(design, db, pid, args.bot, args.seed, on_trial=_print_saved, pace_s=args.bot_pace)
         return 0
     if args.offscreen:
-        try:
-            from studyapp.ui.app import run_offscreen_bot
-        except ImportError:
-            print("The offscreen UI is not available in this installation; running the bot without rendering.",
-                  file=sys.stderr)
-            from studyapp.study.bots import run_bot_session
+        from studyapp.ui.app import run_offscreen_bot
 
-            run_bot_session(design, db, pid, args.bot, args.seed, on_trial=_print_saved)
-            return 0
         return int(run_offscreen_bot(design, db, pid, args.bot, args.seed) or 0)
     from studyapp.demo_cli import display_available
 
@@ -179,7 +174,10 @@ def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:
                             "--offscreen --bot careful for a scripted check")
     from studyapp.ui.app import run_window
 
-    return int(run_window(design, db, pid, fullscreen=args.fullscreen) or 0)
+    device = args.audio_device
+    if device is not None and device.isdigit():
+        device = int(device)
+    return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device) or 0)
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
