@@ -35,9 +35,7 @@ REFRESH_HZ = 60.0
 def start_null_audio() -> int | None:
     if os.environ.get("PULSE_SERVER") or shutil.which("pulseaudio") is None:
         return None
-    script = Path("/work/shared/scripts/start-null-audio.sh")
-    if not script.exists():
-        script = ROOT / ".ci" / "start-null-audio.sh"
+    script = ROOT / ".ci" / "start-null-audio.sh"
     out = subprocess.run(["bash", str(script)], capture_output=True, text=True, timeout=30).stdout
     env = {k: v.strip("'\"") for k, v in (t.split("=", 1) for t in out.replace("export ", "").split() if "=" in t)}
     pid = int(env.pop("AUDIO_NULL_PID"))

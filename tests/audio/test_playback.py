@@ -22,9 +22,7 @@ from studyapp.audio.playback import (
     sound_check_tone,
 )
 
-SCRIPT = Path("/work/shared/scripts/start-null-audio.sh")
-if not SCRIPT.exists():
-    SCRIPT = Path(__file__).resolve().parents[2] / ".ci" / "start-null-audio.sh"
+SCRIPT = Path(__file__).resolve().parents[2] / ".ci" / "start-null-audio.sh"
 
 
 def _rescan():

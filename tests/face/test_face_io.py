@@ -17,15 +17,13 @@ from studyapp.face.arkit import ARKIT_INDEX, ARKIT_NAMES
 from studyapp.face.io import load_face, save_face_csv, summarize
 
 # The shared real-world samples sit beside the checkout (../shared/samples).
-SAMPLES = Path(__file__).resolve().parents[3] / "shared" / "samples"
-needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason="shared samples not available")
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"  # copies of ../shared/samples (see its README)
 LIVELINK = SAMPLES / "livelinkface_S07-001_excerpt.csv"
 BEAT_JSON = SAMPLES / "beat_face51_diffsheg_gt_excerpt.json"
 
 
 # --------------------------------------------------------------------------------------- real samples
 
-@needs_samples
 def test_live_link_sample_maps_by_name_not_position() -> None:
     rows = list(csv.reader(open(LIVELINK)))
     header, data = rows[0], rows[1:]
@@ -47,12 +45,10 @@ def test_live_link_sample_maps_by_name_not_position() -> None:
                                                     for r in data])
 
 
-@needs_samples
 def test_live_link_fps_override() -> None:
     assert load_face(LIVELINK, fps=60.0).fps == 60.0
 
 
-@needs_samples
 def test_beat_json_sample() -> None:
     doc = json.loads(BEAT_JSON.read_text())
     with pytest.warns(UserWarning, match="tongueOut"):
@@ -66,7 +62,6 @@ def test_beat_json_sample() -> None:
     assert face.weight("jawOpen")[0] == pytest.approx(doc["frames"][0]["weights"][doc["names"].index("jawOpen")])
 
 
-@needs_samples
 def test_summaries_of_samples() -> None:
     s = summarize(LIVELINK)
     assert (s["format"], s["frames"], s["fps"], s["shapes_found"], s["has_head_rotation"]) == ("livelink-csv", 3, 30.0, 52, True)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-SAMPLES = Path("/work/shared/samples")
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"  # copies of ../shared/samples (see its README)
 BEAT_SAMPLE = SAMPLES / "beat75_diffsheg_output_excerpt.bvh"
 MIXAMO_SAMPLE = SAMPLES / "mixamo_test_freebvh_excerpt.bvh"
 PYBVH_SAMPLE = SAMPLES / "pybvh_test1_zyx_excerpt.bvh"

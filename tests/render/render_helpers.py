@@ -12,9 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from studyapp.motion.skeleton import Motion
 
-SAMPLES = Path("/work/shared/samples")
-if not SAMPLES.is_dir():
-    SAMPLES = Path(__file__).resolve().parents[3] / "shared" / "samples"
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"  # copies of ../shared/samples (see its README)
 
 
 def posed(avatar, rotvecs_deg: dict[str, tuple[float, float, float]], n_frames: int = 1, fps: float = 30.0) -> Motion:
