@@ -146,16 +146,19 @@ def _read(path: Path) -> tuple[int, np.ndarray]:
         # scipy warns (rather than fails) on chunks it skips and on data cut short; a short file is an error here.
         warnings.simplefilter("error", wavfile.WavFileWarning)
         try:
-            rate, data = wavfile.read(path, mmap=False)
-        except wavfile.WavFileWarning as exc:
-            if "Chunk" in str(exc) and "not understood" in str(exc):
+            try:
+                rate, data = wavfile.read(path, mmap=False)
+            except wavfile.WavFileWarning as exc:
+                if not ("Chunk" in str(exc) and "not understood" in str(exc)):
+                    raise InputError(path, "data chunk", f"damaged or truncated WAV: {exc}") from None
+                # an unknown chunk (LIST, bext, ...) is fine; read again skipping it
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", wavfile.WavFileWarning)
                     rate, data = wavfile.read(path, mmap=False)
-            else:
-                raise InputError(path, "data chunk", f"damaged or truncated WAV: {exc}") from None
-        except (ValueError, EOFError, struct.error, OSError) as exc:
-            raise InputError(path, "header", f"damaged or truncated WAV: {exc}") from None
+        except InputError:
+            raise
+        except Exception as exc:  # scipy's reader fails in many ways on damaged files (struct, Unbound..., EOF)
+            raise InputError(path, "header", f"damaged or truncated WAV: {exc or type(exc).__name__}") from None
     if data.ndim == 1:
         data = data[:, None]
     if data.shape[0] == 0:

@@ -130,6 +130,8 @@ def test_bad_files(tmp_path: Path) -> None:
         "cut_header.wav": (data[:30], "header", "truncated"),
         "cut_data.wav": (data[:1000], "data chunk", "truncated"),
         "no_samples.wav": (data[:44], "data chunk", "truncated"),
+        # a RIFF/WAVE header followed by a chunk header cut short (scipy raises struct.error inside)
+        "cut_chunk.wav": (b"RIFFxxxxWAVEjunk\n", "header", "truncated"),
     }
     for name, (content, where, words) in cases.items():
         p = tmp_path / name
