@@ -88,6 +88,27 @@ REQUIRED_BONES: tuple[str, ...] = (
 )
 
 
+def _mixamo_style_limbs() -> dict[str, str]:
+    """Limb and finger names BEAT shares with Mixamo (``LeftForeArm``, ``LeftHandPinky1``, ...)."""
+    finger = {"Thumb": "Thumb", "Index": "Index", "Middle": "Middle", "Ring": "Ring", "Little": "Pinky"}
+    m: dict[str, str] = {}
+    for s in _SIDES:
+        m.update({
+            f"{s}Shoulder": f"{s}Shoulder",
+            f"{s}Arm": f"{s}UpperArm",
+            f"{s}ForeArm": f"{s}LowerArm",
+            f"{s}Hand": f"{s}Hand",
+            f"{s}UpLeg": f"{s}UpperLeg",
+            f"{s}Leg": f"{s}LowerLeg",
+            f"{s}Foot": f"{s}Foot",
+            f"{s}ToeBase": f"{s}Toes",
+        })
+        for f, src in finger.items():
+            for k, ph in enumerate(_PHALANGES, start=1):
+                m[f"{s}Hand{src}{k}"] = f"{s}{f}{ph}"
+    return m
+
+
 def _beat_map() -> dict[str, str]:
     m = {
         "Hips": "Hips",
@@ -101,21 +122,7 @@ def _beat_map() -> dict[str, str]:
         "Neck1": "Neck",
         "Head": "Head",
     }
-    beat_finger = {"Thumb": "Thumb", "Index": "Index", "Middle": "Middle", "Ring": "Ring", "Little": "Pinky"}
-    for s in _SIDES:
-        m.update({
-            f"{s}Shoulder": f"{s}Shoulder",
-            f"{s}Arm": f"{s}UpperArm",
-            f"{s}ForeArm": f"{s}LowerArm",
-            f"{s}Hand": f"{s}Hand",
-            f"{s}UpLeg": f"{s}UpperLeg",
-            f"{s}Leg": f"{s}LowerLeg",
-            f"{s}Foot": f"{s}Foot",
-            f"{s}ToeBase": f"{s}Toes",
-        })
-        for f, bf in beat_finger.items():
-            for k, ph in enumerate(_PHALANGES, start=1):
-                m[f"{s}Hand{bf}{k}"] = f"{s}{f}{ph}"
+    m.update(_mixamo_style_limbs())
     return m
 
 
@@ -124,21 +131,7 @@ def _mixamo_map() -> dict[str, str]:
         "Hips": "Hips", "Spine": "Spine", "Spine1": "Chest", "Spine2": "UpperChest",
         "Neck": "Neck", "Head": "Head",
     }
-    mix_finger = {"Thumb": "Thumb", "Index": "Index", "Middle": "Middle", "Ring": "Ring", "Little": "Pinky"}
-    for s in _SIDES:
-        m.update({
-            f"{s}Shoulder": f"{s}Shoulder",
-            f"{s}Arm": f"{s}UpperArm",
-            f"{s}ForeArm": f"{s}LowerArm",
-            f"{s}Hand": f"{s}Hand",
-            f"{s}UpLeg": f"{s}UpperLeg",
-            f"{s}Leg": f"{s}LowerLeg",
-            f"{s}Foot": f"{s}Foot",
-            f"{s}ToeBase": f"{s}Toes",
-        })
-        for f, mf in mix_finger.items():
-            for k, ph in enumerate(_PHALANGES, start=1):
-                m[f"{s}Hand{mf}{k}"] = f"{s}{f}{ph}"
+    m.update(_mixamo_style_limbs())
     return {f"mixamorig:{k}": v for k, v in m.items()}
 
 
