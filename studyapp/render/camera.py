@@ -14,32 +14,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from pyrr import matrix44
 
 
 def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
-    """OpenGL projection matrix (row-major numpy, column vectors)."""
-    f = 1.0 / np.tan(np.radians(fov_y_deg) / 2)
-    m = np.zeros((4, 4))
-    m[0, 0] = f / aspect
-    m[1, 1] = f
-    m[2, 2] = (far + near) / (near - far)
-    m[2, 3] = 2 * far * near / (near - far)
-    m[3, 2] = -1.0
-    return m
+    """OpenGL projection matrix for column vectors (pyrr builds it for row vectors: transpose)."""
+    return matrix44.create_perspective_projection(fov_y_deg, aspect, near, far, dtype=np.float64).T
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 1.0, 0.0)) -> np.ndarray:
-    """World-to-camera matrix (row-major numpy, column vectors)."""
-    eye = np.asarray(eye, np.float64)
-    f = np.asarray(target, np.float64) - eye
-    f /= np.linalg.norm(f)
-    s = np.cross(f, up)
-    s /= np.linalg.norm(s)
-    u = np.cross(s, f)
-    m = np.eye(4)
-    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m
+    """World-to-camera matrix for column vectors (pyrr builds it for row vectors: transpose)."""
+    return matrix44.create_look_at(np.asarray(eye, np.float64), np.asarray(target, np.float64),
+                                   np.asarray(up, np.float64), dtype=np.float64).T
 
 
 @dataclass(frozen=True)
