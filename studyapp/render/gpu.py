@@ -49,6 +49,18 @@ MATERIAL_SHADING = np.array([
 ], np.float32)
 
 
+def vertex_local_order(indices: np.ndarray) -> np.ndarray:
+    """The triangles sorted by the sum of their vertex indices (stable, so deterministic).
+
+    Neighbouring triangles then share vertices that are close in the index buffer, which Mesa's vertex
+    cache (llvmpipe splits indexed draws into short runs and shades each vertex once per run) turns into
+    fewer vertex-shader runs: about a seventh less frame time for the built-in avatar on llvmpipe. The
+    picture is the same (depth-tested opaque triangles; only exact depth ties could resolve differently).
+    """
+    idx = np.asarray(indices).reshape(-1, 3)
+    return idx[np.argsort(idx.astype(np.int64).sum(axis=1), kind="stable")]
+
+
 class AvatarMesh:
     """Vertex buffers, morph textures and base-colour texture of one avatar, shared by every slot."""
 
@@ -82,7 +94,7 @@ class AvatarMesh:
             "in_morph_row": ctx.buffer(rows.tobytes()),
             "in_uv": ctx.buffer(np.ascontiguousarray(uv, np.float32).tobytes()),
         }
-        self.index_buffer = ctx.buffer(avatar.indices.astype(np.uint32).tobytes())
+        self.index_buffer = ctx.buffer(vertex_local_order(avatar.indices).astype(np.uint32).tobytes())
         fmt = {"in_position": "3f", "in_normal": "3f", "in_color": "4f", "in_shading": "3f", "in_joints": "4i", "in_weights": "4f",
                "in_morph_row": "i", "in_uv": "2f"}
         content = [(self._buffers[name], fmt[name], name) for name in fmt if name in program]

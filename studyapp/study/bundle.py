@@ -150,22 +150,6 @@ class BundleInfo:
     n_files: int
     size_bytes: int
     roster: dict[str, int] = field(default_factory=dict)
-    #: Texts the participant sees that mention a condition id (the experimenter should reword them).
-    warnings: list[str] = field(default_factory=list)
-
-
-def _visible_text_leaks(design: Any) -> list[str]:
-    texts = {"title": design.title, "instructions": design.instructions}
-    for c in design.criteria:
-        texts[f"criteria.{c.id}"] = " ".join((c.label, c.question, c.explanation))
-    for q in design.questionnaire:
-        texts[f"questionnaire.{q.id}"] = " ".join((q.text, *q.anchors))
-    out = []
-    for cond in design.conditions:
-        for where, text in texts.items():
-            if re.search(rf"(?<![A-Za-z0-9]){re.escape(cond.id)}(?![A-Za-z0-9])", text, flags=re.IGNORECASE):
-                out.append(f"{where} mentions condition {cond.id!r}, which participants will read")
-    return out
 
 
 def _strip_onnx(data: bytes) -> bytes:
@@ -326,7 +310,7 @@ def make_bundle(
     key_path = output.with_name(f"{output.stem}.key.json")
     key_path.write_text(json.dumps(key, indent=2, sort_keys=True), encoding="utf-8")
     return BundleInfo(path=output, key_path=key_path, bundle_hash=bundle_hash, n_files=len(files),
-                      size_bytes=output.stat().st_size, roster=roster, warnings=_visible_text_leaks(design))
+                      size_bytes=output.stat().st_size, roster=roster)
 
 
 # ------------------------------------------------------------------------------------------ opening bundles

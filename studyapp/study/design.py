@@ -111,7 +111,7 @@ DEFAULT_CRITERIA: tuple[Criterion, ...] = (
               "The gestures follow the rhythm and intonation of the speech: emphasis in the voice comes with "
               "movement, pauses with calm."),
     Criterion("diversity", "Diversity", "Which motion is most diverse?",
-              "Rich and varied gestures: not static, not the same movement repeated over and over."),
+              "Rich and varied gestures: not motionless, not the same movement repeated over and over."),
 )
 
 
@@ -760,6 +760,9 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         practice=[str(p) for p in practice], attention_checks=attention, playback=Playback(**playback),
         questionnaire=items, max_attention_failures=maxfail, seed=int(ordering.get("seed", 1)), groups=groups,
     )
+    for key, cid in visible_text_leaks(design):
+        col.add(key, f"participants read this text and it names condition {cid!r}: that unblinds the study",
+                "reword the text, or give the condition another id")
     files = referenced_files(design, col)
     if check_files:
         from studyapp.study.stimuli import check_stimulus_files
@@ -824,6 +827,25 @@ def referenced_files(design: Design, col: _Collector | None = None) -> dict[str,
                 else:
                     col.add(key, f"{what} file not found: {p}", "fix the path (relative to the design file)")
     return files
+
+
+def visible_text_leaks(design: Design) -> list[tuple[str, str]]:
+    """``(key, condition id)`` for every participant-visible text that names a condition (whole word).
+
+    Slot labels are the design's own neutral names (A/B/C) and are not checked.
+
+    >>> from studyapp.resources import demo_design
+    >>> visible_text_leaks(load_design(demo_design(), check_files=False))
+    []
+    """
+    texts = {"title": design.title, "instructions": design.instructions}
+    for i, c in enumerate(design.criteria):
+        texts[f"criteria[{i}]"] = " ".join((c.label, c.question, c.explanation))
+    for i, q in enumerate(design.questionnaire):
+        texts[f"questionnaire[{i}]"] = " ".join((q.text, *q.anchors))
+    # ids of one or two characters ("a", "B1") are opaque already and would match ordinary words
+    return [(key, cond.id) for cond in design.conditions if len(cond.id) > 2 for key, text in texts.items()
+            if re.search(rf"(?<![A-Za-z0-9]){re.escape(cond.id)}(?![A-Za-z0-9])", text, flags=re.IGNORECASE)]
 
 
 def validate_design(path: str | Path, *, check_files: bool = True) -> list[Problem]:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 import pandas as pd
@@ -37,12 +38,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _cmd_validate(args: argparse.Namespace) -> int:
     from studyapp.study.design import problems_to_json, validate_design
 
-    problems = validate_design(args.design, check_files=not args.quick)
+    # Readers warn about what they can work around (a blendshape missing from a face file is set to 0,
+    # a BVH header's frame count disagrees with its data): the experimenter should see those as notes,
+    # not as Python warnings, and they do not stop the design from running.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        problems = validate_design(args.design, check_files=not args.quick)
+    notes = list(dict.fromkeys(str(w.message) for w in caught))
     if args.json:
         print(problems_to_json(problems))
     else:
         for p in problems:
             print(p)
+        for n in notes:
+            print(f"note: {n}")
         if problems:
             n = len(problems)
             print(f"{n} problem{'s' if n != 1 else ''}: the design cannot run until they are fixed.", file=sys.stderr)

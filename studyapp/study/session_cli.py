@@ -207,8 +207,6 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
     print(f"Wrote {info.path} ({info.n_files} files, {info.size_bytes / 1e6:.1f} MB)")
     print(f"Key (opaque ids -> conditions and files), keep it private: {info.key_path}")
     print(f"The key is also stored in {results}, so `studyapp merge` can map results back.")
-    for w in info.warnings:
-        print(f"warning: {w}")
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
     return 0

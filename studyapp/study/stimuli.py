@@ -305,8 +305,7 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
 
 def _problem_text(exc: Exception) -> str:
     if isinstance(exc, InputError):
-        where = f"{exc.where}: " if exc.where else ""
-        return f"{where}{exc.problem}"
+        return str(exc)  # names the file too: the design key alone does not say which of many files is bad
     return f"{type(exc).__name__}: {exc}"
 
 

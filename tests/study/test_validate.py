@@ -358,3 +358,15 @@ def test_any_mangled_design_gives_problems_not_crashes(study: Path) -> None:
             assert probs == []
 
     check()
+
+
+def test_participant_visible_text_naming_a_condition_is_a_problem() -> None:
+    """Blinding: instructions, criteria and questionnaire texts must never name a condition."""
+    from studyapp.resources import demo_design
+    from studyapp.study.design import load_design, visible_text_leaks
+
+    design = load_design(demo_design(), check_files=False)
+    assert visible_text_leaks(design) == []
+    design.title = "Synced or not?"
+    design.criteria[2].explanation += " Some figures stay static."
+    assert visible_text_leaks(design) == [("title", "synced"), ("criteria[2]", "static")]

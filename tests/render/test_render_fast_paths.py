@@ -1,0 +1,86 @@
+"""The renderer's speed-ups on software rasterisers keep the picture: conservative FXAA rectangles, the
+two-pass FXAA, the cached backdrop and the vertex-local triangle order."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from render_helpers import RELAXED, posed
+from studyapp.face.animation import FaceAnimation
+from studyapp.face.arkit import ARKIT_NAMES
+from studyapp.render.context import OffscreenTarget
+from studyapp.render.gpu import vertex_local_order
+from studyapp.render.pose import prepare_slot
+from studyapp.render.renderer import Renderer
+from studyapp.render.scene import make_scene
+
+pytestmark = pytest.mark.gl
+
+WIDE = {"LeftUpperArm": (20, 30, -10), "RightUpperArm": (-20, -40, 15), "LeftLowerArm": (0, -90, 0),
+        "RightLowerArm": (0, 70, 0), "Head": (15, 25, 0), "Spine": (10, 0, 8)}
+
+
+def _scene(avatar):
+    w = np.zeros((2, 52), np.float32)
+    w[:, ARKIT_NAMES.index("jawOpen")] = 1.0
+    w[:, ARKIT_NAMES.index("mouthSmileLeft")] = 1.0
+    face = FaceAnimation(w, 30.0)
+    slots = [prepare_slot(avatar, posed(avatar, pose, 2), face) for pose in (RELAXED, WIDE, {})]
+    return make_scene(slots, avatar, labels=("A", "B", "C"))
+
+
+def _frame(renderer, scene, size, figures=True):
+    target = OffscreenTarget(renderer.ctx, size)
+    try:
+        renderer.draw_trial(scene, 0.0, target.fbo, figures=figures)
+        return target.read_rgb()
+    finally:
+        target.release()
+
+
+def test_triangle_order_is_a_permutation(avatar):
+    tris = vertex_local_order(avatar.indices)
+    assert sorted(map(tuple, tris)) == sorted(map(tuple, np.asarray(avatar.indices).reshape(-1, 3)))
+
+
+@pytest.mark.parametrize("size", [(1280, 720), (640, 300)])
+def test_fxaa_rectangles_hold_every_figure_pixel(gl_ctx, avatar, size):
+    scene = _scene(avatar)
+    plain = Renderer(gl_ctx, samples=0)
+    fig = np.abs(_frame(plain, scene, size).astype(int) - _frame(plain, scene, size, figures=False)).max(-1) > 0
+    aa = Renderer(gl_ctx)
+    _frame(aa, scene, size)
+    w, h = size
+    inside = np.zeros((h, w), bool)
+    for rects in aa._aa_rects:
+        for x, y, rw, rh in rects:
+            inside[h - (y + rh):h - y, x:x + rw] = True
+    assert fig.any()
+    assert not (fig & ~inside).any()
+    assert inside.mean() < 0.9  # and they are not just the whole frame
+
+
+def test_fxaa_is_deterministic_and_stays_in_its_rectangles(gl_ctx, avatar):
+    scene = _scene(avatar)
+    aa = Renderer(gl_ctx)
+    if aa.antialiasing != "fxaa":
+        pytest.skip("FXAA is used on software rasterisers only")
+    a = _frame(aa, scene, (960, 540))
+    assert (a == _frame(aa, scene, (960, 540))).all()
+    plain = _frame(Renderer(gl_ctx, samples=0), scene, (960, 540))
+    diff = np.abs(a.astype(int) - plain).max(-1)
+    assert diff.max() > 40  # edges were smoothed
+    inside = np.zeros(diff.shape, bool)
+    for rects in aa._aa_rects:
+        for x, y, rw, rh in rects:
+            inside[540 - (y + rh):540 - y, x:x + rw] = True
+    assert not (diff > 0)[~inside].any()
+
+
+def test_cached_backdrop_matches_after_resize_and_slot_count(gl_ctx, avatar):
+    scene = _scene(avatar)
+    one = make_scene(scene.slots[:1], avatar, labels=None)
+    r = Renderer(gl_ctx, samples=0)
+    for s, size in ((scene, (640, 360)), (one, (640, 360)), (scene, (500, 400)), (scene, (640, 360))):
+        fresh = _frame(Renderer(gl_ctx, samples=0), s, size)
+        assert (_frame(r, s, size) == fresh).all()
