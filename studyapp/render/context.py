@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 
 import logging
+import warnings
 from collections.abc import Callable
 
 import moderngl
@@ -182,8 +183,13 @@ class Window:
         import glfw
 
         self._glfw = glfw
-        if not glfw.init():
-            raise ContextError("GLFW could not initialise: no display? (set DISPLAY or run under Xvfb)")
+        # GLFW reports why it failed as a Python warning; fold it into the one error the user sees
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ok = glfw.init()
+        if not ok:
+            why = "; ".join(str(w.message) for w in caught) or "no display?"
+            raise ContextError(f"cannot open a window ({why}): run on a desktop, set DISPLAY, or use Xvfb")
         glfw.default_window_hints()
         glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
         glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)

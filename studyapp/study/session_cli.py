@@ -116,7 +116,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if not args.bot:
             raise StudyappError("--no-render and --offscreen need a scripted participant: add --bot random|ordered|careful")
     elif args.bot:
-        args.no_render = True  # a bot without a window mode: the fast session-level run
+        raise StudyappError("--bot needs a mode: --offscreen (through the real UI, rendered offscreen) or "
+                            "--no-render (session only, fast)")
     design = load_design_for_run(design_path, results)
     db = ResultsDB(results, design)
     print(f"Results database: {results}", flush=True)

@@ -94,7 +94,7 @@ def evaluate(r: EnvReport) -> list[Check]:
         checks.append(Check("Rendering", "fail" if r.render_error else "warn",
                             r.render_error or "render speed not measured"))
     elif r.render_fps < MIN_RENDER_FPS:
-        checks.append(Check("Rendering", "fail", f"{r.render_fps:.0f} fps for three avatars; need at least "
+        checks.append(Check("Rendering", "fail", f"{r.render_fps:.1f} fps for three avatars; need at least "
                                                  f"{MIN_RENDER_FPS:.0f}"))
     else:
         target = r.refresh_hz or 60.0
