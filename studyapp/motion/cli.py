@@ -65,6 +65,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
+_MOTION_EXT = {".bvh", ".npz", ".npy"}
+
+
 def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
     """Summary dict of a motion, face or audio file (chosen by extension)."""
     p = Path(path)
@@ -79,6 +82,10 @@ def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
         from studyapp.audio.wav import summarize as wav_summarize
 
         return {"kind": "audio", **wav_summarize(path)}
+    if ext not in _MOTION_EXT:
+        known = ", ".join(sorted(_MOTION_EXT | set(_FACE_EXT) | set(_AUDIO_EXT)))
+        raise InputError(path, None, f"inspect does not know {ext or 'files without an extension'}; it reads "
+                                     f"motion, face and audio files ({known})")
     from studyapp.motion.io import summarize_motion
 
     return {"kind": "motion", **summarize_motion(path, fps=fps)}

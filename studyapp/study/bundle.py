@@ -278,11 +278,18 @@ def make_bundle(
         roster: dict[str, int] = {}
         if participants > 0:
             counts = db.row_counts(n_rows(design))
-            width = max(2, len(str(participants)))
-            for k in range(participants):
+            # ids continue after those already used, so a merge never meets a participant twice
+            taken = {r.id for r in db.participants()} | db.issued_remote_ids()
+            width = max(2, len(str(participants + len(taken))))
+            k = 0
+            while len(roster) < participants:
+                k += 1
+                pid = f"R{k:0{width}d}"
+                if pid in taken or any(t.upper() == pid for t in taken):
+                    continue
                 row = counts.index(min(counts))
                 counts[row] += 1
-                roster[f"R{k + 1:0{width}d}"] = row
+                roster[pid] = row
         study = _slug(design_path.stem)
         key = {
             "format": "studyapp-bundle-key", "study": study, "bundle": output.name,
@@ -290,7 +297,9 @@ def make_bundle(
             "conditions": {v: k for k, v in cond_map.items()}, "stimuli": {v: k for k, v in stim_map.items()},
             "files": origin, "roster": roster, "app_version": __version__,
         }
-        db.add_bundle_key(bundle_hash, key)
+        # the same design bundled again has the same hash: keep the ids earlier bundles handed out
+        earlier = db.bundle_key(bundle_hash) or {}
+        db.add_bundle_key(bundle_hash, {**key, "roster": {**earlier.get("roster", {}), **roster}})
     finally:
         db.close()
 

@@ -585,6 +585,13 @@ class ResultsDB:
             con.execute("INSERT OR REPLACE INTO bundles (design_hash, created, key) VALUES (?, ?, ?)",
                         (bundle_hash, now_iso(), json.dumps(key, sort_keys=True)))
 
+    def issued_remote_ids(self) -> set[str]:
+        """Participant ids handed out in the rosters of earlier bundles of this study."""
+        out: set[str] = set()
+        for (text,) in self._con.execute("SELECT key FROM bundles"):
+            out.update(json.loads(text).get("roster", {}))
+        return out
+
     def bundle_key(self, bundle_hash: str) -> dict[str, Any] | None:
         row = self._con.execute("SELECT key FROM bundles WHERE design_hash = ?", (bundle_hash,)).fetchone()
         return None if row is None else json.loads(row[0])

@@ -67,6 +67,11 @@ def test_bundle_hides_conditions_and_file_names(lab, tmp_path: Path) -> None:
     key = json.loads(info.key_path.read_text())
     assert sorted(key["conditions"].values()) == sorted(REAL_CONDITIONS)
     assert ResultsDB(results, design).bundle_key(info.bundle_hash)["design_hash"] == design.design_hash
+    # a second bundle hands out new ids, so merging both never meets the same participant twice
+    again = make_bundle(design_path, tmp_path / "out" / "study2.zip", participants=2, results=results)
+    assert list(again.roster) == ["R05", "R06"]
+    third = make_bundle(design_path, tmp_path / "out" / "study3.zip", participants=1, results=results)
+    assert list(third.roster) == ["R07"]
 
 
 def test_remote_run_and_merge_maps_back_to_real_ids(lab, tmp_path: Path) -> None:
