@@ -204,6 +204,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     if out.suffix.lower() == ".png":
         if args.time is None:
             raise StudyappError("a PNG needs --time SECONDS (or write an .mp4 for the whole trial)")
+        if not 0.0 <= args.time <= scene.duration:
+            raise StudyappError(f"--time {args.time:g} is outside the trial, which lasts {scene.duration:.2f} s")
         render_still(scene, args.time, out, size=args.size)
     elif out.suffix.lower() in (".mp4", ".m4v", ".mov"):
         duration = getattr(media, "duration_s", None)
