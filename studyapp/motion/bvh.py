@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from studyapp.errors import InputError
+from studyapp.motion._threads import map_rows, pool
 from studyapp.motion.fk import figure_height, guess_unit_scale
 from studyapp.motion.rotations import euler_to_quat, quat_to_euler
 from studyapp.motion.skeleton import Motion, Skeleton
@@ -430,16 +431,6 @@ def _parse_frames(data: bytes, start: int, n_channels: int, path: str) -> np.nda
 # tokenizer and float conversion release the GIL for most of their work.
 _PARALLEL_MIN_BYTES = 4 << 20
 _NON_SPACE = re.compile(rb"\S")
-_POOL = None
-
-
-def _pool():
-    global _POOL
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="bvh-parse")
-    return _POOL
 
 
 def _parse_block(blob, n_channels: int, kwargs: dict) -> np.ndarray | None:
@@ -479,7 +470,7 @@ def _fast_frames(blob: bytes, n_channels: int) -> np.ndarray | None:
         view = memoryview(blob)
         pieces = [view[a:b] for a, b in zip(cuts, cuts[1:]) if _NON_SPACE.search(blob, a, b)]
     if len(pieces) > 1:
-        parts = list(_pool().map(lambda b: _parse_block(b, n_channels, kwargs), pieces))
+        parts = list(pool().map(lambda b: _parse_block(b, n_channels, kwargs), pieces))
     else:
         parts = [_parse_block(pieces[0], n_channels, kwargs)]
     if any(p is None for p in parts):
@@ -558,7 +549,8 @@ def motion_from_channels(skeleton: Skeleton, data: np.ndarray, fps: float, sourc
     if len(full) == j and len({x[3] for x in full}) == 1:
         # the common case (BEAT, Mixamo): one order on every joint, one conversion, no scatter
         cols = np.array([x[4] for x in full])
-        rot = euler_to_quat(data[:, cols], full[0][3])
+        order = full[0][3]
+        rot = map_rows(lambda rows: euler_to_quat(rows, order), data[:, cols])
         layout = [(jj, pcols, paxes, None, rcols) for jj, pcols, paxes, _, rcols in layout]
     else:
         rot = np.empty((f, j, 4))
