@@ -23,6 +23,10 @@ FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
 CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
     "session", "slot", "plays", "response_time_s", "design_hash", "app_version", "_where")
 
+#: Columns the loader adds for its own use (``_where``: where a row came from, for messages); never shown
+#: to users as one of their columns.
+INTERNAL_COLUMNS = ("_where",)
+
 _TRUE = {"1", "true", "t", "yes", "y"}
 _FALSE = {"0", "false", "f", "no", "n", ""}
 
@@ -67,8 +71,9 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         df["_where"] = [f"row {i + 1}" for i in range(len(df))]
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
+        found = [str(c) for c in df.columns if c not in INTERNAL_COLUMNS]
         raise AnalysisInputError(src, f"column(s) {', '.join(missing)}",
-                                 f"missing required column(s); found: {', '.join(map(str, df.columns))}")
+                                 f"missing required column(s); found: {', '.join(found) or 'no columns'}")
     for col in ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version"):
         if col in df.columns:
             df[col] = df[col].map(lambda v: None if _isna(v) else str(v)).astype(object)

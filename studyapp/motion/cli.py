@@ -131,6 +131,43 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+_TEMPLATE_KINDS = "--template takes a BVH file, a studyapp motion .npz or 'beat'"
+
+
+def load_template(name: str) -> Any:
+    """The skeleton ``--template`` names, read now: ``"beat"``, or the :class:`Motion` of a BVH file or
+    studyapp motion NPZ. A missing, unreadable or wrong kind of file is one :class:`InputError` naming the
+    template path (and the line, for a broken BVH) and what is wrong with it."""
+    if name.strip().lower() == "beat":
+        return "beat"
+    from studyapp.motion.arrays import is_motion_npz, load_motion_npz
+    from studyapp.motion.bvh import read_bvh
+
+    path = Path(name)
+    ext = path.suffix.lower()
+    if not path.exists():
+        raise InputError(name, None, f"template file not found; {_TEMPLATE_KINDS}")
+    if path.is_dir():
+        raise InputError(name, None, f"template is a folder, not a BVH file; {_TEMPLATE_KINDS}")
+    try:
+        if ext == ".bvh":
+            return read_bvh(path)
+        if ext == ".npz" and is_motion_npz(path):
+            return load_motion_npz(path)
+    except InputError as exc:
+        kind = "BVH file" if ext == ".bvh" else "studyapp motion .npz"
+        raise InputError(exc.path or name, exc.where, f"template is not a readable {kind}: {exc.problem}") from None
+    except OSError as exc:
+        raise InputError(name, None, f"template cannot be read ({exc.strerror or exc})") from None
+    if ext == ".npy":
+        what = "a .npy array, which holds no skeleton"
+    elif ext == ".npz":
+        what = "not a studyapp motion .npz (no skeleton in it, or not a readable NPZ)"
+    else:
+        what = f"not a BVH file ({ext or 'no extension'})"
+    raise InputError(name, None, f"template is {what}; {_TEMPLATE_KINDS}")
+
+
 def cmd_convert(args: argparse.Namespace) -> int:
     from studyapp.motion.arrays import save_motion_npz
     from studyapp.motion.bvh import write_bvh
@@ -146,7 +183,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
     in_ext = src.suffix.lower()
     kw: dict[str, Any] = {}
     in_fps = args.in_fps
-    if in_ext in (".npy", ".npz") and args.template is not None:
+    template = load_template(args.template) if args.template is not None else None
+    if in_ext in (".npy", ".npz") and template is not None:
         in_fps = in_fps if in_fps is not None else args.fps
         kw.update(
             joints=[j.strip() for j in args.joints.split(",")] if args.joints else None,
@@ -155,7 +193,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
             root_key=args.root_key,
             degrees=not args.radians,
         )
-    motion = load_motion(src, fps=in_fps, template=args.template, representation=args.representation, **kw)
+    motion = load_motion(src, fps=in_fps, template=template, representation=args.representation, **kw)
     if args.fps is not None and float(args.fps) != float(motion.fps):
         motion = resample(motion, args.fps)
     if out_ext == ".bvh":

@@ -40,6 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     r = subparsers.add_parser(
         "render", help="render a participant's trial exactly as they see it (PNG frame or MP4 clip)",
+        description="Render one trial of a participant's sequence offscreen, with the clips in the slots and "
+        "order that participant sees: a still frame at --time as a PNG, or the whole trial with its audio as "
+        "an MP4.",
     )
     r.add_argument("design", help="study design (TOML)")
     r.add_argument("--participant", required=True, help="participant id")

@@ -7,16 +7,22 @@ What ``make_bundle`` writes (``STUDY.zip``)::
     media/m_<hex>.* every stimulus, motion, template, live model and avatar file, renamed
 
 Blinding (the choice made here): inside the bundle **condition ids and stimulus ids are replaced by opaque
-ids** (``c_<hex>`` and ``<hex>``, salted hashes), and every media file is named by a salted hash, so nothing
-a participant can see -- on screen, in the cache folder or inside the zip -- carries a model name, a
-condition id or an original file name. ONNX models also lose their graph name, doc string and metadata.
+ids** (``c_<hex>`` and ``<hex>``, salted hashes), and every media file is named by a salted hash of its own
+bytes only, so nothing a participant can see -- on screen, in the cache folder or inside the zip -- carries a
+model name, a condition id or an original file name, and no part of a file name is shared by the files of
+one condition: the motion files of one model cannot be grouped across clips by name. Because a motion
+file's name no longer follows from its stimulus id, each condition's ``motion`` pattern reads a tag named
+after the condition's opaque id, which every stimulus sets to the hash of its file (only study.toml, which
+must link files to conditions anyway, holds that link). ONNX models also lose their graph name, doc string
+and metadata. The salt is random per bundle unless given, and everything above is a function of the salt
+and the design, so a bundle made again with the same salt is the same bundle (same ids, same hash).
 The mapping back (the *key*) stays with the experimenter: in ``STUDY.key.json`` next to the zip and in
 the experimenter's results database (table ``bundles``), so ``studyapp merge`` maps results back to the
 real condition and stimulus ids and to the original design hash without extra arguments.
 
 On the participant's PC ``studyapp run STUDY.zip`` extracts the bundle to a per-user cache (verifying every
 checksum), stores results in the per-user data folder and, when the participant finishes, writes
-``results-<study>-<participant>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
+``results-<study>-<participant>-<hash>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
 with its sha256) into ``~/studyapp-results`` (a visible folder in the participant's home) and says where.
 
 ``merge_results`` imports such files into the experimenter's database, refusing -- with one clear message
@@ -147,9 +153,12 @@ class BundleInfo:
     path: Path
     key_path: Path
     bundle_hash: str
+    #: entries in the zip, manifest.json and study.toml included (what a participant sees when unzipping)
     n_files: int
     size_bytes: int
     roster: dict[str, int] = field(default_factory=dict)
+    #: media files in the zip (``n_files`` less manifest.json and study.toml)
+    n_media: int = 0
 
 
 def _strip_onnx(data: bytes) -> bytes:
@@ -204,27 +213,34 @@ def make_bundle(
     media: dict[str, bytes] = {}  # bundle name -> bytes
     origin: dict[str, str] = {}   # bundle name -> original path (for the key)
 
-    def add_file(path: Path, name: str | None = None) -> str:
+    def add_file(path: Path, slot: str = "") -> str:
+        # ``slot`` keeps files that must stay separate (one motion file per condition and clip, as always)
+        # apart even when their bytes are equal; it goes through the salted hash, so it shows in no name.
         data = path.read_bytes()
         if path.suffix.lower() == ".onnx":
             data = _strip_onnx(data)
-        if name is None:
-            name = f"media/m_{opaque('file', _sha256_bytes(data), 12)}{path.suffix.lower()}"
+        name = f"media/m_{opaque('file', slot + _sha256_bytes(data), 12)}{path.suffix.lower()}"
         media[name] = data
         origin[name] = str(path)
         return name
 
     out = {k: v for k, v in raw.items() if k not in ("conditions", "stimuli", "practice", "attention_checks")}
     conditions = []
+    # stimulus id -> {condition's opaque id: hash in its motion file's name}, filled into the stimuli's tags
+    motion_tags: dict[str, dict[str, str]] = {s.id: {} for s in design.stimuli}
     for c_raw, cond in zip(raw.get("conditions", []), design.conditions):
         c = dict(c_raw)
         c["id"] = cond_map[cond.id]
-        hexid = cond_map[cond.id][2:]
         if cond.motion is not None:
+            # A name built from the condition (e.g. stimulus hash + condition hash) would let anyone group one
+            # model's files across clips; the pattern reads a per-stimulus tag instead, so names stay per file.
+            tag = cond_map[cond.id]
             suffix = Path(cond.motion).suffix.lower()
-            c["motion"] = f"media/m_{{stimulus}}{hexid}{suffix}"
+            c["motion"] = f"media/m_{{{tag}}}{suffix}"
             for s in design.stimuli:
-                add_file(motion_path(design, cond, s), f"media/m_{stim_map[s.id]}{hexid}{suffix}")
+                # validation makes every pattern end in its suffix, so the file's name ends in it too
+                name = add_file(motion_path(design, cond, s), slot=f"motion\0{cond.id}\0{s.id}\0")
+                motion_tags[s.id][tag] = Path(name).stem[len("m_"):]
         if cond.model is not None and not str(cond.model).startswith("builtin:"):
             c["model"] = add_file(resolve(design, cond.model))
         if cond.template is not None:
@@ -234,6 +250,8 @@ def make_bundle(
     for s_raw, stim in zip(raw.get("stimuli", []), design.stimuli):
         s = dict(s_raw)
         s["id"] = stim_map[stim.id]
+        if motion_tags[stim.id]:
+            s["tags"] = {**s.get("tags", {}), **motion_tags[stim.id]}
         s["audio"] = add_file(stim.audio)
         if stim.face is not None:
             s["face"] = add_file(stim.face)
@@ -318,8 +336,12 @@ def make_bundle(
     os.replace(tmp_out, output)
     key_path = output.with_name(f"{output.stem}.key.json")
     key_path.write_text(json.dumps(key, indent=2, sort_keys=True), encoding="utf-8")
-    return BundleInfo(path=output, key_path=key_path, bundle_hash=bundle_hash, n_files=len(files),
-                      size_bytes=output.stat().st_size, roster=roster)
+    # Counted from the zip as written, so the number reported can never drift from what is inside again.
+    with zipfile.ZipFile(output) as zf:
+        entries = zf.namelist()
+    return BundleInfo(path=output, key_path=key_path, bundle_hash=bundle_hash, n_files=len(entries),
+                      size_bytes=output.stat().st_size, roster=roster,
+                      n_media=sum(n.startswith("media/") for n in entries))
 
 
 # ------------------------------------------------------------------------------------------ opening bundles
@@ -427,7 +449,14 @@ def _participant_rows(db: Any, pid: str) -> dict[str, list[dict[str, Any]]]:
 
 
 def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened: OpenedBundle | None = None) -> Path:
-    """Pack one participant's rows as ``results-<study>-<participant>.zip`` (``results.json`` + manifest)."""
+    """Pack one participant's rows as ``results-<study>-<participant>-<hash>.zip`` (``results.json`` + manifest).
+
+    ``<participant>`` is the id made file-name safe and ``<hash>`` the first 8 hex digits of the sha256 of
+    the exact id, so ids that sanitize alike (``p/1`` and ``p-1``) or differ only in case (``A`` and ``a``,
+    one file on Windows and macOS) get different files. An existing file is replaced only when it is this
+    participant's own results file of this design; any other file there is kept and the new one gets
+    ``-2``, ``-3``, ... added to its name.
+    """
     study = opened.study if opened is not None else _slug(db.title)
     payload = {
         "format": RESULTS_FORMAT, "version": FORMAT_VERSION, "study": study, "design_hash": db.design_hash,
@@ -439,7 +468,19 @@ def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened
     manifest = {"format": RESULTS_FORMAT, "version": FORMAT_VERSION, "participant": participant_id, "study": study,
                 "design_hash": db.design_hash, "files": {"results.json": _sha256_bytes(data)}}
     out_dir = _mkdir(Path(out_dir))
-    path = out_dir / f"results-{study}-{_slug(participant_id)}.zip"
+    stem = f"results-{study}-{_slug(participant_id)}-{_sha256_bytes(participant_id.encode('utf-8'))[:8]}"
+    path, k = out_dir / f"{stem}.zip", 1
+    while path.exists():
+        try:
+            with zipfile.ZipFile(path) as zf:
+                old = json.loads(zf.read("manifest.json"))
+            if (old.get("format"), old.get("participant"), old.get("design_hash")) == (
+                    RESULTS_FORMAT, participant_id, db.design_hash):
+                break  # this participant's own earlier file (e.g. ended early, then resumed): update it
+        except (zipfile.BadZipFile, KeyError, ValueError, OSError, AttributeError):
+            pass  # not a results file we wrote: keep it
+        k += 1
+        path = out_dir / f"{stem}-{k}.zip"
     tmp = path.with_name(path.name + ".part")
     with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         zf.writestr("results.json", data)

@@ -38,7 +38,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --no-render: seconds a bot 'watches' each clip (default 0)")
     p.set_defaults(func=_cmd_run)
 
-    e = sub.add_parser("export", help="export a results database as a tidy CSV (one row per rank)")
+    e = sub.add_parser(
+        "export",
+        help="export a results database as a tidy CSV (one row per rank)",
+        description="Export a results database (.sqlite) as CSV for analysis: --csv writes one row per "
+        "participant x trial x criterion x condition with its rank, --questionnaire-csv one row per participant "
+        "x questionnaire item. Practice trials are kept and flagged unless --exclude-practice.",
+    )
     e.add_argument("db", type=Path, help="results database (.sqlite)")
     e.add_argument("--csv", type=Path, help="long table: participant x trial x criterion x condition")
     e.add_argument("--questionnaire-csv", type=Path, help="questionnaire answers, one row per participant x item")
@@ -46,7 +52,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="leave practice trials out (by default they are kept and flagged in is_practice)")
     e.set_defaults(func=_cmd_export)
 
-    b = sub.add_parser("bundle", help="pack a study into one zip for remote participants (opaque file names)")
+    b = sub.add_parser(
+        "bundle",
+        help="pack a study into one zip for remote participants (opaque file names)",
+        description="Pack a study design and every file it uses into one zip (-o STUDY.zip) that remote "
+        "participants run with `studyapp run STUDY.zip`. Inside it, condition ids, stimulus ids and file names "
+        "are opaque; the key mapping them back is written to STUDY.key.json next to the zip and stored in the "
+        "results database, for `studyapp merge`.",
+    )
     b.add_argument("design", type=Path, help="study design (.toml)")
     b.add_argument("-o", "--output", type=Path, required=True, help="bundle to write (STUDY.zip)")
     b.add_argument("--participants", type=int, default=0,
@@ -56,7 +69,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(default: <design>.results.sqlite next to the design)")
     b.set_defaults(func=_cmd_bundle)
 
-    m = sub.add_parser("merge", help="import remote participants' results files into the experimenter's database")
+    m = sub.add_parser(
+        "merge",
+        help="import remote participants' results files into the experimenter's database",
+        description="Import the results files (results-*.zip) that remote participants send back into the "
+        "experimenter's results database, mapping the bundle's opaque ids back to the real ones. Damaged files, "
+        "results of another design and participants already present are refused with one line each; the exit "
+        "status is 1 when any file was refused.",
+    )
     m.add_argument("db", type=Path, help="the experimenter's results database")
     m.add_argument("files", type=Path, nargs="+", help="results-*.zip files sent back by participants")
     m.add_argument("--key", type=Path, help="a bundle key file (STUDY.key.json) when the database does not hold it")
@@ -205,7 +225,8 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
 
     results = args.results or default_results_path(args.design)
     info = make_bundle(args.design, args.output, participants=args.participants, results=results)
-    print(f"Wrote {info.path} ({info.n_files} files, {info.size_bytes / 1e6:.1f} MB)")
+    print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml and manifest.json; "
+          f"{info.size_bytes / 1e6:.1f} MB)")
     print(f"Key (opaque ids -> conditions and files), keep it private: {info.key_path}")
     print(f"The key is also stored in {results}, so `studyapp merge` can map results back.")
     if info.roster:

@@ -143,6 +143,16 @@ def test_cli_reports_bad_input_with_exit_code_2(tmp_path: Path, study: pd.DataFr
     assert main([str(csv), "--out", str(tmp_path / "o"), "--group", "nope"]) == 2
 
 
+def test_cli_missing_columns_lists_only_the_users_columns(tmp_path: Path, capsys) -> None:
+    csv = tmp_path / "short.csv"
+    csv.write_text("participant,trial_index,stimulus,criterion,condition,score\nP1,0,clip1,realism,A,1\n")
+    assert main([str(csv), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"error: {csv}: column(s) rank: missing required column(s); "
+                   "found: participant, trial_index, stimulus, criterion, condition, score\n")
+    assert "_where" not in err and not (tmp_path / "o").exists()
+
+
 def test_console_script_is_installed(tmp_path: Path) -> None:
     exe = Path(sys.executable).with_name("results-analysis")
     if not exe.exists():

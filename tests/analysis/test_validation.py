@@ -28,6 +28,10 @@ def test_missing_column_names_file_and_column(tmp_path: Path, clean: pd.DataFram
     with pytest.raises(AnalysisInputError) as e:
         load_results(p)
     assert str(p) in str(e.value) and "rank" in e.value.where
+    # the columns found are the file's own, without the loader's internal helper column
+    found = e.value.problem.split("found: ", 1)[1]
+    assert found.split(", ") == [c for c in clean.columns if c != "rank"]
+    assert "_where" not in str(e.value)
 
 
 def test_rank_out_of_range_names_line(tmp_path: Path, clean: pd.DataFrame) -> None:

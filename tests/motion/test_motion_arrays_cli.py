@@ -223,3 +223,39 @@ def test_convert_errors(tmp_path):
         run_cli(["convert", str(BEAT_SAMPLE), str(tmp_path / "y.fbx")])
     with pytest.raises(InputError, match="permutation"):
         run_cli(["convert", str(BEAT_SAMPLE), str(tmp_path / "y.bvh"), "--order", "XXY"])
+
+
+def test_convert_bad_template_is_one_line_naming_it(tmp_path, capsys, upper_rotations):
+    """A missing, unreadable or wrong kind of --template: exit code 2 and one line naming the template."""
+    from studyapp.cli import main
+
+    np.save(tmp_path / "rot.npy", upper_rotations[0])
+    (tmp_path / "notes.txt").write_text("hello")
+    (tmp_path / "broken.bvh").write_text("HIERARCHY\nROOT Hips\n{\n")
+    np.save(tmp_path / "plain.npy", np.zeros((2, 6)))
+    (tmp_path / "folder.bvh").mkdir()
+    out = tmp_path / "out.bvh"
+    cases = {
+        str(tmp_path / "nosuch"): "template file not found",
+        str(tmp_path / "nosuch.bvh"): "template file not found",
+        str(tmp_path / "notes.txt"): "template is not a BVH file (.txt)",
+        str(tmp_path / "broken.bvh"): "template is not a readable BVH file",
+        str(tmp_path / "plain.npy"): "template is a .npy array, which holds no skeleton",
+        str(tmp_path / "folder.bvh"): "template is a folder, not a BVH file",
+    }
+    for template, problem in cases.items():
+        capsys.readouterr()
+        rc = main(["convert", str(tmp_path / "rot.npy"), str(out), "--template", template,
+                   "--representation", "axis_angle", "--fps", "15"])
+        err = capsys.readouterr().err
+        assert rc == 2, (template, err)
+        assert err.startswith(f"error: {template}") and problem in err, err
+        assert err.count("\n") == 1 and "Traceback" not in err, err
+        assert not out.exists()
+    # a good template of each kind still converts
+    assert main(["convert", str(tmp_path / "rot.npy"), str(out), "--template", "beat",
+                 "--representation", "axis_angle", "--fps", "15"]) == 0
+    assert main(["convert", str(out), str(tmp_path / "m.npz")]) == 0
+    assert main(["convert", str(tmp_path / "rot.npy"), str(tmp_path / "again.bvh"), "--template",
+                 str(tmp_path / "m.npz"), "--representation", "axis_angle", "--fps", "15"]) == 0
+    assert read_bvh(tmp_path / "again.bvh").n_frames == 12

@@ -82,7 +82,7 @@ def test_remote_run_and_merge_maps_back_to_real_ids(lab, tmp_path: Path) -> None
     assert bundled.design_hash == info.bundle_hash != design.design_hash
     assert {c.id for c in bundled.conditions}.isdisjoint(REAL_CONDITIONS)
     results_zip = _remote_run(info.path, tmp_path, "R02")
-    assert results_zip.name == "results-tiny-R02.zip"
+    assert re.fullmatch(r"results-tiny-R02-[0-9a-f]{8}\.zip", results_zip.name), results_zip.name
     assert set(zipfile.ZipFile(results_zip).namelist()) == {"results.json", "manifest.json"}
 
     reports = merge_results(results, [results_zip])
@@ -132,6 +132,55 @@ def test_merge_refuses_damaged_foreign_and_non_results_files(lab, tmp_path: Path
     assert ResultsDB(results, design).participant("X1") is None
 
 
+def test_results_files_of_ids_that_sanitize_alike_never_collide(lab, tmp_path: Path) -> None:
+    """``p/1`` and ``p-1`` make the same safe name, ``A`` and ``a`` the same file on Windows/macOS:
+    each participant still gets a file of their own, and merge imports all of them."""
+    design_path, design, results = lab
+    remote = ResultsDB(tmp_path / "remote.sqlite", design)
+    ids = ["p/1", "p-1", "A", "a"]
+    files = {}
+    for pid in ids:
+        run_bot_session(design, remote, pid, "ordered", 1)
+        files[pid] = write_results_file(remote, pid, tmp_path / "outbox")
+    remote.close()
+    names = [f.name for f in files.values()]
+    assert len({n.lower() for n in names}) == 4, names  # distinct even where case does not count
+    assert sorted(p.name for p in (tmp_path / "outbox").iterdir()) == sorted(names)
+    for pid, f in files.items():
+        assert json.loads(zipfile.ZipFile(f).read("manifest.json"))["participant"] == pid
+    # the same id always gets the same name
+    again = ResultsDB(tmp_path / "remote.sqlite", design)
+    assert write_results_file(again, "p/1", tmp_path / "outbox") == files["p/1"]
+    again.close()
+    assert len(list((tmp_path / "outbox").iterdir())) == 4
+
+    reports = merge_results(results, list(files.values()))
+    assert all(r.ok for r in reports), [r.message for r in reports]
+    assert sorted(r.participant for r in reports) == sorted(ids)
+    assert set(ids) <= set(export_dataframe(results)["participant"])
+
+
+def test_results_file_never_overwrites_another_participants_file(lab, tmp_path: Path) -> None:
+    design_path, design, results = lab
+    remote = ResultsDB(tmp_path / "remote.sqlite", design)
+    for pid in ("X1", "X2"):
+        run_bot_session(design, remote, pid, "ordered", 1)
+    first = write_results_file(remote, "X1", tmp_path / "outbox")
+    # whatever sits where X2's file would go -- another participant's results, or any other file -- is kept
+    target = write_results_file(remote, "X2", tmp_path / "scratch")
+    squatter = tmp_path / "outbox" / target.name
+    first.rename(squatter)
+    kept = squatter.read_bytes()
+    second = write_results_file(remote, "X2", tmp_path / "outbox")
+    remote.close()
+    assert second != squatter and second.name == target.name.replace(".zip", "-2.zip")
+    assert squatter.read_bytes() == kept
+    assert json.loads(zipfile.ZipFile(squatter).read("manifest.json"))["participant"] == "X1"
+    assert json.loads(zipfile.ZipFile(second).read("manifest.json"))["participant"] == "X2"
+    reports = merge_results(results, [squatter, second])
+    assert [(r.ok, r.participant) for r in reports] == [(True, "X1"), (True, "X2")]
+
+
 def test_tampered_bundle_is_refused(lab, tmp_path: Path) -> None:
     design_path, _, results = lab
     info = make_bundle(design_path, tmp_path / "study.zip", results=results)
@@ -174,3 +223,107 @@ def test_live_model_is_bundled_without_revealing_metadata(tmp_path: Path) -> Non
     kept = {p.key: p.value for p in original.metadata_props if "description" not in p.key}
     assert meta == kept
     assert "reference" not in opened.design_path.read_text()
+
+
+# ------------------------------------------------------------------------------------------ blinding of file names
+def _grams(text: str, n: int = 4) -> set[str]:
+    return {text[i:i + n] for i in range(len(text) - n + 1)}
+
+
+def _motion_files_by_condition(design, opened) -> dict[str, list[Path]]:
+    """Real condition id -> the extracted motion files (on disk) the bundled design plays for it."""
+    from studyapp.study.design import motion_path
+
+    key = json.loads(opened.zip_path.with_name(f"{opened.zip_path.stem}.key.json").read_text())
+    bundled = load_design(opened.design_path)
+    files: dict[str, list[Path]] = {}
+    for c in bundled.conditions:
+        real = key["conditions"][c.id]
+        for s in bundled.stimuli:
+            path = motion_path(bundled, c, s)
+            assert path.parent == opened.folder / "media" and path.is_file(), path
+            # the per-stimulus indirection must still play the right model's file for the right clip
+            source = motion_path(design, real, key["stimuli"][s.id])
+            assert path.read_bytes() == source.read_bytes(), (real, s.id)
+            files.setdefault(real, []).append(path)
+    return files
+
+
+def _speaker_pattern_study(tmp_path: Path) -> Path:
+    """The tiny study with one condition's motion shared per speaker (``{speaker}`` pattern), not per clip."""
+    design_path = write_synthetic_study(tmp_path / "spk", n_stimuli=4, attention_check=True)
+    for k, spk in enumerate(("spk1", "spk2")):
+        (design_path.parent / "motion" / "static" / f"{spk}.bvh").write_bytes(
+            (design_path.parent / "motion" / "static" / f"s{k + 1}.bvh").read_bytes())
+    text = design_path.read_text().replace('"motion/static/{stimulus}.bvh"', '"motion/static/{speaker}.bvh"')
+    design_path.write_text(text)
+    return design_path
+
+
+@pytest.mark.parametrize("which", ["synthetic", "speaker-pattern", "demo"])
+def test_bundle_file_names_cannot_be_grouped_by_condition(which: str, tmp_path: Path) -> None:
+    """Motion files used to be ``m_<stimulus hash><condition hash>``: the last six hex digits named the model
+    across every clip. No name fragment may be common to one condition's files now."""
+    from studyapp.resources import designs_dir
+
+    design_path = {"synthetic": lambda: write_synthetic_study(tmp_path / "s", n_stimuli=5, attention_check=True),
+                   "speaker-pattern": lambda: _speaker_pattern_study(tmp_path),
+                   "demo": lambda: designs_dir() / "demo.toml"}[which]()
+    design = load_design(design_path)
+    info = make_bundle(design_path, tmp_path / "out" / "study.zip", results=tmp_path / "lab.sqlite", salt="qa-salt")
+    opened = open_bundle(info.path, cache=tmp_path / "cache")
+    by_cond = _motion_files_by_condition(design, opened)
+    assert sorted(by_cond) == sorted(c.id for c in design.conditions)
+    on_disk = sorted(p.name for p in (opened.folder / "media").iterdir())
+    assert on_disk == sorted(n[len("media/"):] for n in zipfile.ZipFile(info.path).namelist() if n.startswith("media/"))
+    assert all(re.fullmatch(r"m_[0-9a-f]{12}\.(bvh|wav|csv)", n) for n in on_disk), on_disk
+    for real, paths in by_cond.items():
+        distinct = sorted({p.stem[len("m_"):] for p in paths})
+        assert len(distinct) >= 2, (real, distinct)
+        shared = set.intersection(*(_grams(t) for t in distinct))
+        assert not shared, f"{real}'s files all contain {sorted(shared)}: {distinct}"
+    # a condition id is a salted hash: no part of it shows up in any file name
+    text = opened.design_path.read_text()
+    for cid in re.findall(r'^id = "(c_[0-9a-f]+)"', text, flags=re.M):
+        assert not any(cid[2:] in n for n in on_disk), cid
+    # nor does a real id or file name, anywhere a participant can look (cache folder included)
+    visible = [str(p.relative_to(opened.folder.parent)) for p in opened.folder.rglob("*")]
+    for secret in [c.id for c in design.conditions] + [s.id for s in design.stimuli]:
+        assert not any(secret in v for v in visible), secret
+
+
+def test_bundle_names_are_reproducible_with_the_salt_only(lab, tmp_path: Path) -> None:
+    """The same salt gives the same bundle (ids, names, hash, so earlier ids stay valid); another salt shares
+    nothing, so the opaque ids cannot be computed from the model names."""
+    design_path, _, results = lab
+
+    def contents(name: str, salt: str) -> tuple[str, list[str], str]:
+        info = make_bundle(design_path, tmp_path / name, results=results, salt=salt)
+        zf = zipfile.ZipFile(info.path)
+        return info.bundle_hash, sorted(zf.namelist()), zf.read("study.toml").decode()
+
+    first, again, other = contents("a.zip", "s1"), contents("b.zip", "s1"), contents("c.zip", "s2")
+    assert first == again
+    assert first[0] != other[0]
+    assert set(first[1]) & set(other[1]) == {"manifest.json", "study.toml"}
+    ids = set(re.findall(r"c_[0-9a-f]{6}", first[2]))
+    assert len(ids) == 3 and ids.isdisjoint(re.findall(r"c_[0-9a-f]{6}", other[2]))
+
+
+# ------------------------------------------------------------------------------------------ reported counts
+def test_bundle_reports_the_files_that_are_in_the_zip(lab, tmp_path: Path, capsys) -> None:
+    from studyapp.cli import main
+
+    design_path, _, results = lab
+    out = tmp_path / "send" / "study.zip"
+    assert main(["bundle", str(design_path), "-o", str(out), "--results", str(results)]) == 0
+    printed = capsys.readouterr().out
+    names = zipfile.ZipFile(out).namelist()
+    total = re.search(r"\((\d+) files\b", printed)
+    assert total and int(total.group(1)) == len(names) == 2 + 6 * (1 + 3), (printed, names)
+    media = re.search(r"\(\d+ files: (\d+) media files, study\.toml and manifest\.json; [\d.]+ MB\)", printed)
+    assert media and int(media.group(1)) == sum(n.startswith("media/") for n in names) == len(names) - 2, printed
+    assert {"manifest.json", "study.toml"} <= set(names)
+    info = make_bundle(design_path, tmp_path / "again.zip", results=results)
+    assert info.n_files == len(zipfile.ZipFile(info.path).namelist())
+    assert info.n_media == info.n_files - 2

@@ -98,7 +98,7 @@ def test_bundle_remote_run_and_merge(tmp_path: Path, cli) -> None:
     remote = _run("run", tmp_path / "send" / "study.zip", "--participant", "R01", "--no-render", "--bot", "careful",
                   env=env, cwd=home)
     assert remote.returncode == 0, remote.stderr
-    results_zip = home / "studyapp-results" / "results-tiny-R01.zip"
+    [results_zip] = (home / "studyapp-results").glob("results-tiny-R01-*.zip")
     assert f"Your results file: {results_zip}" in remote.stdout and results_zip.is_file()
     assert str(home / ".local/share/studyapp/studies") in remote.stdout
     assert any((home / ".cache" / "studyapp" / "bundles").iterdir())
@@ -114,3 +114,19 @@ def test_bundle_remote_run_and_merge(tmp_path: Path, cli) -> None:
     # the careful viewer perceives the synced motion as best synchronized (on average: it has perception noise)
     sync = df[(df["criterion"] == "synchronization") & ~df["is_practice"].astype(bool)]
     assert sync.groupby("condition")["rank"].mean().idxmin() == "synced"
+
+
+@pytest.mark.parametrize("command", ["render", "bundle", "merge", "export", "run", "validate", "schedule",
+                                     "inspect", "convert", "view", "generate", "doctor", "demo"])
+def test_every_command_help_has_a_description(command: str, capsys) -> None:
+    """`studyapp CMD --help` shows a paragraph saying what the command does between usage and arguments."""
+    from studyapp.cli import main
+
+    with pytest.raises(SystemExit) as done:
+        main([command, "--help"])
+    assert done.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: studyapp {command}")
+    paragraphs = out.split("\n\n")
+    assert len(paragraphs) > 2 and not paragraphs[1].startswith(("positional arguments", "options")), out
+    assert len(paragraphs[1].split()) >= 8, paragraphs[1]

@@ -66,46 +66,19 @@ def _status(db: Path) -> str | None:
     return None if row is None else row[0]
 
 
-@pytest.mark.timeout(180)
-def test_sigkill_at_random_points_loses_and_duplicates_nothing(tmp_path: Path) -> None:
-    design = write_synthetic_study(tmp_path / "study", n_stimuli=N_STIMULI, seconds=0.5, questionnaire=True)
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-
-    # The uninterrupted reference run, same participant id and seed, its own database.
-    # Its output timing tells how long start-up takes (until the database is open, until the first answer).
-    ref_db = tmp_path / "reference.sqlite"
-    t0 = time.monotonic()
-    ref = subprocess.Popen(_cmd(design, ref_db, 0.01), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                           env=env)
-    stamps = {}
-    for line in ref.stdout:
-        for key in ("Results database", "saved trial"):
-            if line.startswith(key):
-                stamps.setdefault(key, time.monotonic() - t0)
-    assert ref.wait(timeout=120) == 0, ref.stderr.read()
-    ref.stdout.close()
-    ref.stderr.close()
-    gap = stamps["saved trial"] - stamps["Results database"]  # database open -> first answer committed
-    # Start-up of a later run (the design is fully validated only before the first session): probe it with
-    # the finished reference participant, which is refused right after the database is opened.
-    t0 = time.monotonic()
-    probe = subprocess.run(_cmd(design, ref_db, 0.0), capture_output=True, text=True, env=env, timeout=120)
-    startup = time.monotonic() - t0
-    assert probe.returncode == 2 and "already completed" in probe.stderr
-    ref_trials, ref_ranks, ref_quest = _answers(ref_db)
-    assert len(ref_trials) == N_STIMULI + 1 and len(ref_ranks) == (N_STIMULI + 1) * 3 * 3 and len(ref_quest) == 3
-
-    db = tmp_path / "killed.sqlite"
-    rng = np.random.default_rng(2024)
+def _kill_until_done(design: Path, db: Path, env: dict, rng: np.random.Generator, startup: float, gap: float,
+                     max_kills: int) -> tuple[int, int, int]:
+    """SIGKILL runs on ``db`` until ``max_kills`` kills or the study is complete; returns (kills, kills after
+    new answers, runs), checking after each kill that every reported answer is on disk."""
     pace = 0.01
     reported: set[int] = set()
     kills = 0
     answering_kills = 0  # kills of a run that had committed answers and was not done
     n_before = 0
     runs = 0
-    while kills < N_KILLS:
+    while kills < max_kills:
         runs += 1
-        assert runs < N_KILLS * 3, "the bot finished too often before a kill could land"
+        assert runs < max(3 * max_kills, 10), "the bot finished too often before a kill could land"
         proc = subprocess.Popen(_cmd(design, db, pace), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env=env)
         lines: queue.Queue = queue.Queue()
@@ -160,13 +133,16 @@ def test_sigkill_at_random_points_loses_and_duplicates_nothing(tmp_path: Path) -
             assert len(ranks) == 9 * len(in_db)
             answering_kills += n_before < len(in_db) < N_STIMULI + 1
             n_before = len(in_db)
-    assert kills >= 20 and answering_kills >= 8, (kills, answering_kills)
+    return kills, answering_kills, runs
 
-    # Finish the study without interruption and compare with the reference.
+
+def _finish_and_compare(design: Path, db: Path, env: dict, reference: tuple, answering_kills: int) -> None:
+    """Run ``db`` to the end uninterrupted; its answers must equal the reference run's exactly."""
     done = subprocess.run(_cmd(design, db, 0.0), capture_output=True, text=True, env=env, timeout=120)
     if done.returncode != 0:  # already complete: a finished participant is refused, clearly
         assert "already completed" in done.stderr, done.stderr
     trials, ranks, quest = _answers(db)
+    ref_trials, ref_ranks, ref_quest = reference
     assert trials == ref_trials
     assert ranks == ref_ranks
     assert quest == ref_quest
@@ -176,5 +152,48 @@ def test_sigkill_at_random_points_loses_and_duplicates_nothing(tmp_path: Path) -
     n_sessions = con.execute("SELECT COUNT(*) FROM sessions").fetchone()[0]
     con.close()
     assert n_sessions >= answering_kills + 1  # each of those runs was a session of its own
+
+
+@pytest.mark.timeout(180)
+def test_sigkill_at_random_points_loses_and_duplicates_nothing(tmp_path: Path) -> None:
+    design = write_synthetic_study(tmp_path / "study", n_stimuli=N_STIMULI, seconds=0.5, questionnaire=True)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+    # The uninterrupted reference run, same participant id and seed, its own database.
+    # Its output timing tells how long start-up takes (until the database is open, until the first answer).
+    ref_db = tmp_path / "reference.sqlite"
+    t0 = time.monotonic()
+    ref = subprocess.Popen(_cmd(design, ref_db, 0.01), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           env=env)
+    stamps = {}
+    for line in ref.stdout:
+        for key in ("Results database", "saved trial"):
+            if line.startswith(key):
+                stamps.setdefault(key, time.monotonic() - t0)
+    assert ref.wait(timeout=120) == 0, ref.stderr.read()
+    ref.stdout.close()
+    ref.stderr.close()
+    gap = stamps["saved trial"] - stamps["Results database"]  # database open -> first answer committed
+    # Start-up of a later run (the design is fully validated only before the first session): probe it with
+    # the finished reference participant, which is refused right after the database is opened.
+    t0 = time.monotonic()
+    probe = subprocess.run(_cmd(design, ref_db, 0.0), capture_output=True, text=True, env=env, timeout=120)
+    startup = time.monotonic() - t0
+    assert probe.returncode == 2 and "already completed" in probe.stderr
+    ref_trials, ref_ranks, ref_quest = _answers(ref_db)
+    assert len(ref_trials) == N_STIMULI + 1 and len(ref_ranks) == (N_STIMULI + 1) * 3 * 3 and len(ref_quest) == 3
+
+    rng = np.random.default_rng(2024)
+    kills = answering_kills = runs = rounds = 0
+    # On a loaded machine the bot can outrun the kills and finish the study early: then that database is
+    # checked and a fresh one is killed, so the test always gets its N_KILLS kills.
+    while kills < N_KILLS:
+        rounds += 1
+        assert rounds <= 4, f"the bot finished the study {rounds - 1} times with only {kills} kills"
+        db = tmp_path / f"killed-{rounds}.sqlite"
+        k, a, r = _kill_until_done(design, db, env, rng, startup, gap, N_KILLS - kills)
+        kills, answering_kills, runs = kills + k, answering_kills + a, runs + r
+        _finish_and_compare(design, db, env, (ref_trials, ref_ranks, ref_quest), a)
+    assert kills >= N_KILLS and answering_kills >= 8, (kills, answering_kills)
     print(f"{kills} kills ({answering_kills} after new answers) over {runs} runs; start-up {startup:.2f} s, "
           f"first answer {gap:.2f} s after the database is open")
