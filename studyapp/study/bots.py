@@ -10,6 +10,11 @@ Policies:
 * ``careful``: ranks by :func:`studyapp.study.careful.careful_scores` (higher score = better rank), i.e. what a
   careful viewer would perceive in the actual motion and audio; criteria without a score fall back to random.
 
+With ``allow_ties`` (the design's ``[playback] allow_ties``) ``random`` draws uniformly from all 13 ways to
+rank three slots with ties, and ``careful`` calls two slots equal when it perceives them closer than
+:data:`CAREFUL_TIE_GAP`. Ties are given as competition ranks (1, 1, 3 / 1, 2, 2 / 1, 1, 1), the convention
+of :func:`studyapp.study.session.normalise_ranks`. ``ordered`` never ties: its point is a known strict order.
+
 Example
 -------
 >>> import numpy as np
@@ -36,16 +41,43 @@ def _criterion_ids(criteria: Sequence[Any]) -> list[str]:
     return [c if isinstance(c, str) else c.id for c in criteria]
 
 
-def _ranks_from_scores(scores: Sequence[float]) -> dict[int, int]:
+def _ranks_from_scores(scores: Sequence[float], tie_gap: float | None = None) -> dict[int, int]:
     # Higher score -> better (lower) rank; equal scores keep slot order so the result is deterministic.
+    # With tie_gap, neighbours in that order closer than the gap are equal (competition ranks: the tied
+    # slots share the better rank), which is what a viewer who cannot tell them apart would answer.
     order = sorted(range(3), key=lambda i: (-float(scores[i]), i))
-    return {slot: order.index(slot) + 1 for slot in range(3)}
+    ranks = {order[0]: 1}
+    for k in range(1, 3):
+        tied = tie_gap is not None and float(scores[order[k - 1]]) - float(scores[order[k]]) < tie_gap
+        ranks[order[k]] = ranks[order[k - 1]] if tied else k + 1
+    return {slot: ranks[slot] for slot in range(3)}
+
+
+#: Every ranking of three slots with ties allowed, as competition ranks (slot 0, 1, 2): 6 strict orders,
+#: 3 with two equal best, 3 with two equal worst, and all three equal.
+WEAK_RANKINGS: tuple[tuple[int, int, int], ...] = (
+    (1, 2, 3), (1, 3, 2), (2, 1, 3), (2, 3, 1), (3, 1, 2), (3, 2, 1),
+    (1, 1, 3), (1, 3, 1), (3, 1, 1),
+    (1, 2, 2), (2, 1, 2), (2, 2, 1),
+    (1, 1, 1),
+)
+
+
+def _random_ranks(rng: np.random.Generator, allow_ties: bool) -> dict[int, int]:
+    if allow_ties:
+        return dict(enumerate(WEAK_RANKINGS[int(rng.integers(len(WEAK_RANKINGS)))]))
+    return {i: int(r) for i, r in enumerate(rng.permutation(3) + 1)}
 
 
 #: Perception noise of the careful bot, in units of the trial's score range (Thurstone case V). Real viewers
 #: disagree where motions are close and agree where one is clearly worse; a noiseless bot would make every
 #: simulated participant identical and the statistics degenerate (W = 1, zero-width intervals).
 CAREFUL_NOISE_SD = 0.3
+
+#: With ties allowed, the careful bot calls two slots equal when their perceived scores differ by less than
+#: this (same units as the noise): about a third of the perception noise, so ties are common between close
+#: motions and rare where one is clearly worse.
+CAREFUL_TIE_GAP = 0.1
 
 
 def _perceived(scores: Sequence[float], rng: np.random.Generator) -> np.ndarray:
@@ -63,15 +95,17 @@ def choose_ranking(
     rng: np.random.Generator,
     *,
     condition_order: Sequence[str] | None = None,
+    allow_ties: bool = False,
 ) -> dict[str, dict[int, int]]:
     """A complete ranking ``{criterion: {slot: rank}}`` for one trial under ``policy``.
 
     ``media`` (a :class:`~studyapp.study.stimuli.TrialMedia`) is needed by ``careful`` only;
-    ``condition_order`` (the design's condition ids) by ``ordered`` only.
+    ``condition_order`` (the design's condition ids) by ``ordered`` only. ``allow_ties`` lets ``random``
+    and ``careful`` give tied (competition) ranks.
     """
     crits = _criterion_ids(criteria)
     if policy == "random":
-        return {c: {i: int(r) for i, r in enumerate(rng.permutation(3) + 1)} for c in crits}
+        return {c: _random_ranks(rng, allow_ties) for c in crits}
     if policy == "ordered":
         if condition_order is None:
             raise ValueError("the ordered bot needs condition_order (the design's condition ids)")
@@ -87,9 +121,9 @@ def choose_ranking(
         out = {}
         for c in crits:
             if c in scores:
-                out[c] = _ranks_from_scores(_perceived(scores[c], rng))
+                out[c] = _ranks_from_scores(_perceived(scores[c], rng), CAREFUL_TIE_GAP if allow_ties else None)
             else:
-                out[c] = {i: int(r) for i, r in enumerate(rng.permutation(3) + 1)}
+                out[c] = _random_ranks(rng, allow_ties)
         return out
     raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(POLICIES)}")
 
@@ -134,6 +168,7 @@ def run_bot_session(
         session.finish_instructions()
         session.record_env_check({"bot": policy, "bot_seed": int(seed)})
         cond_order = [c.id for c in design.conditions]
+        ties = bool(getattr(design.playback, "allow_ties", False))
         while (plan := session.current_trial()) is not None:
             media = None
             if policy == "careful":
@@ -146,7 +181,7 @@ def run_bot_session(
             session.record_play_finished(True, PlayStats())
             rng = trial_rng(seed, session.participant_id, plan.trial_index)
             session.submit_ranking(choose_ranking(policy, plan, media, design.criteria, rng,
-                                                  condition_order=cond_order))
+                                                  condition_order=cond_order, allow_ties=ties))
         if session.state is State.QUESTIONNAIRE:
             rng = trial_rng(seed, session.participant_id, -1 & 0xFFFFFFFF)
             session.submit_questionnaire(questionnaire_answers(session.questionnaire_items, rng))

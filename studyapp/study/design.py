@@ -28,7 +28,7 @@ import os
 import re
 import string
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -648,8 +648,11 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
                 "set in_rotation = true (the default) on the clips to be rated")
 
     # -- criteria
-    criteria = [Criterion(e["id"], e.get("label", e["id"].capitalize()), e["question"], e.get("explanation", ""))
-                for _, e in crits if e.get("id") and "question" in e] if "criteria" in top else list(DEFAULT_CRITERIA)
+    if "criteria" in top:
+        criteria = [Criterion(e["id"], e.get("label", e["id"].capitalize()), e["question"], e.get("explanation", ""))
+                    for _, e in crits if e.get("id") and "question" in e]
+    else:
+        criteria = [replace(c) for c in DEFAULT_CRITERIA]  # copies: an edit to one design must not reach others
     if "criteria" in top and not crits:
         col.add("criteria", "empty list of criteria", "remove `criteria` to use the default three, or add some")
     crit_ids = [c.id for c in criteria]

@@ -4,8 +4,10 @@ It renders every frame into an EGL framebuffer and acts only through :class:`~st
 events at the rectangles the screens drew their buttons at -- the same path a participant's mouse and
 keyboard take. Its choices come from :func:`studyapp.study.bots.choose_ranking` (random / ordered /
 careful). To exercise every ranking method it drags the chips for the first question, clicks them for
-the second and uses the number keys for the rest. Time is virtual: each frame while a clip plays moves
-the silent clock ahead by a fraction of the clip.
+the second and uses the number keys for the rest. When the design allows ties and the policy chose some,
+it enters them the same way: a click on the ``>`` between two places for the mouse questions, ``=`` typed
+before the next figure for the keyboard ones. Time is virtual: each frame while a clip plays moves the
+silent clock ahead by a fraction of the clip.
 """
 from __future__ import annotations
 
@@ -192,6 +194,12 @@ class UIBot:
         self.steps.append(lambda: q.key(imgui_key, False))
         self.steps.append(lambda: None)
 
+    def char(self, ch: str) -> None:
+        """Queue a typed character (what GLFW's char callback delivers for symbols like ``=``)."""
+        q = self.app.input
+        self.steps.append(lambda: q.char(ch))
+        self.steps.append(lambda: None)
+
     def wait(self, n: int = 1) -> None:
         for _ in range(n):
             self.steps.append(lambda: None)
@@ -220,6 +228,7 @@ class UIBot:
 
     def _plan_trial(self, key: str) -> None:
         from studyapp.study.bots import choose_ranking, trial_rng
+        from studyapp.ui.ranking import order_and_ties
 
         view = self.app.trial_view()
         sub = key.split(":")[1] if ":" in key else ""
@@ -234,19 +243,26 @@ class UIBot:
             plan = view.plan
             rng = trial_rng(self.seed, self.session.participant_id, plan.trial_index)
             ranks = choose_ranking(self.policy, plan, view.media, self.design.criteria, rng,
-                                   condition_order=[c.id for c in self.design.conditions])
+                                   condition_order=[c.id for c in self.design.conditions],
+                                   allow_ties=view.ranking.allow_ties)
             for ci, crit in enumerate(self.design.criteria):
-                order = sorted(range(3), key=lambda slot: ranks[crit.id][slot])  # best first
+                order, ties = order_and_ties(ranks[crit.id])  # best first
                 if ci == 0:      # drag and drop
                     for place, slot in enumerate(order):
                         self.drag(("chip", crit.id, slot), ("place", crit.id, place))
                 elif ci == 1:    # click in order best -> worst
                     for slot in order:
                         self.click(("chip", crit.id, slot))
-                else:            # keyboard: select the question, then 1/2/3
+                else:            # keyboard: select the question, then 1/2/3, "=" before a tied figure
                     self.click(("crit", crit.id))
-                    for slot in order:
+                    for k, slot in enumerate(order):
+                        if k and ties[k - 1]:
+                            self.char("=")
                         self.key(digit_key(slot + 1))
+                    continue
+                for link, tied in enumerate(ties):
+                    if tied:
+                        self.click(("tie", crit.id, link))
             self.wait(2)
             return
         if sub == "ranked":

@@ -19,7 +19,8 @@ class TrialView:
         self.plan = plan
         self.media: Any = None
         self.scene: Any = None
-        self.ranking = RankingState([c.id for c in app.design.criteria])
+        self.ranking = RankingState([c.id for c in app.design.criteria],
+                                    allow_ties=bool(getattr(app.design.playback, "allow_ties", False)))
         self.recorder: PlayRecorder | None = None
         self.watched = False          # played to the end at least once
         self.in_play = False          # a play is registered with the session (playing or paused)

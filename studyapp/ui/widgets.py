@@ -97,6 +97,11 @@ class Painter:
             self.wrapped(para.strip())
             self.imgui.spacing()
 
+    def tooltip(self, s: str) -> None:
+        """``s`` in a tooltip while the mouse rests on the last item."""
+        self.record(s)
+        self.imgui.set_item_tooltip(s)
+
     # -- controls -----------------------------------------------------------------------------
     def button(self, label: str, *, key: Any = None, enabled: bool = True, size: tuple[float, float] = (0, 0),
                primary: bool = False) -> bool:

@@ -370,3 +370,16 @@ def test_participant_visible_text_naming_a_condition_is_a_problem() -> None:
     design.title = "Synced or not?"
     design.criteria[2].explanation += " Some figures stay static."
     assert visible_text_leaks(design) == [("title", "synced"), ("criteria[2]", "static")]
+
+
+def test_designs_do_not_share_the_default_criteria_objects() -> None:
+    """Editing one loaded design's criteria (as an editor or a test may) must not change another design."""
+    from studyapp.resources import demo_design
+    from studyapp.study.design import DEFAULT_CRITERIA, load_design
+
+    a = load_design(demo_design(), check_files=False)
+    b = load_design(demo_design(), check_files=False)
+    before = DEFAULT_CRITERIA[0].explanation
+    a.criteria[0].explanation += " edited"
+    assert b.criteria[0].explanation == before
+    assert DEFAULT_CRITERIA[0].explanation == before

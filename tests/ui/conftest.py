@@ -29,13 +29,33 @@ def tiny_study(tmp_path):
     from studyapp.study.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "study", n_stimuli=2, seconds=3.0, questionnaire=True)
-    # Condition ids named like the published models, so the leak checks look for realistic secrets.
+    design = load_design(_model_named_conditions(path))
+    db = ResultsDB(tmp_path / "results.sqlite", design)
+    yield design, db
+    db.close()
+
+
+def _model_named_conditions(path: Path) -> Path:
+    # Condition ids named like the published models, so the leak checks look for realistic secrets (and
+    # the design's blinding check never trips over a plain word such as "static" in a participant text).
     text = path.read_text()
     for old, new in (("synced", "FaceCapGes"), ("lagged", "DiffSHEG"), ("static", "CaMN")):
         text = text.replace(f'id = "{old}"', f'id = "{new}"')
     path.write_text(text)
-    design = load_design(path)
-    db = ResultsDB(tmp_path / "results.sqlite", design)
+    return path
+
+
+@pytest.fixture
+def tied_study(tmp_path):
+    """A 2-clip study (practice + 2 clips) whose design allows ties (``[playback] allow_ties = true``)."""
+    from studyapp.study.design import load_design
+    from studyapp.study.storage import ResultsDB
+    from studyapp.study.synthetic import write_synthetic_study
+
+    path = write_synthetic_study(tmp_path / "tied", n_stimuli=2, seconds=2.0, allow_ties=True)
+    design = load_design(_model_named_conditions(path))
+    assert design.playback.allow_ties
+    db = ResultsDB(tmp_path / "tied.sqlite", design)
     yield design, db
     db.close()
 
@@ -56,9 +76,13 @@ def _secrets_of(design) -> list[str]:
     return sorted(out)
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def xvfb_display():
-    """A private Xvfb display (1280x800x24) for the window tests; DISPLAY is set while the test runs."""
+    """A private Xvfb display (1280x800x24) for the window tests; DISPLAY is set while the module runs.
+
+    One display per module, not per test: GLFW stays initialised on the first X display it opened in this
+    process, so a second window test on a fresh Xvfb would talk to a display that is gone.
+    """
     if shutil.which("Xvfb") is None:
         pytest.skip("Xvfb is not installed (apt install xvfb)")
     for n in range(140, 200):

@@ -207,3 +207,133 @@ def test_whole_study_with_the_keyboard_only(tiny_study):
     answers = {a["item"]: a for a in db.questionnaire("K1")}
     assert answers["q1"]["value"] in (5, "5") and answers["q2"]["value"] in (2, "2")
     assert "fine" in str(answers["comments"]["value"])
+
+
+# -- ties (designs with [playback] allow_ties) ------------------------------------------------------------
+
+def _stored_ranks(db, pid):
+    out = {}
+    for r in db.responses(pid):
+        out.setdefault(r["trial_index"], {}).setdefault(r["criterion"], {})[r["slot"]] = r["rank"]
+    return out
+
+
+def test_bot_enters_ties_through_ui_and_they_are_stored(tied_study, tmp_path, secrets_of):
+    """Ties chosen by the policy go in by drag + link click, click + link click and "=" on the keyboard."""
+    from studyapp.study.bots import choose_ranking, trial_rng
+    from studyapp.study.session import normalise_ranks
+    from studyapp.ui.screens.instructions import HOW_TO_TIE
+    from studyapp.ui.screens.ranking_panel import TIE_HINT
+
+    design, db = tied_study
+    seed = 4  # its draws tie on every question (so every entry method enters a tie) and leave some strict
+    bot = UIBot(design, db, "T1", "random", seed, out_dir=tmp_path / "shots")
+    try:
+        assert bot.run() == 0
+        plans = list(bot.session.plans)
+        drawn = set(bot.app.ui.drawn)
+    finally:
+        bot.close()
+    crits = [c.id for c in design.criteria]
+    chosen = {p.trial_index: choose_ranking("random", p, None, design.criteria,
+                                            trial_rng(seed, "T1", p.trial_index), allow_ties=True)
+              for p in plans}
+    for ci, crit in enumerate(crits):  # 0: drag, 1: click, 2: keyboard
+        tied = [t for t, r in chosen.items() if len(set(r[crit].values())) < 3]
+        assert tied, f"seed {seed} gives no tie on question {ci}: the test would not test that entry method"
+    assert any(len(set(r[c].values())) == 3 for r in chosen.values() for c in crits)
+    expected = {t: {c: dict(enumerate(v)) for c, v in normalise_ranks(r, crits, True).items()}
+                for t, r in chosen.items()}
+    assert _stored_ranks(db, "T1") == expected
+    assert db.participant("T1").status == "done"
+    assert HOW_TO_TIE in drawn and any(TIE_HINT in s for s in drawn)
+    assert list(_leaks(drawn, secrets_of(design))) == []
+
+
+def _to_screen(bot, target, limit=400):
+    """Let the scripted participant click through until ``target`` is on screen; nothing queued after."""
+    for _ in range(limit):
+        bot.frame()
+        key = bot.app.screen_key()
+        if key == target:
+            bot.steps.clear()
+            return
+        bot.steps.popleft()() if bot.steps else bot._plan(key)
+    raise AssertionError(f"never reached {target!r} (on {bot.app.screen_key()!r})")
+
+
+def _type(bot, keys):
+    """Digits place the left / middle / right figure, "=" is typed as text (as GLFW delivers it)."""
+    from studyapp.ui.input import digit_key
+
+    for k in keys:
+        if k == "=":
+            bot.app.input.char("=")
+        else:
+            bot.app.input.tap(digit_key(int(k)))
+        for _ in range(2):
+            bot.frame()
+
+
+def _pixel(rgb, rect, fx, fy):
+    x0, y0, x1, y1 = rect
+    return rgb[int(y0 + (y1 - y0) * fy), int(x0 + (x1 - x0) * fx)].astype(int)
+
+
+def test_keyboard_ties_are_visible_and_stored(tied_study):
+    from imgui_bundle import imgui
+
+    from studyapp.ui.screens.ranking_panel import TIE_COLOR
+
+    design, db = tied_study
+    crits = [c.id for c in design.criteria]
+    bot = UIBot(design, db, "K1", "random", 1)
+    try:
+        _to_screen(bot, "practice:ranking")
+        _type(bot, "1=23")       # left = middle, best; right last
+        _type(bot, "31=2")       # right best; left = middle after it
+        _type(bot, "1=2=3")      # all equal
+        bot.frame()
+        assert bot.app.screen_key() == "practice:ranked"
+        r = bot.app.trial_view().ranking
+        assert r.ties == {crits[0]: [True, False], crits[1]: [False, True], crits[2]: [True, True]}
+        # what the participant sees: the captions name the shared rank, tied links are amber "=" buttons
+        shown = bot.app.ui.frame_strings
+        assert shown.count("1st (tied)") == 5 and shown.count("2nd (tied)") == 2 and "3rd (worst)" in shown
+        rgb = bot.screenshot("tied")
+        amber = np.array(TIE_COLOR[:3]) * 255
+        rects = bot.app.ui.rects
+        for crit, ties in r.ties.items():
+            for link, tied in enumerate(ties):
+                px = _pixel(rgb, rects[("tie", crit, link)], 0.2, 0.15)  # beside the sign, on the button
+                assert (np.abs(px - amber).max() < 25) == tied, (crit, link, px)
+            for place in range(3):  # tied boxes have an amber outline
+                px = _pixel(rgb, rects[("place", crit, place)], 0.5, 0.0)
+                assert (np.abs(px - amber).max() < 40) == r.is_tied(crit, place), (crit, place, px)
+        bot.app.input.tap(imgui.Key.enter)
+        for _ in range(4):
+            bot.frame()
+    finally:
+        bot.close()
+    stored = _stored_ranks(db, "K1")
+    assert len(stored) == 1
+    (ranks,) = stored.values()
+    assert ranks == {crits[0]: {0: 1.5, 1: 1.5, 2: 3.0}, crits[1]: {0: 2.5, 1: 2.5, 2: 1.0},
+                     crits[2]: {0: 2.0, 1: 2.0, 2: 2.0}}
+
+
+def test_equals_does_nothing_when_the_design_does_not_allow_ties(tiny_study):
+    design, db = tiny_study
+    crit = design.criteria[0].id
+    bot = UIBot(design, db, "K2", "random", 1)
+    try:
+        _to_screen(bot, "practice:ranking")
+        _type(bot, "1=23")
+        bot.frame()
+        r = bot.app.trial_view().ranking
+        assert r.ranks()[crit] == {0: 1, 1: 2, 2: 3} and r.ties[crit] == [False, False]
+        assert not any(isinstance(k, tuple) and k[0] == "tie" for k in bot.app.ui.rects)
+        assert not any("tied" in s for s in bot.app.ui.drawn)
+        assert "3rd (worst)" in bot.app.ui.frame_strings
+    finally:
+        bot.close()

@@ -204,3 +204,60 @@ def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_pat
         runner.close()
         session.close()
         restore_egl()
+
+
+def test_real_window_ties_with_mouse_and_equals_key(xvfb_display, tied_study, tmp_path):
+    """With ties allowed: a click on the ">" between two boxes and the "=" key (X key event -> GLFW char
+    callback) enter ties, and the session stores them as average ranks."""
+    from studyapp.audio.clock import SilentClock
+    from studyapp.study.session import Session
+    from studyapp.ui.app import WindowRunner
+
+    design, db = tied_study
+    session = Session(design, db, "W2")
+    restore_egl = release_egl_context()
+    try:
+        runner = WindowRunner(design, session, SilentClock(), size=(1280, 720))
+    except Exception as exc:
+        restore_egl()
+        pytest.skip(f"no GLX window under Xvfb: {exc}")
+    try:
+        d = Driver(runner, tmp_path)
+        app = d.app
+        d.until(lambda: "consent" in app.ui.rects)
+        d.frames(2)
+        d.click("consent")
+        d.until(lambda: app.screen_key() == "instructions")
+        d.frames(3)
+        d.key("Return")
+        d.until(lambda: app.screen_key() == "env_check")
+        d.frames(3)
+        d.click("continue")
+        d.until(lambda: app.screen_key() == "practice:ready")
+        d.frames(3)
+        d.click("play")
+        d.until(lambda: app.screen_key() == "practice:ranking", 30)
+        d.frames(3)
+        crits = [c.id for c in design.criteria]
+        for slot in (0, 1, 2):                   # 1st question: left, middle, right...
+            d.click(("chip", crits[0], slot))
+        d.click(("tie", crits[0], 1))            # ... with middle = right
+        d.click(("crit", crits[1]))              # 2nd: middle = right, then left
+        for k in ("2", "equal", "3", "1"):
+            d.key(k)
+        for k in ("1", "2", "3"):                # 3rd: no tie
+            d.key(k)
+        d.frames(3)
+        assert app.screen_key() == "practice:ranked", app.screen_key()
+        assert app.trial_view().ranking.ties == {crits[0]: [False, True], crits[1]: [True, False],
+                                                 crits[2]: [False, False]}
+        d.click("next")
+        d.until(lambda: db.trials("W2"), 10)
+        ranks = {(r["criterion"], r["slot"]): r["rank"] for r in db.responses("W2")}
+        assert [ranks[(crits[0], s)] for s in range(3)] == [1.0, 2.5, 2.5]
+        assert [ranks[(crits[1], s)] for s in range(3)] == [3.0, 1.5, 1.5]
+        assert [ranks[(crits[2], s)] for s in range(3)] == [1.0, 2.0, 3.0]
+    finally:
+        runner.close()
+        session.close()
+        restore_egl()

@@ -13,6 +13,11 @@ HOW_TO_RANK = (
     "in order from best to worst. Keyboard: press {keys} to place a figure, Up/Down to change question, "
     "Backspace to clear a question, Enter for the next clip. Space pauses and resumes the clip."
 )
+HOW_TO_TIE = (
+    "If two or three figures seem equally good, you may rank them as equal: click the > sign between their "
+    "boxes so that it shows = (keyboard: press = before placing the next figure, e.g. 1 = 2 3). Equal figures "
+    "share the better place: two equal best figures are both 1st, and the other one is 3rd."
+)
 
 
 def draw(app: Any) -> None:
@@ -33,6 +38,9 @@ def draw(app: Any) -> None:
     ui.heading("How to rank", 1.3)
     keys = " / ".join(f"{i + 1} ({label})" for i, label in enumerate(app.slot_names))
     ui.wrapped(HOW_TO_RANK.format(keys=keys))
+    if getattr(app.design.playback, "allow_ties", False):
+        imgui.spacing()
+        ui.wrapped(HOW_TO_TIE)
     if primary_row(app, "Continue", "continue", hint="or press Enter"):
         app.session.finish_instructions()
     page_end()

@@ -6,6 +6,11 @@ Three ways to rank, all through :class:`studyapp.ui.ranking.RankingState`:
 * click chips in order from best to worst (clicking a filled place empties it);
 * keyboard: 1 / 2 / 3 place the left / middle / right figure in the highlighted question, Up / Down move
   the highlight, Backspace clears it, Enter goes to the next clip when everything is ranked.
+
+When the design allows ties, a small button between neighbouring places shows ``>`` ("better than");
+clicking it turns it into an amber ``=`` and the two places become equal: their captions then read, e.g.,
+"1st (tied)" twice and "3rd (worst)", and the tied boxes get an amber outline. On the keyboard ``=`` ties
+the next figure placed with the one above it (``1 = 2 3``). Without ties the panel is drawn as before.
 """
 from __future__ import annotations
 
@@ -14,10 +19,17 @@ from typing import Any
 from imgui_bundle import imgui
 
 from studyapp.ui.input import digit_key
+from studyapp.ui.ranking import ORDINALS
 
 ROW_PX = 86.0
 GAP_PX = 6.0
 PLACE_NAMES = ("1st (best)", "2nd", "3rd (worst)")
+#: Width of the ``>`` / ``=`` button between two places (designs with ties only).
+LINK_PX = 28.0
+#: Width of a place with ties: three of them and the two links take the room of three places without.
+TIE_PLACE_PX = 112.0
+TIE_COLOR = (0.93, 0.68, 0.22, 1.0)
+TIE_HINT = "Click > to tie two."
 
 
 def height(app: Any) -> float:
@@ -49,11 +61,36 @@ def _box_text(app: Any, caption: str, value: str, filled: bool) -> None:
     dl.add_text(bold, val_size, imgui.ImVec2(cx - vw / 2, top + cap_size + 2), white, value)
 
 
+def _caption(r: Any, crit_id: str, place: int) -> str:
+    if not r.is_tied(crit_id, place):
+        return PLACE_NAMES[place]
+    return f"{ORDINALS[r.place_rank(crit_id, place) - 1]} (tied)"
+
+
+def _tie_link(app: Any, r: Any, ci: int, crit_id: str, link: int, size: tuple[float, float]) -> None:
+    """The ``>`` / ``=`` button between places ``link`` and ``link + 1``."""
+    ui = app.ui
+    tied = r.ties[crit_id][link]
+    bg, fg = (TIE_COLOR, (0.10, 0.10, 0.12, 1.0)) if tied else ((0.24, 0.25, 0.29, 1.0), (0.80, 0.82, 0.86, 1.0))
+    imgui.push_style_color(imgui.Col_.button, imgui.ImVec4(*bg))
+    imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(*fg))
+    imgui.push_font(app.layer.font_bold, imgui.get_style().font_size_base * 1.4)
+    # "###": the id must not change with the sign, or ImGui would lose a click held across the toggle.
+    if ui.button(f"{'=' if tied else '>'}###tie{ci}{link}", key=("tie", crit_id, link), size=size):
+        r.toggle_tie(crit_id, link)
+        r.active = ci
+    imgui.pop_font()
+    imgui.pop_style_color(2)
+    ui.tooltip("Equal. Click to make them different again." if tied else "Click to make these two equal.")
+
+
 def _keys(app: Any, view: Any) -> None:
     r = view.ranking
     for i in range(3):
         if app.key_pressed(digit_key(i + 1)) or app.key_pressed(getattr(imgui.Key, f"keypad{i + 1}")):
             r.key_slot(i)
+    if r.allow_ties and app.char_typed("="):
+        r.key_tie()
     if app.key_pressed("down"):
         r.move_active(1)
     if app.key_pressed("up"):
@@ -70,8 +107,13 @@ def draw(app: Any, view: Any) -> None:
     r = view.ranking
     names = app.slot_names
     place_w, box_h, chip_w = 132 * s, 60 * s, 60 * s
+    link_w, link_gap = LINK_PX * s, 4 * s
     avail_w = imgui.get_content_region_avail().x
     text_w = max(240 * s, avail_w - 3 * place_w - 3 * chip_w - 150 * s)
+    if r.allow_ties:
+        # Narrower places and the two links fit in the room of the three places without ties, so the
+        # questions keep their width and still fit their row.
+        place_w = TIE_PLACE_PX * s
     for ci, crit in enumerate(app.design.criteria):
         active = ci == r.active
         bg = (0.21, 0.25, 0.32, 1.0) if active else (0.16, 0.17, 0.20, 1.0)
@@ -96,7 +138,11 @@ def draw(app: Any, view: Any) -> None:
         # the three places, best to worst
         imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 20 * s, top + (ROW_PX - 16) * s / 2 - box_h / 2))
         for p in range(3):
-            if p:
+            if p and r.allow_ties:
+                imgui.same_line(0, link_gap)
+                _tie_link(app, r, ci, crit.id, p - 1, (link_w, box_h))
+                imgui.same_line(0, link_gap)
+            elif p:
                 imgui.same_line()
             slot = r.order[crit.id][p]
             color = (0.18, 0.46, 0.36, 1.0) if slot is not None else (0.24, 0.25, 0.29, 1.0)
@@ -104,7 +150,10 @@ def draw(app: Any, view: Any) -> None:
             if ui.button(f"##place{ci}{p}", key=("place", crit.id, p), size=(place_w, box_h)) and slot is not None:
                 r.click(crit.id, slot)  # take it out again
             imgui.pop_style_color()
-            _box_text(app, PLACE_NAMES[p], names[slot] if slot is not None else "drop here", slot is not None)
+            _box_text(app, _caption(r, crit.id, p), names[slot] if slot is not None else "drop here", slot is not None)
+            if r.is_tied(crit.id, p):
+                imgui.get_window_draw_list().add_rect(imgui.get_item_rect_min(), imgui.get_item_rect_max(),
+                                                      imgui.get_color_u32(imgui.ImVec4(*TIE_COLOR)), 4 * s, 3 * s)
             if slot is not None and imgui.begin_drag_drop_source():
                 imgui.set_drag_drop_payload_py_id(f"slot{ci}", slot)
                 ui.text(names[slot])
@@ -155,6 +204,8 @@ def next_button(app: Any, view: Any) -> None:
         why = "Available when the clip has finished."
     elif not any(slot is not None for places in r.order.values() for slot in places):
         why = "Drag the letters into the boxes, best first; or click them in order."
+        if r.allow_ties:  # the same in fewer words, so the tie hint still fits on one line
+            why = "Drag or click the letters into the boxes, best first. " + TIE_HINT
     else:
         why = "Still to rank: " + ", ".join(c.label for c in app.design.criteria if not r.is_complete(c.id))
     bw = 210 * s
