@@ -388,6 +388,15 @@ class ResultsDB:
 
     def close(self) -> None:
         try:
+            # Leave a closed database as one self-contained file: back in rollback-journal mode, readers
+            # that open it read-only (the analysis) do not recreate -wal/-shm files they cannot remove, and
+            # a copied or mailed .sqlite holds every answer. Only possible when no other connection is
+            # open; then the WAL simply stays (it is as durable), so never wait for a lock here.
+            self._con.execute("PRAGMA busy_timeout=0")
+            self._con.execute("PRAGMA journal_mode=DELETE").fetchone()
+        except sqlite3.Error:
+            pass
+        try:
             self._con.close()
         except sqlite3.Error:
             pass

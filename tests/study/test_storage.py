@@ -36,6 +36,27 @@ def test_pragmas_and_stamps(tmp_path: Path) -> None:
     db.close()
 
 
+def test_closed_database_is_one_file_that_read_only_readers_leave_alone(tmp_path: Path) -> None:
+    """Closing leaves a single .sqlite (no -wal/-shm), which a read-only reader such as the analysis does not
+    turn back into three files; with a second connection still open the WAL stays and nothing is lost."""
+    path = tmp_path / "r.sqlite"
+    db = ResultsDB(path, design_hash="h1", title="T")
+    other = ResultsDB(path, design_hash="h1")
+    db.add_participant("P1", n_rows=3)
+    db.save_trial(_trial("P1", 0), _ranks())
+    db.close()  # `other` still has it open: stays in WAL mode
+    assert path.with_name("r.sqlite-wal").exists()
+    other.close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.sqlite"]
+    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    assert con.execute("SELECT COUNT(*) FROM responses").fetchone()[0] == 6
+    con.close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.sqlite"]
+    again = ResultsDB(path, design_hash="h1")  # reopened for more answers: WAL again
+    assert again.connection.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    again.close()
+
+
 def test_rows_go_to_the_least_used_row(tmp_path: Path) -> None:
     db = ResultsDB(tmp_path / "r.sqlite", design_hash="h", title="T")
     assert [db.add_participant(f"P{i}", n_rows=3).latin_row for i in range(3)] == [0, 1, 2]
