@@ -12,6 +12,7 @@ import argparse
 import json
 import os
 import shutil
+import sqlite3
 import sys
 import tempfile
 from pathlib import Path
@@ -107,6 +108,11 @@ def run_offscreen_demo(design_path: Path, out: Path, *, panel: int, seed: int, v
     db.close()
 
     report = _analyse(db_path, out / "analysis", design)
+    # The analysis reads the database read-only, which leaves empty -wal/-shm files that only a writer can
+    # remove; the demo owns this folder, so one writable open-and-close leaves just the .sqlite.
+    con = sqlite3.connect(db_path)
+    con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchall()
+    con.close()
     summary = {
         "design": str(design_path),
         "results_db": str(db_path),

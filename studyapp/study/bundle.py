@@ -251,6 +251,10 @@ def make_bundle(
         s = dict(s_raw)
         s["id"] = stim_map[stim.id]
         if motion_tags[stim.id]:
+            clash = sorted(set(s.get("tags", {})) & set(motion_tags[stim.id]))
+            if clash:  # an own tag named like a salted condition id: overwriting it would lose its value
+                raise InputError(design_path, f"stimuli.{stim.id}.tags.{clash[0]}",
+                                 "this tag name is needed by the bundle; rename the tag (or bundle with another salt)")
             s["tags"] = {**s.get("tags", {}), **motion_tags[stim.id]}
         s["audio"] = add_file(stim.audio)
         if stim.face is not None:

@@ -230,6 +230,9 @@ class ResultsDB:
         With ``False`` a missing file is an error instead of a new database.
     """
 
+    #: How long to wait for another connection's lock (a second lab station committing) before giving up.
+    LOCK_TIMEOUT_S = 30.0
+
     def __init__(
         self,
         path: str | Path,
@@ -253,7 +256,7 @@ class ResultsDB:
         else:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
-            self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=30.0)
+            self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=self.LOCK_TIMEOUT_S)
         except sqlite3.Error as exc:
             raise InputError(self.path, None, f"cannot open the results database: {exc}") from None
         self._con.row_factory = sqlite3.Row
@@ -273,6 +276,11 @@ class ResultsDB:
             row = self._con.execute("SELECT design_hash, title FROM study WHERE id = 1").fetchone()
         except sqlite3.DatabaseError as exc:
             self._con.close()
+            if isinstance(exc, sqlite3.OperationalError) and ("locked" in str(exc) or "busy" in str(exc)):
+                # Another program holds a lock (a database browser or notebook mid-write): the file is fine,
+                # and a new --results file would split the study, so never advise that here.
+                raise InputError(self.path, None, f"the results database is in use by another program ({exc}); "
+                                 "close that program (or let it finish) and start again") from None
             raise InputError(self.path, None, f"the results database is damaged or not a studyapp database ({exc}); "
                              "keep a copy of the file and start a new one with --results") from None
         except BaseException:
@@ -387,15 +395,6 @@ class ResultsDB:
         return ResultsDB._Tx(self._con)
 
     def close(self) -> None:
-        try:
-            # Leave a closed database as one self-contained file: back in rollback-journal mode, readers
-            # that open it read-only (the analysis) do not recreate -wal/-shm files they cannot remove, and
-            # a copied or mailed .sqlite holds every answer. Only possible when no other connection is
-            # open; then the WAL simply stays (it is as durable), so never wait for a lock here.
-            self._con.execute("PRAGMA busy_timeout=0")
-            self._con.execute("PRAGMA journal_mode=DELETE").fetchone()
-        except sqlite3.Error:
-            pass
         try:
             self._con.close()
         except sqlite3.Error:

@@ -138,8 +138,8 @@ class StudyApp:
         keys = [getattr(imgui.Key, n) for n in names[key]] if isinstance(key, str) else [key]
         return any(imgui.is_key_pressed(k, False) for k in keys)
 
-    def char_typed(self, ch: str) -> bool:
-        """The character ``ch`` was typed this frame, unless the participant is typing into a text box.
+    def typed_text(self) -> str:
+        """The characters typed this frame, in the order typed; empty while a text box takes the typing.
 
         For symbols such as ``=``: which physical key types them depends on the keyboard layout (Shift+0 on
         a German one), so they are read from the typed text, not from key codes.
@@ -148,9 +148,9 @@ class StudyApp:
 
         io = imgui.get_io()
         if io.want_text_input:
-            return False
+            return ""
         typed = io.input_queue_characters
-        return any(typed[i] == ord(ch) for i in range(typed.size()))
+        return "".join(chr(typed[i]) for i in range(typed.size()))
 
     def estimated_minutes(self) -> int:
         total = 0.0

@@ -327,3 +327,17 @@ def test_bundle_reports_the_files_that_are_in_the_zip(lab, tmp_path: Path, capsy
     info = make_bundle(design_path, tmp_path / "again.zip", results=results)
     assert info.n_files == len(zipfile.ZipFile(info.path).namelist())
     assert info.n_media == info.n_files - 2
+
+
+def test_own_stimulus_tag_named_like_a_condition_tag_is_an_error_not_lost(tmp_path: Path) -> None:
+    """The bundle adds one tag per condition (named by its salted id) to each stimulus; a tag of the design's
+    own with that very name must be refused by name, never silently overwritten."""
+    design_path = write_synthetic_study(tmp_path / "s", n_stimuli=3)
+    info = make_bundle(design_path, tmp_path / "a.zip", results=tmp_path / "lab.sqlite", salt="fixed")
+    bundled = zipfile.ZipFile(info.path).read("study.toml").decode()
+    cid = re.findall(r'^id = "(c_[0-9a-f]+)"', bundled, flags=re.M)[0]
+    text = design_path.read_text()
+    design_path.write_text(text.replace('tags = { speaker = "spk1" }', f'tags = {{ speaker = "spk1", {cid} = "x" }}', 1))
+    with pytest.raises(InputError, match=rf"tags\.{cid}.*rename the tag"):
+        make_bundle(design_path, tmp_path / "b.zip", results=tmp_path / "lab.sqlite", salt="fixed")
+    assert not (tmp_path / "b.zip").exists()

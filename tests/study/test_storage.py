@@ -36,24 +36,24 @@ def test_pragmas_and_stamps(tmp_path: Path) -> None:
     db.close()
 
 
-def test_closed_database_is_one_file_that_read_only_readers_leave_alone(tmp_path: Path) -> None:
-    """Closing leaves a single .sqlite (no -wal/-shm), which a read-only reader such as the analysis does not
-    turn back into three files; with a second connection still open the WAL stays and nothing is lost."""
+def test_database_locked_by_another_program_is_named_as_such(tmp_path: Path, monkeypatch) -> None:
+    """A lock held elsewhere is "in use", never "damaged, start a new one" (which would split the study)."""
     path = tmp_path / "r.sqlite"
     db = ResultsDB(path, design_hash="h1", title="T")
-    other = ResultsDB(path, design_hash="h1")
     db.add_participant("P1", n_rows=3)
     db.save_trial(_trial("P1", 0), _ranks())
-    db.close()  # `other` still has it open: stays in WAL mode
-    assert path.with_name("r.sqlite-wal").exists()
+    db.close()
+    other = sqlite3.connect(path, isolation_level=None)  # e.g. a database browser in rollback mode, mid-write
+    other.execute("PRAGMA journal_mode=DELETE")
+    other.execute("BEGIN EXCLUSIVE")
+    monkeypatch.setattr(ResultsDB, "LOCK_TIMEOUT_S", 0.2)
+    with pytest.raises(InputError, match="in use by another program") as err:
+        ResultsDB(path, design_hash="h1")
+    assert "damaged" not in str(err.value) and "new one" not in str(err.value)
+    other.execute("ROLLBACK")
     other.close()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.sqlite"]
-    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
-    assert con.execute("SELECT COUNT(*) FROM responses").fetchone()[0] == 6
-    con.close()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.sqlite"]
-    again = ResultsDB(path, design_hash="h1")  # reopened for more answers: WAL again
-    assert again.connection.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    again = ResultsDB(path, design_hash="h1")
+    assert again.connection.execute("SELECT COUNT(*) FROM responses").fetchone()[0] == 6
     again.close()
 
 

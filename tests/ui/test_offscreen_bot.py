@@ -337,3 +337,43 @@ def test_equals_does_nothing_when_the_design_does_not_allow_ties(tiny_study):
         assert "3rd (worst)" in bot.app.ui.frame_strings
     finally:
         bot.close()
+
+
+def test_fast_typing_with_key_rollover_ties_the_right_figures(tied_study):
+    """ "1", then "=" and "2" typed so fast that 2 goes down before = comes up: both land in one frame,
+    and the tie must still join the first two places (1 = 2), as typed."""
+    from imgui_bundle import imgui
+
+    from studyapp.ui.input import digit_key
+
+    design, db = tied_study
+    crit = design.criteria[-1].id
+    seen = {}
+
+    class Typist(UIBot):
+        def _plan_trial(self, key):
+            sub = key.split(":")[1] if ":" in key else ""
+            if sub != "ranking" or self._planned_for is not None:
+                return super()._plan_trial(key)
+            self._planned_for = -1
+            q = self.app.input
+            self.click(("crit", crit))
+            self.steps.append(lambda: (q.key(digit_key(1), True), q.char("1"), q.key(digit_key(1), False)))
+            self.wait(3)
+            self.steps.append(lambda: (q.key(imgui.Key.equal, True), q.char("="), q.key(digit_key(2), True),
+                                       q.char("2"), q.key(imgui.Key.equal, False), q.key(digit_key(2), False)))
+            self.wait(12)
+
+            def done():
+                r = self.app.trial_view().ranking
+                seen["order"], seen["ties"] = list(r.order[crit]), list(r.ties[crit])
+                self.app.quit = True
+
+            self.steps.append(done)
+
+    bot = Typist(design, db, "R1", "ordered", 1)
+    try:
+        bot.run()
+    finally:
+        bot.close()
+    assert seen == {"order": [0, 1, None], "ties": [True, False]}

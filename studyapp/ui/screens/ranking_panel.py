@@ -86,11 +86,22 @@ def _tie_link(app: Any, r: Any, ci: int, crit_id: str, link: int, size: tuple[fl
 
 def _keys(app: Any, view: Any) -> None:
     r = view.ranking
-    for i in range(3):
-        if app.key_pressed(digit_key(i + 1)) or app.key_pressed(getattr(imgui.Key, f"keypad{i + 1}")):
-            r.key_slot(i)
-    if r.allow_ties and app.char_typed("="):
-        r.key_tie()
+    typed = app.typed_text()
+    if r.allow_ties and "=" in typed and any(c in "123" for c in typed):
+        # A fast "1=2" with key rollover puts "=" and a digit into one frame; only the typed text keeps
+        # their order, and the order decides which two figures are tied.
+        for c in typed:
+            if c == "=":
+                r.key_tie()
+            elif c in "123":
+                r.key_slot(int(c) - 1)
+    else:
+        # Digits by key code, not text: layouts such as AZERTY type "&" on the "1" key without Shift.
+        for i in range(3):
+            if app.key_pressed(digit_key(i + 1)) or app.key_pressed(getattr(imgui.Key, f"keypad{i + 1}")):
+                r.key_slot(i)
+        if r.allow_ties and "=" in typed:
+            r.key_tie()
     if app.key_pressed("down"):
         r.move_active(1)
     if app.key_pressed("up"):
