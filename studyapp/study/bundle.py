@@ -452,14 +452,19 @@ def _participant_rows(db: Any, pid: str) -> dict[str, list[dict[str, Any]]]:
     return rows
 
 
+def _answer_key(trial: dict[str, Any]) -> tuple[Any, ...]:
+    """What identifies one answered trial across two exports of the same participant."""
+    return trial.get("trial_index"), trial.get("stimulus"), trial.get("answered_at")
+
+
 def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened: OpenedBundle | None = None) -> Path:
     """Pack one participant's rows as ``results-<study>-<participant>-<hash>.zip`` (``results.json`` + manifest).
 
     ``<participant>`` is the id made file-name safe and ``<hash>`` the first 8 hex digits of the sha256 of
     the exact id, so ids that sanitize alike (``p/1`` and ``p-1``) or differ only in case (``A`` and ``a``,
     one file on Windows and macOS) get different files. An existing file is replaced only when it is this
-    participant's own results file of this design; any other file there is kept and the new one gets
-    ``-2``, ``-3``, ... added to its name.
+    participant's own results file of this design and every answer in it is in the new one (a resumed
+    session); any other file there is kept and the new one gets ``-2``, ``-3``, ... added to its name.
     """
     study = opened.study if opened is not None else _slug(db.title)
     payload = {
@@ -474,14 +479,18 @@ def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened
     out_dir = _mkdir(Path(out_dir))
     stem = f"results-{study}-{_slug(participant_id)}-{_sha256_bytes(participant_id.encode('utf-8'))[:8]}"
     path, k = out_dir / f"{stem}.zip", 1
+    answered = {_answer_key(t) for t in payload["trials"]}
     while path.exists():
         try:
             with zipfile.ZipFile(path) as zf:
                 old = json.loads(zf.read("manifest.json"))
-            if (old.get("format"), old.get("participant"), old.get("design_hash")) == (
-                    RESULTS_FORMAT, participant_id, db.design_hash):
-                break  # this participant's own earlier file (e.g. ended early, then resumed): update it
-        except (zipfile.BadZipFile, KeyError, ValueError, OSError, AttributeError):
+                if (old.get("format"), old.get("participant"), old.get("design_hash")) == (
+                        RESULTS_FORMAT, participant_id, db.design_hash):
+                    before = {_answer_key(t) for t in json.loads(zf.read("results.json")).get("trials", [])}
+                    if before <= answered:
+                        break  # this participant's own earlier file (ended early, then resumed): update it
+                    # else a run from a reset local database: the earlier answers may not have been sent yet
+        except (zipfile.BadZipFile, KeyError, ValueError, OSError, AttributeError, TypeError):
             pass  # not a results file we wrote: keep it
         k += 1
         path = out_dir / f"{stem}-{k}.zip"

@@ -341,3 +341,37 @@ def test_own_stimulus_tag_named_like_a_condition_tag_is_an_error_not_lost(tmp_pa
     with pytest.raises(InputError, match=rf"tags\.{cid}.*rename the tag"):
         make_bundle(design_path, tmp_path / "b.zip", results=tmp_path / "lab.sqlite", salt="fixed")
     assert not (tmp_path / "b.zip").exists()
+
+
+def test_results_file_is_updated_on_resume_but_never_replaced_by_a_fresh_run(lab, tmp_path: Path) -> None:
+    """Resuming extends the participant's file in place; a run from a reset local database (other answers)
+    goes beside it, so answers the participant may not have sent yet are never overwritten."""
+    _, design, _ = lab
+    outbox = tmp_path / "outbox"
+    remote = ResultsDB(tmp_path / "remote.sqlite", design)
+
+    class Stop(Exception):
+        pass
+
+    def stop_after_two(plan) -> None:
+        if plan.trial_index >= 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        run_bot_session(design, remote, "X1", "ordered", 1, on_trial=stop_after_two)
+    partial = write_results_file(remote, "X1", outbox)
+    n_partial = len(json.loads(zipfile.ZipFile(partial).read("results.json"))["trials"])
+    run_bot_session(design, remote, "X1", "ordered", 1)  # resumes
+    full = write_results_file(remote, "X1", outbox)
+    remote.close()
+    assert full == partial
+    n_full = len(json.loads(zipfile.ZipFile(full).read("results.json"))["trials"])
+    assert 1 <= n_partial < n_full
+    kept = full.read_bytes()
+
+    reset = ResultsDB(tmp_path / "reset.sqlite", design)  # the participant's local data was wiped
+    run_bot_session(design, reset, "X1", "ordered", 1)
+    again = write_results_file(reset, "X1", outbox)
+    reset.close()
+    assert again.name == full.name.replace(".zip", "-2.zip")
+    assert full.read_bytes() == kept
