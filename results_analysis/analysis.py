@@ -68,6 +68,7 @@ class Analysis:
     design_hashes: list[str] = field(default_factory=list)
     n_boot: int = 2000
     seed: int = 0
+    sm_permutations: int = 0
     ci: float = 0.95
     conover: bool = False
 
@@ -79,7 +80,8 @@ def group_columns(df: pd.DataFrame) -> list[str]:
 
 def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "trial",
                       alpha: float = 0.05, conover: bool = False, n_boot: int = 2000, ci: float = 0.95,
-                      seed: int = 0, skillings_mack_test: bool = False) -> CriterionAnalysis:
+                      seed: int = 0, skillings_mack_test: bool = False, sm_permutations: int = 2000,
+                      ) -> CriterionAnalysis:
     """Analyse one criterion of a validated, exclusion-applied tidy frame.
 
     >>> from results_analysis.simulate import simulate_results
@@ -91,7 +93,7 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     sm = None
     if skillings_mack_test:
         sm = skillings_mack(rank_blocks(df, criterion, block="trial", conditions=conditions,
-                                        complete_only=False).values)
+                                        complete_only=False).values, n_perm=sm_permutations, seed=seed)
     blocks = rank_blocks(df, criterion, block=block, conditions=conditions)
     if blocks.n < 2:
         raise AnalysisInputError(df.attrs.get("source"), f"criterion {criterion}",
@@ -147,12 +149,14 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
 def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str] = (),
                  questionnaire: pd.DataFrame | None = None, exclude_failed_attention: bool = False,
                  exclude: Iterable[str] = (), alpha: float = 0.05, conover: bool = False, n_boot: int = 2000,
-                 ci: float = 0.95, seed: int = 0, incomplete: str = "error") -> Analysis:
+                 ci: float = 0.95, seed: int = 0, incomplete: str = "error", sm_permutations: int = 2000,
+                 ) -> Analysis:
     """Validate, apply exclusions and analyse every criterion (see module docstring).
 
     ``incomplete='drop'`` deletes trials that do not rank every condition (listwise deletion) instead of
     stopping with an error; ``incomplete='skillings-mack'`` adds the Skillings-Mack test over all trials
-    (incomplete ones included) per criterion, while the Friedman, post-hoc and descriptive statistics use
+    (incomplete ones included) per criterion, with a permutation p-value from ``sm_permutations``
+    within-trial shuffles (0: chi-squared only), while the Friedman, post-hoc and descriptive statistics use
     the complete trials. Warnings (e.g. mixed design hashes) are collected in ``Analysis.warnings``
     and also re-emitted.
     """
@@ -175,7 +179,8 @@ def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
     results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
-                                    n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm) for c in criteria}
+                                    n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm,
+                                    sm_permutations=sm_permutations) for c in criteria}
     by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block) for g in groups}
     items = reliability = None
     if questionnaire is not None and len(questionnaire):
@@ -191,4 +196,5 @@ def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str
                     incomplete_blocks=int(kept.attrs.get("incomplete_blocks", 0)),
                     groups=by_group, questionnaire_items=items, questionnaire_reliability=reliability,
                     warnings=notes, source=df.attrs.get("source"), design_hashes=[str(h) for h in hashes],
-                    n_boot=n_boot, seed=seed, ci=ci, conover=conover)
+                    n_boot=n_boot, seed=seed, ci=ci, conover=conover,
+                    sm_permutations=sm_permutations if incomplete == "skillings-mack" else 0)

@@ -31,6 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--incomplete", choices=("error", "drop", "skillings-mack"), default="error",
                    help="a trial that does not rank every condition: stop (default), drop it (listwise deletion), "
                    "or add the Skillings-Mack test over all trials (other statistics on complete trials)")
+    p.add_argument("--permutations", type=int, default=2000, metavar="N",
+                   help="with --incomplete skillings-mack: within-trial shuffles for its permutation p-value "
+                   "(default 2000; 0 = chi-squared approximation only)")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
     p.add_argument("--conover", action="store_true", help="add Conover's Friedman post-hoc tests")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
@@ -59,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
             a = analyze(df, args.out, title=args.title or f"Results: {args.results.name}", block=args.block,
                         groups=args.group, questionnaire=q, exclude_failed_attention=args.exclude_failed_attention,
                         exclude=[x for x in args.exclude.split(",") if x.strip()], alpha=args.alpha,
-                        conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete)
+                        conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete,
+                        sm_permutations=args.permutations)
     except AnalysisInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

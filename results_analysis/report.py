@@ -28,7 +28,7 @@ def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study r
     """Run :func:`results_analysis.analysis.run_analysis` on ``df`` and write every output into ``out_dir``.
 
     Keyword arguments are those of ``run_analysis`` (block, groups, questionnaire,
-    exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete). Returns the
+    exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete, sm_permutations). Returns the
     :class:`Analysis`; the report is ``out_dir / "report.html"``.
     """
     out = Path(out_dir)
@@ -76,7 +76,8 @@ def stats_dict(a: Analysis) -> dict:
         if c.skillings_mack is not None:
             sm = c.skillings_mack
             entry["skillings_mack"] = {"statistic": sm.statistic, "df": sm.df, "p": sm.p, "n_blocks": sm.n_blocks,
-                                       "n_missing": sm.n_missing}
+                                       "n_missing": sm.n_missing, "p_permutation": sm.p_permutation,
+                                       "n_permutations": sm.n_permutations}
         out[crit] = entry
     out["_meta"] = {
         "source": a.source, "block": a.block, "conditions": a.conditions, "criteria": list(a.criteria),
@@ -237,7 +238,11 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
     if c.skillings_mack is not None:
         sm = c.skillings_mack
         text[0] += (f" Including the incomplete trials ({sm.n_missing} missing rank(s) over {sm.n_blocks} trials), the "
-                    f"Skillings–Mack test gave SM({sm.df}) = {_num(sm.statistic)}, {fmt_p(sm.p)}.")
+                    f"Skillings–Mack test gave SM({sm.df}) = {_num(sm.statistic)}, {fmt_p(sm.p)} (χ² approximation)")
+        if sm.p_permutation is not None:
+            text[0] += (f"; a permutation test with {sm.n_permutations} within-trial shuffles gave "
+                        f"{fmt_p(sm.p_permutation)}")
+        text[0] += "."
     nem = c.posthoc["nemenyi"]
     parts = []
     for r in nem.itertuples():
@@ -289,9 +294,12 @@ def methods_paragraph(a: Analysis) -> str:
                       f"{a.dropped_incomplete} trial-criterion block(s) removed); no Skillings–Mack test was used.")
     else:
         incomplete = (f"{a.incomplete_blocks} trial-criterion block(s) did not rank every condition: the Skillings–Mack "
-                      "test (missing ranks set to the block's mean rank, generalised-inverse covariance, χ²(k−1)) "
-                      "was computed over all trials, and the Friedman, post-hoc and descriptive statistics over the "
-                      "complete trials (listwise deletion).")
+                      "test (missing ranks set to the block's mean rank, generalised-inverse covariance, χ²(k−1)"
+                      + (", and a Monte Carlo permutation p-value from "
+                         f"{a.sm_permutations} shuffles of the ranks within each trial, seed {a.seed}"
+                         if a.sm_permutations else "") +
+                      ") was computed over all trials, and the Friedman, post-hoc and descriptive statistics over "
+                      "the complete trials (listwise deletion).")
     return (
         f"Practice trials and attention-check (catch) trials were not analysed. {excl} The analysis covers "
         f"{a.n_participants} participants and {a.n_trials} trials. For each criterion, the {k} conditions were "

@@ -220,3 +220,43 @@ def test_skillings_mack_on_a_balanced_incomplete_design_is_durbin() -> None:
     res = skillings_mack(values)
     assert res.statistic == pytest.approx(durbin)
     assert res.p == pytest.approx(stats.chi2.sf(durbin, t - 1))
+
+
+def test_skillings_mack_permutation_p_matches_full_enumeration() -> None:
+    """The Monte Carlo p-value against the exact permutation distribution, enumerated by brute force over every
+    within-block arrangement of a small incomplete data set (3! * 3! * 2! * 2! * 3! = 864 arrangements)."""
+    from itertools import permutations, product
+
+    from results_analysis.skillings_mack import skillings_mack
+
+    values = np.array([[1.0, 2, 3], [2, 1, 3], [1, np.nan, 2], [np.nan, 1, 2], [1, 3, 2]])
+    observed = skillings_mack(values).statistic
+    per_block = []
+    for row in values:
+        cells = np.flatnonzero(~np.isnan(row))
+        per_block.append([(cells, row[cells][list(p)]) for p in permutations(range(len(cells)))])
+    extreme = total = 0
+    for arrangement in product(*per_block):
+        v = np.full(values.shape, np.nan)
+        for i, (cells, vals) in enumerate(arrangement):
+            v[i, cells] = vals
+        total += 1
+        extreme += skillings_mack(v).statistic >= observed - 1e-9
+    exact = extreme / total
+    assert total == 864
+    mc = skillings_mack(values, n_perm=40_000, seed=3)
+    assert mc.n_permutations == 40_000
+    assert mc.p_permutation == pytest.approx(exact, abs=4 * np.sqrt(exact * (1 - exact) / 40_000) + 1e-4)
+    assert skillings_mack(values, n_perm=500, seed=9).p_permutation == skillings_mack(values, n_perm=500, seed=9).p_permutation
+
+
+def test_skillings_mack_permutation_p_agrees_with_chi2_on_many_blocks() -> None:
+    """With many blocks the chi-squared approximation is good, so the two p-values must be close."""
+    from results_analysis.skillings_mack import skillings_mack
+
+    rng = np.random.default_rng(5)
+    values = rng.normal(size=(300, 3)) + np.array([0.0, 0.1, 0.2])
+    values[rng.random(values.shape) < 0.1] = np.nan
+    res = skillings_mack(values, n_perm=4000, seed=1)
+    assert 0.01 < res.p < 0.99
+    assert res.p_permutation == pytest.approx(res.p, abs=0.03)

@@ -209,3 +209,27 @@ def test_skillings_mack_mode_keeps_incomplete_trials(clean: pd.DataFrame) -> Non
         sm = c.skillings_mack
         assert sm is not None and sm.n_blocks == 12  # all trials, incomplete ones included
         assert sm.n_missing == 12 - c.friedman.n_blocks
+        assert sm.n_permutations == 2000 and 0 < sm.p_permutation <= 1
+
+
+def test_skillings_mack_permutation_p_reaches_stats_and_report(clean: pd.DataFrame, tmp_path: Path) -> None:
+    import json
+
+    from results_analysis.cli import main
+
+    bad = clean.drop(index=[4, 13])
+    src = tmp_path / "incomplete.csv"
+    bad.to_csv(src, index=False)
+    assert main([str(src), "--out", str(tmp_path / "a"), "--incomplete", "skillings-mack", "--permutations", "999",
+                 "--bootstrap", "50"]) == 0
+    stats_json = json.loads((tmp_path / "a" / "stats.json").read_text())
+    for crit in bad["criterion"].unique():
+        sm = stats_json[crit]["skillings_mack"]
+        assert sm["n_permutations"] == 999 and 0 < sm["p_permutation"] <= 1
+        assert sm["p_permutation"] * 1000 == pytest.approx(round(sm["p_permutation"] * 1000))  # (1 + hits) / 1000
+    report = (tmp_path / "a" / "report.md").read_text()
+    assert "permutation test with 999 within-trial shuffles" in report
+    assert "Monte Carlo permutation p-value from 999 shuffles" in report
+    assert main([str(src), "--out", str(tmp_path / "b"), "--incomplete", "skillings-mack", "--permutations", "0",
+                 "--bootstrap", "50"]) == 0
+    assert "permutation" not in (tmp_path / "b" / "report.md").read_text()
