@@ -18,13 +18,13 @@ from results_analysis.loader import load_questionnaire, load_results, normalize_
 from results_analysis.posthoc import (conover, critical_difference, holm, nemenyi, nemenyi_q_alpha, posthoc_table,
                                       wilcoxon_holm)
 from results_analysis.questionnaire import cronbach_alpha, item_summary, scale_reliability
-from results_analysis.ranks import RankBlocks, rank_blocks, within_block_ranks
+from results_analysis.ranks import RankBlocks, as_blocks, rank_blocks, within_block_ranks
 from results_analysis.report import analyze
 from results_analysis.simulate import simulate_results
 from results_analysis.validate import MixedDesignWarning, validate_results
 
 __all__ = [
-    "Analysis", "AnalysisInputError", "FriedmanResult", "MixedDesignWarning", "RankBlocks", "analyze",
+    "Analysis", "AnalysisInputError", "FriedmanResult", "MixedDesignWarning", "RankBlocks", "analyze", "as_blocks",
     "analyze_criterion", "apply_exclusions", "bradley_terry", "condition_summary", "conover", "critical_difference",
     "cronbach_alpha", "fit_bradley_terry", "friedman", "friedman_ranks", "group_breakdown", "holm", "item_summary",
     "kendall_w", "load_questionnaire", "load_results", "nemenyi", "nemenyi_q_alpha", "normalize_results",

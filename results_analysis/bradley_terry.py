@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from results_analysis.descriptives import bootstrap_weights
-from results_analysis.ranks import RankBlocks
+from results_analysis.ranks import RankBlocks, as_blocks
 
 
 def pairwise_wins(ranks: np.ndarray) -> np.ndarray:
@@ -57,12 +57,16 @@ def fit_bradley_terry(wins: np.ndarray, *, prior: float = 1e-3, tol: float = 1e-
     return p[0] if single else p
 
 
-def bradley_terry(blocks: RankBlocks, *, n_boot: int = 1000, ci: float = 0.95, seed: int = 0) -> pd.DataFrame:
+def bradley_terry(blocks: RankBlocks | pd.DataFrame, criterion: str | None = None, *, n_boot: int = 1000,
+                  ci: float = 0.95, seed: int = 0) -> pd.DataFrame:
     """Bradley-Terry strength per condition with percentile bootstrap intervals over participants.
+
+    ``blocks``: a :class:`RankBlocks`, or a tidy results DataFrame with the ``criterion`` to fit.
 
     Columns: condition, strength (sums to 1 over conditions), ci_low, ci_high, log_strength (centred
     log-strength; differences are log-odds of winning), win_rate (share of its pairwise comparisons won).
     """
+    blocks = as_blocks(blocks, criterion)
     k = blocks.k
     wins = pairwise_wins(blocks.ranks)
     p = fit_bradley_terry(wins)

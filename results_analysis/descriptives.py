@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from results_analysis.ranks import RankBlocks
+from results_analysis.ranks import RankBlocks, as_blocks
 
 
 def bootstrap_weights(n_participants: int, n_boot: int, seed: int) -> np.ndarray:
@@ -28,17 +28,22 @@ def per_participant_sums(blocks: RankBlocks, values: np.ndarray | None = None) -
     return ids, sums, counts
 
 
-def condition_summary(blocks: RankBlocks, *, n_boot: int = 2000, ci: float = 0.95, seed: int = 0) -> pd.DataFrame:
+def condition_summary(blocks: RankBlocks | pd.DataFrame, criterion: str | None = None, *, n_boot: int = 2000,
+                      ci: float = 0.95, seed: int = 0) -> pd.DataFrame:
     """Per condition: n blocks, n participants, mean rank with a percentile bootstrap CI over participants,
     median rank and the share of blocks that put the condition at each rank (``share_rank_1`` ...).
 
+    ``blocks``: a :class:`RankBlocks`, or a tidy results DataFrame with the ``criterion`` to describe
+    (trials as blocks; practice and attention-check trials left out).
+
     >>> import numpy as np
-    >>> from results_analysis.ranks import RankBlocks
+    >>> from results_analysis.ranks import RankBlocks, as_blocks
     >>> r = np.array([[1, 2, 3], [1, 3, 2], [2, 1, 3], [1, 2, 3]], dtype=float)
     >>> b = RankBlocks(r, r, ["A", "B", "C"], np.array(["P1", "P1", "P2", "P2"]), "trial")
     >>> condition_summary(b, n_boot=200)[["condition", "mean_rank", "share_rank_1"]].values.tolist()
     [['A', 1.25, 0.75], ['B', 2.0, 0.25], ['C', 2.75, 0.0]]
     """
+    blocks = as_blocks(blocks, criterion)
     ranks = blocks.ranks
     n, k = ranks.shape
     out = pd.DataFrame({"condition": blocks.conditions, "n": n,

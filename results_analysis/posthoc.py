@@ -4,11 +4,12 @@
   studentized-range tail P(Q_{k,inf} > z sqrt(2)), and the critical difference is
   CD = q_alpha / sqrt(2) * sqrt(k(k+1)/(6n)), q_alpha the studentized-range quantile. This is the test the
   critical-difference diagram draws.
-* Pairwise Wilcoxon signed-rank tests on the block values, Holm-adjusted. Zero differences are dropped
-  (Wilcoxon's method, R's default); the exact null distribution is used when at most 50 non-zero
-  differences remain and none tie, otherwise the normal approximation with tie correction and continuity
-  correction (R's ``wilcox.test`` defaults; scipy's default has no continuity correction). The method
-  actually used is reported per pair.
+* Pairwise Wilcoxon signed-rank tests on the block values, Holm-adjusted, with R's ``wilcox.test``
+  defaults: zero differences are dropped (Wilcoxon's method); the exact null distribution is used only
+  when fewer than 50 non-zero differences remain and there were neither ties nor zeros, otherwise the
+  normal approximation with tie correction and continuity correction (scipy's default differs: it keeps
+  the exact test when zeros were dropped and has no continuity correction). The method actually used is
+  reported per pair.
 * Conover's Friedman post-hoc (Conover 1999): t = |R_a - R_b| / sqrt(2 (n A - sum R_j^2) / ((n-1)(k-1)))
   with rank sums R, A the sum of all squared ranks, t distribution with (n-1)(k-1) df, Holm-adjusted.
 
@@ -25,8 +26,8 @@ from scipy import stats
 
 from results_analysis.ranks import within_block_ranks
 
-#: Largest number of non-zero differences for which the exact Wilcoxon distribution is used.
-WILCOXON_EXACT_MAX_N = 50
+#: The exact Wilcoxon distribution is used for fewer than this many non-zero differences (R: ``n < 50``).
+WILCOXON_EXACT_BELOW_N = 50
 
 
 def holm(p: np.ndarray | list[float]) -> np.ndarray:
@@ -66,13 +67,30 @@ def critical_difference(k: int, n: int, alpha: float = 0.05) -> float:
     return nemenyi_q_alpha(k, alpha) * float(np.sqrt(k * (k + 1) / (6.0 * n)))
 
 
-def nemenyi(ranks: np.ndarray, conditions: list[str], *, alpha: float = 0.05) -> pd.DataFrame:
-    """Nemenyi single-step comparisons of mean ranks (``ranks``: within-block average ranks).
+def _matrix(data: np.ndarray | pd.DataFrame, conditions: list[str] | None) -> tuple[np.ndarray, list[str]]:
+    """An (n blocks, k) array and the condition names, from an array + names or a wide DataFrame
+    (rows = blocks, columns = conditions; rows with a missing value are dropped, listwise)."""
+    if isinstance(data, pd.DataFrame):
+        wide = data.dropna(axis=0, how="any")
+        names = [str(c) for c in wide.columns] if conditions is None else list(conditions)
+        return wide.to_numpy(dtype=float), names
+    if conditions is None:
+        raise ValueError("pass the condition names with an array (or give a DataFrame with named columns)")
+    return np.asarray(data, dtype=float), list(conditions)
+
+
+def nemenyi(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = None, *,
+            alpha: float = 0.05) -> pd.DataFrame:
+    """Nemenyi single-step comparisons of mean ranks (``ranks``: within-block average ranks, or a wide
+    DataFrame of block values, which are ranked within each row first).
 
     Columns: a, b, mean_rank_a, mean_rank_b, statistic (z), p (unadjusted two-sided normal), p_adjusted
     (single-step studentized range), significant (|difference| > CD, equivalently p_adjusted < alpha).
     """
-    ranks = np.asarray(ranks, dtype=float)
+    frame = isinstance(ranks, pd.DataFrame)
+    ranks, conditions = _matrix(ranks, conditions)
+    if frame:
+        ranks = within_block_ranks(ranks)
     n, k = ranks.shape
     mean = ranks.mean(axis=0)
     se = np.sqrt(k * (k + 1) / (6.0 * n))
@@ -90,14 +108,15 @@ def nemenyi(ranks: np.ndarray, conditions: list[str], *, alpha: float = 0.05) ->
     return out
 
 
-def wilcoxon_holm(values: np.ndarray, conditions: list[str]) -> pd.DataFrame:
-    """Pairwise Wilcoxon signed-rank tests on paired block values, Holm-adjusted.
+def wilcoxon_holm(values: np.ndarray | pd.DataFrame, conditions: list[str] | None = None) -> pd.DataFrame:
+    """Pairwise Wilcoxon signed-rank tests on paired block values (array + names, or a wide DataFrame),
+    Holm-adjusted.
 
     Columns: a, b, statistic (V: sum of the ranks of positive differences a - b, as R reports),
     n_nonzero, zeros_dropped, method ('exact' or 'normal approximation'), continuity_correction,
     rank_biserial (matched-pairs effect size, positive when a has the larger values), p, p_adjusted.
     """
-    values = np.asarray(values, dtype=float)
+    values, conditions = _matrix(values, conditions)
     k = values.shape[1]
     rows = []
     for i, j in combinations(range(k), 2):
@@ -113,7 +132,8 @@ def wilcoxon_holm(values: np.ndarray, conditions: list[str]) -> pd.DataFrame:
             v = float(r[nz > 0].sum())
             total = n_nz * (n_nz + 1) / 2.0
             ties = np.unique(r).size < n_nz
-            exact = n_nz <= WILCOXON_EXACT_MAX_N and not ties
+            # R also falls back to the normal approximation when zeros were dropped, not only on ties.
+            exact = n_nz < WILCOXON_EXACT_BELOW_N and not ties and row["zeros_dropped"] == 0
             res = stats.wilcoxon(nz, zero_method="wilcox", correction=not exact,
                                  method="exact" if exact else "asymptotic")
             row.update(statistic=v, method="exact" if exact else "normal approximation",
@@ -128,12 +148,16 @@ def wilcoxon_holm(values: np.ndarray, conditions: list[str]) -> pd.DataFrame:
     return out
 
 
-def conover(ranks: np.ndarray, conditions: list[str]) -> pd.DataFrame:
+def conover(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = None) -> pd.DataFrame:
     """Conover's all-pairs post-hoc for the Friedman test (t distribution), Holm-adjusted.
 
-    ``ranks`` are within-block average ranks. Columns: a, b, statistic (t), df, p, p_adjusted.
+    ``ranks`` are within-block average ranks, or a wide DataFrame of block values (ranked within each row
+    first). Columns: a, b, statistic (t), df, p, p_adjusted.
     """
-    ranks = np.asarray(ranks, dtype=float)
+    frame = isinstance(ranks, pd.DataFrame)
+    ranks, conditions = _matrix(ranks, conditions)
+    if frame:
+        ranks = within_block_ranks(ranks)
     n, k = ranks.shape
     rank_sums = ranks.sum(axis=0)
     a1 = float(np.sum(ranks ** 2))

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
-from results_analysis.validate import trial_key
+from results_analysis.validate import rated_mask, trial_key
 
 BLOCKS = ("trial", "participant")
 
@@ -86,3 +86,23 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "trial",
             np.isnan(values), np.nan, rankdata(np.where(np.isnan(values), np.inf, values), axis=1, method="average"))
     return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants,
                       block=block)
+
+
+def as_blocks(data: RankBlocks | pd.DataFrame, criterion: str | None = None, *, block: str = "trial") -> RankBlocks:
+    """``data`` itself when it is a :class:`RankBlocks`; else the blocks of ``criterion`` in a tidy results
+    frame (one row per participant x trial x criterion x condition, as ``studyapp export`` writes it).
+
+    Practice and attention-check rows are left out, as the command-line analysis does, so a notebook that
+    passes the raw export gets the same numbers. ``criterion`` may be omitted when the frame has only one.
+    """
+    if isinstance(data, RankBlocks):
+        return data
+    if not isinstance(data, pd.DataFrame):
+        raise TypeError(f"expected RankBlocks or a tidy results DataFrame, not {type(data).__name__}")
+    rated = data[rated_mask(data)]
+    if criterion is None:
+        found = list(dict.fromkeys(rated["criterion"]))
+        if len(found) != 1:
+            raise ValueError(f"the frame has criteria {found}: pass criterion=")
+        criterion = found[0]
+    return rank_blocks(rated, criterion, block=block, conditions=sorted(rated["condition"].unique()))

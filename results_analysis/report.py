@@ -21,7 +21,7 @@ import scipy
 from results_analysis import figures
 from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
 from results_analysis.document import Document
-from results_analysis.posthoc import WILCOXON_EXACT_MAX_N, nemenyi_q_alpha
+from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, nemenyi_q_alpha
 
 
 def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study results", **kwargs) -> Analysis:
@@ -87,7 +87,8 @@ def stats_dict(a: Analysis) -> dict:
         "design_hashes": a.design_hashes, "warnings": a.warnings,
         "bootstrap": {"n_boot": a.n_boot, "seed": a.seed, "ci": a.ci, "resampled": "participants"},
         "wilcoxon": {"zero_method": "wilcox (zero differences dropped)",
-                     "exact_if": f"at most {WILCOXON_EXACT_MAX_N} non-zero differences and no ties",
+                     "exact_if": f"fewer than {WILCOXON_EXACT_BELOW_N} non-zero differences, no ties and no "
+                                 "zero differences (R's wilcox.test default)",
                      "otherwise": "normal approximation with tie and continuity correction",
                      "adjustment": "holm"},
         "software": {"scipy": scipy.__version__, "numpy": np.__version__, "pandas": pd.__version__},
@@ -259,10 +260,14 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
     wil = c.posthoc["wilcoxon_holm"]
     wparts = [f"{r.a} vs {r.b}: V = {r.statistic:.0f}, r_rb = {_num(r.rank_biserial)}, "
               f"{fmt_p(r.p_adjusted, adjusted=True)}" for r in wil.itertuples()]
-    same = all((w < a.alpha) == bool(n) for w, n in zip(wil["p_adjusted"], nem["significant"]))
+    # Name the pairs where the two post-hoc families disagree: a reader must not have to find them.
+    differ = [f"{w.a} vs {w.b} (significant only with {'Wilcoxon' if w.p_adjusted < a.alpha else 'Nemenyi'})"
+              for w, n in zip(wil.itertuples(), nem["significant"]) if (w.p_adjusted < a.alpha) != bool(n)]
     methods = sorted(set(wil["method"]))
-    post += (f" Pairwise Wilcoxon signed-rank tests with Holm correction ({', '.join(methods)}) "
-             f"{'led to the same conclusions' if same else 'differed from the Nemenyi tests'}: " + "; ".join(wparts) + ".")
+    verdict = ("led to the same conclusions" if not differ else
+               "agreed with the Nemenyi tests except for " + " and ".join(differ))
+    post += (f" Pairwise Wilcoxon signed-rank tests with Holm correction ({', '.join(methods)}) {verdict}: "
+             + "; ".join(wparts) + ".")
     if "conover" in c.posthoc:
         con = c.posthoc["conover"]
         post += (" Conover's post-hoc tests (t distribution, Holm): "
@@ -310,9 +315,10 @@ def methods_paragraph(a: Analysis) -> str:
         f"degrees of freedom; critical difference CD = q_α/√2 · √(k(k+1)/(6n)), q_α/√2 = "
         f"{nemenyi_q_alpha(k, a.alpha):.3f} for k = {k} at α = {_alpha(a.alpha)}), and with two-sided Wilcoxon "
         f"signed-rank tests on the paired block values, Holm-adjusted over the {k * (k - 1) // 2} pairs; zero "
-        f"differences were discarded (Wilcoxon's method), the exact null distribution was used when at most "
-        f"{WILCOXON_EXACT_MAX_N} non-zero differences without ties remained, otherwise the normal approximation "
-        f"with tie and continuity correction. Effect size of a pair is the matched-pairs rank-biserial correlation "
+        f"differences were discarded (Wilcoxon's method) and, as in R's wilcox.test, the exact null "
+        f"distribution was used only when fewer than {WILCOXON_EXACT_BELOW_N} non-zero differences remained and "
+        f"there were neither ties nor zero differences, otherwise the normal approximation with tie and "
+        f"continuity correction. Effect size of a pair is the matched-pairs rank-biserial correlation "
         f"r_rb (positive: the first condition received larger, i.e. worse, ranks). Mean ranks come with "
         f"{a.ci:.0%} percentile bootstrap intervals ({a.n_boot} resamples of participants, seed {a.seed}), which "
         f"keeps each participant's trials together. Bradley–Terry strengths were fitted by maximum likelihood "
@@ -358,6 +364,7 @@ def build_document(a: Analysis, title: str) -> Document:
                          "r_rb": wil.loc[(x, y), "rank_biserial"], "Wilcoxon p_adj (Holm)": wil.loc[(x, y), "p_adjusted"],
                          "method": wil.loc[(x, y), "method"]})
     ptab = pd.DataFrame(prow)
+    ptab["Wilcoxon V"] = [f"{v:g}" for v in ptab["Wilcoxon V"]]  # a rank sum: 442 or 442.5, not 442.000
     for col in ("Nemenyi p_adj", "Wilcoxon p_adj (Holm)"):
         ptab[col] = [_p_cell(p) for p in ptab[col]]
     doc.table(ptab, "Table 3. Post-hoc comparisons (Δ: difference of mean ranks; r_rb: matched-pairs rank-biserial "
@@ -372,7 +379,8 @@ def build_document(a: Analysis, title: str) -> Document:
         for g, t in a.groups.items():
             cols = ["level", "criterion", "n_blocks", "n_participants", "chi2", "p", "kendall_w"] + \
                    [f"mean_rank_{x}" for x in a.conditions]
-            show = t[cols].rename(columns={f"mean_rank_{x}": f"mean rank {x}" for x in a.conditions})
+            show = t[cols].rename(columns={"n_blocks": "n", "n_participants": "participants", "chi2": "χ²",
+                                           "kendall_w": "W", **{f"mean_rank_{x}": f"mean rank {x}" for x in a.conditions}})
             show["p"] = [_p_cell(p) for p in show["p"]]
             doc.table(show, f"Friedman test per level of '{g}' (blocks: {a.block}s).")
     if a.questionnaire_reliability is not None:
@@ -380,7 +388,9 @@ def build_document(a: Analysis, title: str) -> Document:
         rel = a.questionnaire_reliability
         doc.p("Internal consistency per scale (Cronbach's α; participants who answered every item of the scale; "
               "α ≥ 0.7 is conventionally taken as acceptable): " + "; ".join(
-                  f"{r.scale}: α = {_num(r.alpha)} ({r.n_items} items, {r.n_participants} participants)"
+                  f"{r.scale}: α = {_num(r.alpha)} ({r.n_items} items, {r.n_participants} participants"
+                  + (", below 0.7: the items do not form a reliable scale" if np.isfinite(r.alpha) and r.alpha < 0.7
+                     else "") + ")"
                   for r in rel.itertuples()) + ".")
         doc.table(a.questionnaire_items, "Questionnaire items.")
     doc.h(1, "Exclusions")

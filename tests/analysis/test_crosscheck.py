@@ -260,3 +260,44 @@ def test_skillings_mack_permutation_p_agrees_with_chi2_on_many_blocks() -> None:
     res = skillings_mack(values, n_perm=4000, seed=1)
     assert 0.01 < res.p < 0.99
     assert res.p_permutation == pytest.approx(res.p, abs=0.03)
+
+
+def test_wilcoxon_follows_r_on_zeros_and_the_exact_limit(r_wilcox_normal_p) -> None:
+    """R's wilcox.test uses the exact distribution only for n < 50 non-zero differences with neither ties nor
+    zeros; scipy's 'auto' would stay exact after dropping zeros. The p values must be R's in every branch."""
+    d = np.arange(1.0, 21.0)  # 20 distinct |d|, no zeros; three negatives: V = 210 - (2 + 5 + 11) = 192
+    d[[1, 4, 10]] *= -1
+    zeros = np.r_[d, 0.0, 0.0]
+    row = wilcoxon_holm(np.c_[zeros, np.zeros_like(zeros)], ["a", "b"]).iloc[0]
+    v, p = r_wilcox_normal_p(zeros)
+    assert row.zeros_dropped == 2 and row.method == "normal approximation" and row.continuity_correction
+    assert row.statistic == v and row.p == pytest.approx(p, rel=1e-12)
+    # without the zeros the same differences get the exact test (scipy's exact = R's psignrank)
+    exact = wilcoxon_holm(np.c_[d, np.zeros_like(d)], ["a", "b"]).iloc[0]
+    assert exact.method == "exact" and exact.p == pytest.approx(stats.wilcoxon(d, method="exact").pvalue)
+    assert exact.p != pytest.approx(p, rel=1e-6)
+    for n, method in ((49, "exact"), (50, "normal approximation")):
+        dn = np.arange(1, n + 1) * np.where(np.arange(n) % 3 == 0, -1.0, 1.0)
+        r = wilcoxon_holm(np.c_[dn, np.zeros(n)], ["a", "b"]).iloc[0]
+        assert r.method == method, n
+        if method != "exact":
+            assert r.p == pytest.approx(r_wilcox_normal_p(dn)[1], rel=1e-12)
+
+
+def test_dataframe_api_gives_the_numbers_of_the_full_analysis() -> None:
+    """Notebook use: tidy or wide DataFrames in, DataFrames out, equal to what the command-line analysis
+    computes (practice and attention-check trials left out the same way)."""
+    from results_analysis import run_analysis
+
+    df = simulate_results(12, 4, seed=14)
+    full = run_analysis(df, n_boot=300, seed=2).criteria["synchronization"]
+    pd.testing.assert_frame_equal(condition_summary(df, "synchronization", n_boot=300, seed=2), full.summary)
+    pd.testing.assert_frame_equal(bradley_terry(df, "synchronization", n_boot=150, seed=2), full.bradley_terry)
+    rated = df[~df.is_practice & ~df.is_attention_check & (df.criterion == "synchronization")]
+    wide = rated.pivot(index=["participant", "trial_index"], columns="condition", values="rank")
+    assert list(wide.columns) == full.blocks.conditions
+    for table, ref in ((nemenyi(wide), full.posthoc["nemenyi"]), (wilcoxon_holm(wide), full.posthoc["wilcoxon_holm"])):
+        pd.testing.assert_frame_equal(table.reset_index(drop=True), ref.reset_index(drop=True))
+    assert conover(wide)["p"].tolist() == pytest.approx(conover(full.blocks.ranks, full.blocks.conditions)["p"].tolist())
+    with pytest.raises(ValueError, match="criteria"):
+        condition_summary(df)

@@ -42,8 +42,9 @@ def test_r_friedman_rounding_times_long_format() -> None:
 
 
 def test_scipy_friedmanchisquare_documented_example() -> None:
-    # scipy.stats.friedmanchisquare docs: pulse rate of seven students before, immediately after and
-    # 5 minutes after exercise; res.statistic = 10.57142857142857, res.pvalue = 0.005063414171757498.
+    # SciPy's hypothesis-test tutorial for friedmanchisquare: pulse rate of seven students before, immediately
+    # after and 5 minutes after exercise; res.statistic = 10.57142857142857, res.pvalue = 0.005063414171757498.
+    # (No ties: rank sums 10, 21, 11, so chi2 = 12/84 * 662 - 84 = 74/7 by hand as well.)
     wide = pd.DataFrame({"before": [72, 96, 88, 92, 74, 76, 82],
                          "immediately_after": [120, 120, 132, 120, 101, 96, 112],
                          "five_min_after": [76, 95, 104, 96, 84, 72, 76]})
@@ -52,9 +53,19 @@ def test_scipy_friedmanchisquare_documented_example() -> None:
     assert res["p"] == pytest.approx(0.005063414171757498, rel=1e-9)
 
 
+def test_scipy_friedmanchisquare_docstring_example() -> None:
+    # scipy.stats.friedmanchisquare docstring (SciPy 1.17): x = default_rng(seed=18).random((6, 10)), six
+    # conditions x ten blocks -> (11.428571428571416, 0.043514520866727614).
+    x = np.random.default_rng(seed=18).random((6, 10))
+    res = friedman(pd.DataFrame(x.T)).iloc[0]
+    assert res["chi2"] == pytest.approx(11.428571428571416, rel=1e-12)
+    assert res["p"] == pytest.approx(0.043514520866727614, rel=1e-9)
+    assert (res["n_blocks"], res["k"], res["df"]) == (10, 6, 5)
+
+
 def test_pingouin_friedman_wine_example() -> None:
-    # pingouin's test_friedman (checked there against R's friedman.test and DescTools::KendallW):
-    # Q = 2, p = 0.3678794, W = 0.08333333 for 12 raters x 3 wines.
+    # pingouin.friedman docstring (pingouin 0.7.0; also its test suite, checked there against R's
+    # friedman.test and DescTools::KendallW): 12 raters x 3 wines, W = 0.083333, Q = 2.0, p_unc = 0.367879.
     wide = pd.DataFrame({
         "white": [10, 8, 7, 9, 7, 4, 5, 6, 5, 10, 4, 7],
         "red": [7, 5, 8, 6, 5, 7, 9, 6, 4, 6, 7, 3],
@@ -121,3 +132,42 @@ def test_r_wilcox_test_paired_example() -> None:
     assert row["method"] == "exact" and not row["continuity_correction"]
     assert row["p"] == pytest.approx(2 * 0.01953, abs=1e-5)
     assert row["p_adjusted"] == row["p"]  # one pair: Holm changes nothing
+
+
+def test_r_wilcox_test_normal_approximation_example(r_wilcox_normal_p) -> None:
+    # R ?wilcox.test, same data: wilcox.test(y - x, alternative = "less", exact = FALSE, correct = FALSE)
+    # ("H&W large sample approximation") gives V = 5, p-value = 0.01908. Our hand-written copy of R's
+    # normal approximation (conftest.py; it checks the continuity-corrected variant in test_crosscheck) must
+    # agree.
+    x = np.array([1.83, 0.50, 1.62, 2.48, 1.68, 1.88, 1.55, 3.06, 1.30])
+    y = np.array([0.878, 0.647, 0.598, 2.05, 1.06, 1.29, 1.06, 3.14, 1.29])
+    v, p_two_sided = r_wilcox_normal_p(y - x, correct=False)
+    assert v == 5
+    assert p_two_sided / 2 == pytest.approx(0.01908, abs=5e-6)
+
+
+def test_scipy_wilcoxon_documented_example() -> None:
+    # scipy.stats.wilcoxon docstring: Darwin's cross- minus self-fertilized corn heights,
+    # d = [6, 8, ..., 75]; two-sided exact p = 0.041259765625, and alternative='greater' reports the sum of
+    # the ranks of the positive differences, 96.0 (what R calls V).
+    d = np.array([6, 8, 14, 16, 23, 24, 28, 29, 41, -48, 49, 56, 60, -67, 75], dtype=float)
+    row = wilcoxon_holm(np.c_[d, np.zeros_like(d)], ["cross", "self"]).iloc[0]
+    assert row["method"] == "exact"
+    assert row["statistic"] == 96
+    assert row["p"] == pytest.approx(0.041259765625, rel=1e-12)
+
+
+def test_pingouin_cronbach_alpha_listwise_example() -> None:
+    # pingouin.cronbach_alpha docstring (pingouin 0.7.0), data set 'cronbach_wide_missing' (binary answers of
+    # 12 people to 11 items, from real-statistics.com): after listwise deletion, "In R:
+    # psych:alpha(data, use='complete.obs')" alpha = 0.8016949152542373.
+    from results_analysis import cronbach_alpha
+
+    nan = np.nan
+    data = pd.DataFrame([
+        [1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1], [1, 1, 1, 1, 1, 1, 1, 1, 0, 1, 0], [nan, 0, 1, 1, nan, 1, 1, 1, 1, 0, 0],
+        [1, 1, 1, 0, 1, 1, 0, 1, 1, 0, 0], [1, 1, 1, 1, 1, 0, 0, 0, 1, 0, 0], [0, 1, nan, 0, 1, 1, 1, 1, 0, 0, 0],
+        [1, 1, 1, 1, 0, 0, 1, 0, 0, 0, 0], [1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0], [0, 1, 0, 1, 1, 0, 0, 0, 0, 1, 0],
+        [1, 0, 0, 1, 0, 1, 0, 0, nan, 0, 0], [1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0], [1, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0]],
+        columns=[f"Q{i}" for i in range(1, 12)])
+    assert cronbach_alpha(data) == pytest.approx(0.8016949152542373, rel=1e-12)

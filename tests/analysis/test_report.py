@@ -187,3 +187,23 @@ def test_package_never_imports_studyapp(tmp_path: Path) -> None:
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "o" / "report.html").exists()
+
+
+def test_report_names_the_pairs_where_post_hoc_tests_disagree(written) -> None:
+    out, a = written
+    paras = (out / "report.md").read_text().split("\n\n")
+    s = json.loads((out / "stats.json").read_text())
+    for crit in a.criteria:
+        # the post-hoc paragraph follows the criterion's opening paragraph
+        post = paras[next(i for i, p in enumerate(paras) if p.startswith(f"**{crit.capitalize()}.**")) + 1]
+        nem = {(r["a"], r["b"]): r["significant"] for r in s[crit]["posthoc"]["nemenyi"]}
+        wil = {(r["a"], r["b"]): r["p_adjusted"] < 0.05 for r in s[crit]["posthoc"]["wilcoxon_holm"]}
+        differ = [f"{x} vs {y} (significant only with {'Wilcoxon' if wil[(x, y)] else 'Nemenyi'})"
+                  for (x, y) in nem if nem[(x, y)] != wil[(x, y)]]
+        expected = ("led to the same conclusions" if not differ
+                    else "agreed with the Nemenyi tests except for " + " and ".join(differ))
+        assert expected in post, crit
+    table3 = next(p for p in paras if p.startswith("| criterion | pair |"))
+    for line in table3.splitlines()[2:]:
+        v = line.split(" | ")[4]
+        assert float(v) * 2 == int(float(v) * 2) and not v.endswith(".000"), line  # a rank sum, as printed by R
