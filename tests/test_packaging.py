@@ -49,17 +49,23 @@ def test_wheel_contains_shaders_designs_and_demo_data(wheel: Path) -> None:
 
 def test_installed_wheel_runs_outside_checkout(wheel: Path, tmp_path: Path) -> None:
     env_dir = tmp_path / "venv"
-    venv.EnvBuilder(with_pip=False).create(env_dir)
-    py = env_dir / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+    # with the venv's own pip (ensurepip, offline), so the console scripts are written for this venv's python
+    venv.EnvBuilder(with_pip=True).create(env_dir)
+    bindir = env_dir / ("Scripts" if os.name == "nt" else "bin")
+    py = bindir / ("python.exe" if os.name == "nt" else "python")
     site = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                           capture_output=True, text=True, check=True).stdout.strip()
     # Borrow numpy, moderngl, ... from the test environment, but not studyapp itself.
     (Path(site) / "borrowed.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps",
-                    "--target", site, str(wheel)], check=True)
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)], check=True)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     run = lambda *a: subprocess.run([str(py), "-m", "studyapp.cli", *a], cwd=tmp_path, env=env,
                                     capture_output=True, text=True, timeout=300)
+    # the README's promise: `pip install dist/*.whl`, then the `studyapp` command works
+    for script, words in (("studyapp", "demo"), ("results-analysis", "--out")):
+        exe = bindir / (script + (".exe" if os.name == "nt" else ""))
+        helped = subprocess.run([str(exe), "--help"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+        assert helped.returncode == 0 and words in helped.stdout, (script, helped.stdout + helped.stderr)
     where = subprocess.run([str(py), "-c", "import studyapp, studyapp.resources as r; print(studyapp.__file__); print(r.demo_design())"],
                            cwd=tmp_path, env=env, capture_output=True, text=True, check=True).stdout.split()
     assert str(ROOT) not in where[0], f"studyapp imported from the checkout: {where[0]}"

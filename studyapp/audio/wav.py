@@ -135,6 +135,45 @@ def _bits_per_sample(path: Path) -> int | None:
             f.seek(size + (size & 1), 1)
 
 
+def _check_chunks(path: Path, head: bytes) -> None:
+    """Name the chunk a damaged file breaks in, before scipy fails on it with a bare struct/reshape error.
+
+    Only sizes are checked (a chunk that claims more bytes than follow, a missing ``fmt `` or ``data``);
+    everything inside the chunks is left to scipy. Streaming writers put 0 or 0xFFFFFFFF in an unfinished
+    ``data`` size, and RF64 keeps the real sizes elsewhere, so those are not judged here.
+    """
+    if head[:4] == b"RF64":
+        return
+    endian = "<" if head[:4] == b"RIFF" else ">"
+    size = path.stat().st_size
+    seen: set[bytes] = set()
+    with path.open("rb") as f:
+        f.seek(12)
+        while True:
+            pos = f.tell()
+            chunk = f.read(8)
+            if len(chunk) < 8:
+                break
+            cid, n = chunk[:4], struct.unpack(endian + "I", chunk[4:])[0]
+            name = cid.decode("latin-1").strip() or "?"
+            left = size - pos - 8
+            if cid == b"data" and n in (0, 0xFFFFFFFF):
+                return
+            if n > left:
+                if cid == b"data":
+                    raise InputError(path, "data chunk", f"declares {n} bytes of samples but only {left} follow: "
+                                                         "the file is truncated")
+                raise InputError(path, f"{name} chunk at byte {pos}", f"declares {n} bytes but only {left} follow: "
+                                                                     "the file is truncated or damaged")
+            seen.add(cid)
+            if cid == b"data":
+                break
+            f.seek(n + (n & 1), 1)
+    for cid in (b"fmt ", b"data"):
+        if cid not in seen:
+            raise InputError(path, f"{cid.decode().strip()} chunk", "missing: the file is truncated or not a complete WAV")
+
+
 def _read(path: Path) -> tuple[int, np.ndarray]:
     if not path.is_file():
         raise InputError(path, None, "file not found" if not path.exists() else "not a regular file")
@@ -142,6 +181,7 @@ def _read(path: Path) -> tuple[int, np.ndarray]:
         head = f.read(12)
     if len(head) < 12 or head[:4] not in (b"RIFF", b"RIFX", b"RF64") or head[8:12] != b"WAVE":
         raise InputError(path, "header", f"not a WAV file (starts with {head[:12]!r}, expected RIFF....WAVE)")
+    _check_chunks(path, head)
     with warnings.catch_warnings():
         # scipy warns (rather than fails) on chunks it skips and on data cut short; a short file is an error here.
         warnings.simplefilter("error", wavfile.WavFileWarning)

@@ -15,6 +15,7 @@ whole motion (skeleton included) in one NPZ.
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ from studyapp.motion.fk import joint_positions
 from studyapp.motion.rotations import representation_width, to_quat
 from studyapp.motion.skeleton import Motion, Skeleton
 
-__all__ = ["load_rotation_array", "save_motion_npz", "load_motion_npz", "read_array", "is_motion_npz"]
+__all__ = ["load_rotation_array", "save_motion_npz", "load_motion_npz", "read_array", "is_motion_npz", "check_numpy_file"]
 
 # keys tried, in order, when an NPZ holds several arrays and no key is given
 _ROTATION_KEYS = ("rotations", "rotation", "poses", "pose", "motion", "body_pose", "data", "arr_0")
@@ -46,9 +47,29 @@ def _template_motion(template: Motion | Skeleton | str | Path) -> Motion:
     return load_motion(name)
 
 
+def check_numpy_file(path: str | Path) -> None:
+    """Raise :class:`InputError` unless ``path`` starts like an ``.npy`` or ``.npz`` file.
+
+    Checked before ``np.load``, which takes any other file for a pickle and then complains about
+    pickles, a message that hides the real problem (a text file or a BVH saved as ``.npy``).
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except FileNotFoundError:
+        raise InputError(str(path), None, "file not found") from None
+    except OSError as exc:
+        raise InputError(str(path), None, f"cannot read file: {exc.strerror or exc}") from None
+    if not head:
+        raise InputError(str(path), None, "file is empty; expected a NumPy .npy or .npz file")
+    if not head.startswith((b"\x93NUMPY", b"PK\x03\x04", b"PK\x05\x06")):
+        raise InputError(str(path), "header", f"not a NumPy .npy/.npz file (it starts with {head[:8]!r})")
+
+
 def read_array(path: str | Path, key: str | None = None) -> tuple[np.ndarray, str]:
     """The rotation array of an ``.npy`` / ``.npz`` file and the place it came from (for messages)."""
     path = str(path)
+    check_numpy_file(path)
     try:
         loaded = np.load(path, allow_pickle=False)
     except FileNotFoundError:
@@ -195,7 +216,9 @@ def load_rotation_array(
     rot = np.broadcast_to(base.rotations[first] if first is not None else sk.rest_rotations, (n_frames, sk.n_joints, 4)).copy()
     trans = np.broadcast_to(base.translations[first] if first is not None else sk.offsets, (n_frames, sk.n_joints, 3)).copy()
     rot[:, idx] = quats
-    if root_key is not None:
+    if root_key is None:
+        _warn_unused_root(path, n_frames)
+    else:
         root, rwhere = read_array(path, root_key)
         root = np.asarray(root, dtype=np.float64).reshape(-1, 3) if np.asarray(root).size == n_frames * 3 else None
         if root is None:
@@ -203,6 +226,27 @@ def load_rotation_array(
         roots = np.flatnonzero(sk.parents < 0)
         trans[:, roots[0]] = root
     return Motion(sk, float(fps), rot, trans, source=path)
+
+
+def _warn_unused_root(path: str, n_frames: int) -> None:
+    """Warn when an NPZ holds what looks like a root translation that nobody asked for.
+
+    It is not applied on a guess: model outputs store it in metres, centimetres or normalised units,
+    and a wrong unit would throw the figure across the scene; the root stays where the template has it.
+    """
+    if not path.lower().endswith(".npz"):
+        return
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            found = [k for k in _ROOT_KEYS if k in z.files and z[k].size == n_frames * 3]
+    except (ValueError, OSError, EOFError, AttributeError):
+        return
+    if found:
+        warnings.warn(
+            f"{path}: array {found[0]!r} looks like a ({n_frames}, 3) root translation but is not used; the root "
+            f"keeps the template's position (pass root_key={found[0]!r} / --root-key {found[0]} to apply it)",
+            stacklevel=3,
+        )
 
 
 def save_motion_npz(motion: Motion, path: str | Path) -> None:
@@ -245,6 +289,7 @@ def is_motion_npz(path: str | Path) -> bool:
 def load_motion_npz(path: str | Path, fps: float | None = None) -> Motion:
     """Read an NPZ written by :func:`save_motion_npz` back into a :class:`Motion`."""
     path = str(path)
+    check_numpy_file(path)
     try:
         z = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:

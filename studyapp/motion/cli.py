@@ -1,7 +1,8 @@
 """``studyapp inspect`` and ``studyapp convert``.
 
 inspect PATH [--fps F] [--json]
-    Summary of a motion (BVH / NPZ / NPY), a face file (JSON / CSV) or a WAV.
+    Summary of a motion (BVH / NPZ / NPY), a face file (JSON / CSV, an NPZ with ``weights`` and
+    ``names``, a bare ``(F, 52)`` NPY when ``--fps`` is given) or a WAV.
 convert IN OUT [--fps F] [--in-fps F] [--order XYZ] [--template T] [--representation R] ...
     BVH -> BVH (new rotation order and/or frame rate), NPZ/NPY rotation arrays -> BVH or NPZ (needs
     ``--template``), BVH -> NPZ (studyapp motion NPZ with world joint positions).
@@ -11,6 +12,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "inspect",
         help="summarize a motion, face or audio file",
-        description="Print what studyapp reads from a BVH/NPZ/NPY motion, a face JSON/CSV or a WAV file.",
+        description="Print what studyapp reads from a BVH/NPZ/NPY motion, a face JSON/CSV/NPZ/NPY or a WAV file.",
     )
     p.add_argument("path", help="file to inspect")
     p.add_argument("--fps", type=float, default=None, help="true frame rate (overrides a BVH header's Frame Time)")
@@ -82,13 +85,59 @@ def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
         from studyapp.audio.wav import summarize as wav_summarize
 
         return {"kind": "audio", **wav_summarize(path)}
+    if ext in (".npz", ".npy") and _looks_like_face_array(p, fps):
+        from studyapp.face.io import summarize as face_summarize
+
+        return {"kind": "face", **face_summarize(path, fps=fps)}
     if ext not in _MOTION_EXT:
         known = ", ".join(sorted(_MOTION_EXT | set(_FACE_EXT) | set(_AUDIO_EXT)))
         raise InputError(path, None, f"inspect does not know {ext or 'files without an extension'}; it reads "
                                      f"motion, face and audio files ({known})")
     from studyapp.motion.io import summarize_motion
 
-    return {"kind": "motion", **summarize_motion(path, fps=fps)}
+    summary = {"kind": "motion", **summarize_motion(path, fps=fps)}
+    if ext == ".npy" and fps is None and _npy_width(p) == _N_ARKIT:
+        # a bare face NPY carries no frame rate, so it cannot be told from a rotation array without one
+        summary.setdefault("warnings", []).append(
+            f"{_N_ARKIT} columns: if these are ARKit blendshape weights (Apple order), pass --fps to read it as face data"
+        )
+    return summary
+
+
+_N_ARKIT = 52
+
+
+def _npy_width(path: Path) -> int | None:
+    """Column count of a 2-D numeric ``.npy`` (header only; ``None`` for anything else)."""
+    import numpy as np
+
+    try:
+        arr = np.load(str(path), mmap_mode="r", allow_pickle=False)
+    except (ValueError, OSError, EOFError):
+        return None
+    if not isinstance(arr, np.ndarray) or arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number):
+        return None
+    return int(arr.shape[1])
+
+
+def _looks_like_face_array(path: Path, fps: float | None) -> bool:
+    """Whether an ``.npz`` / ``.npy`` holds blendshape weights rather than joint rotations.
+
+    Face NPZ files name their columns (``weights`` + ``names``), so they are recognised by their keys;
+    a bare ``(F, 52)`` NPY is face data only when the caller gives the frame rate it lacks.
+    """
+    import zipfile
+
+    import numpy as np
+
+    if path.suffix.lower() == ".npy":
+        return fps is not None and _npy_width(path) == _N_ARKIT
+    try:
+        with np.load(str(path), allow_pickle=False) as z:
+            keys = set(z.files)
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, AttributeError):
+        return False
+    return {"weights", "names"} <= keys and "rotations" not in keys
 
 
 def _text(value: Any, nested: bool = False) -> str:
@@ -168,18 +217,40 @@ def load_template(name: str) -> Any:
     raise InputError(name, None, f"template is {what}; {_TEMPLATE_KINDS}")
 
 
-def cmd_convert(args: argparse.Namespace) -> int:
-    from studyapp.motion.arrays import save_motion_npz
-    from studyapp.motion.bvh import write_bvh
-    from studyapp.motion.io import load_motion
-    from studyapp.motion.resample import resample
+def _check_fps(value: float | None, option: str) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise InputError(None, option, f"frame rate must be a positive number, got {value:g}")
 
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    _check_fps(args.fps, "--fps")
+    _check_fps(args.in_fps, "--in-fps")
     src, dst = Path(args.input), Path(args.output)
     out_ext = dst.suffix.lower()
     if out_ext not in (".bvh", ".npz"):
         raise InputError(str(dst), None, f"cannot write {out_ext or 'files without extension'}; use .bvh or .npz")
     if args.order is not None and out_ext != ".bvh":
         raise InputError(str(dst), None, "--order only applies to BVH output")
+    # tolerated oddities (a header frame count that disagrees, an unused root array) are reported as
+    # "warning:" lines like inspect's, not as Python warnings pointing into studyapp's source
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            return _convert(args, src, dst, out_ext)
+    finally:
+        for w in caught:
+            if issubclass(w.category, UserWarning):
+                print(f"warning: {w.message}", file=sys.stderr)
+            else:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+
+
+def _convert(args: argparse.Namespace, src: Path, dst: Path, out_ext: str) -> int:
+    from studyapp.motion.arrays import save_motion_npz
+    from studyapp.motion.bvh import write_bvh
+    from studyapp.motion.io import load_motion
+    from studyapp.motion.resample import resample
+
     in_ext = src.suffix.lower()
     kw: dict[str, Any] = {}
     in_fps = args.in_fps

@@ -56,8 +56,9 @@ def load_motion(
 
         return read_bvh(p, fps=fps)
     if ext in (".npz", ".npy"):
-        from studyapp.motion.arrays import is_motion_npz, load_motion_npz, load_rotation_array
+        from studyapp.motion.arrays import check_numpy_file, is_motion_npz, load_motion_npz, load_rotation_array
 
+        check_numpy_file(p)
         if ext == ".npz" and is_motion_npz(p) and template is None:
             return load_motion_npz(p, fps=fps)
         if template is None or representation is None:
@@ -97,8 +98,9 @@ def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, An
             out["header_frame_time"] = data.frame_time
             out["header_frames"] = data.header_frames
         elif ext in (".npz", ".npy"):
-            from studyapp.motion.arrays import is_motion_npz
+            from studyapp.motion.arrays import check_numpy_file, is_motion_npz
 
+            check_numpy_file(p)
             if ext == ".npz" and is_motion_npz(p):
                 motion = load_motion(p, fps=fps)
                 out["format"] = "npz (studyapp motion)"

@@ -124,14 +124,18 @@ def test_bad_files(tmp_path: Path) -> None:
     good = tmp_path / "good.wav"
     save_wav(AudioClip(np.zeros(1000, np.float32), 16000), good)
     data = good.read_bytes()
+    save_wav(AudioClip(np.zeros((1000, 2), np.float32), 16000), tmp_path / "stereo.wav")
+    stereo = (tmp_path / "stereo.wav").read_bytes()
     cases = {
         "text.wav": (b"hello, this is not audio at all", "header", "not a WAV"),
         "tiny.wav": (b"RIFF", "header", "not a WAV"),
-        "cut_header.wav": (data[:30], "header", "truncated"),
+        "cut_header.wav": (data[:30], "fmt chunk at byte 12", "truncated"),
         "cut_data.wav": (data[:1000], "data chunk", "truncated"),
         "no_samples.wav": (data[:44], "data chunk", "truncated"),
         # a RIFF/WAVE header followed by a chunk header cut short (scipy raises struct.error inside)
-        "cut_chunk.wav": (b"RIFFxxxxWAVEjunk\n", "header", "truncated"),
+        "cut_chunk.wav": (b"RIFFxxxxWAVEjunk\n", "fmt chunk", "truncated"),
+        # cut mid-sample in a stereo file: scipy fails with a bare reshape error there
+        "cut_stereo.wav": (stereo[:1001], "data chunk", "declares 4000 bytes of samples but only 957 follow"),
     }
     for name, (content, where, words) in cases.items():
         p = tmp_path / name

@@ -259,3 +259,78 @@ def test_convert_bad_template_is_one_line_naming_it(tmp_path, capsys, upper_rota
     assert main(["convert", str(tmp_path / "rot.npy"), str(tmp_path / "again.bvh"), "--template",
                  str(tmp_path / "m.npz"), "--representation", "axis_angle", "--fps", "15"]) == 0
     assert read_bvh(tmp_path / "again.bvh").n_frames == 12
+
+
+def test_convert_refuses_non_positive_frame_rates(tmp_path, capsys):
+    """A negative or zero --fps / --in-fps is one error line naming the option, not a traceback."""
+    from studyapp.cli import main
+
+    for option, value in (("--fps", "-3"), ("--fps", "0"), ("--in-fps", "nan")):
+        capsys.readouterr()
+        assert main(["convert", str(BEAT_SAMPLE), str(tmp_path / "o.bvh"), option, value]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"error: {option}: frame rate must be a positive number"), err
+        assert "Traceback" not in err and not (tmp_path / "o.bvh").exists()
+
+
+def test_files_that_are_not_numpy_are_named_as_such(tmp_path):
+    """np.load takes any non-NumPy file for a pickle; the message must say what the file really is."""
+    (tmp_path / "text.npy").write_text("hello")
+    (tmp_path / "motion.npz").write_bytes(BEAT_SAMPLE.read_bytes())
+    (tmp_path / "empty.npz").write_bytes(b"")
+    for name, problem in (("text.npy", "not a NumPy .npy/.npz file (it starts with b'hello')"),
+                          ("motion.npz", "not a NumPy .npy/.npz file (it starts with b'HIERARCH')"),
+                          ("empty.npz", "file is empty")):
+        for call in (lambda p: load_motion(p, template="beat", representation="axis_angle", fps=15),
+                     lambda p: load_motion(p), summarize_motion):
+            with pytest.raises(InputError) as err:
+                call(tmp_path / name)
+            assert err.value.path == str(tmp_path / name) and problem in err.value.problem, err.value
+            assert "pickle" not in str(err.value)
+
+
+def test_unused_root_array_is_reported_not_guessed(tmp_path, upper_rotations, capsys):
+    aa, _ = upper_rotations
+    root = np.tile([0.0, 1.0, 0.0], (aa.shape[0], 1))  # metres: applying it to a cm skeleton would be wrong
+    np.savez(tmp_path / "out.npz", poses=aa, trans=root)
+    template = read_bvh(BEAT_SAMPLE)
+    with pytest.warns(UserWarning, match="'trans' looks like a \\(12, 3\\) root translation but is not used"):
+        m = load_rotation_array(tmp_path / "out.npz", template, "axis_angle", fps=15)
+    np.testing.assert_allclose(m.translations[:, 0], np.tile(template.translations[0, 0], (12, 1)))
+    # on the command line the same note is one "warning:" line, and the file is still written
+    assert run_cli(["convert", str(tmp_path / "out.npz"), str(tmp_path / "o.bvh"), "--template", "beat",
+                    "--representation", "axis_angle", "--fps", "15"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("warning: ") and "--root-key trans" in err and err.count("\n") == 1, err
+    assert (tmp_path / "o.bvh").exists()
+
+
+def test_convert_reports_header_disagreement_as_a_warning_line(tmp_path, capsys):
+    src = write(tmp_path, SMALL_BVH.replace("Frames: 2", "Frames: 5"), "five.bvh")
+    assert run_cli(["convert", str(src), str(tmp_path / "o.bvh")]) == 0
+    err = capsys.readouterr().err
+    assert err == f"warning: {src}: header says Frames: 5 but the file has 2 data lines; using the data lines\n"
+    assert read_bvh_channels(tmp_path / "o.bvh").header_frames == 2
+
+
+def test_inspect_face_arrays(tmp_path, capsys):
+    """Face NPZ (weights + names) is face data; a bare (F, 52) NPY becomes face data once --fps is given."""
+    from studyapp.face.arkit import ARKIT_NAMES
+
+    w = np.random.default_rng(3).uniform(0, 0.5, size=(10, 52))
+    np.savez(tmp_path / "face.npz", weights=w[:, :51], names=np.array(ARKIT_NAMES[:51]), fps=np.float64(30))
+    np.save(tmp_path / "face.npy", w)
+    assert run_cli(["inspect", str(tmp_path / "face.npz"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["kind"] == "face" and s["frames"] == 10 and s["fps"] == 30 and s["missing"] == ["tongueOut"]
+    assert run_cli(["inspect", str(tmp_path / "face.npy"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["kind"] == "motion" and any("pass --fps" in x for x in s["warnings"])
+    assert run_cli(["inspect", str(tmp_path / "face.npy"), "--fps", "60", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["kind"] == "face" and s["fps"] == 60 and abs(s["duration"] - 10 / 60) < 1e-9
+    # a rotation array is still a rotation array
+    np.save(tmp_path / "rot.npy", np.zeros((4, 47 * 3)))
+    assert run_cli(["inspect", str(tmp_path / "rot.npy"), "--fps", "15", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["kind"] == "motion" and s["arrays"]["array"]["shape"] == [4, 141] and not s["warnings"]
