@@ -36,10 +36,12 @@ import os
 import re
 import secrets
 import shutil
+import sqlite3
 import sys
 import tempfile
 import tomllib
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
@@ -518,15 +520,22 @@ def _read_results_file(path: Path) -> dict[str, Any]:
             data = zf.read("results.json")
     except FileNotFoundError:
         raise InputError(path, None, "file not found") from None
-    except (zipfile.BadZipFile, KeyError, ValueError, OSError) as exc:
+    # Flipped bytes inside a compressed member surface as zlib.error or EOFError, a zip CRC failure as
+    # BadZipFile, encryption or an unknown compression method as RuntimeError/NotImplementedError.
+    except (zipfile.BadZipFile, zlib.error, EOFError, RuntimeError, NotImplementedError, KeyError, ValueError,
+            OSError) as exc:
         raise InputError(path, None, f"not a readable results file ({exc}); ask the participant to send it again") from None
-    if manifest.get("format") != RESULTS_FORMAT:
+    if not isinstance(manifest, dict) or manifest.get("format") != RESULTS_FORMAT:
         raise InputError(path, "manifest.json", "not a studyapp results file")
-    if _sha256_bytes(data) != manifest.get("files", {}).get("results.json"):
+    files = manifest.get("files")
+    if not isinstance(files, dict) or _sha256_bytes(data) != files.get("results.json"):
         raise InputError(path, "results.json", "checksum mismatch: the file was damaged or edited; ask the "
                          "participant to send the original again")
-    payload = json.loads(data)
-    if payload.get("design_hash") != manifest.get("design_hash"):
+    try:
+        payload = json.loads(data)
+    except ValueError as exc:
+        raise InputError(path, "results.json", f"not valid JSON ({exc})") from None
+    if not isinstance(payload, dict) or payload.get("design_hash") != manifest.get("design_hash"):
         raise InputError(path, "results.json", "the manifest and the results disagree on the design")
     return payload
 
@@ -552,6 +561,11 @@ def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file:
                 reports.append(MergeReport(f, True, f"participant {pid}", pid))
             except StudyappError as exc:
                 reports.append(MergeReport(f, False, getattr(exc, "problem", str(exc))))
+            except (KeyError, TypeError, ValueError, AttributeError, sqlite3.IntegrityError) as exc:
+                # A file whose checksum matches but whose tables lack fields was not written by studyapp
+                # (or by an incompatible version); the transaction rolled back, so nothing of it was kept.
+                reports.append(MergeReport(f, False, f"results.json is not in the studyapp results layout "
+                                           f"({type(exc).__name__}: {exc}); it was not imported"))
     finally:
         db.close()
     return reports

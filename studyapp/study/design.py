@@ -361,6 +361,9 @@ class _Collector:
         head, idx = parts[0]
         if idx:  # array of tables: find the idx-th "[[head]]"
             hits = [i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)]
+            if not hits:  # an inline list (practice = [...]): its element sits on the key's line
+                hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
+                return None if hit is None else hit + 1
             if len(hits) <= int(idx):
                 return None
             start = hits[int(idx)]
@@ -373,7 +376,12 @@ class _Collector:
             hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\s*{re.escape(head)}\s*\]", ln)), None)
             if hit is None:
                 hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
+            if hit is None:  # a problem with a whole array of tables: point at its first block
+                hit = next((i for i, ln in enumerate(self.lines)
+                            if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)), None)
                 return None if hit is None else hit + 1
+            if not re.match(r"^\s*\[", self.lines[hit]):
+                return hit + 1
             start = hit
             if len(parts) == 1:
                 return start + 1
@@ -421,9 +429,10 @@ def _check_table(col: _Collector, table: Any, schema: dict, where: str) -> dict:
             col.add(kpath, f"must be {want}, got {type(value).__name__} {value!r}"[:200], f"write {key} as {want}")
             continue
         good[key] = value
-    for key, (_, required) in schema.items():
+    for key, (types, required) in schema.items():
         if required and key not in table:
-            col.add(f"{where}.{key}" if where else key, "is required but missing", f"add {key} = ...")
+            fix = f"add [[{key}]] blocks (see study_designs/example_beat.toml)" if types == (list,) else f"add {key} = ..."
+            col.add(f"{where}.{key}" if where else key, "is required but missing", fix)
     return good
 
 
@@ -642,7 +651,9 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
                 duration_s=float(e["duration_s"]) if "duration_s" in e else None,
                 in_rotation=bool(e.get("in_rotation", True)),
             ))
-    stim_ids = [s.id for s in stimuli]
+    # Every stimulus that has an id counts as known, even one with another problem (say, no audio): a
+    # reference to it from `practice` or an attention check is not a second problem.
+    stim_ids = [e["id"] for _, e in stims if e.get("id")]
     if stimuli and not any(s.in_rotation for s in stimuli):
         col.add("stimuli", "every stimulus has in_rotation = false: there are no rated trials",
                 "set in_rotation = true (the default) on the clips to be rated")
@@ -655,7 +666,8 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         criteria = [replace(c) for c in DEFAULT_CRITERIA]  # copies: an edit to one design must not reach others
     if "criteria" in top and not crits:
         col.add("criteria", "empty list of criteria", "remove `criteria` to use the default three, or add some")
-    crit_ids = [c.id for c in criteria]
+    # As for stimuli: a criterion with a problem of its own is still known by its id to attention checks.
+    crit_ids = [e["id"] for _, e in crits if e.get("id")] if "criteria" in top else [c.id for c in criteria]
 
     # -- avatar
     avatar_default = avatar.get("model", "builtin")
@@ -665,7 +677,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
             col.add(f"avatar.by_speaker.{k}", "must be \"builtin\" or a glTF/VRM path", f'{k} = "builtin"')
         else:
             by_speaker[k] = v
-    speakers = {s.tags.get("speaker") for s in stimuli}
+    speakers = {str(e.get("tags", {}).get("speaker")) for _, e in stims if "speaker" in e.get("tags", {})}
     for k in by_speaker:
         if k not in speakers:
             col.add(f"avatar.by_speaker.{k}", f"no stimulus has tags.speaker = {k!r}",

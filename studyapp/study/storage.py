@@ -323,8 +323,12 @@ class ResultsDB:
         con.execute("PRAGMA foreign_keys=ON")
 
     def _check_integrity(self) -> None:
-        problems = [r[0] for r in self._con.execute("PRAGMA integrity_check").fetchall()]
-        if problems != ["ok"]:
+        rows = [str(r[0]) for r in self._con.execute("PRAGMA integrity_check").fetchall()]
+        if rows != ["ok"]:
+            # One result row may hold dozens of lines (one per damaged cell): count lines, show only a few,
+            # so the message stays readable while still saying how much is wrong.
+            problems = [ln.strip() for r in rows for ln in r.splitlines()
+                        if ln.strip() and not ln.startswith("*** in database")]
             shown = "; ".join(problems[:3]) + (f" (+{len(problems) - 3} more)" if len(problems) > 3 else "")
             raise InputError(self.path, "integrity check", f"the results database is damaged: {shown}. Keep a "
                              "copy of the file for recovery and start a new one with --results")

@@ -375,3 +375,42 @@ def test_results_file_is_updated_on_resume_but_never_replaced_by_a_fresh_run(lab
     reset.close()
     assert again.name == full.name.replace(".zip", "-2.zip")
     assert full.read_bytes() == kept
+
+
+def test_merge_refuses_byte_damaged_truncated_and_malformed_files_one_line_each(lab, tmp_path: Path) -> None:
+    """Bytes flipped inside the compressed data, a cut-off download, a forged file with a matching checksum:
+    each is refused with a message, the others still import, and the database keeps nothing of the bad ones."""
+    import hashlib
+    import json
+
+    design_path, design, results = lab
+    info = make_bundle(design_path, tmp_path / "study.zip", results=results)
+    good = _remote_run(info.path, tmp_path, "R11")
+    raw = good.read_bytes()
+    with zipfile.ZipFile(good) as zf:
+        member = zf.getinfo("results.json")
+        manifest = json.loads(zf.read("manifest.json"))
+    start = member.header_offset + 30 + len(member.filename.encode()) + len(member.extra)
+    flipped = tmp_path / "flipped.zip"
+    data = bytearray(raw)
+    for i in range(start + 8, start + member.compress_size - 8, 97):  # inside the deflate stream
+        data[i] ^= 0xFF
+    flipped.write_bytes(bytes(data))
+    truncated = tmp_path / "truncated.zip"
+    truncated.write_bytes(raw[: len(raw) // 2])
+    forged = tmp_path / "forged.zip"
+    body = json.dumps({"design_hash": manifest["design_hash"], "participants": [{"id": "R99"}]}).encode()
+    manifest["files"]["results.json"] = hashlib.sha256(body).hexdigest()
+    with zipfile.ZipFile(forged, "w") as zf:
+        zf.writestr("results.json", body)
+        zf.writestr("manifest.json", json.dumps(manifest))
+
+    reports = {r.file.name: r for r in merge_results(results, [flipped, truncated, forged, good])}
+    for bad in (flipped, truncated, forged):
+        assert reports[bad.name].ok is False and reports[bad.name].message, bad.name
+    assert "not a readable results file" in reports[truncated.name].message
+    assert "layout" in reports[forged.name].message
+    assert reports[good.name].ok and reports[good.name].participant == "R11"
+    db = ResultsDB(results, design)
+    assert db.participant("R99") is None and db.participant("R11") is not None
+    db.close()

@@ -383,3 +383,24 @@ def test_designs_do_not_share_the_default_criteria_objects() -> None:
     a.criteria[0].explanation += " edited"
     assert b.criteria[0].explanation == before
     assert DEFAULT_CRITERIA[0].explanation == before
+
+
+def test_one_problem_is_reported_once_and_points_at_its_line(study: Path) -> None:
+    """A stimulus lacking audio is one problem, not also 'unknown stimulus' wherever it is referenced."""
+    text = GOOD.replace('id = "s1"\naudio = "audio/s1.wav"\n', 'id = "s1"\n')
+    text = text.replace('[[conditions]]\nid = "b"\nmotion = "motion/b/{stimulus}.bvh"\n', "")
+    text = text.replace('[[conditions]]\nid = "c"\nmotion = "motion/c/{stimulus}.bvh"\n', "")
+    probs = problems_for(study, text)
+    lines = text.splitlines()
+    assert only(probs, "stimuli[0].audio").line == lines.index('id = "s1"')
+    assert not [p for p in probs if p.key.startswith("practice")], [str(p) for p in probs]
+    p = only(probs, "conditions")  # a problem with the whole list points at its first block
+    assert p.line == lines.index("[[conditions]]") + 1
+    bad_practice = only(problems_for(study, GOOD.replace('practice = ["s1"]', 'practice = ["s9"]')), "practice[0]")
+    assert bad_practice.line == GOOD.splitlines().index('practice = ["s1"]') + 1
+    missing = only(problems_for(study, 'title = "x"\n[[stimuli]]\nid = "s1"\naudio = "audio/s1.wav"\n'), "conditions")
+    assert "[[conditions]]" in missing.fix
+    # a criterion lacking its question is one problem; the attention check that names it is fine
+    crit = GOOD.replace("[ordering]", '[[criteria]]\nid = "realism"\n\n[[criteria]]\nid = "sync"\nquestion = "?"\n\n'
+                                      "[ordering]")
+    assert [p.key for p in problems_for(study, crit)] == ["criteria[0].question"]
