@@ -31,14 +31,19 @@ CORE_COLUMNS = (
 )
 TAIL_COLUMNS = ("design_hash", "app_version")
 
+# Criteria keep the design's order (the order a trial's answers are stored in, so the first stored row of
+# each criterion tells it): the analysis tables and figures follow the row order, and a reader expects
+# "realism, synchronization, diversity" as the participants saw them, not the alphabet.
 _QUERY = """
+WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition, r.slot, r.rank,
        t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
        r.design_hash, r.app_version, c.position AS _cond_pos
 FROM responses r
 JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
+JOIN crit ON crit.criterion = r.criterion
 LEFT JOIN conditions c ON c.id = r.condition
-ORDER BY r.participant, r.trial_index, r.criterion, r.slot
+ORDER BY r.participant, r.trial_index, crit.pos, r.slot
 """
 
 

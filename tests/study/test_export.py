@@ -55,6 +55,19 @@ def test_long_table_shape_columns_and_values(results) -> None:
     assert len(export_dataframe(db_path, include_practice=False)) == 2 * (n_trials - 1) * 9
 
 
+def test_criteria_keep_the_design_order(results, tmp_path: Path) -> None:
+    db_path, design = results
+    wanted = [c.id for c in design.criteria]
+    assert wanted != sorted(wanted), "the fixture must list criteria out of alphabetical order"
+    df = export_dataframe(db_path)
+    assert list(dict.fromkeys(df["criterion"])) == wanted
+    # the analysis takes its table order from the export
+    from results_analysis import load_results, run_analysis
+
+    df.to_csv(tmp_path / "r.csv", index=False)
+    assert list(run_analysis(load_results(tmp_path / "r.csv"), n_boot=50).criteria) == wanted
+
+
 def test_export_matches_raw_tables(results) -> None:
     db_path, _ = results
     df = export_dataframe(db_path)
