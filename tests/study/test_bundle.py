@@ -6,6 +6,7 @@ import re
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from studyapp.errors import InputError
@@ -205,24 +206,35 @@ def test_tampered_bundle_is_refused(lab, tmp_path: Path) -> None:
     assert victim.read_bytes() != b"changed" and again.design_path.is_file()
 
 
-def test_live_model_is_bundled_without_revealing_metadata(tmp_path: Path) -> None:
-    import onnx
-
+def test_live_model_is_bundled_as_its_generated_motion(tmp_path: Path) -> None:
+    """A live condition must look like the others inside the zip: no .onnx singles it out, and the remote
+    participant's PC plays exactly the frames the model streams in the lab."""
+    from studyapp.motion.fk import joint_positions
     from studyapp.resources import designs_dir
+    from studyapp.study.stimuli import load_condition_motion
 
     source = designs_dir() / "live_model_example.toml"
-    original = onnx.load(str(designs_dir() / "models" / "reference_gesture.onnx"))
+    lab_design = load_design(source)
     info = make_bundle(source, tmp_path / "live.zip", results=tmp_path / "live.sqlite")
+    with zipfile.ZipFile(info.path) as zf:
+        names = zf.namelist()
+    assert not [n for n in names if n.endswith(".onnx")], names
     opened = open_bundle(info.path, cache=tmp_path / "cache")
-    design = load_design(opened.design_path)  # validates the stripped model against the model contract
-    live = [c for c in design.conditions if c.model]
-    assert len(live) == 1 and re.fullmatch(r"media/m_[0-9a-f]{12}\.onnx", live[0].model)
-    model = onnx.load(str(opened.folder / live[0].model))
-    meta = {p.key: p.value for p in model.metadata_props}
-    assert model.graph.name == "model" and model.producer_name == "" and not any("description" in k for k in meta)
-    kept = {p.key: p.value for p in original.metadata_props if "description" not in p.key}
-    assert meta == kept
-    assert "reference" not in opened.design_path.read_text()
+    text = opened.design_path.read_text()
+    assert "model =" not in text and "reference" not in text and "onnx" not in text
+    bundled = load_design(opened.design_path)
+    assert all(c.model is None and c.motion.endswith(".bvh") for c in bundled.conditions)
+    key = json.loads(info.key_path.read_text())
+    live = next(c for c in bundled.conditions if key["conditions"][c.id] == "reference")
+    lab_live = next(c for c in lab_design.conditions if c.id == "reference")
+    for s in bundled.stimuli:
+        lab_stim = next(x for x in lab_design.stimuli if x.id == key["stimuli"][s.id])
+        shipped = load_condition_motion(bundled, live, s)
+        generated = load_condition_motion(lab_design, lab_live, lab_stim)
+        assert shipped.n_frames == generated.n_frames
+        # BVH keeps 6 decimals of a degree: compare world joint positions, not bits
+        err = np.abs(joint_positions(shipped) - joint_positions(generated)).max()
+        assert err < 1e-3, err
 
 
 # ------------------------------------------------------------------------------------------ blinding of file names
