@@ -331,6 +331,27 @@ def _outward(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return faces if volume >= 0 else faces[:, [0, 2, 1]]
 
 
+def _blend_in(joints: np.ndarray, weights: np.ndarray, extra_joints: list[int], extra: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Mix extra influences into four-per-vertex skin weights: ``extra`` is ``(V, k)`` weights of the joints
+    ``extra_joints``; the existing weights shrink to make room, and the four largest of all are kept
+    (largest first).
+
+    >>> j, w = _blend_in(np.array([[0, 1, 0, 0]]), np.array([[0.5, 0.5, 0, 0]]), [7], np.array([[0.5]]))
+    >>> j.tolist(), w.tolist()
+    ([[7, 0, 1, 0]], [[0.5, 0.25, 0.25, 0.0]])
+    """
+    extra = np.clip(np.asarray(extra, np.float64), 0, 1)
+    keep = np.clip(1 - extra.sum(axis=1, keepdims=True), 0, 1)
+    all_j = np.concatenate([joints, np.broadcast_to(np.asarray(extra_joints), extra.shape)], axis=1)
+    all_w = np.concatenate([weights * keep, extra], axis=1)
+    top = np.argsort(-all_w, axis=1, kind="stable")[:, :4]
+    j = np.take_along_axis(all_j, top, 1)
+    w = np.take_along_axis(all_w, top, 1)
+    w = w / np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
+    return np.where(w > 0, j, 0), w
+
+
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance of points ``p`` (N,3) to segments ``a->b`` (B,3): (N,B)."""
     ab = b - a
@@ -423,7 +444,7 @@ TROUSERS = np.array([0.20, 0.21, 0.23])
 SHOES = np.array([0.12, 0.11, 0.11])
 HAIR = np.array([0.20, 0.14, 0.10])
 BROW = np.array([0.22, 0.15, 0.11])
-LIPS = np.array([0.70, 0.42, 0.40])
+LIPS = np.array([0.68, 0.43, 0.40])
 MOUTH = np.array([0.16, 0.06, 0.06])
 SCLERA = np.array([0.86, 0.84, 0.82])
 IRIS = np.array([0.24, 0.16, 0.10])
@@ -504,8 +525,10 @@ def _face_features(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     dy = y - _MOUTH_Y
     lw = _MOUTH_HW * 1.05
     xr = np.clip(np.abs(x) / lw, 0, 2)
-    upper = _smoothstep(0.0125, 0.004, dy) * (dy >= 0) * (1 - _smoothstep(0.75, 1.0, xr))
-    lower = _smoothstep(-0.0135, -0.004, dy) * (dy < 0) * (1 - _smoothstep(0.7, 1.0, xr))
+    # both lips thin out towards the corners (a band of constant height reads as a painted rectangle)
+    taper = 1 - 0.6 * np.minimum(xr, 1.0) ** 2
+    upper = _smoothstep(0.0105 * taper, 0.0075 * taper, dy) * (dy >= 0) * (1 - _smoothstep(0.8, 1.0, xr))
+    lower = _smoothstep(-0.0125 * taper, -0.0095 * taper, dy) * (dy < 0) * (1 - _smoothstep(0.75, 1.0, xr))
     lipmask = np.maximum(upper, lower)
     lip_bulge = (0.0045 * _gauss(dy ** 2, 0.006) * (1 - _smoothstep(0.5, 1.25, xr)))
     out[..., 2] += lip_bulge * front
@@ -531,10 +554,13 @@ def _head_grid() -> tuple[np.ndarray, np.ndarray]:
     lat += list(np.radians(np.arange(-50, 14, 1.9)))
     lat += list(np.radians(np.arange(14, 44, 3.0)))
     lat += list(np.radians(np.linspace(47, 89, 9)))
-    lat = np.array(sorted(lat))
-    # the mouth slit: five rows packed together at the lip line (they spread when the jaw opens)
     b = _HEAD_R[1]
     lat_m = np.arcsin(_MOUTH_Y / b)
+    # twice as many rows over the lips: their colour edge is per vertex and would blur over a whole row
+    lips = lat_m + np.radians(np.arange(-7.6, 7.0, 0.95))
+    lat = [x for x in lat if abs(x - lat_m) > np.radians(8.0)] + list(lips)
+    lat = np.array(sorted(lat))
+    # the mouth slit: five rows packed together at the lip line (they spread when the jaw opens)
     lat = lat[np.abs(lat - lat_m) > np.radians(0.9)]
     slit = lat_m + np.radians(np.array([0.30, 0.15, 0.0, -0.15, -0.30]))
     lat = np.array(sorted(np.concatenate([lat, slit])))
@@ -846,7 +872,9 @@ def _morphs(local: dict[str, np.ndarray], groups: dict[str, np.ndarray], n_verti
     put("mouthPucker", "face", to_centre * around)
     fun = np.zeros_like(face)
     fun[:, 0] = -fx * 0.2
-    fun[:, 1] = np.sign(dy) * 0.003
+    # the lips part only between the mouth corners: beyond them the slit rows must stay together, or the
+    # stretched skin between them shows as a light crack across the cheeks
+    fun[:, 1] = np.sign(dy) * 0.003 * (1 - _smoothstep(_MOUTH_HW * 0.8, _MOUTH_HW * 1.1, np.abs(fx)))
     fun[:, 2] = 0.007
     put("mouthFunnel", "face", fun * around)
     for name, s in (("mouthLeft", 1), ("mouthRight", -1)):
@@ -930,7 +958,7 @@ def _build_body(mb: _MeshBuilder) -> None:
     spine_bones = ["Hips", "Spine", "Chest", "UpperChest", "Neck", "LeftShoulder", "RightShoulder"]
     # torso: sections from the crotch to the base of the neck (y, half width, half depth, z centre)
     prof = np.array([
-        [0.800, 0.050, 0.045, 0.000],
+        [0.830, 0.050, 0.045, 0.000],
         [0.870, 0.140, 0.072, 0.000],
         [0.930, 0.170, 0.100, -0.004],
         [0.990, 0.165, 0.098, -0.002],
@@ -942,8 +970,8 @@ def _build_body(mb: _MeshBuilder) -> None:
         [1.380, 0.182, 0.096, -0.002],
         [1.425, 0.178, 0.084, -0.010],
         [1.455, 0.150, 0.072, -0.014],
-        [1.478, 0.095, 0.060, -0.016],
-        [1.495, 0.062, 0.052, -0.018],
+        [1.472, 0.092, 0.064, -0.016],
+        [1.488, 0.050, 0.046, -0.018],  # narrower than the neck: its tube comes out of a crew neck here
     ])
     # rows every ~1.5 cm, with extra rows at the belt so the shirt/trousers edge stays crisp
     ys = np.unique(np.concatenate([np.linspace(prof[0, 0], prof[-1, 0], 34), 1.02 + np.array([-0.02, -0.013, -0.006, 0.0, 0.006, 0.013, 0.02])]))
@@ -964,13 +992,27 @@ def _build_body(mb: _MeshBuilder) -> None:
     col = np.where((v[:, 1] < 1.02)[:, None], TROUSERS, SHIRT)
     belt = np.abs(v[:, 1] - 1.02) < 0.0095
     col[belt] = TROUSERS * 0.6
-    # collar: skin at the neckline
-    # a soft round collar: skin shows in a small curve below the neck
-    collar = _smoothstep(0.0, 0.010, v[:, 1] - (1.440 + 6.0 * v[:, 0] ** 2)) * _smoothstep(0.0, 0.03, v[:, 2])
-    col = col * (1 - collar[:, None]) + SKIN * collar[:, None]
+    # crew neck: the neck (skin) comes out of the shirt. A neckline painted on these ~1.5 cm rows would be
+    # smeared across a row by per-vertex colour; the neck tube's edge against the torso is crisp.
+    # Below the hips the torso narrows into the crotch between the legs. Its own normals face down there,
+    # so it would read as a separately lit patch ("briefs") where it shows between the thigh tubes: shade
+    # it with level normals, as the vertical thighs are, and the trousers read as one piece of cloth.
+    f = _outward(v, f)
+    nrm = vertex_normals(v, f).astype(np.float64)
+    level = _smoothstep(0.99, 0.93, v[:, 1])
+    nrm[:, 1] *= 1 - level
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     bias = {"LeftShoulder": 1.25, "RightShoulder": 1.25, "Neck": 1.3}
-    mb.add(v, f, col, MAT_CLOTH, bones=spine_bones + ["LeftUpperArm", "RightUpperArm"],
-           bias={**bias, "LeftUpperArm": 1.6, "RightUpperArm": 1.6})
+    joints, weights = mb.weights_for(v, spine_bones + ["LeftUpperArm", "RightUpperArm"],
+                                     bias={**bias, "LeftUpperArm": 1.6, "RightUpperArm": 1.6})
+    # below the hip joints the torso is the top of the trousers: it follows the thighs, so a pelvis tilted
+    # against the legs bends the crotch instead of swinging it forwards through the thigh tubes
+    hip_y = P("LeftUpperLeg")[1]
+    to_legs = _smoothstep(hip_y + 0.02, hip_y - 0.07, v[:, 1])
+    left = _smoothstep(-0.03, 0.03, v[:, 0])
+    joints, weights = _blend_in(joints, weights, [sk.index("LeftUpperLeg"), sk.index("RightUpperLeg")],
+                                np.stack([to_legs * left, to_legs * (1 - left)], axis=1))
+    mb.add(v, f, col, MAT_CLOTH, joints=joints, weights=weights, normals=nrm.astype(np.float32))
     # neck
     ys = np.linspace(1.38, 1.59, 9)
     path = np.stack([np.zeros_like(ys), ys, -0.02 + 0.02 * (ys - 1.40)], -1)
@@ -981,10 +1023,13 @@ def _build_body(mb: _MeshBuilder) -> None:
     for side, sx in (("Left", 1), ("Right", -1)):
         a, e, w = P(f"{side}UpperArm"), P(f"{side}LowerArm"), P(f"{side}Hand")
         sh = a + np.array([-sx * 0.03, -0.012, 0.0])
-        s = np.linspace(0, 1, 23)
         upper_len = np.linalg.norm(e - sh)
         total = upper_len + np.linalg.norm(w - e)
-        d = s * total
+        # rings every ~2.5 cm, plus pairs a millimetre either side of the cuff's edges: per-vertex colour
+        # would otherwise smear the sleeve into the skin over a whole ring spacing
+        edges = total - np.array([0.048, 0.032])
+        d = np.unique(np.concatenate([np.linspace(0, total, 23), edges - 0.001, edges + 0.001]))
+        s = d / total
         path = np.where((d < upper_len)[:, None], sh + (e - sh) * (d / upper_len)[:, None],
                         e + (w - e) * ((d - upper_len) / (total - upper_len))[:, None])
         ru = np.interp(s, [0, 0.08, 0.25, 0.5, 0.56, 0.75, 1.0], [0.040, 0.045, 0.043, 0.037, 0.038, 0.035, 0.026])
@@ -992,9 +1037,8 @@ def _build_body(mb: _MeshBuilder) -> None:
         v, f = _tube(path, rs, ru, [0, 0, 1.0], n_around=18, cap_start=True, cap_end=True)
         col = np.tile(SHIRT, (len(v), 1))
         along = (v - sh) @ ((w - sh) / np.linalg.norm(w - sh))
-        col[along > total - 0.035] = SKIN
-        cuff = np.abs(along - (total - 0.04)) < 0.008
-        col[cuff] = SHIRT * 0.8
+        col[along > edges[1]] = SKIN
+        col[(along > edges[0]) & (along <= edges[1])] = SHIRT * 0.8  # cuff
         mb.add(v, f, col, MAT_CLOTH, bones=[f"{side}Shoulder", f"{side}UpperArm", f"{side}LowerArm", f"{side}Hand"],
                bias={f"{side}Shoulder": 1.5})
         _build_hand(mb, side, sx)
@@ -1002,12 +1046,23 @@ def _build_body(mb: _MeshBuilder) -> None:
     for side, sx in (("Left", 1), ("Right", -1)):
         hip, knee, ankle = P(f"{side}UpperLeg"), P(f"{side}LowerLeg"), P(f"{side}Foot")
         s = np.linspace(0, 1, 14)
-        top = hip + np.array([0, 0.03, 0])  # starts inside the pelvis
+        # starts inside the pelvis, a little towards the middle: the two thighs meet below the crotch, so
+        # from the front the trousers show two legs and a seam, not the torso's narrowing bottom
+        # (high and closed: a pelvis tilted 15 degrees against the thighs, as BEAT's rest pose is, lifts the
+        # torso's front edge by some 3 cm, and an open tube end just below it would show)
+        top = hip + np.array([-sx * 0.016, 0.06, 0])
         path = np.where((s < 0.5)[:, None], top + (knee - top) * (s / 0.5)[:, None],
                         knee + (ankle - knee) * ((s - 0.5) / 0.5)[:, None])
-        r = np.interp(s, [0, 0.2, 0.5, 0.7, 0.95, 1], [0.078, 0.074, 0.056, 0.055, 0.045, 0.044])
-        v, f = _tube(path, r, r * 1.05, [1.0, 0, 0], n_around=12, cap_start=False, cap_end=False)
-        mb.add(v, f, TROUSERS, MAT_CLOTH, bones=["Hips", f"{side}UpperLeg", f"{side}LowerLeg", f"{side}Foot"])
+        # nearly straight at the top (a bulge would catch the light as a seam); the open top stays inside
+        # the hips
+        r = np.interp(s, [0, 0.077, 0.154, 0.3, 0.5, 0.7, 0.95, 1],
+                      [0.082, 0.081, 0.078, 0.068, 0.056, 0.055, 0.045, 0.044])
+        v, f = _tube(path, r, r * 1.05, [1.0, 0, 0], n_around=20, cap_start=True, cap_end=False)
+        joints, weights = mb.weights_for(v, [f"{side}UpperLeg", f"{side}LowerLeg", f"{side}Foot"])
+        # and the top of the thigh, inside the hips, follows the pelvis as the torso there does
+        joints, weights = _blend_in(joints, weights, [sk.index("Hips")],
+                                    _smoothstep(hip[1] - 0.07, hip[1] + 0.02, v[:, 1])[:, None])
+        mb.add(v, f, TROUSERS, MAT_CLOTH, joints=joints, weights=weights)
         toe = P(f"{side}Toes")
         fpath = np.array([ankle + [0, -0.03, -0.07], ankle + [0, -0.045, 0.0], toe + [0, -0.01, 0.0], toe + [0, -0.012, 0.065]])
         fs = np.linspace(0, 1, 7)

@@ -196,3 +196,41 @@ def test_back_face_culling_hides_nothing_of_the_builtin_avatar(renderer, avatar,
         a = render(renderer, closed, (300, 300))
         b = render(renderer, both, (300, 300))
         assert changed(a, b).sum() <= 20  # a few pixels where parts interpenetrate; inward eyes alone give 35-400
+
+
+def test_bone_palette_holds_more_than_128_joints(renderer, avatar):
+    # Rigs like BEAT's (75 joints) plus face and finger bones run past 128: the palette must reach them.
+    # Append 200 joints at the hips and skin the whole mesh to the very last one (index 251): turning that
+    # joint a quarter turn about the vertical axis must show the T-posed figure from the side.
+    import dataclasses
+
+    from studyapp.motion.fk import rest_global_transforms
+    from studyapp.motion.skeleton import Skeleton
+    from studyapp.render.camera import Camera
+
+    sk = avatar.skeleton
+    n_extra = 200
+    big = Skeleton(names=sk.names + tuple(f"Extra{i}" for i in range(n_extra)),
+                   parents=np.concatenate([sk.parents, np.zeros(n_extra, int)]),
+                   offsets=np.concatenate([sk.offsets, np.zeros((n_extra, 3))]), end_sites=sk.end_sites, unit_scale=1.0)
+    last = big.n_joints - 1
+    assert last > 128
+    joints = np.zeros_like(avatar.joints)
+    joints[:, 0] = last
+    weights = np.zeros_like(avatar.weights)
+    weights[:, 0] = 1.0
+    rigged = dataclasses.replace(avatar, skeleton=big, joints=joints, weights=weights,
+                                 inverse_bind=np.linalg.inv(rest_global_transforms(big)))
+    camera = Camera(eye=np.array([0.0, 1.0, 5.0]), target=np.array([0.0, 1.0, 0.0]), fov_y=30)
+    widths = []
+    for turn in (0, 90):
+        slot = prepare_slot(rigged, posed(rigged, {f"Extra{n_extra - 1}": (0, turn, 0)}, 2), None)
+        scene = make_scene([slot], rigged)
+        empty = make_scene([slot], rigged)
+        scene.camera = empty.camera = camera
+        fig = changed(render(renderer, scene, (320, 240)), render(renderer, empty, (320, 240), figures=False))
+        cols = np.flatnonzero(fig.any(0))
+        widths.append(cols.max() - cols.min() if len(cols) else 0)
+    front, side = widths
+    # T-pose: ~1.5 m fingertip to fingertip; from the side ~0.3 m
+    assert front > 100 and side < 0.4 * front, widths
