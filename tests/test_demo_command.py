@@ -45,6 +45,19 @@ def test_offscreen_demo_writes_everything_and_the_expected_ranking(tmp_path: Pat
         background = np.median(third.reshape(-1, 3), axis=0)
         assert (np.abs(third - background).max(axis=2) > 60).mean() > 0.01
     assert (out / "first_trial.mp4").stat().st_size > 10_000
+    # the short video: 1280x720 picture with sound, and the sound no longer than the picture (~4 s)
+    import av
+
+    with av.open(str(out / "first_trial.mp4")) as c:
+        v = c.streams.video[0]
+        assert (v.codec_context.width, v.codec_context.height) == (1280, 720)
+        n_video = sum(1 for _ in c.decode(video=0))
+    with av.open(str(out / "first_trial.mp4")) as c:
+        a = c.streams.audio[0]
+        audio_s = sum(f.samples for f in c.decode(audio=0)) / a.rate
+    video_s = n_video / 30.0
+    assert 3.0 <= video_s <= 4.05, video_s
+    assert abs(audio_s - video_s) < 0.15, (audio_s, video_s)
     assert len(list((out / "screens").glob("*.png"))) >= 5
 
     stats = json.loads((out / "analysis" / "stats.json").read_text())

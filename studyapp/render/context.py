@@ -264,7 +264,8 @@ class Window:
 
     @property
     def is_fullscreen(self) -> bool:
-        return self._glfw.get_window_monitor(self.handle) is not None
+        # pyGLFW returns a NULL monitor pointer (falsy, never None) for a windowed window
+        return bool(self._glfw.get_window_monitor(self.handle))
 
     def set_fullscreen(self, on: bool) -> None:
         """Switch between fullscreen on the primary monitor and the last windowed geometry."""

@@ -67,7 +67,8 @@ def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (12
     """Write an MP4 (H.264 yuv420p, plus AAC audio when ``audio`` is an AudioClip) of the whole trial.
 
     The video lasts ``duration`` seconds (default: the longer of the motion and the audio); the audio is
-    muxed from the start of the clip, so picture and sound line up as they do in the study.
+    muxed from the start of the clip and cut at ``duration``, so picture and sound line up as they do in the
+    study and a shortened video does not go on talking over a frozen last frame.
     """
     import av
 
@@ -90,7 +91,7 @@ def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (12
             if samples.ndim == 1:
                 samples = samples[:, None]
             layout = "mono" if samples.shape[1] == 1 else "stereo"
-            samples = samples[:, :2]
+            samples = samples[: int(round(duration * float(audio.sample_rate))), :2]
             astream = container.add_stream("aac", rate=int(audio.sample_rate))
             astream.layout = layout
         times = np.arange(n_frames) / float(fps)

@@ -83,9 +83,10 @@ class PlayStats:
 
 
 ENDED_EARLY_MESSAGE = (
-    "Thank you for your time. The study has ended early because several check questions were not answered "
-    "as expected. This can happen to anyone; your participation is appreciated and nothing more is needed "
-    "from you."
+    # It must not say "nothing more is needed": a remote participant is still asked to send the results file.
+    "Thank you for your time. The study has ended early because a check question was not answered as "
+    "expected. This can happen to anyone, and your participation is appreciated. Your answers so far have "
+    "been saved."
 )
 DONE_MESSAGE = "Thank you! You have completed the study. Your answers have been saved."
 

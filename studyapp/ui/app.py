@@ -86,6 +86,7 @@ class StudyApp:
         self.test_sound_played = False
         self.answers: dict[str, Any] = {}
         self.question_active = 0
+        self.question_moved = False   # the keyboard picked another questionnaire item: scroll it into view
         self.focus_text = False
         self.typing = False
         self.quit = False

@@ -74,7 +74,7 @@ def evaluate(r: EnvReport) -> list[Check]:
                                                "update the graphics driver"))
     else:
         checks.append(Check("OpenGL", "pass", f"{r.gl_renderer} (OpenGL {r.gl_version_code / 100:.1f})"))
-    if r.refresh_hz is None:
+    if not r.refresh_hz:  # None or 0: GLFW reports 0 Hz when the display does not say (Xvfb, VMs)
         checks.append(Check("Display", "warn", "no display found: only offscreen runs are possible"
                             if r.display is None else "refresh rate unknown"))
     elif r.refresh_hz < MIN_REFRESH_HZ:
@@ -134,7 +134,8 @@ def display_facts() -> tuple[str | None, tuple[int, int] | None, float | None, f
             return name, None, None, None
         mode = glfw.get_video_mode(mon)
         sx, _ = glfw.get_monitor_content_scale(mon)
-        return (name or "desktop"), (mode.size.width, mode.size.height), float(mode.refresh_rate), float(sx)
+        refresh = float(mode.refresh_rate) or None  # 0: the display does not report it
+        return (name or "desktop"), (mode.size.width, mode.size.height), refresh, float(sx)
     except Exception:
         return name, None, None, None
 

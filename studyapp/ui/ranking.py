@@ -171,7 +171,7 @@ def order_and_ties(ranks: Mapping[int, int]) -> tuple[list[int], list[bool]]:
     ([1, 2, 0], [True, False])
     """
     if set(ranks) != {0, 1, 2}:
-        raise ValueError(f"ranks for slots 0, 1, 2 expected, got {dict(ranks)!r}")
+        raise ValueError(f"ranks for slots 0, 1, 2 expected, got {ranks!r}")
     order = sorted(range(3), key=lambda s: (ranks[s], s))
     ties = [ranks[order[k]] == ranks[order[k + 1]] for k in range(2)]
     probe = RankingState(["c"], allow_ties=True)

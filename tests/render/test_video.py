@@ -56,3 +56,15 @@ def test_video_without_audio(tmp_path, scene, renderer):
         v = f.streams.video[0]
         assert (v.codec_context.width, v.codec_context.height) == (96, 54)  # even sizes for yuv420p
         assert sum(1 for _ in f.decode(video=0)) == 4
+
+
+def test_shortened_video_cuts_the_audio_too(tmp_path, scene, renderer):
+    t = np.arange(16000) / 16000
+    clip = AudioClip(0.3 * np.sin(2 * np.pi * 440 * t).astype(np.float32), 16000)  # 1 s of sound
+    out = render_video(scene, clip, tmp_path / "short.mp4", size=(96, 54), fps=10, renderer=renderer, duration=0.3)
+    with av.open(str(out)) as f:
+        assert sum(1 for _ in f.decode(video=0)) == 3
+    with av.open(str(out)) as f:
+        pcm = np.concatenate([fr.to_ndarray().reshape(-1) for fr in f.decode(audio=0)])
+    # AAC adds priming and pads to whole 1024-sample frames; the second of sound must not survive
+    assert 0.25 * 16000 <= pcm.size <= 0.3 * 16000 + 2 * 1024, pcm.size

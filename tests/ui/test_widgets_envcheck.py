@@ -65,3 +65,28 @@ def test_each_problem_is_named(kw, name, status):
     assert ok == (status != "fail")
     if status == "fail":
         assert name in summary
+
+
+def test_zero_hz_refresh_reads_as_unknown_not_choppy():
+    """GLFW reports 0 Hz where the display does not say (Xvfb, some VMs): that is "unknown", not a
+    0 Hz display that would make motion choppy."""
+    checks = {c.name: c for c in evaluate(_report(refresh_hz=0.0))}
+    assert checks["Display"].status == "warn"
+    assert checks["Display"].detail == "refresh rate unknown"
+    assert "0 Hz" not in checks["Display"].detail
+
+
+def test_display_facts_turns_zero_hz_into_none(monkeypatch):
+    import types
+
+    import glfw
+
+    from studyapp.ui.envcheck import display_facts
+
+    mode = types.SimpleNamespace(size=types.SimpleNamespace(width=1280, height=720), refresh_rate=0)
+    monkeypatch.setenv("DISPLAY", ":99")
+    monkeypatch.setattr(glfw, "init", lambda: True)
+    monkeypatch.setattr(glfw, "get_primary_monitor", lambda: object())
+    monkeypatch.setattr(glfw, "get_video_mode", lambda mon: mode)
+    monkeypatch.setattr(glfw, "get_monitor_content_scale", lambda mon: (1.0, 1.0))
+    assert display_facts() == (":99", (1280, 720), None, 1.0)

@@ -261,3 +261,39 @@ def test_real_window_ties_with_mouse_and_equals_key(xvfb_display, tied_study, tm
         runner.close()
         session.close()
         restore_egl()
+
+
+def test_f11_switches_fullscreen_and_back(xvfb_display, tiny_study, tmp_path):
+    """F11 (an X key event) makes the window fill the 1280x800 screen, the UI lays itself out for the new
+    framebuffer, and a second F11 restores the window's own size."""
+    from studyapp.audio.clock import SilentClock
+    from studyapp.study.session import Session
+    from studyapp.ui.app import WindowRunner
+
+    design, db = tiny_study
+    session = Session(design, db, "W3")
+    restore_egl = release_egl_context()
+    try:
+        runner = WindowRunner(design, session, SilentClock(), size=(960, 540))
+    except Exception as exc:
+        restore_egl()
+        pytest.skip(f"no GLX window under Xvfb: {exc}")
+    try:
+        d = Driver(runner, tmp_path)
+        app = d.app
+        d.until(lambda: "consent" in app.ui.rects)
+        assert app.fb_size == (960, 540) and not runner.window.is_fullscreen
+        d.key("F11")
+        d.until(lambda: app.fb_size == (1280, 800), 10)
+        assert runner.window.is_fullscreen
+        d.frames(3)
+        x0, y0, x1, y1 = app.ui.rects["consent"]
+        assert y1 <= 800 and y0 > 540  # the footer button moved down to the bottom of the larger window
+        assert app.screen_key() == "welcome"  # F11 is not Enter: still on the consent page
+        d.key("F11")
+        d.until(lambda: app.fb_size == (960, 540), 10)
+        assert not runner.window.is_fullscreen
+    finally:
+        runner.close()
+        session.close()
+        restore_egl()

@@ -2,6 +2,9 @@
 
 A page is a scrolling body (with a visible scrollbar when the text is longer than the window) and a
 fixed footer holding the page's main button, so "Continue" is always on screen, at any window size.
+While part of the body is out of sight the footer says so (at 1280x720 the instructions are taller than
+the window, and a scrollbar alone is easy to miss), and the keyboard scrolls it too: Page Up / Page Down
+on every page, the arrow keys on pages that do not use them for something else.
 """
 from __future__ import annotations
 
@@ -16,11 +19,18 @@ COLUMN_PX = 860.0
 FOOTER_PX = 84.0
 
 _body_open = False
+_arrow_scroll = True
+#: Set when the last page body closed with text still below the visible part.
+_more_below = False
+MORE_BELOW_HINT = "There is more text below: scroll down (mouse wheel or Down arrow) to read it all."
 
 
-def page_begin(app: Any, name: str) -> float:
-    """Open a full-window page and its scrolling body; returns the column width in pixels."""
-    global _body_open
+def page_begin(app: Any, name: str, *, arrow_scroll: bool = True) -> float:
+    """Open a full-window page and its scrolling body; returns the column width in pixels.
+
+    ``arrow_scroll``: Up/Down scroll the body (False where the page uses the arrows itself).
+    """
+    global _body_open, _arrow_scroll
     w, h = app.fb_size
     s = app.scale
     col = min(w - 48 * s, COLUMN_PX * s)
@@ -35,13 +45,34 @@ def page_begin(app: Any, name: str) -> float:
     imgui.begin_child("##body", imgui.ImVec2(0, -FOOTER_PX * s), imgui.ChildFlags_.always_use_window_padding)
     imgui.pop_style_var()
     _body_open = True
+    _arrow_scroll = arrow_scroll
     app.page_pad_x = pad_x
     return col
 
 
-def _end_body() -> None:
-    global _body_open
+def _scroll_keys(app: Any) -> None:
+    """Keyboard scrolling of the open page body (keyboard-only participants must reach all the text)."""
+    line = imgui.get_text_line_height_with_spacing()
+    page = max(line, imgui.get_window_height() - 3 * line)
+    step = 0.0
+    if app.key_pressed(imgui.Key.page_down):
+        step += page
+    if app.key_pressed(imgui.Key.page_up):
+        step -= page
+    if _arrow_scroll and app.key_pressed("down"):
+        step += 3 * line
+    if _arrow_scroll and app.key_pressed("up"):
+        step -= 3 * line
+    if step:
+        imgui.set_scroll_y(min(max(0.0, imgui.get_scroll_y() + step), imgui.get_scroll_max_y()))
+
+
+def _end_body(app: Any = None) -> None:
+    global _body_open, _more_below
     if _body_open:
+        if app is not None:
+            _scroll_keys(app)
+        _more_below = imgui.get_scroll_y() < imgui.get_scroll_max_y() - 1.0
         imgui.end_child()
         _body_open = False
 
@@ -57,12 +88,16 @@ def primary_row(app: Any, label: str, key: str, *, enabled: bool = True, hint: s
     Enter presses it too, so every page works from the keyboard alone.
     """
     s = app.scale
-    _end_body()
+    _end_body(app)
     imgui.separator()
     pad_x = getattr(app, "page_pad_x", 24 * s)
     imgui.set_cursor_pos(imgui.ImVec2(pad_x, imgui.get_cursor_pos_y() + 14 * s))
     pressed = app.ui.button(label, key=key, enabled=enabled, size=(260 * s, 48 * s), primary=True)
-    if hint:
+    if _more_below:
+        imgui.same_line(0, 16 * s)
+        imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
+        app.ui.text(MORE_BELOW_HINT, color=(1.0, 0.80, 0.35, 1.0), key="more_below")
+    elif hint:
         imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
         app.ui.muted(hint)

@@ -49,7 +49,8 @@ def draw(app: Any) -> None:
     ui.heading("Sound check", 1.3)
     ui.wrapped("Put on your headphones and press the button: you should hear a short beep. Adjust the volume "
                "so it is comfortable. The clips use the same output.")
-    if ui.button("Play test sound", key="test_sound", size=(220 * s, 0)):
+    # T: the keyboard-only way to the sound check (the page has no other use for letters)
+    if ui.button("Play test sound (T)", key="test_sound", size=(240 * s, 0)) or app.key_pressed(imgui.Key.t):
         app.play_test_sound()
     if app.test_sound_played:
         imgui.same_line()

@@ -11,7 +11,7 @@ def draw(app: Any) -> None:
     session = app.session
     page_begin(app, "final")
     early = session.state.value == "ended_early"
-    ui.heading("The study has ended" if early else "Thank you!", 2.0)
+    ui.heading("The study has ended" if early else "Study complete", 2.0)
     ui.text("")
     ui.wrapped(session.end_message)
     ui.text("")

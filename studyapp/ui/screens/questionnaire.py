@@ -22,7 +22,7 @@ def draw(app: Any) -> None:
     s = app.scale
     items = app.session.questionnaire_items
     answers = app.answers
-    page_begin(app, "questionnaire")
+    page_begin(app, "questionnaire", arrow_scroll=False)  # Up/Down pick the item
     ui.heading("A few last questions", 2.0)
     ui.wrapped("Please tell us about your experience. Choose one point on each scale.")
     ui.text("")
@@ -30,6 +30,9 @@ def draw(app: Any) -> None:
     for qi, q in enumerate(items):
         active = qi == app.question_active
         ui.heading(f"{qi + 1}. {q.text}", 1.05, key=("question", q.id))
+        if active and app.question_moved:
+            imgui.set_scroll_here_y(0.3)  # an item picked with the keyboard comes into view
+            app.question_moved = False
         if q.kind == "likert":
             left, right = q.anchors
             imgui.align_text_to_frame_padding()
@@ -68,10 +71,10 @@ def _keys(app: Any, items: list[Any]) -> None:
         return
     if app.key_pressed("down"):
         app.question_active = min(len(items) - 1, app.question_active + 1)
-        app.focus_text = True
+        app.focus_text = app.question_moved = True
     if app.key_pressed("up"):
         app.question_active = max(0, app.question_active - 1)
-        app.focus_text = True
+        app.focus_text = app.question_moved = True
     q = items[app.question_active]
     if q.kind == "likert":
         for v in range(1, min(9, int(q.points)) + 1):

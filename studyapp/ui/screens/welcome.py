@@ -11,6 +11,9 @@ CONSENT_TEXT = (
     "code, without your name. You can stop at any time by closing the window; nothing else is recorded."
 )
 
+KEYS_TIP = ("Tip: everything works with the keyboard too (Enter continues on every page), and F11 switches "
+            "full screen on and off.")
+
 
 def draw(app: Any) -> None:
     ui = app.ui
@@ -23,6 +26,8 @@ def draw(app: Any) -> None:
     ui.text("")
     ui.wrapped("By pressing the button below you agree to take part and to your anonymous answers being "
                "used for research.")
+    ui.text("")
+    ui.muted(KEYS_TIP)
     if primary_row(app, "I agree, start", "consent", hint="or press Enter"):
         app.session.accept_consent()
     page_end()
