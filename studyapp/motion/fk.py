@@ -33,10 +33,11 @@ __all__ = [
 
 
 _LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
-# Frames are processed in blocks of this many: each block's work arrays (under 1 MB) stay in cache
+# Frames are processed in blocks of this many: each block's work arrays (about 1 MB) stay in cache
 # between the ~40 vector operations per block instead of streaming 7,200-frame rows through memory
-# each time (measured ~15-25 % faster on BEAT's 75 joints; the per-block Python overhead is small).
-_FRAME_BLOCK = 128
+# each time. 256 balances that against the per-block Python overhead (~90 numpy calls a block): on
+# BEAT's 75 joints it measured 58 ms against 66 ms for 128 and 85 ms for 512 (bench_motion.py).
+_FRAME_BLOCK = 256
 
 
 @lru_cache(maxsize=64)
