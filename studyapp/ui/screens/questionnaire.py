@@ -56,7 +56,8 @@ def draw(app: Any) -> None:
                 app.typing = True
             answers[q.id] = new
         if active:
-            ui.muted("(selected: press a number key)" if q.kind == "likert" else "(selected: type, then press Enter)")
+            ui.muted(f"Keyboard: press 1-{min(9, int(q.points))} to answer, Up/Down arrows for another question"
+                     if q.kind == "likert" else "Keyboard: type your answer, then press Enter")
         imgui.spacing()
     ok = complete(items, answers)
     if primary_row(app, "Submit answers", "submit", enabled=ok,
