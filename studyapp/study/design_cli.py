@@ -47,6 +47,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     notes = list(dict.fromkeys(str(w.message) for w in caught))
     if args.json:
         print(problems_to_json(problems))
+        for n in notes:  # stdout stays one JSON document; the notes still reach the experimenter
+            print(f"note: {n}", file=sys.stderr)
     else:
         for p in problems:
             print(p)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -404,3 +405,13 @@ def test_one_problem_is_reported_once_and_points_at_its_line(study: Path) -> Non
     crit = GOOD.replace("[ordering]", '[[criteria]]\nid = "realism"\n\n[[criteria]]\nid = "sync"\nquestion = "?"\n\n'
                                       "[ordering]")
     assert [p.key for p in problems_for(study, crit)] == ["criteria[0].question"]
+
+
+def test_cli_validate_json_keeps_reader_notes_on_stderr(study: Path, capsys) -> None:
+    bvh = study / "motion" / "a" / "s1.bvh"
+    text = bvh.read_text()
+    frames = int(re.search(r"Frames:\s*(\d+)", text).group(1))
+    bvh.write_text(re.sub(r"Frames:\s*\d+", f"Frames: {frames + 1}", text))
+    code, out, err = run_cli(capsys, "validate", "--json", str(study / "design.toml"))
+    assert code == 0 and json.loads(out) == []
+    assert "note:" in err and "Frames" in err and "s1.bvh" in err
