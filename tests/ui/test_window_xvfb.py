@@ -6,6 +6,7 @@ screenshots of the X screen with ImageMagick's ``import`` and checks what they s
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import subprocess
@@ -132,22 +133,34 @@ def thirds_with_figures(img: np.ndarray, top: int, bottom: int) -> list[int]:
     return [int(dark[:, k * w // 3:(k + 1) * w // 3].sum()) for k in range(3)]
 
 
-def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_path, secrets_of):
+@contextlib.contextmanager
+def window_driver(design, db, participant: str, tmp_path, size=(1280, 720)):
+    """A real GLFW window running a fresh session, with its :class:`Driver`; skips when Xvfb offers no GLX."""
     from studyapp.audio.clock import SilentClock
     from studyapp.study.session import Session
     from studyapp.ui.app import WindowRunner
+
+    session = Session(design, db, participant)
+    restore_egl = release_egl_context()
+    try:
+        runner = WindowRunner(design, session, SilentClock(), size=size)
+    except Exception as exc:
+        restore_egl()
+        session.close()
+        pytest.skip(f"no GLX window under Xvfb: {exc}")
+    try:
+        yield Driver(runner, tmp_path), runner
+    finally:
+        runner.close()
+        session.close()
+        restore_egl()
+
+
+def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_path, secrets_of):
     from studyapp.ui.widgets import Painter
 
     design, db = tiny_study
-    session = Session(design, db, "W1")
-    restore_egl = release_egl_context()
-    try:
-        runner = WindowRunner(design, session, SilentClock(), size=(1280, 720))
-    except Exception as exc:
-        restore_egl()
-        pytest.skip(f"no GLX window under Xvfb: {exc}")
-    try:
-        d = Driver(runner, tmp_path)
+    with window_driver(design, db, "W1", tmp_path, size=(1280, 720)) as (d, runner):
         app = d.app
         d.until(lambda: "consent" in app.ui.rects)
         d.frames(2)
@@ -200,29 +213,13 @@ def test_real_window_full_ranking_with_xdotool(xvfb_display, tiny_study, tmp_pat
         for s in app.ui.drawn:
             p.record(s)
         assert p.leaks(secrets_of(design)) == []
-    finally:
-        runner.close()
-        session.close()
-        restore_egl()
 
 
 def test_real_window_ties_with_mouse_and_equals_key(xvfb_display, tied_study, tmp_path):
     """With ties allowed: a click on the ">" between two boxes and the "=" key (X key event -> GLFW char
     callback) enter ties, and the session stores them as average ranks."""
-    from studyapp.audio.clock import SilentClock
-    from studyapp.study.session import Session
-    from studyapp.ui.app import WindowRunner
-
     design, db = tied_study
-    session = Session(design, db, "W2")
-    restore_egl = release_egl_context()
-    try:
-        runner = WindowRunner(design, session, SilentClock(), size=(1280, 720))
-    except Exception as exc:
-        restore_egl()
-        pytest.skip(f"no GLX window under Xvfb: {exc}")
-    try:
-        d = Driver(runner, tmp_path)
+    with window_driver(design, db, "W2", tmp_path, size=(1280, 720)) as (d, runner):
         app = d.app
         d.until(lambda: "consent" in app.ui.rects)
         d.frames(2)
@@ -257,29 +254,13 @@ def test_real_window_ties_with_mouse_and_equals_key(xvfb_display, tied_study, tm
         assert [ranks[(crits[0], s)] for s in range(3)] == [1.0, 2.5, 2.5]
         assert [ranks[(crits[1], s)] for s in range(3)] == [3.0, 1.5, 1.5]
         assert [ranks[(crits[2], s)] for s in range(3)] == [1.0, 2.0, 3.0]
-    finally:
-        runner.close()
-        session.close()
-        restore_egl()
 
 
 def test_f11_switches_fullscreen_and_back(xvfb_display, tiny_study, tmp_path):
     """F11 (an X key event) makes the window fill the 1280x800 screen, the UI lays itself out for the new
     framebuffer, and a second F11 restores the window's own size."""
-    from studyapp.audio.clock import SilentClock
-    from studyapp.study.session import Session
-    from studyapp.ui.app import WindowRunner
-
     design, db = tiny_study
-    session = Session(design, db, "W3")
-    restore_egl = release_egl_context()
-    try:
-        runner = WindowRunner(design, session, SilentClock(), size=(960, 540))
-    except Exception as exc:
-        restore_egl()
-        pytest.skip(f"no GLX window under Xvfb: {exc}")
-    try:
-        d = Driver(runner, tmp_path)
+    with window_driver(design, db, "W3", tmp_path, size=(960, 540)) as (d, runner):
         app = d.app
         d.until(lambda: "consent" in app.ui.rects)
         assert app.fb_size == (960, 540) and not runner.window.is_fullscreen
@@ -293,7 +274,3 @@ def test_f11_switches_fullscreen_and_back(xvfb_display, tiny_study, tmp_path):
         d.key("F11")
         d.until(lambda: app.fb_size == (960, 540), 10)
         assert not runner.window.is_fullscreen
-    finally:
-        runner.close()
-        session.close()
-        restore_egl()
