@@ -31,6 +31,14 @@ _TRUE = {"1", "true", "t", "yes", "y"}
 _FALSE = {"0", "false", "f", "no", "n", ""}
 
 
+def _is_sqlite(path: Path) -> bool:
+    """True for a SQLite database (by its header, whatever the file is called); the file must exist."""
+    if not path.exists():
+        raise AnalysisInputError(path, None, "file not found")
+    with open(path, "rb") as fh:
+        return fh.read(16).startswith(b"SQLite format 3")
+
+
 def load_results(path: str | Path) -> pd.DataFrame:
     """Read results from a tidy CSV (``studyapp export --csv``) or a results SQLite database.
 
@@ -43,11 +51,7 @@ def load_results(path: str | Path) -> pd.DataFrame:
     [['P1', 'A', 1.0], ['P1', 'B', 2.0]]
     """
     path = Path(path)
-    if not path.exists():
-        raise AnalysisInputError(path, None, "file not found")
-    with open(path, "rb") as fh:
-        magic = fh.read(16)
-    if magic.startswith(b"SQLite format 3"):
+    if _is_sqlite(path):
         df = _read_sqlite(path)
     else:
         try:
@@ -113,11 +117,7 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
     [4.0, 5.0]
     """
     path = Path(path)
-    if not path.exists():
-        raise AnalysisInputError(path, None, "file not found")
-    with open(path, "rb") as fh:
-        magic = fh.read(16)
-    if magic.startswith(b"SQLite format 3"):
+    if _is_sqlite(path):
         from results_analysis.sqlite_schema import questionnaire_from_connection
 
         with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as con:
