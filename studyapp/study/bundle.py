@@ -177,13 +177,17 @@ def make_bundle(
     ``participants`` pre-assigns Latin-square rows to ids ``R01..RN``, continuing the balance of the
     experimenter's database ``results`` (which also receives the key).
     """
-    from studyapp.study.design import load_design, motion_path, resolve
+    from studyapp.study.design import conditions_named_in, load_design, motion_path, resolve
     from studyapp.study.schedule import n_rows
     from studyapp.study.storage import ResultsDB
 
     design_path = Path(design_path)
     output = Path(output)
     design = load_design(design_path)
+    named = conditions_named_in(design, output.name)
+    if named:
+        raise InputError(output, None, f"the bundle's file name names condition {named[0]!r}, and participants see "
+                         "it: that unblinds the study; choose a neutral name (e.g. the study's title)")
     raw = tomllib.loads(design_path.read_text(encoding="utf-8"))
     salt = salt or secrets.token_hex(16)
 
@@ -311,7 +315,9 @@ def make_bundle(
                 row = counts.index(min(counts))
                 counts[row] += 1
                 roster[pid] = row
-        study = _slug(design_path.stem)
+        # The participant sees this name (cache and results file names): the design's title, which
+        # validation already keeps free of condition names, never the experimenter's file name.
+        study = _slug(design.title)[:40].strip("-.") or "study"
         key = {
             "format": "studyapp-bundle-key", "study": study, "bundle": output.name,
             "design_hash": design.design_hash, "bundle_hash": bundle_hash,

@@ -858,9 +858,20 @@ def visible_text_leaks(design: Design) -> list[tuple[str, str]]:
         texts[f"criteria[{i}]"] = " ".join((c.label, c.question, c.explanation))
     for i, q in enumerate(design.questionnaire):
         texts[f"questionnaire[{i}]"] = " ".join((q.text, *q.anchors))
+    return [(key, cid) for key, text in texts.items() for cid in conditions_named_in(design, text)]
+
+
+def conditions_named_in(design: Design, text: str) -> list[str]:
+    """Ids of the design's conditions that ``text`` names as a whole word, ignoring case (``_``, ``-`` and
+    ``.`` separate words, so a file name such as ``ours_vs_base.zip`` names ``ours``).
+
+    >>> from studyapp.resources import demo_design
+    >>> conditions_named_in(load_design(demo_design(), check_files=False), "demo_synced-v2.zip")
+    ['synced']
+    """
     # ids of one or two characters ("a", "B1") are opaque already and would match ordinary words
-    return [(key, cond.id) for cond in design.conditions if len(cond.id) > 2 for key, text in texts.items()
-            if re.search(rf"(?<![A-Za-z0-9]){re.escape(cond.id)}(?![A-Za-z0-9])", text, flags=re.IGNORECASE)]
+    return [cond.id for cond in design.conditions if len(cond.id) > 2
+            and re.search(rf"(?<![A-Za-z0-9]){re.escape(cond.id)}(?![A-Za-z0-9])", text, flags=re.IGNORECASE)]
 
 
 def validate_design(path: str | Path, *, check_files: bool = True) -> list[Problem]:

@@ -83,7 +83,7 @@ def test_remote_run_and_merge_maps_back_to_real_ids(lab, tmp_path: Path) -> None
     assert bundled.design_hash == info.bundle_hash != design.design_hash
     assert {c.id for c in bundled.conditions}.isdisjoint(REAL_CONDITIONS)
     results_zip = _remote_run(info.path, tmp_path, "R02")
-    assert re.fullmatch(r"results-tiny-R02-[0-9a-f]{8}\.zip", results_zip.name), results_zip.name
+    assert re.fullmatch(r"results-Tiny-synthetic-study-tiny-R02-[0-9a-f]{8}\.zip", results_zip.name), results_zip.name
     assert set(zipfile.ZipFile(results_zip).namelist()) == {"results.json", "manifest.json"}
 
     reports = merge_results(results, [results_zip])
@@ -426,3 +426,20 @@ def test_merge_refuses_byte_damaged_truncated_and_malformed_files_one_line_each(
     db = ResultsDB(results, design)
     assert db.participant("R99") is None and db.participant("R11") is not None
     db.close()
+
+
+def test_design_file_name_never_reaches_the_participant(lab, tmp_path: Path) -> None:
+    """Experimenters name files after their models; the participant's cache, results database and results
+    file are named after the (validated) title instead, and a bundle named after a model is refused."""
+    design_path, design, results = lab
+    telling = design_path.with_name("synced_vs_static.toml")
+    telling.write_text(design_path.read_text())
+    with pytest.raises(InputError, match="names condition 'synced'"):
+        make_bundle(telling, tmp_path / "synced-study.zip", results=results)
+    info = make_bundle(telling, tmp_path / "study.zip", results=results, participants=1)
+    with zipfile.ZipFile(info.path) as zf:
+        manifest = json.loads(zf.read("manifest.json"))
+    assert "synced" not in json.dumps(manifest).lower() and "static" not in json.dumps(manifest).lower()
+    results_file = _remote_run(info.path, tmp_path, "R01")
+    seen = [results_file.name, *(p.name for p in (tmp_path / "cache").rglob("*"))]
+    assert not [n for n in seen if "synced" in n.lower() or "static" in n.lower()], seen

@@ -98,7 +98,7 @@ def test_bundle_remote_run_and_merge(tmp_path: Path, cli) -> None:
     remote = _run("run", tmp_path / "send" / "study.zip", "--participant", "R01", "--no-render", "--bot", "careful",
                   env=env, cwd=home)
     assert remote.returncode == 0, remote.stderr
-    [results_zip] = (home / "studyapp-results").glob("results-tiny-R01-*.zip")
+    [results_zip] = (home / "studyapp-results").glob("results-Tiny-synthetic-study-tiny-R01-*.zip")
     assert f"Your results file: {results_zip}" in remote.stdout and results_zip.is_file()
     assert str(home / ".local/share/studyapp/studies") in remote.stdout
     assert any((home / ".cache" / "studyapp" / "bundles").iterdir())
