@@ -14,7 +14,7 @@ from results_analysis.descriptives import condition_summary
 from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions
 from results_analysis.friedman import FriedmanResult, friedman, friedman_ranks, kendall_w
-from results_analysis.loader import load_questionnaire, load_results, normalize_results
+from results_analysis.loader import load_questionnaire, load_results, load_study_title, normalize_results
 from results_analysis.posthoc import (conover, critical_difference, holm, nemenyi, nemenyi_q_alpha, posthoc_table,
                                       wilcoxon_holm)
 from results_analysis.questionnaire import cronbach_alpha, item_summary, scale_reliability
@@ -27,7 +27,7 @@ __all__ = [
     "Analysis", "AnalysisInputError", "FriedmanResult", "MixedDesignWarning", "RankBlocks", "analyze", "as_blocks",
     "analyze_criterion", "apply_exclusions", "bradley_terry", "condition_summary", "conover", "critical_difference",
     "cronbach_alpha", "fit_bradley_terry", "friedman", "friedman_ranks", "group_breakdown", "holm", "item_summary",
-    "kendall_w", "load_questionnaire", "load_results", "nemenyi", "nemenyi_q_alpha", "normalize_results",
+    "kendall_w", "load_questionnaire", "load_results", "load_study_title", "nemenyi", "nemenyi_q_alpha", "normalize_results",
     "pairwise_wins", "posthoc_table", "rank_blocks", "run_analysis", "scale_reliability", "simulate_results",
     "validate_results", "within_block_ranks", "wilcoxon_holm",
 ]

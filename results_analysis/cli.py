@@ -38,19 +38,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--conover", action="store_true", help="add Conover's Friedman post-hoc tests")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
-    p.add_argument("--title", default=None, help="report title")
+    p.add_argument("--title", default=None, help="report title (default: the study title stored in a results "
+                   "database, else 'Results: FILE')")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from results_analysis.loader import load_questionnaire, load_results
+    from results_analysis.loader import load_questionnaire, load_results, load_study_title
     from results_analysis.report import analyze
 
     try:
         if not 0 < args.alpha < 1:
             raise AnalysisInputError(None, "--alpha", f"{args.alpha} is not between 0 and 1")
         df = load_results(args.results)
+        # --title wins; then the title the study database stores; the file name only as the last resort.
+        title = args.title or load_study_title(args.results) or f"Results: {args.results.name}"
         q = None
         if args.questionnaire is not None:
             q = load_questionnaire(args.questionnaire)
@@ -59,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
             q = q if len(q) else None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            a = analyze(df, args.out, title=args.title or f"Results: {args.results.name}", block=args.block,
+            a = analyze(df, args.out, title=title, block=args.block,
                         groups=args.group, questionnaire=q, exclude_failed_attention=args.exclude_failed_attention,
                         exclude=[x for x in args.exclude.split(",") if x.strip()], alpha=args.alpha,
                         conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete,

@@ -153,6 +153,29 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
     return q.reset_index(drop=True)
 
 
+def load_study_title(path: str | Path) -> str | None:
+    """The study title stored in a results database, or None (a CSV export, or a database without a title).
+
+    >>> import tempfile, pathlib, sqlite3
+    >>> db = pathlib.Path(tempfile.mkdtemp()) / "s.sqlite"
+    >>> with sqlite3.connect(db) as con:
+    ...     _ = con.execute("CREATE TABLE study (id INTEGER PRIMARY KEY, title TEXT)")
+    ...     _ = con.execute("INSERT INTO study VALUES (1, 'Gesture realism')")
+    >>> load_study_title(db)
+    'Gesture realism'
+    """
+    path = Path(path)
+    if not _is_sqlite(path):
+        return None
+    from results_analysis.sqlite_schema import study_title_from_connection
+
+    try:
+        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as con:
+            return study_title_from_connection(con)
+    except sqlite3.DatabaseError as exc:
+        raise AnalysisInputError(path, "table study", f"not readable ({exc})") from exc
+
+
 # --- SQLite -------------------------------------------------------------------------------------------
 
 

@@ -203,8 +203,32 @@ def _p_cell(p: float) -> str:
     return fmt_p(p).split(" ", 1)[1].lstrip("= ")
 
 
+# Every statistic printed in both the prose and a report table goes through one of these formatters in both
+# places, so a reader never sees 50 in the text and 49.5 in the table for the same number.
+
+
 def _num(v: float, digits: int = 2) -> str:
+    """A statistic (χ², W, F, CD, mean rank, r_rb, ...) with ``digits`` decimals; ``n/a`` when undefined.
+
+    >>> _num(83.6354), _num(float("nan")), _num(float("inf"))
+    ('83.64', 'n/a', '∞')
+    """
+    if v is None or not np.isfinite(v):
+        return "∞" if v is not None and np.isposinf(v) else "n/a"
     return f"{v:.{digits}f}"
+
+
+def fmt_v(v: float) -> str:
+    """The Wilcoxon V (a sum of signed ranks: a whole or half number with tied ranks) as R prints it: an
+    integer when it is one, otherwise one decimal; never rounded to a neighbouring integer.
+
+    >>> fmt_v(49.5), fmt_v(236.0), fmt_v(235.49999999999997), fmt_v(1234567.0), fmt_v(float("nan"))
+    ('49.5', '236', '235.5', '1234567', 'n/a')
+    """
+    if v is None or not np.isfinite(v):
+        return "n/a"
+    r = round(float(v), 1)
+    return f"{r:.0f}" if r == int(r) else f"{r:.1f}"
 
 
 def _alpha(x: float) -> str:
@@ -258,7 +282,7 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
     post = (f"{lead} (critical difference CD = {_num(c.critical_difference)} at α = {_alpha(a.alpha)}) found: "
             + "; ".join(parts) + ".")
     wil = c.posthoc["wilcoxon_holm"]
-    wparts = [f"{r.a} vs {r.b}: V = {r.statistic:.0f}, r_rb = {_num(r.rank_biserial)}, "
+    wparts = [f"{r.a} vs {r.b}: V = {fmt_v(r.statistic)}, r_rb = {_num(r.rank_biserial)}, "
               f"{fmt_p(r.p_adjusted, adjusted=True)}" for r in wil.itertuples()]
     # Name the pairs where the two post-hoc families disagree: a reader must not have to find them.
     differ = [f"{w.a} vs {w.b} (significant only with {'Wilcoxon' if w.p_adjusted < a.alpha else 'Nemenyi'})"
@@ -345,12 +369,14 @@ def build_document(a: Analysis, title: str) -> Document:
                                                        "critical_difference": "CD"})
     show["p"] = [_p_cell(p) for p in show["p"]]
     show["p (F_ID)"] = [_p_cell(p) for p in show["p (F_ID)"]]
+    for col in ("χ²", "W", "F_ID", "CD"):
+        show[col] = [_num(v) for v in show[col]]
     doc.table(show, f"Table 1. Friedman tests per criterion (blocks: {a.block}s).")
     rows = []
     for crit, c in a.criteria.items():
         for r in c.summary.itertuples():
-            rows.append({"criterion": crit, "condition": r.condition, "n": r.n, "mean rank": r.mean_rank,
-                         f"{a.ci:.0%} CI": f"{r.ci_low:.2f}–{r.ci_high:.2f}", "median": f"{r.median_rank:g}",
+            rows.append({"criterion": crit, "condition": r.condition, "n": r.n, "mean rank": _num(r.mean_rank),
+                         f"{a.ci:.0%} CI": f"{_num(r.ci_low)}–{_num(r.ci_high)}", "median": f"{r.median_rank:g}",
                          **{f"rank {i}": f"{getattr(r, f'share_rank_{i}'):.0%}" for i in range(1, len(a.conditions) + 1)}})
     doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
               "interval, median, and share of answers at each rank.")
@@ -364,7 +390,9 @@ def build_document(a: Analysis, title: str) -> Document:
                          "r_rb": wil.loc[(x, y), "rank_biserial"], "Wilcoxon p_adj (Holm)": wil.loc[(x, y), "p_adjusted"],
                          "method": wil.loc[(x, y), "method"]})
     ptab = pd.DataFrame(prow)
-    ptab["Wilcoxon V"] = [f"{v:g}" for v in ptab["Wilcoxon V"]]  # a rank sum: 442 or 442.5, not 442.000
+    ptab["Wilcoxon V"] = [fmt_v(v) for v in ptab["Wilcoxon V"]]
+    for col in ("Δ mean rank", "r_rb"):
+        ptab[col] = [_num(v) for v in ptab[col]]
     for col in ("Nemenyi p_adj", "Wilcoxon p_adj (Holm)"):
         ptab[col] = [_p_cell(p) for p in ptab[col]]
     doc.table(ptab, "Table 3. Post-hoc comparisons (Δ: difference of mean ranks; r_rb: matched-pairs rank-biserial "
@@ -382,6 +410,9 @@ def build_document(a: Analysis, title: str) -> Document:
             show = t[cols].rename(columns={"n_blocks": "n", "n_participants": "participants", "chi2": "χ²",
                                            "kendall_w": "W", **{f"mean_rank_{x}": f"mean rank {x}" for x in a.conditions}})
             show["p"] = [_p_cell(p) for p in show["p"]]
+            # Same precision as Tables 1 and 2, so a level's numbers compare directly with the overall ones.
+            for col in ["χ²", "W"] + [f"mean rank {x}" for x in a.conditions]:
+                show[col] = [_num(v) for v in show[col]]
             doc.table(show, f"Friedman test per level of '{g}' (blocks: {a.block}s).")
     if a.questionnaire_reliability is not None:
         doc.h(1, "Questionnaire")

@@ -52,6 +52,19 @@ def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFr
     return df
 
 
+def study_title_from_connection(con: sqlite3.Connection) -> str | None:
+    """The study title stored in table ``study`` (column ``title``), whitespace collapsed to single spaces; None
+    when the database has no such table or column or the title is empty (studyapp stores '' for an untitled
+    design), so the caller can fall back to something else."""
+    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type IN ('table','view')")}
+    if "study" not in tables or "title" not in {r[1] for r in con.execute("PRAGMA table_info(study)")}:
+        return None
+    row = con.execute("SELECT title FROM study ORDER BY rowid LIMIT 1").fetchone()
+    # A heading is one line: a newline in the stored title would otherwise break the Markdown report.
+    title = " ".join(str(row[0]).split()) if row and row[0] is not None else ""
+    return title or None
+
+
 def questionnaire_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:
     """Questionnaire answers (participant, item, scale, kind, value). The scale is the stored ``scale`` column
     when the database has one; otherwise (or when it is empty) an item named ``scale.item`` or

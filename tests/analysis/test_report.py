@@ -207,3 +207,99 @@ def test_report_names_the_pairs_where_post_hoc_tests_disagree(written) -> None:
     for line in table3.splitlines()[2:]:
         v = line.split(" | ")[4]
         assert float(v) * 2 == int(float(v) * 2) and not v.endswith(".000"), line  # a rank sum, as printed by R
+
+
+# Rankings of (ours, sixdnet, baseline), 6 participants x 3 trials: with only rank differences of 1 and 2 the
+# Wilcoxon signed ranks are tied averages, and here every V is a half-integer (ours vs sixdnet: V = 31.5).
+HALF_V_RANKINGS = "132 213 123 213 123 123 123 231 231 231 123 123 123 312 132 132 123 231".split()
+
+
+def _half_v_study() -> pd.DataFrame:
+    rows = [{"participant": f"P{i // 3 + 1}", "trial_index": i % 3, "stimulus": f"clip{i % 3 + 1}",
+             "criterion": "realism", "condition": cond, "rank": float(r)}
+            for i, ranking in enumerate(HALF_V_RANKINGS) for cond, r in zip(("ours", "sixdnet", "baseline"), ranking)]
+    return pd.DataFrame(rows)
+
+
+def _md_table(md: str, header_start: str) -> list[dict[str, str]]:
+    block = next(p for p in md.split("\n\n") if p.startswith(header_start))
+    lines = block.splitlines()
+    head = [c.strip() for c in lines[0].strip("|").split("|")]
+    return [dict(zip(head, (c.strip() for c in line.strip("|").split(" | ")))) for line in lines[2:]]
+
+
+def test_prose_and_tables_print_the_same_numbers(tmp_path: Path) -> None:
+    df = _half_v_study()
+    wide = df.pivot(index=["participant", "trial_index"], columns="condition", values="rank")
+    v_ref, _ = stats.wilcoxon(wide["ours"], wide["sixdnet"], zero_method="wilcox", correction=True)
+    d = (wide["ours"] - wide["sixdnet"]).to_numpy()
+    d = d[d != 0]
+    v_ours_six = stats.rankdata(np.abs(d))[d > 0].sum()  # R's V: sum of the ranks of positive differences
+    assert v_ours_six == 31.5 and min(v_ours_six, len(d) * (len(d) + 1) / 2 - v_ours_six) == v_ref
+    a = analyze(df, tmp_path, title="Half ranks", n_boot=50, seed=0)
+    md = (tmp_path / "report.md").read_text()
+    html = (tmp_path / "report.html").read_text()
+    c = a.criteria["realism"]
+    wil = c.posthoc["wilcoxon_holm"].set_index(["a", "b"])
+    assert (wil["statistic"] % 1 == 0.5).all()  # the data really exercise half-integer V
+    prose = next(p for p in md.split("\n\n") if p.startswith("Nemenyi post-hoc") or p.startswith("For completeness"))
+    t3 = {tuple(r["pair"].split(" – ")): r for r in _md_table(md, "| criterion | pair |")}
+    assert t3[("ours", "sixdnet")]["Wilcoxon V"] == "31.5"
+    assert "ours vs sixdnet: V = 31.5, " in prose and "ours vs sixdnet: V = 31.5, " in html
+    for (x, y), r in t3.items():
+        # the very string of the table cell appears in the sentence about the same pair
+        assert f"{x} vs {y}: V = {r['Wilcoxon V']}, r_rb = {r['r_rb']}, p_adj " in prose, (x, y)
+        assert f"(difference {r['Δ mean rank']}, " in prose, (x, y)
+        cell = r["Nemenyi p_adj"]
+        assert (f"p_adj {cell})" if cell.startswith("<") else f"p_adj = {cell})") in prose, (x, y)
+    opening = next(p for p in md.split("\n\n") if p.startswith("**Realism.**"))
+    (t1,) = _md_table(md, "| criterion | n | χ² |")
+    assert f"χ²({t1['df']}) = {t1['χ²']}, " in opening and f"Kendall's W = {t1['W']} " in opening
+    assert f") = {t1['F_ID']}, " in opening and f"CD = {t1['CD']} at α = .05" in prose
+    assert t1["χ²"] == f"{c.friedman.chi2:.2f}"  # two decimals in both places, not 3 in the table
+    for r in _md_table(md, "| criterion | condition |"):
+        assert f"{r['condition']} {r['mean rank']} (95% CI {r['95% CI']}; ranked first in {r['rank 1']})" in opening
+
+
+def test_cli_title_comes_from_the_results_database(tmp_path: Path, study: pd.DataFrame) -> None:
+    import sqlite3
+
+    storage = pytest.importorskip("studyapp.study.storage")  # the tests may use studyapp; the package never does
+    from types import SimpleNamespace
+
+    conditions = sorted(study.condition.unique())
+    design = SimpleNamespace(design_hash="h", title="Gesture realism\nstudy 2026", stimuli=[],
+                             conditions=[SimpleNamespace(id=c) for c in conditions])
+    db_path = tmp_path / "study.results.sqlite"
+    db = storage.ResultsDB(db_path, design)
+    rated = study[~study.is_practice & ~study.is_attention_check & study.participant.isin(["P01", "P02", "P03"])]
+    for pid in ("P01", "P02", "P03"):
+        db.add_participant(pid, n_rows=1)
+        for t, trial in rated[rated.participant == pid].groupby("trial_index"):
+            db.save_trial(storage.TrialRecord(
+                participant=pid, trial_index=int(t), stimulus=str(trial.stimulus.iloc[0]), is_practice=False,
+                is_attention_check=False, slots=tuple(conditions), answered_at="2026-01-01T00:00:00", plays=1,
+                response_time_s=1.0, attention_passed=None),
+                [storage.Response(r.criterion, r.condition, conditions.index(r.condition), float(r.rank))
+                 for r in trial.itertuples()])
+    db.close()
+
+    def heading(out: str, *extra: str) -> str:
+        assert main([str(db_path), "--out", str(tmp_path / out), "--bootstrap", "20", *extra]) == 0
+        md = (tmp_path / out / "report.md").read_text()
+        html = (tmp_path / out / "report.html").read_text()
+        first = md.splitlines()[0]
+        assert f"<h1>{first[2:]}</h1>" in html and f"<title>{first[2:]}</title>" in html
+        return first
+
+    # the stored title (one line: a heading cannot hold a newline), not the file name
+    assert heading("stored") == "# Gesture realism study 2026"
+    assert heading("given", "--title", "Mine") == "# Mine"  # --title still wins
+    # an untitled study (studyapp stores '') falls back to the file name, as does a CSV export
+    with sqlite3.connect(db_path) as con:
+        con.execute("UPDATE study SET title = ''")
+    assert heading("untitled") == "# Results: study.results.sqlite"
+    csv = tmp_path / "export.csv"
+    rated.to_csv(csv, index=False)
+    assert main([str(csv), "--out", str(tmp_path / "csv"), "--bootstrap", "20"]) == 0
+    assert (tmp_path / "csv" / "report.md").read_text().startswith("# Results: export.csv\n")
