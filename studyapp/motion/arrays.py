@@ -1,7 +1,11 @@
 """Motion stored as numpy arrays (model outputs) and studyapp's own NPZ motion format.
 
 Gesture models write per-frame joint rotations as arrays: CaMN Euler angles, DiffSHEG axis-angle,
-FaceCapGes 6D, often flattened to ``(F, J*k)`` and without any skeleton. :func:`load_rotation_array`
+FaceCapGes 6D, often flattened to ``(F, J*k)`` and without any skeleton. 6D comes in two layouts that
+the numbers cannot tell apart: ``"sixd"`` (Zhou et al.: first two columns, ``[R00, R10, R20, R01, R11,
+R21]``) and ``"sixd_rows"`` (PyTorch3D's ``matrix_to_rotation_6d``, used by EMAGE and other
+BEAT-derived code: first two rows, ``[R00, R01, R02, R10, R11, R12]``); the wrong one plays every joint
+rotation inverted. :func:`load_rotation_array`
 puts such an array onto a template skeleton; :func:`save_motion_npz` / :func:`load_motion_npz` keep a
 whole motion (skeleton included) in one NPZ.
 
@@ -22,10 +26,13 @@ import numpy as np
 
 from studyapp.errors import InputError
 from studyapp.motion.fk import joint_positions
-from studyapp.motion.rotations import representation_width, to_quat
+from studyapp.motion.rotations import REPRESENTATIONS, representation_width, to_quat
 from studyapp.motion.skeleton import Motion, Skeleton
 
-__all__ = ["load_rotation_array", "save_motion_npz", "load_motion_npz", "read_array", "is_motion_npz", "check_numpy_file"]
+__all__ = [
+    "load_rotation_array", "save_motion_npz", "load_motion_npz", "read_array", "is_motion_npz", "check_numpy_file",
+    "fitting_representations",
+]
 
 # keys tried, in order, when an NPZ holds several arrays and no key is given
 _ROTATION_KEYS = ("rotations", "rotation", "poses", "pose", "motion", "body_pose", "data", "arr_0")
@@ -94,6 +101,29 @@ def read_array(path: str | Path, key: str | None = None) -> tuple[np.ndarray, st
         return loaded[key], f"key {key}"
 
 
+def fitting_representations(shape: tuple[int, ...]) -> list[str]:
+    """Representations whose per-joint width fits an array of ``shape`` the way
+    :func:`load_rotation_array` reads it (``(F, J, k)``, flattened ``(F, J*k)`` or ``(F, J, 3, 3)``).
+
+    Only the shape is checked: a fit is a possibility, not a guess at what the array holds.
+
+    >>> fitting_representations((30, 47 * 6))
+    ['euler', 'axis_angle', 'sixd', 'sixd_rows']
+    >>> fitting_representations((1, 30, 47, 4))
+    ['quat', 'quat_wxyz']
+    """
+    shape = tuple(int(n) for n in shape)
+    while len(shape) > 2 and shape[0] == 1 and not (len(shape) == 4 and shape[2:] == (3, 3)):
+        shape = shape[1:]
+    if len(shape) == 4:
+        return ["matrix"] if shape[2:] == (3, 3) else []
+    if len(shape) == 3:
+        return [r for r, k in REPRESENTATIONS.items() if shape[2] == k]
+    if len(shape) == 2 and shape[1] > 0:
+        return [r for r, k in REPRESENTATIONS.items() if shape[1] % k == 0]
+    return []
+
+
 def _default_joints(skeleton: Skeleton, n: int | None) -> tuple[str, ...]:
     from studyapp.motion.beat import BEAT_UPPER_BODY
 
@@ -121,12 +151,14 @@ def load_rotation_array(
     path:
         ``.npy`` or ``.npz`` with ``(F, J, k)`` or flattened ``(F, J*k)`` values (leading singleton
         batch dimensions are dropped); ``k`` is 3 for ``"euler"`` / ``"axis_angle"``, 4 for
-        ``"quat"`` / ``"quat_wxyz"``, 6 for ``"sixd"``, 9 (or ``3x3``) for ``"matrix"``.
+        ``"quat"`` / ``"quat_wxyz"``, 6 for ``"sixd"`` / ``"sixd_rows"``, 9 (or ``3x3``) for ``"matrix"``.
     template:
         A :class:`Motion` (its first frame poses the joints the array does not drive), a
         :class:`Skeleton` (rest pose), a motion file path, or ``"beat"``.
     representation:
-        See :func:`studyapp.motion.rotations.to_quat`.
+        See :func:`studyapp.motion.rotations.to_quat`. For 6D, ``"sixd"`` reads each joint's six
+        numbers as Zhou's first two matrix columns ``[R00, R10, R20, R01, R11, R21]``, ``"sixd_rows"``
+        as the first two rows ``[R00, R01, R02, R10, R11, R12]`` (PyTorch3D ``matrix_to_rotation_6d``).
     fps:
         Frame rate of the array (arrays carry none).
     joints:

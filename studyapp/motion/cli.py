@@ -2,7 +2,9 @@
 
 inspect PATH [--fps F] [--json]
     Summary of a motion (BVH / NPZ / NPY), a face file (JSON / CSV, an NPZ with ``weights`` and
-    ``names``, a bare ``(F, 52)`` NPY when ``--fps`` is given) or a WAV.
+    ``names``, a bare ``(F, 52)`` NPY when ``--fps`` is given) or a WAV. For a raw rotation array it
+    lists the representations whose width fits each array's shape and, when a 6D reading fits, says
+    that ``sixd`` (columns) and ``sixd_rows`` (rows) cannot be told apart from the numbers.
 convert IN OUT [--fps F] [--in-fps F] [--order XYZ] [--template T] [--representation R] ...
     BVH -> BVH (new rotation order and/or frame rate), NPZ/NPY rotation arrays -> BVH or NPZ (needs
     ``--template``), BVH -> NPZ (studyapp motion NPZ with world joint positions).
@@ -18,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from studyapp.errors import InputError
+# the motion package (numpy included) is already imported by the time this module loads
+from studyapp.motion.rotations import REPRESENTATIONS
 
 _FACE_EXT = (".json", ".csv")
 _AUDIO_EXT = (".wav",)
@@ -52,9 +56,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--order", default=None, help="rotation order of every joint in an output BVH, e.g. ZXY")
     c.add_argument("--template", default=None, help="skeleton for rotation arrays: a BVH/NPZ file or 'beat'")
     c.add_argument(
-        "--representation", default=None,
-        choices=["euler", "axis_angle", "quat", "quat_wxyz", "sixd", "matrix"],
-        help="rotation representation of an array input",
+        "--representation", default=None, choices=list(REPRESENTATIONS),
+        help="rotation representation of an array input. 6D has two layouts the numbers cannot tell apart: "
+             "sixd = Zhou et al. first two columns [R00,R10,R20,R01,R11,R21]; sixd_rows = first two rows "
+             "[R00,R01,R02,R10,R11,R12] (PyTorch3D matrix_to_rotation_6d, EMAGE/BEAT-derived code)",
     )
     c.add_argument("--joints", default=None, help="comma-separated template joints the array columns map to")
     c.add_argument("--in-order", default=None, help="Euler order of an 'euler' array (default: template's per joint)")

@@ -73,6 +73,25 @@ def load_motion(
     raise InputError(str(path), None, f"unsupported motion format {ext or '(no extension)'}; expected one of {', '.join(MOTION_EXTENSIONS)}")
 
 
+#: Said whenever an array could hold 6D rotations: the two layouts cannot be told apart from the numbers
+#: (each joint's six numbers read the other way are its inverse rotation, just as valid), so only the
+#: model's own code can say which one it wrote.
+SIXD_LAYOUT_NOTE = (
+    "if this array holds 6D rotations, its layout cannot be read from the numbers: --representation sixd "
+    "reads Zhou's first two matrix columns [R00,R10,R20,R01,R11,R21], sixd_rows the first two rows "
+    "[R00,R01,R02,R10,R11,R12] (PyTorch3D matrix_to_rotation_6d, EMAGE/BEAT-derived code); "
+    "check how the model flattens it"
+)
+
+
+def _array_facts(a: np.ndarray) -> dict[str, Any]:
+    """Shape, dtype and the representations whose per-joint width fits the shape (numeric arrays)."""
+    from studyapp.motion.arrays import fitting_representations
+
+    fits = fitting_representations(a.shape) if np.issubdtype(a.dtype, np.number) else []
+    return {"shape": list(a.shape), "dtype": str(a.dtype), "fits": fits}
+
+
 def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, Any]:
     """Facts about a motion file for ``studyapp inspect`` (JSON-serialisable).
 
@@ -80,7 +99,8 @@ def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, An
     ``rotation_orders`` (order -> joint count), ``position_channels`` (joints with them),
     ``channels``, ``figure_height`` (file units, first frame), ``unit_scale``, ``unit_guess``,
     ``height_m`` (when the unit is known), ``warnings``. A raw rotation array (no skeleton) gives
-    ``format``, ``arrays`` (name -> shape, dtype) and ``warnings``.
+    ``format``, ``arrays`` (name -> shape, dtype, ``fits``: the representations whose per-joint width
+    fits the shape) and ``warnings`` (with :data:`SIXD_LAYOUT_NOTE` when a 6D reading fits).
     """
     from studyapp.motion.fk import figure_height
 
@@ -115,8 +135,10 @@ def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, An
                     with loaded:
                         arrays = {k: loaded[k] for k in loaded.keys()}
                 out["format"] = f"{ext[1:]} (rotation array; needs a template to become a motion)"
-                out["arrays"] = {k: {"shape": list(v.shape), "dtype": str(v.dtype)} for k, v in arrays.items()}
+                out["arrays"] = {k: _array_facts(v) for k, v in arrays.items()}
                 out["warnings"] = [str(w.message) for w in caught]
+                if any("sixd" in a["fits"] for a in out["arrays"].values()):
+                    out["warnings"].append(SIXD_LAYOUT_NOTE)
                 return out
         else:
             motion = load_motion(p, fps=fps)

@@ -8,8 +8,17 @@ Conventions (see :mod:`studyapp.motion.skeleton`):
   way a BVH channel list reads: ``"ZXY"`` gives ``R = R_Z @ R_X @ R_Y`` and ``angles[..., 0]`` is the
   Z angle. Angles are in degrees unless ``degrees=False``.
 * Matrices rotate column vectors: ``v_parent = R @ v_local``.
-* 6D (Zhou et al. 2019, "On the Continuity of Rotation Representations") is the first two
-  **columns** of the matrix, laid out ``[col0 (3), col1 (3)]`` = ``[R00, R10, R20, R01, R11, R21]``.
+* 6D comes in two layouts of the same six matrix entries (``Rij`` = row ``i``, column ``j``); the
+  numbers alone cannot tell them apart (read the wrong way, every joint plays its inverse rotation):
+
+  - ``"sixd"``: Zhou et al. 2019 ("On the Continuity of Rotation Representations in Neural
+    Networks"), the first two **columns**, ``[col0, col1]`` = ``[R00, R10, R20, R01, R11, R21]``
+    (``np.concatenate([R[..., :, 0], R[..., :, 1]], -1)``).
+  - ``"sixd_rows"``: the first two **rows**, ``[row0, row1]`` = ``[R00, R01, R02, R10, R11, R12]``,
+    i.e. ``R[..., :2, :].reshape(..., 6)``. This is what PyTorch3D's ``matrix_to_rotation_6d``
+    writes (``matrix[..., :2, :].clone().reshape(batch_dim + (6,))``, "by dropping the last row") and
+    its ``rotation_6d_to_matrix`` reads (Gram-Schmidt rows stacked with ``dim=-2``), so most PyTorch
+    gesture code (EMAGE and other BEAT-derived pipelines that copy PyTorch3D's conversions) stores it.
 
 >>> import numpy as np
 >>> q = euler_to_quat(np.array([90.0, 0.0, 0.0]), "ZXY")
@@ -34,6 +43,10 @@ __all__ = [
     "matrix_to_sixd",
     "quat_to_sixd",
     "sixd_to_quat",
+    "sixd_rows_to_matrix",
+    "matrix_to_sixd_rows",
+    "quat_to_sixd_rows",
+    "sixd_rows_to_quat",
     "quat_multiply",
     "quat_inverse",
     "quat_slerp",
@@ -59,6 +72,7 @@ REPRESENTATIONS: dict[str, int] = {
     "quat": 4,
     "quat_wxyz": 4,
     "sixd": 6,
+    "sixd_rows": 6,
     "matrix": 9,
 }
 
@@ -237,45 +251,95 @@ def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
     return _rotation_class().from_quat(flat).as_rotvec().reshape(lead + (3,))
 
 
-def sixd_to_matrix(d6: np.ndarray) -> np.ndarray:
-    """6D rotations ``(..., 6)`` = ``[col0, col1]`` to matrices ``(..., 3, 3)`` by Gram-Schmidt.
-
-    >>> sixd_to_matrix(np.array([2.0, 0, 0, 0.5, 3.0, 0])).round(6).tolist()
-    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
-    """
+def _gram_schmidt(d6: np.ndarray, vectors: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Orthonormal ``b1, b2, b3`` from the two 3-vectors of ``(..., 6)`` (Zhou et al., section B)."""
     d6 = np.asarray(d6, dtype=np.float64)
     if d6.shape[-1:] != (6,):
         raise ValueError(f"expected trailing shape (6,), got {d6.shape}")
     a1, a2 = d6[..., 0:3], d6[..., 3:6]
     n1 = np.linalg.norm(a1, axis=-1, keepdims=True)
     if np.any(n1 < 1e-12):
-        raise ValueError("6D rotation has a zero first column")
+        raise ValueError(f"6D rotation has a zero first {vectors[:-1]}")
     b1 = a1 / n1
     b2 = a2 - np.sum(b1 * a2, axis=-1, keepdims=True) * b1
     n2 = np.linalg.norm(b2, axis=-1, keepdims=True)
     if np.any(n2 < 1e-12):
-        raise ValueError("6D rotation has parallel columns")
+        raise ValueError(f"6D rotation has parallel {vectors}")
     b2 = b2 / n2
-    b3 = np.cross(b1, b2)
-    return np.stack([b1, b2, b3], axis=-1)
+    return b1, b2, np.cross(b1, b2)
+
+
+def sixd_to_matrix(d6: np.ndarray) -> np.ndarray:
+    """Zhou 6D ``(..., 6)`` = ``[R00, R10, R20, R01, R11, R21]`` (first two **columns**) to matrices
+    ``(..., 3, 3)``; Gram-Schmidt makes the columns orthonormal and the third is their cross product.
+
+    >>> sixd_to_matrix(np.array([2.0, 0, 0, 0.5, 3.0, 0])).round(6).tolist()
+    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    >>> z90 = [[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]  # 90 degrees about Z
+    >>> np.array_equal(sixd_to_matrix(np.array([0.0, 1, 0, -1, 0, 0])), z90)
+    True
+    """
+    return np.stack(_gram_schmidt(d6, "columns"), axis=-1)
 
 
 def matrix_to_sixd(m: np.ndarray) -> np.ndarray:
-    """Matrices ``(..., 3, 3)`` to 6D ``(..., 6)``: ``[R[:,0], R[:,1]]`` (first two columns)."""
+    """Matrices ``(..., 3, 3)`` to Zhou 6D ``(..., 6)``: the first two **columns**,
+    ``[R00, R10, R20, R01, R11, R21]``.
+
+    >>> matrix_to_sixd(np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])).tolist()  # 90 degrees about Z
+    [0.0, 1.0, 0.0, -1.0, 0.0, 0.0]
+    """
     m = np.asarray(m, dtype=np.float64)
     if m.shape[-2:] != (3, 3):
         raise ValueError(f"expected trailing shape (3, 3), got {m.shape}")
     return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
+def sixd_rows_to_matrix(d6: np.ndarray) -> np.ndarray:
+    """Row-layout 6D ``(..., 6)`` = ``[R00, R01, R02, R10, R11, R12]`` (first two **rows**, PyTorch3D's
+    ``rotation_6d_to_matrix``) to matrices ``(..., 3, 3)``; Gram-Schmidt on the rows, the third row is
+    their cross product.
+
+    >>> z90 = [[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]  # 90 degrees about Z
+    >>> np.array_equal(sixd_rows_to_matrix(np.array([0.0, -1, 0, 1, 0, 0])), z90)
+    True
+    """
+    return np.stack(_gram_schmidt(d6, "rows"), axis=-2)
+
+
+def matrix_to_sixd_rows(m: np.ndarray) -> np.ndarray:
+    """Matrices ``(..., 3, 3)`` to row-layout 6D ``(..., 6)``: the first two **rows** flattened,
+    ``[R00, R01, R02, R10, R11, R12]`` (= ``m[..., :2, :].reshape(..., 6)``, PyTorch3D's
+    ``matrix_to_rotation_6d``).
+
+    >>> matrix_to_sixd_rows(np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])).tolist()  # 90 degrees about Z
+    [0.0, -1.0, 0.0, 1.0, 0.0, 0.0]
+    """
+    m = np.asarray(m, dtype=np.float64)
+    if m.shape[-2:] != (3, 3):
+        raise ValueError(f"expected trailing shape (3, 3), got {m.shape}")
+    # copy: for a single contiguous matrix the reshape would be a view into the caller's array
+    return m[..., :2, :].reshape(m.shape[:-2] + (6,)).copy()
+
+
 def quat_to_sixd(q: np.ndarray) -> np.ndarray:
-    """Quaternions ``(..., 4)`` to 6D ``(..., 6)``."""
+    """Quaternions ``(..., 4)`` to Zhou (column) 6D ``(..., 6)``."""
     return matrix_to_sixd(quat_to_matrix(q))
 
 
 def sixd_to_quat(d6: np.ndarray) -> np.ndarray:
-    """6D ``(..., 6)`` to quaternions ``(..., 4)``."""
+    """Zhou (column) 6D ``(..., 6)`` to quaternions ``(..., 4)``."""
     return matrix_to_quat(sixd_to_matrix(d6))
+
+
+def quat_to_sixd_rows(q: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` to row-layout (PyTorch3D) 6D ``(..., 6)``."""
+    return matrix_to_sixd_rows(quat_to_matrix(q))
+
+
+def sixd_rows_to_quat(d6: np.ndarray) -> np.ndarray:
+    """Row-layout (PyTorch3D) 6D ``(..., 6)`` to quaternions ``(..., 4)``."""
+    return matrix_to_quat(sixd_rows_to_matrix(d6))
 
 
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -379,8 +443,10 @@ def to_quat(data: np.ndarray, representation: str, order: str | None = None, deg
     """Convert ``(..., k)`` rotations of a named representation to quaternions ``(..., 4)``.
 
     ``representation`` is one of ``"euler"`` (needs ``order``; degrees unless ``degrees=False``),
-    ``"axis_angle"`` (radians), ``"quat"`` (xyzw), ``"quat_wxyz"``, ``"sixd"`` or ``"matrix"``
-    (``(..., 3, 3)`` or flattened row-major ``(..., 9)``).
+    ``"axis_angle"`` (radians), ``"quat"`` (xyzw), ``"quat_wxyz"``, ``"sixd"`` (Zhou: first two
+    columns, ``[R00, R10, R20, R01, R11, R21]``), ``"sixd_rows"`` (PyTorch3D: first two rows,
+    ``[R00, R01, R02, R10, R11, R12]``) or ``"matrix"`` (``(..., 3, 3)`` or flattened row-major
+    ``(..., 9)``).
 
     >>> to_quat(np.array([1.0, 0, 0, 0]), "quat_wxyz").tolist()
     [0.0, 0.0, 0.0, 1.0]
@@ -405,6 +471,8 @@ def to_quat(data: np.ndarray, representation: str, order: str | None = None, deg
         return quat_normalize(data)
     if representation == "quat_wxyz":
         return quat_normalize(data[..., [1, 2, 3, 0]])
+    if representation == "sixd_rows":
+        return sixd_rows_to_quat(data)
     return sixd_to_quat(data)
 
 
@@ -424,4 +492,6 @@ def from_quat(q: np.ndarray, representation: str, order: str | None = None, degr
         return quat_normalize(q)[..., [3, 0, 1, 2]]
     if representation == "sixd":
         return quat_to_sixd(q)
+    if representation == "sixd_rows":
+        return quat_to_sixd_rows(q)
     return quat_to_matrix(q)

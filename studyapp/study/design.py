@@ -48,10 +48,14 @@ class Condition:
     motion: path pattern of the pre-computed motion files, relative to the design file, with ``{stimulus}``.
     model: path of an ONNX gesture model run live on each stimulus instead of ``motion``.
     fps: frame rate to use instead of what the motion file says (BVH headers can lie; NPZ/NPY have none).
-    representation: rotation representation of NPZ/NPY motion arrays (``euler``, ``axis_angle``, ``sixd``, ...).
+    representation: rotation representation of NPZ/NPY motion arrays (``euler``, ``axis_angle``, ``quat``,
+        ``sixd`` (Zhou's first two matrix columns), ``sixd_rows`` (PyTorch3D's first two rows), ``matrix``).
     template: BVH whose skeleton NPZ/NPY arrays (and live model outputs) are laid onto.
     rotation_order: Euler order of NPZ/NPY euler arrays (e.g. ``"XYZ"``).
     name_map: source joint name -> humanoid bone name, for skeletons whose names are not recognised.
+    joints: template joint names the columns of NPZ/NPY arrays drive, in order (default: all template
+        joints, or BEAT's 47 upper-body joints for 47-joint arrays on a BEAT-like template).
+    degrees: whether NPZ/NPY Euler angles are in degrees (default) or radians.
     """
 
     id: str
@@ -62,6 +66,8 @@ class Condition:
     template: str | None = None
     rotation_order: str | None = None
     name_map: dict[str, str] = field(default_factory=dict)
+    joints: tuple[str, ...] | None = None
+    degrees: bool = True
 
     @property
     def is_live(self) -> bool:
@@ -305,9 +311,11 @@ ORDERINGS = ("balanced-latin-square", "random", "fixed")
 SLOT_ASSIGNMENTS = ("balanced", "random")
 SLOT_LABELS = {"ABC": ("A", "B", "C"), "LMR": ("L", "M", "R"), "123": ("1", "2", "3"), "none": None}
 #: Rotation representations of NPZ/NPY arrays (see studyapp.motion.rotations.to_quat), plus common aliases.
-REPRESENTATIONS = ("euler", "axis_angle", "quat", "quat_wxyz", "sixd", "matrix")
-_REPR_ALIASES = {"axis-angle": "axis_angle", "axisangle": "axis_angle", "rotvec": "axis_angle", "6d": "sixd",
-                 "rot6d": "sixd", "quaternion": "quat", "quat_xyzw": "quat", "rotmat": "matrix"}
+REPRESENTATIONS = ("euler", "axis_angle", "quat", "quat_wxyz", "sixd", "sixd_rows", "matrix")
+# "6d"/"rot6d" are left out on purpose: the two 6D layouts cannot be told apart from the numbers, so a
+# design must say which one (sixd = Zhou's columns, sixd_rows = PyTorch3D's rows).
+_REPR_ALIASES = {"axis-angle": "axis_angle", "axisangle": "axis_angle", "rotvec": "axis_angle",
+                 "quaternion": "quat", "quat_xyzw": "quat", "rotmat": "matrix"}
 QUESTION_KINDS = ("likert", "text")
 MOTION_SUFFIXES = (".bvh", ".npz", ".npy")
 AVATAR_SUFFIXES = (".glb", ".gltf", ".vrm")
@@ -322,7 +330,7 @@ _TOP = {
 }
 _CONDITION = {"id": (_STR, True), "motion": (_STR, False), "model": (_STR, False), "fps": (_NUM, False),
               "representation": (_STR, False), "template": (_STR, False), "rotation_order": (_STR, False),
-              "name_map": ((dict,), False)}
+              "name_map": ((dict,), False), "joints": ((list,), False), "degrees": (_BOOL, False)}
 _STIMULUS = {"id": (_STR, True), "audio": (_STR, True), "face": (_STR, False), "head": (_STR, False),
              "tags": ((dict,), False), "duration_s": (_NUM, False), "in_rotation": (_BOOL, False)}
 _CRITERION = {"id": (_STR, True), "label": (_STR, False), "question": (_STR, True), "explanation": (_STR, False)}
@@ -598,7 +606,13 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         rep = e.get("representation")
         if rep is not None:
             rep = _REPR_ALIASES.get(rep.lower(), rep.lower())
-            if rep not in REPRESENTATIONS:
+            if rep in ("6d", "rot6d", "rotation_6d"):
+                col.add(f"{key}.representation", f"{e['representation']!r} is ambiguous: 6D rotations come in two "
+                        "layouts that the numbers cannot tell apart",
+                        'representation = "sixd" (Zhou et al.: first two matrix columns) or "sixd_rows" '
+                        "(PyTorch3D matrix_to_rotation_6d: first two rows)")
+                rep = None
+            elif rep not in REPRESENTATIONS:
                 col.add(f"{key}.representation", f"unknown rotation representation {e['representation']!r}",
                         _did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
         ro = e.get("rotation_order")
@@ -616,9 +630,27 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
             if not e["motion"].lower().endswith(MOTION_SUFFIXES):
                 col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
                         "convert them first (studyapp convert) or fix the pattern's extension")
-            if e["motion"].lower().endswith((".npz", ".npy")) and "template" not in e:
-                col.add(f"{key}.template", "NPZ/NPY motion needs a template BVH for its skeleton",
-                        'add template = "template.bvh" (and representation = "sixd" etc.)')
+            if e["motion"].lower().endswith((".npz", ".npy")):
+                # Arrays carry neither skeleton, nor rotation layout, nor frame rate: the condition must say.
+                if "template" not in e:
+                    col.add(f"{key}.template", "NPZ/NPY motion needs a template BVH for its skeleton",
+                            'add template = "template.bvh" (a BVH of the skeleton the arrays drive)')
+                if "representation" not in e:
+                    col.add(f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
+                            f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})')
+                if "fps" not in e:
+                    col.add(f"{key}.fps", "NPZ/NPY motion carries no frame rate",
+                            "add the model's output rate, e.g. fps = 15")
+            else:
+                for k in ("joints", "degrees", "representation"):
+                    if k in e:
+                        col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
+                                f"remove {k}")
+        joints = e.get("joints")
+        if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
+            col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
+                    'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
+            joints = None
         if "model" in e and e["model"] != BUILTIN_REFERENCE and not e["model"].lower().endswith(".onnx"):
             col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
         if e.get("id"):
@@ -628,6 +660,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
                 representation=rep, template=e.get("template"),
                 rotation_order=ro.upper() if ro else None,
                 name_map={k: v for k, v in nm.items() if isinstance(v, str)},
+                joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", True)),
             ))
 
     # -- stimuli

@@ -245,8 +245,10 @@ def load_condition_motion(design: Design, condition: Condition, stimulus: Stimul
     kwargs: dict[str, Any] = {}
     if condition.rotation_order:
         kwargs["order"] = condition.rotation_order
+    if path.suffix.lower() in (".npz", ".npy"):
+        kwargs.update(joints=list(condition.joints) if condition.joints else None, degrees=condition.degrees)
     key = ("motion", _file_id(path), condition.fps, condition.representation, condition.template,
-           condition.rotation_order)
+           condition.rotation_order, condition.joints, condition.degrees)
     return _FILES.get(key, lambda: load_motion(path, fps=condition.fps, template=template,
                                                representation=condition.representation, **kwargs))
 
@@ -303,8 +305,10 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
 # Validation of the files a design references (called by design.validate_design)
 
 
-def _problem_text(exc: Exception) -> str:
+def _problem_text(exc: Exception, *, with_path: bool = True) -> str:
     if isinstance(exc, InputError):
+        if not with_path:  # the caller names the file itself
+            return ", ".join(p for p in (exc.where, exc.problem) if p)
         return str(exc)  # names the file too: the design key alone does not say which of many files is bad
     return f"{type(exc).__name__}: {exc}"
 
@@ -320,6 +324,8 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     from studyapp.durations import duration_mismatches
 
     problems: list[tuple[str, str, str]] = []
+    unreadable: dict[tuple[int, str], list[tuple[str, Path]]] = {}  # (condition, problem) -> clips
+    wrong_rate: dict[int, tuple[float, float, list[str]]] = {}      # condition -> (file fps, true fps, clips)
     skeletons_checked: set[tuple[int, tuple[str, ...]]] = set()
     cond_index = {c.id: i for i, c in enumerate(design.conditions)}
 
@@ -353,26 +359,83 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             except (InputError, ValueError, OSError) as exc:
                 problems.append((f"stimuli[{si}].head", f"cannot read the head rotation: {_problem_text(exc)}",
                                  "give an (F, 3) NPY or a CSV with yaw, pitch, roll columns (radians)"))
+        audio_s = items.get("audio", (None, ""))[0]
         for cond in design.conditions:
             ci = cond_index[cond.id]
-            if cond.motion is None:
-                continue  # live conditions are generated to the audio's length
-            path = motion_path(design, cond, stim)
+            if cond.motion is None or not _array_settings_complete(cond):
+                continue  # live conditions are generated to the audio's length; incomplete settings are reported
+            try:
+                path = motion_path(design, cond, stim)
+            except KeyError:
+                continue  # the pattern names a tag this stimulus lacks: reported with the pattern
             if not path.is_file():
                 continue
             try:
                 motion = load_condition_motion(design, cond, stim)
             except (InputError, ValueError, OSError, KeyError) as exc:
-                problems.append((f"conditions[{ci}].motion", f"cannot read the motion of {cond.id!r} for "
-                                 f"stimulus {stim.id!r}: {_problem_text(exc)}", "fix or re-export the file"))
+                unreadable.setdefault((ci, _problem_text(exc, with_path=False)), []).append((stim.id, path))
                 continue
+            rate = _likely_true_fps(cond, motion, audio_s)
+            if rate is not None:
+                wrong_rate.setdefault(ci, (motion.fps, rate, []))[2].append(stim.id)
+                continue  # its length is explained; a "durations differ" line would point at the wrong fix
             items[f"motion:{cond.id}"] = (motion.duration, str(path))
             sig = (ci, motion.skeleton.names)
             if sig not in skeletons_checked:
                 skeletons_checked.add(sig)
                 problems += _check_retarget(ci, cond, motion, path)
         problems += _check_durations(si, stim, items, duration_mismatches)
+    # One line per condition and cause, not one per clip: a setting of the condition is usually the cause.
+    for (ci, text), where in unreadable.items():
+        cond = design.conditions[ci]
+        clips = ", ".join(sid for sid, _ in where)
+        what = (f"stimulus {where[0][0]!r}" if len(where) == 1
+                else f"{len(where)} stimuli ({clips})")
+        problems.append((f"conditions[{ci}].motion", f"cannot read the motion of {cond.id!r} for {what}, e.g. "
+                         f"{where[0][1]}: {text}", _unreadable_fix(cond)))
+    for ci, (file_fps, rate, clips) in wrong_rate.items():
+        cond = design.conditions[ci]
+        ratio = file_fps / rate
+        how = f"{ratio:.3g} times shorter" if ratio > 1 else f"{1 / ratio:.3g} times longer"
+        problems.append((f"conditions[{ci}].fps", f"the motion of {cond.id!r} is {how} than the audio at the "
+                         f"{file_fps:.3g} fps its files state, and as long as the audio at {rate:g} fps "
+                         f"({', '.join(clips)}): the files' frame rate (BVH Frame Time) is probably wrong",
+                         f"add fps = {rate:g} to this condition (it overrides the files' frame rate)"))
     return problems
+
+
+#: Frame rates gesture pipelines write; a motion whose length matches the audio at one of these is mislabelled.
+COMMON_FPS = (15.0, 20.0, 24.0, 25.0, 30.0, 50.0, 60.0, 100.0, 120.0)
+
+
+def _likely_true_fps(cond: Condition, motion: Motion, audio_s: float | None) -> float | None:
+    """The common frame rate at which ``motion`` lasts as long as the audio, when the rate it was read at
+    does not (DiffSHEG writes ``Frame Time: 0.008333`` over 15 fps data); ``None`` otherwise."""
+    if cond.fps is not None or not audio_s or motion.n_frames < 2:
+        return None
+    if abs(motion.duration - audio_s) <= DURATION_TOLERANCE_S:
+        return None
+    for rate in COMMON_FPS:
+        # Only whole multiples of the stated rate (a header copied from a 120 fps data set over 15 fps
+        # output): a clip a little short at 30 fps is a short clip, not one at 24 or 50 fps.
+        ratio = max(rate, motion.fps) / min(rate, motion.fps)
+        whole = round(ratio) >= 2 and abs(ratio - round(ratio)) < 0.01
+        if whole and abs(motion.n_frames / rate - audio_s) <= DURATION_TOLERANCE_S:
+            return rate
+    return None
+
+
+def _array_settings_complete(cond: Condition) -> bool:
+    if cond.motion is None or not cond.motion.lower().endswith((".npz", ".npy")):
+        return True
+    return None not in (cond.template, cond.representation, cond.fps)
+
+
+def _unreadable_fix(cond: Condition) -> str:
+    if cond.motion is not None and cond.motion.lower().endswith((".npz", ".npy")):
+        return ("check this condition's template, representation, joints and fps against how the model wrote "
+                "its arrays (`studyapp inspect FILE` shows their shape), or re-export the files")
+    return "fix or re-export the file (`studyapp inspect FILE` shows what is read)"
 
 
 def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]], mismatches) -> list:

@@ -16,7 +16,13 @@ from studyapp.motion.beat import BEAT_UPPER_BODY
 from studyapp.motion.bvh import read_bvh, read_bvh_channels
 from studyapp.motion.fk import figure_height, joint_positions
 from studyapp.motion.io import load_motion, summarize_motion
-from studyapp.motion.rotations import axis_angle_to_quat, euler_to_quat, quat_to_matrix, quat_to_sixd
+from studyapp.motion.rotations import (
+    axis_angle_to_quat,
+    euler_to_quat,
+    quat_to_matrix,
+    quat_to_sixd,
+    quat_to_sixd_rows,
+)
 
 
 def _mats(q):
@@ -51,6 +57,52 @@ def test_sixd_and_template_motion_first_frame(tmp_path, upper_rotations):
     # undriven joints hold the template's first frame, not the rest pose
     np.testing.assert_allclose(m.rotations[:, 0], np.tile(template.rotations[0, 0], (12, 1)))
     np.testing.assert_allclose(m.translations[:, 0], np.tile(template.translations[0, 0], (12, 1)))
+
+
+def _pytorch3d_rows(motion):
+    """Every joint of every frame as PyTorch3D's matrix_to_rotation_6d writes it, flattened (F, J*6)."""
+    m = quat_to_matrix(motion.rotations)
+    return m[..., :2, :].reshape(motion.n_frames, -1)
+
+
+def test_sixd_rows_npy_reproduces_bvh_world_positions(tmp_path):
+    bvh = read_bvh(BEAT_SAMPLE, fps=15)
+    rows = _pytorch3d_rows(bvh)
+    assert rows.shape == (3, 75 * 6)
+    np.testing.assert_allclose(rows.reshape(3, 75, 6), quat_to_sixd_rows(bvh.rotations), atol=0)
+    np.save(tmp_path / "emage.npy", rows)
+    m = load_rotation_array(tmp_path / "emage.npy", BEAT_SAMPLE, "sixd_rows", fps=15)
+    want = joint_positions(bvh)
+    np.testing.assert_allclose(joint_positions(m), want, atol=1e-9 * figure_height(bvh.skeleton))
+    # the same file read as Zhou columns plays every joint's inverse rotation: far off, not a rounding error
+    wrong = joint_positions(load_rotation_array(tmp_path / "emage.npy", BEAT_SAMPLE, "sixd", fps=15))
+    assert np.abs(wrong - want).max() > 0.05 * figure_height(bvh.skeleton)
+
+
+def test_convert_and_inspect_sixd_rows(tmp_path, capsys):
+    bvh = read_bvh(BEAT_SAMPLE, fps=15)
+    np.save(tmp_path / "emage.npy", _pytorch3d_rows(bvh))
+    out = tmp_path / "emage.bvh"
+    assert run_cli(["convert", str(tmp_path / "emage.npy"), str(out), "--template", str(BEAT_SAMPLE),
+                    "--representation", "sixd_rows", "--fps", "15"]) == 0
+    np.testing.assert_allclose(joint_positions(read_bvh(out)), joint_positions(bvh), atol=1e-4)
+    capsys.readouterr()
+    assert run_cli(["inspect", str(tmp_path / "emage.npy"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["arrays"]["array"]["fits"] == ["euler", "axis_angle", "sixd", "sixd_rows", "matrix"]  # 450 columns
+    (note,) = [w for w in s["warnings"] if "6D" in w]
+    assert "sixd_rows" in note and "[R00,R01,R02,R10,R11,R12]" in note and "[R00,R10,R20,R01,R11,R21]" in note
+    with pytest.raises(SystemExit):
+        run_cli(["convert", str(tmp_path / "emage.npy"), str(out), "--representation", "sixd_cols"])
+    assert "sixd_rows" in capsys.readouterr().err
+
+
+def test_convert_help_explains_both_sixd_layouts(capsys):
+    with pytest.raises(SystemExit):
+        run_cli(["convert", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "sixd = Zhou et al. first two columns [R00,R10,R20,R01,R11,R21]" in help_text
+    assert "sixd_rows = first two rows [R00,R01,R02,R10,R11,R12] (PyTorch3D matrix_to_rotation_6d" in help_text
 
 
 def test_euler_uses_template_order_and_explicit_joints(tmp_path):
@@ -89,7 +141,9 @@ def test_root_key_matrix_and_wxyz(tmp_path, upper_rotations):
         (np.zeros((0, 47, 3)), "axis_angle", {}, "no frames"),
         (np.full((2, 47, 3), np.nan), "axis_angle", {}, "non-finite"),
         (np.zeros((2, 1, 3)), "axis_angle", {"joints": ["NoSuchJoint"]}, "NoSuchJoint"),
-        (np.zeros((2, 47, 6)), "sixd", {}, "cannot read as sixd"),
+        (np.zeros((2, 47, 6)), "sixd", {}, "cannot read as sixd: 6D rotation has a zero first column"),
+        (np.zeros((2, 47, 6)), "sixd_rows", {}, "cannot read as sixd_rows: 6D rotation has a zero first row"),
+        (np.zeros((2, 47 * 4)), "sixd_rows", {}, "not a multiple of 6"),
     ],
 )
 def test_array_errors_name_file_and_shape(tmp_path, array, rep, kw, pattern):

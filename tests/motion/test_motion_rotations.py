@@ -54,7 +54,7 @@ def test_euler_gimbal_lock_still_reproduces_rotation(order):
 def test_representation_round_trips(q):
     q = q / np.linalg.norm(q)
     m = R.quat_to_matrix(q)
-    for rep in ("axis_angle", "quat", "quat_wxyz", "sixd", "matrix"):
+    for rep in ("axis_angle", "quat", "quat_wxyz", "sixd", "sixd_rows", "matrix"):
         back = R.to_quat(R.from_quat(q, rep), rep)
         np.testing.assert_allclose(R.quat_to_matrix(back), m, atol=1e-9, err_msg=rep)
     np.testing.assert_allclose(R.quat_to_matrix(R.matrix_to_quat(m)), m, atol=1e-9)
@@ -67,6 +67,63 @@ def test_sixd_layout_is_first_two_columns():
     # Gram-Schmidt: scaled / skewed columns still give the same rotation
     noisy = np.concatenate([d6[:3] * 3.0, d6[3:] * 0.5 + d6[:3] * 0.2])
     np.testing.assert_allclose(R.sixd_to_matrix(noisy), m, atol=1e-12)
+
+
+def pytorch3d_rotation_6d_to_matrix(d6: np.ndarray) -> np.ndarray:
+    """numpy transcription of PyTorch3D's ``rotation_6d_to_matrix``: Gram-Schmidt, stacked ``dim=-2`` (rows)."""
+    a1, a2 = d6[..., :3], d6[..., 3:]
+    b1 = a1 / np.linalg.norm(a1, axis=-1, keepdims=True)
+    b2 = a2 - (b1 * a2).sum(-1, keepdims=True) * b1
+    b2 = b2 / np.linalg.norm(b2, axis=-1, keepdims=True)
+    return np.stack((b1, b2, np.cross(b1, b2)), axis=-2)
+
+
+@pytest.mark.parametrize(
+    "m,cols,rows",
+    [
+        # 90 degrees about Z: x -> y, y -> -x
+        (axis_matrix("Z", 90), [0, 1, 0, -1, 0, 0], [0, -1, 0, 1, 0, 0]),
+        # Rz(90) @ Rx(90) = [[0,0,1],[1,0,0],[0,1,0]]: a permutation whose six entries differ per layout
+        (axis_matrix("Z", 90) @ axis_matrix("X", 90), [0, 1, 0, 0, 0, 1], [0, 0, 1, 1, 0, 0]),
+    ],
+)
+def test_both_sixd_layouts_of_known_matrices(m, cols, rows):
+    np.testing.assert_allclose(R.matrix_to_sixd(m), cols, atol=1e-15)
+    np.testing.assert_allclose(R.matrix_to_sixd_rows(m), rows, atol=1e-15)
+    np.testing.assert_allclose(R.sixd_to_matrix(np.array(cols, float)), m, atol=1e-15)
+    np.testing.assert_allclose(R.sixd_rows_to_matrix(np.array(rows, float)), m, atol=1e-15)
+    q = R.matrix_to_quat(m)
+    np.testing.assert_allclose(R.from_quat(q, "sixd"), cols, atol=1e-15)
+    np.testing.assert_allclose(R.from_quat(q, "sixd_rows"), rows, atol=1e-15)
+    np.testing.assert_allclose(R.quat_to_matrix(R.to_quat(np.array(rows, float), "sixd_rows")), m, atol=1e-15)
+
+
+def test_sixd_rows_matches_pytorch3d_flattening_batched():
+    rng = np.random.default_rng(4)
+    m = R.quat_to_matrix(R.quat_normalize(rng.normal(size=(5, 7, 4))))
+    d6 = R.matrix_to_sixd_rows(m)
+    # PyTorch3D matrix_to_rotation_6d: matrix[..., :2, :].reshape(batch_dim + (6,))
+    np.testing.assert_array_equal(d6, m[..., :2, :].reshape(5, 7, 6))
+    assert d6.shape == (5, 7, 6) and R.sixd_rows_to_quat(d6).shape == (5, 7, 4)
+    np.testing.assert_allclose(R.sixd_rows_to_matrix(d6), m, atol=1e-12)
+    # network output is not orthonormal: both sides orthogonalise the rows the same way
+    noisy = d6 * rng.uniform(0.5, 2.0, size=(5, 7, 1)) + rng.normal(scale=0.1, size=d6.shape)
+    np.testing.assert_allclose(R.sixd_rows_to_matrix(noisy), pytorch3d_rotation_6d_to_matrix(noisy), atol=1e-12)
+    # read with the column layout, row data gives the transposed (inverse) rotation: the bug this avoids
+    np.testing.assert_allclose(R.sixd_to_matrix(d6), np.swapaxes(m, -1, -2), atol=1e-12)
+    single = np.eye(3)
+    out = R.matrix_to_sixd_rows(single)
+    out[0] = 5.0
+    assert single[0, 0] == 1.0  # a copy, never a view into the caller's matrix
+
+
+@settings(max_examples=60, deadline=None)
+@given(q=unit_quats)
+def test_sixd_layouts_are_each_others_transpose(q):
+    m = R.quat_to_matrix(q / np.linalg.norm(q))
+    np.testing.assert_allclose(R.matrix_to_sixd_rows(m), R.matrix_to_sixd(m.T), atol=1e-15)
+    np.testing.assert_allclose(R.matrix_to_sixd_rows(m), m[:2, :].ravel(), atol=0)
+    np.testing.assert_allclose(R.sixd_rows_to_matrix(R.matrix_to_sixd_rows(m)), m, atol=1e-12)
 
 
 def test_axis_angle_and_multiply_against_matrices():
@@ -117,3 +174,10 @@ def test_bad_input_raises():
         R.quat_normalize(np.zeros(4))
     with pytest.raises(ValueError):
         R.to_quat(np.zeros(3), "bogus")
+    with pytest.raises(ValueError, match="zero first row"):
+        R.to_quat(np.zeros(6), "sixd_rows")
+    with pytest.raises(ValueError, match="parallel rows"):
+        R.sixd_rows_to_matrix(np.array([1.0, 0, 0, 2.0, 0, 0]))
+    with pytest.raises(ValueError, match="zero first column"):
+        R.sixd_to_matrix(np.zeros(6))
+    assert R.representation_width("sixd_rows") == 6

@@ -415,3 +415,68 @@ def test_cli_validate_json_keeps_reader_notes_on_stderr(study: Path, capsys) -> 
     code, out, err = run_cli(capsys, "validate", "--json", str(study / "design.toml"))
     assert code == 0 and json.loads(out) == []
     assert "note:" in err and "Frames" in err and "s1.bvh" in err
+
+
+def test_a_lying_frame_time_is_one_problem_with_the_fps_fix(study: Path) -> None:
+    """DiffSHEG writes 120 fps headers over 15 fps data: the fix is `fps` on the condition, said once, not
+    a "durations differ" line per clip that suggests cutting the clips."""
+    for sid in ("s1", "s2"):
+        path = study / "motion" / "b" / f"{sid}.bvh"
+        path.write_text(re.sub(r"Frame Time:\s*\S+", "Frame Time: 0.008333", path.read_text()))
+    probs = validate_design(study / "design.toml")
+    p = only(probs, "conditions[1].fps")
+    assert "4 times shorter" in p.message and "s1, s2" in p.message and p.fix.startswith("add fps = 30")
+    # the line of the condition's [[conditions]] header, just above its id
+    assert p.line == GOOD.splitlines().index('id = "b"') and len(probs) == 1, [str(x) for x in probs]
+    fixed = GOOD.replace('motion = "motion/b/{stimulus}.bvh"', 'motion = "motion/b/{stimulus}.bvh"\nfps = 30')
+    assert problems_for(study, fixed) == []
+
+
+def _write_arrays(study: Path, joints: int) -> None:
+    for sid in ("s1", "s2"):
+        np.save(study / "motion" / "a" / f"{sid}.npy", np.zeros((int(SECONDS * FPS), joints, 3)))
+    write_motion(study / "template.bvh")
+
+
+def test_array_settings_are_asked_for_once_per_condition(study: Path) -> None:
+    _write_arrays(study, 75)
+    text = GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.npy"\ntemplate = "template.bvh"')
+    probs = problems_for(study, text)
+    assert "representation" in only(probs, "conditions[0].representation").fix
+    assert "fps = 15" in only(probs, "conditions[0].fps").fix
+    assert len(probs) == 2, [str(p) for p in probs]  # nothing per clip
+    ok = text.replace('template = "template.bvh"', 'template = "template.bvh"\nrepresentation = "axis_angle"\nfps = 30')
+    assert problems_for(study, ok) == []
+
+
+def test_arrays_that_do_not_fit_the_template_are_one_problem_and_joints_fix_it(study: Path) -> None:
+    _write_arrays(study, 3)
+    text = GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.npy"\n'
+                        'template = "template.bvh"\nrepresentation = "axis_angle"\nfps = 30')
+    p = only(problems_for(study, text), "conditions[0].motion")
+    assert "2 stimuli (s1, s2)" in p.message and "3 joints" in p.message and "joints" in p.fix
+    ok = text.replace("fps = 30", 'fps = 30\njoints = ["Spine", "Neck", "Head"]')
+    assert problems_for(study, ok) == []
+    assert load_design(study / "design.toml").conditions[0].joints == ("Spine", "Neck", "Head")
+    bad = text.replace("fps = 30", 'fps = 30\njoints = ["Spine", 3]')
+    assert "joint names" in only(problems_for(study, bad), "conditions[0].joints").message
+
+
+def test_a_pattern_tag_no_stimulus_has_is_reported_once_without_an_internal_error(study: Path) -> None:
+    text = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{clip}.bvh"')
+    probs = problems_for(study, text)
+    assert all("KeyError" not in str(p) for p in probs), [str(p) for p in probs]
+    assert probs and all(p.key == "conditions[2].motion" and "no such tag" in p.message for p in probs), \
+        [str(p) for p in probs]
+
+
+def test_representations_match_the_motion_layer_and_6d_must_name_its_layout(study: Path) -> None:
+    from studyapp.motion.rotations import REPRESENTATIONS
+    from studyapp.study import design
+
+    assert set(design.REPRESENTATIONS) == set(REPRESENTATIONS)
+    _write_arrays(study, 75)
+    text = GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.npy"\n'
+                        'template = "template.bvh"\nrepresentation = "6d"\nfps = 30')
+    p = only(problems_for(study, text), "conditions[0].representation")
+    assert "ambiguous" in p.message and "sixd_rows" in p.fix
