@@ -165,14 +165,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
             print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
         code = _run_mode(args, design, db, rec.id)
         final = db.participant(rec.id)
+        checks = [t["attention_passed"] for t in db.trials(rec.id) if t["is_attention_check"]]
     finally:
         db.close()
+    # For the experimenter at a lab PC; a remote participant is not told how their checks went.
+    summary = "" if opened is not None or not checks else \
+        f" Attention checks passed: {sum(1 for c in checks if c)} of {len(checks)}."
     if final is not None and final.status == "ended_early":
         from studyapp.study.session import ENDED_EARLY_MESSAGE
 
-        print(ENDED_EARLY_MESSAGE)
+        print(ENDED_EARLY_MESSAGE + summary)
     elif final is not None and final.status == "done":
-        print(f"Participant {rec.id} completed the study.")
+        print(f"Participant {rec.id} completed the study.{summary}")
     for f in finished_files:
         print(f"Your results file: {f}\nPlease send this file to the experimenter.")
     return code

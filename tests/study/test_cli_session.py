@@ -130,3 +130,26 @@ def test_every_command_help_has_a_description(command: str, capsys) -> None:
     paragraphs = out.split("\n\n")
     assert len(paragraphs) > 2 and not paragraphs[1].startswith(("positional arguments", "options")), out
     assert len(paragraphs[1].split()) >= 8, paragraphs[1]
+
+
+def test_attention_checks_are_summed_up_for_the_experimenter_only(tmp_path: Path, cli) -> None:
+    design = write_synthetic_study(tmp_path / "study", n_stimuli=2, practice=False, attention_check=True)
+    lab = cli("run", design, "--participant", "P1", "--no-render", "--bot", "ordered")
+    assert lab.returncode == 0, lab.stderr
+    # the ordered bot ranks by design order, whatever the frozen figure does: its check passes or fails,
+    # and the line must say which, agreeing with the stored trial
+    from studyapp.study.design import load_design
+    from studyapp.study.storage import ResultsDB
+
+    db = ResultsDB(design.with_name("tiny.results.sqlite"), load_design(design))
+    [passed] = [t["attention_passed"] for t in db.trials("P1") if t["is_attention_check"]]
+    db.close()
+    assert f"Attention checks passed: {int(bool(passed))} of 1." in lab.stdout, lab.stdout
+    cli("bundle", design, "-o", tmp_path / "send" / "study.zip", "--participants", "1",
+        "--results", tmp_path / "lab.sqlite")
+    env = {"HOME": str(tmp_path / "home"), "XDG_CACHE_HOME": str(tmp_path / "home" / ".cache"),
+           "XDG_DATA_HOME": str(tmp_path / "home" / "data"), "STUDYAPP_RESULTS_DIR": str(tmp_path / "home" / "out")}
+    remote = _run("run", tmp_path / "send" / "study.zip", "--participant", "R01", "--no-render", "--bot", "ordered",
+                  env=env)
+    assert remote.returncode == 0, remote.stderr
+    assert "checks passed" not in remote.stdout, remote.stdout
