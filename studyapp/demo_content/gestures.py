@@ -6,7 +6,7 @@ Three demo "models" come from this one generator so that the demo study has a kn
   gesture space in front of the chest while speaking and lowered in pauses, head nods and a little spine
   motion with the strokes. Which hand(s), the gesture-space position and the stroke direction vary from
   one gesture unit (the stretch between two pauses) and one stroke to the next.
-* ``lagged``: the same generator fed the energy delayed by 300 ms (same amplitudes, strokes late).
+* ``lagged``: the very same gestures as ``synced``, 300 ms late (same hands, positions and amplitudes).
 * ``static``: arms resting at the sides, breathing and a slow idle drift of the hands only.
 
 Poses are built as BVH Euler angles (BEAT's ``Xrotation Yrotation Zrotation`` channel order) so the
@@ -147,8 +147,12 @@ def gesture_motion(skeleton: Skeleton, energy: np.ndarray, fps: float, seed: int
         g.update(fwd=z, elbow=z, abduct=z, inward=z)
         idle_amp = 1.2
     else:
-        drive = energy if condition == "synced" else delay(energy, fps, LAG_S)
-        g = _gesture_drive(drive, fps, np.random.default_rng([seed, 1]))
+        g = _gesture_drive(energy, fps, np.random.default_rng([seed, 1]))
+        if condition == "lagged":
+            # The synced gestures themselves, late: re-running the generator on a delayed envelope would
+            # draw other hands, positions and stroke mixes, and the two "models" would then differ in
+            # diversity and realism too, where the demo's known answer is that only timing differs.
+            g = {k: delay(v, fps, LAG_S, hold_first=True) for k, v in g.items()}
         idle_amp = 0.6
     act = g["act"]
     lift_r, lift_l = act * g["w_r"], act * g["w_l"]
