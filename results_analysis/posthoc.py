@@ -71,9 +71,13 @@ def _matrix(data: np.ndarray | pd.DataFrame, conditions: list[str] | None) -> tu
     """An (n blocks, k) array and the condition names, from an array + names or a wide DataFrame
     (rows = blocks, columns = conditions; rows with a missing value are dropped, listwise)."""
     if isinstance(data, pd.DataFrame):
+        if conditions is not None:  # pick the columns by name: labelling them in place would mislabel them
+            missing = [c for c in conditions if c not in data.columns]
+            if missing:
+                raise KeyError(f"conditions {missing} are not columns of the DataFrame ({list(data.columns)})")
+            data = data[list(conditions)]
         wide = data.dropna(axis=0, how="any")
-        names = [str(c) for c in wide.columns] if conditions is None else list(conditions)
-        return wide.to_numpy(dtype=float), names
+        return wide.to_numpy(dtype=float), [str(c) for c in wide.columns]
     if conditions is None:
         raise ValueError("pass the condition names with an array (or give a DataFrame with named columns)")
     return np.asarray(data, dtype=float), list(conditions)

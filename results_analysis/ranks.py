@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
+from results_analysis.errors import AnalysisInputError
 from results_analysis.validate import rated_mask, trial_key
 
 BLOCKS = ("trial", "participant")
@@ -99,7 +100,13 @@ def as_blocks(data: RankBlocks | pd.DataFrame, criterion: str | None = None, *, 
         return data
     if not isinstance(data, pd.DataFrame):
         raise TypeError(f"expected RankBlocks or a tidy results DataFrame, not {type(data).__name__}")
-    rated = data[rated_mask(data)]
+    from results_analysis.loader import normalize_results  # flags written as yes/no, t/f or 0/1 become booleans
+
+    rated = normalize_results(data)
+    rated = rated[rated_mask(rated)]
+    if rated.empty:
+        raise AnalysisInputError(data.attrs.get("source"), None, "no rated trials: every row is a practice or "
+                                 "attention-check trial")
     if criterion is None:
         found = list(dict.fromkeys(rated["criterion"]))
         if len(found) != 1:

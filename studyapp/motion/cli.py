@@ -101,15 +101,14 @@ def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
     from studyapp.motion.io import summarize_motion
 
     summary = {"kind": "motion", **summarize_motion(path, fps=fps)}
-    if ext == ".npy" and fps is None and _npy_width(p) == _N_ARKIT:
+    from studyapp.face.arkit import N_ARKIT
+
+    if ext == ".npy" and fps is None and _npy_width(p) == N_ARKIT:
         # a bare face NPY carries no frame rate, so it cannot be told from a rotation array without one
         summary.setdefault("warnings", []).append(
-            f"{_N_ARKIT} columns: if these are ARKit blendshape weights (Apple order), pass --fps to read it as face data"
+            f"{N_ARKIT} columns: if these are ARKit blendshape weights (Apple order), pass --fps to read it as face data"
         )
     return summary
-
-
-_N_ARKIT = 52
 
 
 def _npy_width(path: Path) -> int | None:
@@ -135,8 +134,10 @@ def _looks_like_face_array(path: Path, fps: float | None) -> bool:
 
     import numpy as np
 
+    from studyapp.face.arkit import N_ARKIT
+
     if path.suffix.lower() == ".npy":
-        return fps is not None and _npy_width(path) == _N_ARKIT
+        return fps is not None and _npy_width(path) == N_ARKIT
     try:
         with np.load(str(path), allow_pickle=False) as z:
             keys = set(z.files)

@@ -651,6 +651,11 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
             col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
                     'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
             joints = None
+        if "model" in e and "motion" not in e:
+            for k in ("joints", "degrees", "representation", "rotation_order"):
+                if k in e:  # a live model declares its own output; a setting here would be silently ignored
+                    col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
+                            f"remove {k} (the model's output is read as its contract declares)")
         if "model" in e and e["model"] != BUILTIN_REFERENCE and not e["model"].lower().endswith(".onnx"):
             col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
         if e.get("id"):

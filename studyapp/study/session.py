@@ -84,7 +84,7 @@ class PlayStats:
 
 ENDED_EARLY_MESSAGE = (
     # It must not say "nothing more is needed": a remote participant is still asked to send the results file.
-    "Thank you for your time. The study has ended early because a check question was not answered as "
+    "Thank you for your time. The study has ended early because check questions were not answered as "
     "expected. This can happen to anyone, and your participation is appreciated. Your answers so far have "
     "been saved."
 )

@@ -14,6 +14,7 @@ from results_analysis import (bradley_terry, conover, cronbach_alpha, fit_bradle
                               kendall_w, nemenyi, pairwise_wins, rank_blocks, simulate_results, wilcoxon_holm,
                               within_block_ranks)
 from results_analysis.descriptives import condition_summary
+from results_analysis.errors import AnalysisInputError
 
 rank_tables = st.integers(2, 6).flatmap(lambda k: st.lists(
     st.lists(st.integers(1, k), min_size=k, max_size=k), min_size=3, max_size=40))
@@ -301,3 +302,15 @@ def test_dataframe_api_gives_the_numbers_of_the_full_analysis() -> None:
     assert conover(wide)["p"].tolist() == pytest.approx(conover(full.blocks.ranks, full.blocks.conditions)["p"].tolist())
     with pytest.raises(ValueError, match="criteria"):
         condition_summary(df)
+    # conditions given with a wide frame pick its columns by name, whatever their order in the frame
+    shuffled = wide[list(reversed(wide.columns))]
+    pd.testing.assert_frame_equal(nemenyi(shuffled, list(wide.columns)).reset_index(drop=True),
+                                  full.posthoc["nemenyi"].reset_index(drop=True))
+    with pytest.raises(KeyError, match="not columns"):
+        nemenyi(wide, ["nope", *wide.columns[1:]])
+    # flags exported as text read as the command line reads them; nothing rated is an error, not an empty table
+    texty = df.assign(is_practice=df.is_practice.map({True: "yes", False: "no"}),
+                      is_attention_check=df.is_attention_check.map({True: "yes", False: "no"}))
+    pd.testing.assert_frame_equal(condition_summary(texty, "synchronization", n_boot=300, seed=2), full.summary)
+    with pytest.raises(AnalysisInputError, match="no rated trials"):
+        condition_summary(df.assign(is_practice=True), "synchronization")

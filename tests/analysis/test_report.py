@@ -303,3 +303,16 @@ def test_cli_title_comes_from_the_results_database(tmp_path: Path, study: pd.Dat
     rated.to_csv(csv, index=False)
     assert main([str(csv), "--out", str(tmp_path / "csv"), "--bootstrap", "20"]) == 0
     assert (tmp_path / "csv" / "report.md").read_text().startswith("# Results: export.csv\n")
+
+
+def test_disagreeing_post_hoc_tests_are_named_in_words(tmp_path: Path) -> None:
+    """On the half-V data the Wilcoxon test separates ours from sixdnet while Nemenyi does not: the report
+    must say so in the exact words a reader sees, not only when the tests agree."""
+    df = _half_v_study()
+    a = analyze(df, tmp_path, title="Half ranks", n_boot=50, seed=0)
+    c = a.criteria["realism"]
+    nem = c.posthoc["nemenyi"].set_index(["a", "b"])["significant"]
+    wil = c.posthoc["wilcoxon_holm"].set_index(["a", "b"])["p_adjusted"] < 0.05
+    assert not nem[("ours", "sixdnet")] and wil[("ours", "sixdnet")]  # the data really disagree there
+    md = (tmp_path / "report.md").read_text()
+    assert "agreed with the Nemenyi tests except for ours vs sixdnet (significant only with Wilcoxon)" in md

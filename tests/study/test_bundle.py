@@ -417,8 +417,20 @@ def test_merge_refuses_byte_damaged_truncated_and_malformed_files_one_line_each(
         zf.writestr("results.json", body)
         zf.writestr("manifest.json", json.dumps(manifest))
 
-    reports = {r.file.name: r for r in merge_results(results, [flipped, truncated, forged, good])}
-    for bad in (flipped, truncated, forged):
+    # a matching checksum over rows whose values SQLite cannot store (a list where a number belongs)
+    listy = tmp_path / "listy.zip"
+    with zipfile.ZipFile(good) as zf:
+        payload = json.loads(zf.read("results.json"))
+        manifest2 = json.loads(zf.read("manifest.json"))
+    payload["trials"][0]["plays"] = [1, 2]
+    body2 = json.dumps(payload).encode()
+    manifest2["files"]["results.json"] = hashlib.sha256(body2).hexdigest()
+    with zipfile.ZipFile(listy, "w") as zf:
+        zf.writestr("results.json", body2)
+        zf.writestr("manifest.json", json.dumps(manifest2))
+
+    reports = {r.file.name: r for r in merge_results(results, [flipped, truncated, forged, listy, good])}
+    for bad in (flipped, truncated, forged, listy):
         assert reports[bad.name].ok is False and reports[bad.name].message, bad.name
     assert "not a readable results file" in reports[truncated.name].message
     assert "layout" in reports[forged.name].message

@@ -480,3 +480,14 @@ def test_representations_match_the_motion_layer_and_6d_must_name_its_layout(stud
                         'template = "template.bvh"\nrepresentation = "6d"\nfps = 30')
     p = only(problems_for(study, text), "conditions[0].representation")
     assert "ambiguous" in p.message and "sixd_rows" in p.fix
+
+
+def test_array_settings_on_a_live_model_are_refused_not_ignored(tmp_path: Path) -> None:
+    from studyapp.resources import designs_dir
+
+    text = (designs_dir() / "live_model_example.toml").read_text()
+    text = text.replace('model = "models/reference_gesture.onnx"', 'model = "models/reference_gesture.onnx"\ndegrees = false')
+    (tmp_path / "live.toml").write_text(text.replace('"demo/', f'"{designs_dir()}/demo/').replace(
+        '"models/', f'"{designs_dir()}/models/'))
+    probs = validate_design(tmp_path / "live.toml", check_files=False)
+    assert [p.key for p in probs] == ["conditions[1].degrees"], [str(p) for p in probs]

@@ -22,7 +22,8 @@ _body_open = False
 _arrow_scroll = True
 #: Set when the last page body closed with text still below the visible part.
 _more_below = False
-MORE_BELOW_HINT = "There is more text below: scroll down (mouse wheel or Down arrow) to read it all."
+# Page Down, not the arrows: the questionnaire uses Up/Down to move between its questions.
+MORE_BELOW_HINT = "More text below: scroll down (mouse wheel or Page Down)."
 
 
 def page_begin(app: Any, name: str, *, arrow_scroll: bool = True) -> float:
@@ -97,7 +98,7 @@ def primary_row(app: Any, label: str, key: str, *, enabled: bool = True, hint: s
         imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
         app.ui.text(MORE_BELOW_HINT, color=(1.0, 0.80, 0.35, 1.0), key="more_below")
-    elif hint:
+    if hint:  # the page's own hint (e.g. what is still unanswered) stays visible beside it
         imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
         app.ui.muted(hint)
