@@ -17,12 +17,16 @@ from results_analysis.errors import AnalysisInputError
 _NEEDED = {"responses": {"participant", "trial_index", "criterion", "condition", "rank"},
            "trials": {"participant", "trial_index", "stimulus"}}
 
+# Criteria in the order the study asked them (answers are stored in that order, so the first stored row of
+# each criterion tells it), as `studyapp export` writes them: the report's sections follow this order.
 _QUERY = """
+WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.rowid AS _rowid, r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition,
        r.slot, r.rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
        r.design_hash, r.app_version
 FROM responses r JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
-ORDER BY r.participant, r.trial_index, r.criterion, r.slot
+JOIN crit ON crit.criterion = r.criterion
+ORDER BY r.participant, r.trial_index, crit.pos, r.slot
 """
 
 

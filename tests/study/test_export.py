@@ -66,6 +66,8 @@ def test_criteria_keep_the_design_order(results, tmp_path: Path) -> None:
 
     df.to_csv(tmp_path / "r.csv", index=False)
     assert list(run_analysis(load_results(tmp_path / "r.csv"), n_boot=50).criteria) == wanted
+    # and the same when the analysis reads the database itself
+    assert list(run_analysis(load_results(db_path), n_boot=50).criteria) == wanted
 
 
 def test_export_matches_raw_tables(results) -> None:
