@@ -347,15 +347,20 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             except (InputError, ValueError, OSError) as exc:
                 problems.append((f"stimuli[{si}].audio", f"cannot read the audio: {_problem_text(exc)}",
                                  "give a PCM or float WAV file"))
+        face_fps = None
         if stim.face is not None and stim.face.is_file():
             try:
-                items["face"] = (load_stimulus_face(stim).duration, str(stim.face))
+                face = load_stimulus_face(stim)
+                items["face"] = (face.duration, str(stim.face))
+                face_fps = face.fps
             except (InputError, ValueError, OSError) as exc:
                 problems.append((f"stimuli[{si}].face", f"cannot read the face animation: {_problem_text(exc)}",
                                  "give an ARKit CSV, Live Link Face CSV, BEAT JSON or NPY/NPZ file"))
         if stim.head is not None and stim.head.is_file():
             try:
-                load_head(stim.head)
+                head = load_head(stim.head)
+                if face_fps:  # head rows come at the face's frame rate, so only then do they have a length
+                    items["head"] = (len(head) / face_fps, str(stim.head))
             except (InputError, ValueError, OSError) as exc:
                 problems.append((f"stimuli[{si}].head", f"cannot read the head rotation: {_problem_text(exc)}",
                                  "give an (F, 3) NPY or a CSV with yaw, pitch, roll columns (radians)"))

@@ -491,3 +491,15 @@ def test_array_settings_on_a_live_model_are_refused_not_ignored(tmp_path: Path) 
         '"models/', f'"{designs_dir()}/models/'))
     probs = validate_design(tmp_path / "live.toml", check_files=False)
     assert [p.key for p in probs] == ["conditions[1].degrees"], [str(p) for p in probs]
+
+
+def test_a_head_track_shorter_than_the_clip_is_a_duration_problem(study: Path) -> None:
+    """Head rotation rows come at the face's frame rate; a track a second short would freeze the live
+    model's head input, so it is checked like the audio, face and motion."""
+    np.save(study / "head_s1.npy", np.zeros((int(SECONDS * FPS), 3)))
+    np.save(study / "head_s2.npy", np.zeros((int((SECONDS - 1.0) * FPS), 3)))
+    text = GOOD.replace('face = "face/s1.csv"', 'face = "face/s1.csv"\nhead = "head_s1.npy"')
+    assert problems_for(study, text) == []
+    text = text.replace('face = "face/s2.csv"', 'face = "face/s2.csv"\nhead = "head_s2.npy"')
+    p = only(problems_for(study, text), "stimuli[1]")
+    assert "head 1.000 s" in p.message and "head_s2.npy" in p.message
