@@ -74,6 +74,11 @@ class Condition:
         """True when the motion comes from an ONNX model run on the stimulus rather than from files."""
         return self.model is not None
 
+    @property
+    def is_array(self) -> bool:
+        """True when the motion files are NPZ/NPY rotation arrays (read with template, representation, fps)."""
+        return self.motion is not None and self.motion.lower().endswith((".npz", ".npy"))
+
 
 @dataclass
 class Stimulus:

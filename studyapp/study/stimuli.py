@@ -245,7 +245,7 @@ def load_condition_motion(design: Design, condition: Condition, stimulus: Stimul
     kwargs: dict[str, Any] = {}
     if condition.rotation_order:
         kwargs["order"] = condition.rotation_order
-    if path.suffix.lower() in (".npz", ".npy"):
+    if condition.is_array:
         kwargs.update(joints=list(condition.joints) if condition.joints else None, degrees=condition.degrees)
     key = ("motion", _file_id(path), condition.fps, condition.representation, condition.template,
            condition.rotation_order, condition.joints, condition.degrees)
@@ -431,13 +431,11 @@ def _likely_true_fps(cond: Condition, motion: Motion, audio_s: float | None) -> 
 
 
 def _array_settings_complete(cond: Condition) -> bool:
-    if cond.motion is None or not cond.motion.lower().endswith((".npz", ".npy")):
-        return True
-    return None not in (cond.template, cond.representation, cond.fps)
+    return not cond.is_array or None not in (cond.template, cond.representation, cond.fps)
 
 
 def _unreadable_fix(cond: Condition) -> str:
-    if cond.motion is not None and cond.motion.lower().endswith((".npz", ".npy")):
+    if cond.is_array:
         return ("check this condition's template, representation, joints and fps against how the model wrote "
                 "its arrays (`studyapp inspect FILE` shows their shape), or re-export the files")
     return "fix or re-export the file (`studyapp inspect FILE` shows what is read)"
