@@ -1,10 +1,12 @@
 """``studyapp inspect`` and ``studyapp convert``.
 
-inspect PATH [--fps F] [--json]
+inspect PATH [--fps F] [--json] [--name-map-template]
     Summary of a motion (BVH / NPZ / NPY), a face file (JSON / CSV, an NPZ with ``weights`` and
     ``names``, a bare ``(F, 52)`` NPY when ``--fps`` is given) or a WAV. For a raw rotation array it
     lists the representations whose width fits each array's shape and, when a 6D reading fits, says
-    that ``sixd`` (columns) and ``sixd_rows`` (rows) cannot be told apart from the numbers.
+    that ``sixd`` (columns) and ``sixd_rows`` (rows) cannot be told apart from the numbers. For a
+    skeleton it shows the rig recognised and its humanoid map; ``--name-map-template`` prints the
+    ``[conditions.name_map]`` table to complete when bones are missing.
 convert IN OUT [--fps F] [--in-fps F] [--order XYZ] [--template T] [--representation R] ...
     BVH -> BVH (new rotation order and/or frame rate), NPZ/NPY rotation arrays -> BVH or NPZ (needs
     ``--template``), BVH -> NPZ (studyapp motion NPZ with world joint positions).
@@ -36,6 +38,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("path", help="file to inspect")
     p.add_argument("--fps", type=float, default=None, help="true frame rate (overrides a BVH header's Frame Time)")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.add_argument("--name-map-template", action="store_true",
+                   help="print a [conditions.name_map] TOML table for a motion file's skeleton: the bones found "
+                        "filled in, every other joint as a comment to complete")
     p.set_defaults(func=cmd_inspect)
 
     c = subparsers.add_parser(
@@ -178,6 +183,15 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
+    if args.name_map_template:
+        from studyapp.motion.io import load_motion
+        from studyapp.motion.rigs import name_map_template
+
+        if Path(args.path).suffix.lower() != ".bvh":
+            raise InputError(args.path, None, "--name-map-template reads a BVH file's skeleton (for an array, "
+                                              "give its template BVH)")
+        print(name_map_template(load_motion(args.path, fps=args.fps).skeleton, Path(args.path).name), end="")
+        return 0
     summary = summarize_any(args.path, fps=args.fps)
     if args.json:
         print(json.dumps(summary, indent=2, default=str))

@@ -26,7 +26,7 @@ from studyapp.errors import InputError
 from studyapp.motion.humanoid import BUILTIN_MAPS, HUMANOID_BONES, REQUIRED_BONES
 from studyapp.motion.skeleton import Skeleton
 
-__all__ = ["detect_name_map", "merge_name_map", "fuzzy_name_map", "missing_bones_message", "name_map_template"]
+__all__ = ["recognise_rig", "detect_name_map", "merge_name_map", "fuzzy_name_map", "missing_bones_message", "name_map_template"]
 
 
 def _strip_namespace(name: str) -> str:
@@ -180,6 +180,24 @@ def fuzzy_name_map(skeleton: Skeleton, taken: dict[str, str] | None = None) -> d
     return out
 
 
+def recognise_rig(skeleton: Skeleton) -> tuple[str, dict[str, str]]:
+    """The built-in map that fits best (its name, ``"+fuzzy"`` when word matching completed it) and the
+    ``{joint: bone}`` map :func:`detect_name_map` returns."""
+    best: dict[str, str] = {}
+    best_name, best_key = "none", (-1, -1)
+    for name, table in BUILTIN_MAPS.items():
+        got = _apply_map(skeleton.names, table)
+        key = (sum(b in got.values() for b in REQUIRED_BONES), len(got))
+        if key > best_key:
+            best, best_key, best_name = got, key, name
+    if best_key[0] < len(REQUIRED_BONES):
+        extra = fuzzy_name_map(skeleton, best)
+        if extra:
+            best.update(extra)
+            best_name = "fuzzy" if best_key[0] <= 0 else f"{best_name}+fuzzy"
+    return best_name, best
+
+
 def detect_name_map(skeleton: Skeleton) -> dict[str, str]:
     """``{joint name: humanoid bone}`` from the built-in map that matches the most joints, completed by
     :func:`fuzzy_name_map` for the required bones it lacks.
@@ -192,16 +210,7 @@ def detect_name_map(skeleton: Skeleton) -> dict[str, str]:
     >>> m["RightForeArm"], m["Spine3"], "Spine2" in m
     ('RightLowerArm', 'UpperChest', False)
     """
-    best: dict[str, str] = {}
-    best_key = (-1, -1)
-    for table in BUILTIN_MAPS.values():
-        got = _apply_map(skeleton.names, table)
-        key = (sum(b in got.values() for b in REQUIRED_BONES), len(got))
-        if key > best_key:
-            best, best_key = got, key
-    if best_key[0] < len(REQUIRED_BONES):
-        best.update(fuzzy_name_map(skeleton, best))
-    return best
+    return recognise_rig(skeleton)[1]
 
 
 def merge_name_map(skeleton: Skeleton, override: dict[str, str] | None, what: str | None = None) -> dict[str, str]:
