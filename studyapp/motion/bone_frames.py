@@ -26,7 +26,9 @@ fingers                    along the finger                        the hand's fi
 *Where* the two directions are read depends on the rig's rest pose:
 
 - a rest pose that stands (spine up, as in T- and A-poses and every avatar) is read directly, the hinge of
-  a straight limb taken as the anatomical one (elbows bend forward, knees backward);
+  a straight limb taken as the anatomical one (elbows bend forward, knees backward); where the clip
+  bends an upper arm's elbow or a knee clearly, the hinge it shows is used instead (a rig's rest arm can
+  be turned 30 degrees about itself, as CMU's is, and the avatar's elbow would then fold askew);
 - a rest pose that does not stand carries no anatomy, so the directions are read from the animation
   itself: at every frame the world-space directions (the body's left at that frame, the elbow's actual
   hinge when bent, ...) are brought into the bone's local axes and averaged over the clip, weighted by
@@ -46,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BoneAxes", "frame_from_axes", "is_standing", "bone_axes", "body_forward"]
+__all__ = ["BoneAxes", "frame_from_axes", "is_standing", "bone_axes", "body_forward", "hinge_evidence"]
 
 _TRUNK = ("Hips", "Spine", "Chest", "UpperChest", "Neck", "Head")
 _SIDES = ("Left", "Right")
@@ -180,6 +182,13 @@ def _hinge(pos: np.ndarray, bone: dict[str, int], b: str) -> tuple[np.ndarray, n
     c = np.cross(upper, lower)
     s = np.linalg.norm(c, axis=-1)
     return _unit(c), np.clip(s - _MIN_BEND_SIN, 0.0, None)
+
+
+def hinge_evidence(positions: np.ndarray, bone: dict[str, int], b: str) -> float:
+    """How well a clip (``(F, J, 3)`` positions) shows the hinge of the elbow or knee of bone ``b``: the
+    fraction of frames' worth of clear bending (0 when the limb never bends past 12 degrees)."""
+    got = _hinge(positions, bone, b)
+    return 0.0 if got is None else float(got[1].sum() / max(len(positions), 1))
 
 
 def _rest_hinge(pos: np.ndarray, bone: dict[str, int], b: str, forward: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from studyapp.errors import InputError
-from studyapp.motion.bone_frames import body_forward, bone_axes, choose_axes, is_standing
+from studyapp.motion.bone_frames import body_forward, bone_axes, choose_axes, hinge_evidence, is_standing
 from studyapp.motion.fk import global_transforms, rest_global_transforms
 from studyapp.motion.humanoid import HUMANOID_BONES, HUMANOID_PARENT, REQUIRED_BONES
 from studyapp.motion.rigs import detect_name_map, merge_name_map, missing_bones_message
@@ -99,6 +99,29 @@ def _head_top(skeleton: Skeleton, glob: np.ndarray, head: int) -> np.ndarray | N
     return np.einsum("fij,j->fi", glob[:, head, :3, :3], off) + glob[:, head, :3, 3]
 
 
+#: Bones whose hinge (elbow or knee) the clip may show better than the rest pose. Not the forearm: it
+#: carries pronation, so its frame turns about the hinge as the hand does.
+_HINGE_BONES = ("LeftUpperArm", "RightUpperArm", "LeftUpperLeg", "RightUpperLeg", "LeftLowerLeg", "RightLowerLeg")
+#: A clip must bend that joint clearly for about this fraction of its frames (in sine-weighted frames).
+_MIN_HINGE_EVIDENCE = 0.05
+
+
+def _clip_hinges(glob: np.ndarray, bone: dict[str, int], axes) -> dict[str, np.ndarray]:
+    """Frames of the hinge bones read from the clip where it bends them clearly (see bone_frames)."""
+    pos = glob[..., :3, 3]
+    chosen = [b for b in _HINGE_BONES if b in axes.primary and axes.secondary.get(b) == "hinge"
+              and hinge_evidence(pos, bone, b) >= _MIN_HINGE_EVIDENCE]
+    if not chosen:
+        return {}
+    sub = type(axes)(primary={b: axes.primary[b] for b in chosen}, secondary={b: "hinge" for b in chosen})
+    return bone_axes(glob[..., :3, :3], pos, bone, sub, from_motion=True)
+
+
+def _same_rig(a: Skeleton, b: Skeleton) -> bool:
+    return a is b or (a.names == b.names and a.offsets.shape == b.offsets.shape
+                      and np.allclose(a.offsets, b.offsets, atol=1e-9))
+
+
 def _standing_height(pos: np.ndarray, hips: int) -> tuple[float, float]:
     """Hip height above the lowest joint (median over frames) and the floor height, from ``(F, J, 3)``."""
     lowest = pos[:, :, 1].min(axis=1)
@@ -144,6 +167,8 @@ def retarget(
     if standing:
         x_s = bone_axes(s_g0[None, :, :3, :3], s_pos0[None], s_bone, axes, from_motion=False)
         s_fwd = body_forward(s_pos0[None], s_bone)[0]
+        if not _same_rig(source.skeleton, target):
+            x_s.update(_clip_hinges(s_glob, s_bone, axes))
     else:  # the zero pose carries no anatomy: read it from the animation
         x_s = bone_axes(s_glob[..., :3, :3], s_glob[..., :3, 3], s_bone, axes, from_motion=True,
                         head_top=_head_top(source.skeleton, s_glob, s_bone["Head"]))
