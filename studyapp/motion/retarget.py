@@ -181,10 +181,12 @@ def retarget(
     f = source.n_frames
     t_glob_q = np.empty((f, target.n_joints, 4))
     set_global = np.zeros(target.n_joints, dtype=bool)
-    for b in axes.primary:
-        sj, tj = s_bone[b], t_bone[b]
-        g = yaw_m @ s_glob[:, sj, :3, :3] @ (x_s[b] @ x_t[b].T)
-        t_glob_q[:, tj] = matrix_to_quat(g)
+    mapped = list(axes.primary)
+    if mapped:
+        sj = [s_bone[b] for b in mapped]
+        tj = [t_bone[b] for b in mapped]
+        corr = np.stack([x_s[b] @ x_t[b].T for b in mapped])
+        t_glob_q[:, tj] = matrix_to_quat(yaw_m @ s_glob[:, sj, :3, :3] @ corr[None])
         set_global[tj] = True
 
     # local rotations: walk the target in depth-first order
