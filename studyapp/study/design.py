@@ -27,11 +27,11 @@ import math
 import os
 import re
 import string
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from studyapp import tomlfile
 from studyapp.errors import InputError
 
 # ---------------------------------------------------------------------------------------------------------
@@ -564,8 +564,8 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         return None, [Problem(str(path), "", f"not UTF-8 text (byte {exc.start})", "save the file as UTF-8")]
     col = _Collector(path, text)
     try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+        raw = tomlfile.loads(text)
+    except tomlfile.TOMLDecodeError as exc:
         m = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
         msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
         line = int(m.group(1)) if m else None
