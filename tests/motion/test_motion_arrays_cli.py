@@ -10,7 +10,7 @@ import pytest
 
 from motion_helpers import BEAT_SAMPLE, MIXAMO_SAMPLE, PYBVH_SAMPLE, SAMPLES, SMALL_BVH, write
 from studyapp.errors import InputError
-from studyapp.motion import cli as motion_cli
+from studyapp.cli import motion as motion_cli
 from studyapp.motion.arrays import load_motion_npz, load_rotation_array, save_motion_npz
 from studyapp.motion.beat import BEAT_UPPER_BODY
 from studyapp.motion.bvh import read_bvh, read_bvh_channels

@@ -277,7 +277,7 @@ def run_cli(capsys, *args: str) -> tuple[int, str, str]:
     """Run this area's sub-commands in-process, through argparse exactly as ``studyapp`` registers them."""
     import argparse
 
-    from studyapp.study import design_cli
+    from studyapp.cli import design as design_cli
 
     parser = argparse.ArgumentParser(prog="studyapp")
     design_cli.register(parser.add_subparsers())
