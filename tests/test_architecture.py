@@ -8,6 +8,8 @@ README's architecture table; a new package must be placed in it before it can im
 from __future__ import annotations
 
 import ast
+import doctest
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +22,7 @@ TOP_PACKAGES = ("studyapp", "results_analysis")
 # so the graph cannot have a cycle. Same order as the README's architecture table.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("studyapp", "studyapp.errors", "results_analysis"),       # the version, the error type; statistics stand alone
-    ("studyapp.resources", "studyapp.durations"),              # shipped-file paths, the duration rules
+    ("studyapp.resources", "studyapp.durations", "studyapp.tomlfile"),   # shipped files, duration rules, TOML
     ("studyapp.motion", "studyapp.face", "studyapp.audio"),   # the media, each on its own
     ("studyapp.models", "studyapp.demo_content"),             # produce motion from speech (a network, a recipe)
     ("studyapp.render",),                                     # draws media; knows nothing of studies
@@ -238,7 +240,11 @@ def test_readme_table_states_the_same_layers() -> None:
     assert in_readme == declared, "README's architecture table and LAYERS disagree"
 
 
-# The checks above must be able to fail: run them on a small tree with a cycle hidden in a function.
+# The checks above must be able to fail: the helpers' examples, then a small tree with a cycle hidden in a function.
+
+def test_helper_examples_hold() -> None:
+    result = doctest.testmod(sys.modules[__name__], verbose=False)
+    assert result.attempted >= 3 and result.failed == 0
 
 def test_collector_sees_a_cycle_hidden_in_a_function(tmp_path: Path) -> None:
     pkg = tmp_path / "studyapp"
