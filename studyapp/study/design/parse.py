@@ -5,24 +5,23 @@ The keys each table accepts, and their defaults, come from the classes that decl
 """
 from __future__ import annotations
 
-import difflib
 import math
 import re
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Sequence
 
 from studyapp import tomlfile
 from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
 from studyapp.study.design.blinding import visible_text_leaks
+from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
 from studyapp.study.design.files import design_hash, pattern_fields, referenced_files, resolve
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
                                              Playback, Problem, QuestionItem, Stimulus)
-from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE, ID_RE,
+from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
                                               MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
-                                              SLOT_LABELS, TYPE_NAMES, AttentionCheckTable, AvatarTable,
+                                              SLOT_LABELS, AttentionCheckTable, AvatarTable,
                                               DesignFile, OrderingTable, ParticipantsTable, SlotsTable,
-                                              key_default, toml_keys)
+                                              key_default)
 
 #: Rotation representations of NPZ/NPY arrays (those :mod:`studyapp.motion.rotations` reads).
 REPRESENTATIONS = tuple(_REPRESENTATION_WIDTHS)
@@ -30,7 +29,6 @@ REPRESENTATIONS = tuple(_REPRESENTATION_WIDTHS)
 # design must say which one (sixd = Zhou's columns, sixd_rows = PyTorch3D's rows).
 _REPR_ALIASES = {"axis-angle": "axis_angle", "axisangle": "axis_angle", "rotvec": "axis_angle",
                  "quaternion": "quat", "quat_xyzw": "quat", "rotmat": "matrix"}
-_TOP_KEYS = toml_keys(DesignFile)
 #: Every table of a design file and the class declaring its keys ("" is the top level).
 TABLES: dict[str, type] = {"": DesignFile, "conditions": Condition, "stimuli": Stimulus, "criteria": Criterion,
                            "avatar": AvatarTable, "ordering": OrderingTable, "slots": SlotsTable,
@@ -38,134 +36,11 @@ TABLES: dict[str, type] = {"": DesignFile, "conditions": Condition, "stimuli": S
                            "questionnaire": QuestionItem, "participants": ParticipantsTable}
 
 
-class _Collector:
-    """Gathers problems and points each at the line of its key (tomllib reports no positions)."""
-
-    def __init__(self, path: Path, text: str) -> None:
-        self.path = str(path)
-        self.lines = text.splitlines()
-        self.problems: list[Problem] = []
-
-    def add(self, key: str, message: str, fix: str = "") -> None:
-        self.problems.append(Problem(self.path, key, message, fix, self._line_of(key)))
-
-    def _line_of(self, key: str) -> int | None:
-        """Best-effort line number of a dotted key like ``stimuli[2].audio`` or ``slots.labels``."""
-        parts = re.findall(r"([A-Za-z0-9_\-]+)(?:\[(\d+)\])?", key)
-        if not parts:
-            return None
-        start, end = 0, len(self.lines)
-        head, idx = parts[0]
-        if idx:  # array of tables: find the idx-th "[[head]]"
-            hits = [i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)]
-            if not hits:  # an inline list (practice = [...]): its element sits on the key's line
-                hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
-                return None if hit is None else hit + 1
-            if len(hits) <= int(idx):
-                return None
-            start = hits[int(idx)]
-            nxt = [i for i, ln in enumerate(self.lines) if i > start and re.match(r"^\s*\[\[", ln)]
-            end = nxt[0] if nxt else end
-            if len(parts) == 1:
-                return start + 1
-            rest = parts[1:]
-        else:
-            hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\s*{re.escape(head)}\s*\]", ln)), None)
-            if hit is None:
-                hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
-            if hit is None:  # a problem with a whole array of tables: point at its first block
-                hit = next((i for i, ln in enumerate(self.lines)
-                            if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)), None)
-                return None if hit is None else hit + 1
-            if not re.match(r"^\s*\[", self.lines[hit]):
-                return hit + 1
-            start = hit
-            if len(parts) == 1:
-                return start + 1
-            rest = parts[1:]
-            # The table ends at the next header that is not one of its own sub-tables.
-            nxt = [i for i, ln in enumerate(self.lines) if i > start and re.match(r"^\s*\[", ln)
-                   and not re.match(rf"^\s*\[\s*{re.escape(head)}\.", ln)]
-            end = nxt[0] if nxt else end
-        found = start
-        for name, _ in rest:  # each deeper part is searched for after the line of the one before
-            for i in range(found, end):
-                if re.match(rf"^\s*\[?\s*[\w.\-\[]*?{re.escape(name)}\s*[=\]]", self.lines[i]):
-                    found = i
-                    break
-            else:
-                break
-        return found + 1
-
-
-def _did_you_mean(word: str, options: Sequence[str]) -> str:
-    close = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
-    return f"did you mean {close[0]!r}?" if close else f"allowed keys: {', '.join(sorted(options))}"
-
-
-def _check_table(col: _Collector, table: Any, cls: type, where: str) -> dict:
-    """Type-check one table against the keys its class declares; returns only the well-typed keys."""
-    schema = toml_keys(cls)
-    if not isinstance(table, dict):
-        col.add(where, f"must be a table, got {type(table).__name__}", f"write it as [{where}] with key = value lines")
-        return {}
-    good: dict = {}
-    for key, value in table.items():
-        kpath = f"{where}.{key}" if where else key
-        if key not in schema:
-            if where and key in _TOP_KEYS and not where.startswith(("conditions", "stimuli")):
-                # TOML puts every key after a [table] header into that table: a classic slip.
-                col.add(kpath, f"unknown key {key!r} in [{where.split('[')[0]}]",
-                        f"`{key}` is a top-level key: move it above the first [table] header")
-            else:
-                col.add(kpath, f"unknown key {key!r}", _did_you_mean(key, schema))
-            continue
-        types, _ = schema[key]
-        ok = isinstance(value, types) and not (bool not in types and isinstance(value, bool))
-        if not ok:
-            want = " or ".join(TYPE_NAMES[t] for t in types)
-            col.add(kpath, f"must be {want}, got {type(value).__name__} {value!r}"[:200], f"write {key} as {want}")
-            continue
-        good[key] = value
-    for key, (types, required) in schema.items():
-        if required and key not in table:
-            fix = f"add [[{key}]] blocks (see study_designs/example_beat.toml)" if types == (list,) else f"add {key} = ..."
-            col.add(f"{where}.{key}" if where else key, "is required but missing", fix)
-    return good
-
-
-def _check_array(col: _Collector, raw: dict, name: str, cls: type) -> list[tuple[int, dict]]:
-    items = raw.get(name, [])
-    out = []
-    for i, item in enumerate(items):
-        if not isinstance(item, dict):
-            col.add(f"{name}[{i}]", "must be a table", f"write each entry as a [[{name}]] block")
-            continue
-        out.append((i, _check_table(col, item, cls, f"{name}[{i}]")))
-    return out
-
-
-def _check_ids(col: _Collector, name: str, entries: list[tuple[int, dict]], what: str) -> None:
-    seen: dict[str, int] = {}
-    for i, e in entries:
-        ident = e.get("id")
-        if ident is None:
-            continue
-        if not ID_RE.match(ident):
-            col.add(f"{name}[{i}].id", f"{what} id {ident!r} may only hold letters, digits, '_', '-' and '.'",
-                    "rename it, e.g. " + repr(re.sub(r"[^A-Za-z0-9_.\-]", "_", ident) or "c1"))
-        if ident in seen:
-            col.add(f"{name}[{i}].id", f"duplicate {what} id {ident!r} (also {name}[{seen[ident]}])",
-                    f"give every {what} its own id")
-        else:
-            seen[ident] = i
-
-
 # ---------------------------------------------------------------------------------------------------------
 # One function per part of the design
 
 
-def _conditions(col: _Collector, top: dict, conds: list[tuple[int, dict]]) -> list[Condition]:
+def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> list[Condition]:
     conditions: list[Condition] = []
     if "conditions" not in top:
         pass  # reported as a missing required key
@@ -194,7 +69,7 @@ def _conditions(col: _Collector, top: dict, conds: list[tuple[int, dict]]) -> li
                 rep = None
             elif rep not in REPRESENTATIONS:
                 col.add(f"{key}.representation", f"unknown rotation representation {e['representation']!r}",
-                        _did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
+                        did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
         ro = e.get("rotation_order")
         if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
             col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
@@ -250,7 +125,7 @@ def _conditions(col: _Collector, top: dict, conds: list[tuple[int, dict]]) -> li
     return conditions
 
 
-def _stimuli(col: _Collector, top: dict, stims: list[tuple[int, dict]], path: Path) -> list[Stimulus]:
+def _stimuli(col: Collector, top: dict, stims: list[tuple[int, dict]], path: Path) -> list[Stimulus]:
     stimuli: list[Stimulus] = []
     if "stimuli" in top and not stims:
         col.add("stimuli", "no stimuli", "add [[stimuli]] blocks with id, audio and face")
@@ -277,7 +152,7 @@ def _stimuli(col: _Collector, top: dict, stims: list[tuple[int, dict]], path: Pa
     return stimuli
 
 
-def _criteria(col: _Collector, top: dict, crits: list[tuple[int, dict]]) -> list[Criterion]:
+def _criteria(col: Collector, top: dict, crits: list[tuple[int, dict]]) -> list[Criterion]:
     if "criteria" in top:
         criteria = [Criterion(e["id"], e.get("label", e["id"].capitalize()), e["question"],
                               e.get("explanation", key_default(Criterion, "explanation")))
@@ -289,7 +164,7 @@ def _criteria(col: _Collector, top: dict, crits: list[tuple[int, dict]]) -> list
     return criteria
 
 
-def _avatar(col: _Collector, avatar: AvatarTable, stims: list[tuple[int, dict]]) -> tuple[str, dict[str, str]]:
+def _avatar(col: Collector, avatar: AvatarTable, stims: list[tuple[int, dict]]) -> tuple[str, dict[str, str]]:
     avatar_default = avatar.model
     by_speaker = {}
     for k, v in avatar.by_speaker.items():
@@ -301,26 +176,26 @@ def _avatar(col: _Collector, avatar: AvatarTable, stims: list[tuple[int, dict]])
     for k in by_speaker:
         if k not in speakers:
             col.add(f"avatar.by_speaker.{k}", f"no stimulus has tags.speaker = {k!r}",
-                    _did_you_mean(k, sorted(x for x in speakers if x)).replace("allowed keys", "speakers"))
+                    did_you_mean(k, sorted(x for x in speakers if x)).replace("allowed keys", "speakers"))
     for akey, name in [("avatar.model", avatar_default)] + [(f"avatar.by_speaker.{k}", v) for k, v in by_speaker.items()]:
         if name != "builtin" and not name.lower().endswith(AVATAR_SUFFIXES):
             col.add(akey, f"{name!r} is neither \"builtin\" nor a .glb/.gltf/.vrm file", 'use "builtin" or a glTF file')
     return avatar_default, by_speaker
 
 
-def _ordering_and_slots(col: _Collector, ordering: OrderingTable, slots: SlotsTable):
+def _ordering_and_slots(col: Collector, ordering: OrderingTable, slots: SlotsTable):
     if ordering.method not in ORDERINGS:
         col.add("ordering.method", f"unknown ordering {ordering.method!r}",
-                _did_you_mean(ordering.method, ORDERINGS).replace("allowed keys", "allowed values"))
+                did_you_mean(ordering.method, ORDERINGS).replace("allowed keys", "allowed values"))
     if slots.assignment not in SLOT_ASSIGNMENTS:
         col.add("slots.assignment", f"unknown slot assignment {slots.assignment!r}",
-                _did_you_mean(slots.assignment, SLOT_ASSIGNMENTS).replace("allowed keys", "allowed values"))
+                did_you_mean(slots.assignment, SLOT_ASSIGNMENTS).replace("allowed keys", "allowed values"))
     if slots.labels not in SLOT_LABELS:
         col.add("slots.labels", f"unknown slot labels {slots.labels!r}", 'use "ABC", "LMR", "123" or "none"')
     return SLOT_LABELS.get(slots.labels, ("A", "B", "C"))
 
 
-def _attention_checks(col: _Collector, checks: list[tuple[int, dict]], stim_ids: list[str], crit_ids: list[str],
+def _attention_checks(col: Collector, checks: list[tuple[int, dict]], stim_ids: list[str], crit_ids: list[str],
                       ids_ok: list[str]) -> list[AttentionCheck]:
     attention: list[AttentionCheck] = []
     for i, e in checks:
@@ -328,13 +203,13 @@ def _attention_checks(col: _Collector, checks: list[tuple[int, dict]], stim_ids:
         kind = e.get("kind", key_default(AttentionCheckTable, "kind"))
         if "stimulus" in e and e["stimulus"] not in stim_ids:
             col.add(f"{key}.stimulus", f"unknown stimulus {e['stimulus']!r}",
-                    _did_you_mean(e["stimulus"], stim_ids).replace("allowed keys", "stimuli"))
+                    did_you_mean(e["stimulus"], stim_ids).replace("allowed keys", "stimuli"))
         if kind not in ATTENTION_KINDS:
             col.add(f"{key}.kind", f"unknown attention check kind {kind!r}", 'use "frozen" or "known-worst"')
         crit = e.get("criterion", key_default(AttentionCheckTable, "criterion"))
         if crit not in crit_ids:
             col.add(f"{key}.criterion", f"unknown criterion {crit!r}",
-                    _did_you_mean(crit, crit_ids).replace("allowed keys", "criteria"))
+                    did_you_mean(crit, crit_ids).replace("allowed keys", "criteria"))
         rank = e.get("rank", key_default(AttentionCheckTable, "rank"))
         if rank not in (1, 2, 3):
             col.add(f"{key}.rank", f"rank must be 1, 2 or 3, got {rank}", "3 means ranked last")
@@ -345,7 +220,7 @@ def _attention_checks(col: _Collector, checks: list[tuple[int, dict]], stim_ids:
                         f'condition = "{ids_ok[-1] if ids_ok else "static"}"')
             elif e["condition"] not in ids_ok:
                 col.add(f"{key}.condition", f"unknown condition {e['condition']!r}",
-                        _did_you_mean(e["condition"], ids_ok).replace("allowed keys", "conditions"))
+                        did_you_mean(e["condition"], ids_ok).replace("allowed keys", "conditions"))
             else:
                 expected["condition"] = e["condition"]
         elif "condition" in e:
@@ -356,7 +231,7 @@ def _attention_checks(col: _Collector, checks: list[tuple[int, dict]], stim_ids:
     return attention
 
 
-def _questionnaire(col: _Collector, questions: list[tuple[int, dict]]) -> list[QuestionItem]:
+def _questionnaire(col: Collector, questions: list[tuple[int, dict]]) -> list[QuestionItem]:
     items: list[QuestionItem] = []
     for i, e in questions:
         key = f"questionnaire[{i}]"
@@ -377,7 +252,7 @@ def _questionnaire(col: _Collector, questions: list[tuple[int, dict]]) -> list[Q
     return items
 
 
-def _participants(col: _Collector, participants: ParticipantsTable) -> tuple[int | None, dict[str, str]]:
+def _participants(col: Collector, participants: ParticipantsTable) -> tuple[int | None, dict[str, str]]:
     maxfail = participants.max_attention_failures
     if maxfail is not None and maxfail < 0:
         col.add("participants.max_attention_failures", "must be 0 or more", "e.g. 1")
@@ -421,23 +296,23 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     if isinstance(got, Problem):
         return None, [got]
     data, text, raw = got
-    col = _Collector(path, text)
-    top = _check_table(col, raw, DesignFile, "")
-    conds = _check_array(col, top, "conditions", Condition)
-    stims = _check_array(col, top, "stimuli", Stimulus)
-    crits = _check_array(col, top, "criteria", Criterion)
-    checks = _check_array(col, top, "attention_checks", AttentionCheckTable)
-    questions = _check_array(col, top, "questionnaire", QuestionItem)
-    avatar = AvatarTable(**_check_table(col, top.get("avatar", {}), AvatarTable, "avatar"))
-    ordering = OrderingTable(**_check_table(col, top.get("ordering", {}), OrderingTable, "ordering"))
-    slots = SlotsTable(**_check_table(col, top.get("slots", {}), SlotsTable, "slots"))
-    playback = _check_table(col, top.get("playback", {}), Playback, "playback")
-    participants = ParticipantsTable(**_check_table(col, top.get("participants", {}), ParticipantsTable,
+    col = Collector(path, text)
+    top = check_table(col, raw, DesignFile, "")
+    conds = check_array(col, top, "conditions", Condition)
+    stims = check_array(col, top, "stimuli", Stimulus)
+    crits = check_array(col, top, "criteria", Criterion)
+    checks = check_array(col, top, "attention_checks", AttentionCheckTable)
+    questions = check_array(col, top, "questionnaire", QuestionItem)
+    avatar = AvatarTable(**check_table(col, top.get("avatar", {}), AvatarTable, "avatar"))
+    ordering = OrderingTable(**check_table(col, top.get("ordering", {}), OrderingTable, "ordering"))
+    slots = SlotsTable(**check_table(col, top.get("slots", {}), SlotsTable, "slots"))
+    playback = check_table(col, top.get("playback", {}), Playback, "playback")
+    participants = ParticipantsTable(**check_table(col, top.get("participants", {}), ParticipantsTable,
                                                     "participants"))
-    _check_ids(col, "conditions", conds, "condition")
-    _check_ids(col, "stimuli", stims, "stimulus")
-    _check_ids(col, "criteria", crits, "criterion")
-    _check_ids(col, "questionnaire", questions, "questionnaire item")
+    check_ids(col, "conditions", conds, "condition")
+    check_ids(col, "stimuli", stims, "stimulus")
+    check_ids(col, "criteria", crits, "criterion")
+    check_ids(col, "questionnaire", questions, "questionnaire item")
 
     conditions = _conditions(col, top, conds)
     ids_ok = [e.get("id") for _, e in conds if e.get("id")]
@@ -454,7 +329,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     for j, sid in enumerate(practice):
         if sid not in stim_ids:
             col.add(f"practice[{j}]", f"unknown stimulus {sid!r}",
-                    _did_you_mean(str(sid), stim_ids).replace("allowed keys", "stimuli"))
+                    did_you_mean(str(sid), stim_ids).replace("allowed keys", "stimuli"))
     attention = _attention_checks(col, checks, stim_ids, crit_ids, ids_ok)
     items = _questionnaire(col, questions)
     maxfail, groups = _participants(col, participants)
