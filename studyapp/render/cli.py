@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 from pathlib import Path
 
 from studyapp.errors import InputError, StudyappError
@@ -174,7 +175,8 @@ def _open_clock(audio):
         return SilentClock(reason="no --audio")
     from studyapp.audio.playback import open_clock
 
-    clock, message = open_clock(None)
+    # the output a study session would use (run_window reads the same variable)
+    clock, message = open_clock(os.environ.get("STUDYAPP_AUDIO_DEVICE") or None)
     log.info("%s", message)
     if isinstance(clock, SilentClock):
         print(message, flush=True)

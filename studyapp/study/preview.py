@@ -60,8 +60,8 @@ def _name_map_file(path: Path) -> dict[str, str]:
                          "[name_map] or [conditions.name_map]")
     bad = [k for k, v in table.items() if not isinstance(v, str)]
     if bad:
-        line = next((i + 1 for i, ln in enumerate(text.splitlines()) if re.match(rf'^\s*"?{re.escape(bad[0])}"?\s*=', ln)),
-                    None)
+        key_line = re.compile(rf'^\s*"?{re.escape(bad[0])}"?\s*=')
+        line = next((i + 1 for i, ln in enumerate(text.splitlines()) if key_line.match(ln)), None)
         raise InputError(path, f"line {line}" if line else f"key {bad[0]}",
                          f"{bad[0]!r} must map to a bone name in quotes, e.g. {bad[0]} = \"LeftHand\"")
     return dict(table)
@@ -82,6 +82,11 @@ def preview_condition(motion: str | Path, **settings: Any) -> Condition:
     if "joints" in given:
         given["joints"] = list(given["joints"])
     motion = Path(motion)
+    if set(given) <= {"fps", "name_map"} and _self_describing(motion):
+        # studyapp's own motion NPZ (`convert`, bundles) carries its skeleton and frame rate: no array settings
+        if "fps" in given and not given["fps"] > 0:
+            raise InputError(motion, "--fps", f"must be a positive frame rate, got {given['fps']}")
+        return Condition(id="view", motion=str(motion), fps=given.get("fps"), name_map=dict(given.get("name_map", {})))
     cond, problems = condition_from_settings({"motion": str(motion), **given}, motion)
     if problems:
         p = problems[0]
@@ -91,6 +96,12 @@ def preview_condition(motion: str | Path, **settings: Any) -> Condition:
         raise InputError(motion, where, f"{p.message}{fix}{rest}")
     assert cond is not None
     return cond
+
+
+def _self_describing(path: Path) -> bool:
+    from studyapp.motion.arrays import is_motion_npz
+
+    return path.suffix.lower() == ".npz" and path.is_file() and is_motion_npz(path)
 
 
 def load_preview_motion(motion: str | Path, condition: Condition) -> Motion:

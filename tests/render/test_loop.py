@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from studyapp.audio.clock import SilentClock
 from studyapp.render.loop import FrameLoop, NullTarget, ScenePlayer, VirtualTimer
@@ -71,11 +72,10 @@ def test_video_frames_are_the_stills_at_k_over_fps(renderer, avatar):
     from studyapp.render.video import play_frames, render_frames
 
     m = posed(avatar, {"LeftUpperArm": (0, 0, -70)}, n_frames=10, fps=10.0)
-    # the left arm swings up over the clip
-    from scipy.spatial.transform import Rotation
     j = avatar.skeleton.index("LeftUpperArm")
-    for f in range(10):
-        m.rotations[f, j] = (Rotation.from_quat(m.rotations[f, j]) * Rotation.from_rotvec([0, 0, np.radians(8 * f)])).as_quat()
+    for f in range(10):  # the left arm swings up over the clip
+        lift = Rotation.from_rotvec([0, 0, np.radians(8 * f)])
+        m.rotations[f, j] = (Rotation.from_quat(m.rotations[f, j]) * lift).as_quat()
     scene = make_scene([prepare_slot(avatar, m, None)], avatar)
     video = list(play_frames(scene, 5.0, 5, size=(96, 128), renderer=renderer))
     stills = list(render_frames(scene, [k / 5.0 for k in range(5)], size=(96, 128), renderer=renderer))

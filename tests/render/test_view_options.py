@@ -141,3 +141,12 @@ def test_view_name_map_on_a_renamed_rig(tmp_path, capsys):
     assert main(["view", str(renamed), "--name-map", str(bad), "--offscreen", "--out", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err
     assert "bad.toml, line 2" in err and "J000" in err
+
+
+def test_view_plays_studyapps_own_motion_npz_without_array_options(tmp_path):
+    """A motion NPZ written by studyapp (``convert``, bundles) carries its skeleton and frame rate."""
+    from studyapp.motion.arrays import save_motion_npz
+
+    npz = tmp_path / "converted.npz"
+    save_motion_npz(_bvh_rotations(BEAT, 15.0), npz)
+    assert np.abs(_view(tmp_path, "npz", npz) - _view(tmp_path, "bvh", BEAT, "--fps", "15")).max() <= 2
