@@ -1,8 +1,9 @@
 """The participant application: the session's screens drawn with Dear ImGui over the 3D view.
 
-:class:`StudyApp` is the whole UI for one GL context and is driven one frame at a time, so the same
-code runs in a GLFW window (:func:`run_window`, :class:`WindowRunner`) and offscreen for the scripted
-participant (:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`). Each frame:
+:class:`StudyApp` is the whole UI for one GL context and is driven one frame at a time by the frame
+loop (:class:`studyapp.render.loop.FrameLoop`), so the same code runs in a GLFW window (:func:`run_window`,
+:class:`WindowRunner`, on the audio or wall clock) and offscreen for the scripted participant
+(:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`, on a virtual clock). Each frame:
 
 1. queued input (:mod:`studyapp.ui.input`) goes to ImGui;
 2. the screen for the session's state builds the UI and, on a trial, asks for the 3D view at the media
