@@ -9,6 +9,7 @@ import math
 import re
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from studyapp import tomlfile
 from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
@@ -51,78 +52,106 @@ def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> lis
         col.add("conditions", f"{len(conds)} conditions given; the three-slot viewer shows exactly 3 per trial",
                 "keep exactly 3 [[conditions]] (make one design per set of three models)")
     for i, e in conds:
-        key = f"conditions[{i}]"
-        if ("motion" in e) == ("model" in e):
-            col.add(key, "needs exactly one of `motion` (file pattern) or `model` (ONNX file)"
-                    + (", not both" if "motion" in e else ""),
-                    'add motion = "motion/<model>/{stimulus}.bvh" or model = "model.onnx"')
-        if "fps" in e and not (e["fps"] > 0 and math.isfinite(e["fps"])):
-            col.add(f"{key}.fps", f"must be a positive frame rate, got {e['fps']}", "e.g. fps = 15")
-        rep = e.get("representation")
-        if rep is not None:
-            rep = _REPR_ALIASES.get(rep.lower(), rep.lower())
-            if rep in ("6d", "rot6d", "rotation_6d"):
-                col.add(f"{key}.representation", f"{e['representation']!r} is ambiguous: 6D rotations come in two "
-                        "layouts that the numbers cannot tell apart",
-                        'representation = "sixd" (Zhou et al.: first two matrix columns) or "sixd_rows" '
-                        "(PyTorch3D matrix_to_rotation_6d: first two rows)")
-                rep = None
-            elif rep not in REPRESENTATIONS:
-                col.add(f"{key}.representation", f"unknown rotation representation {e['representation']!r}",
-                        did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
-        ro = e.get("rotation_order")
-        if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
-            col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
-        nm = e.get("name_map", {})
-        bad = [k for k, v in nm.items() if not isinstance(v, str)]
-        for k in bad:
-            col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
-        if "motion" in e:
-            fields = pattern_fields(e["motion"])
-            if not fields:
-                col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
-                        "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
-            if not e["motion"].lower().endswith(MOTION_SUFFIXES):
-                col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
-                        "convert them first (studyapp convert) or fix the pattern's extension")
-            if e["motion"].lower().endswith((".npz", ".npy")):
-                # Arrays carry neither skeleton, nor rotation layout, nor frame rate: the condition must say.
-                if "template" not in e:
-                    col.add(f"{key}.template", "NPZ/NPY motion needs a template BVH for its skeleton",
-                            'add template = "template.bvh" (a BVH of the skeleton the arrays drive)')
-                if "representation" not in e:
-                    col.add(f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
-                            f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})')
-                if "fps" not in e:
-                    col.add(f"{key}.fps", "NPZ/NPY motion carries no frame rate",
-                            "add the model's output rate, e.g. fps = 15")
-            else:
-                for k in ("joints", "degrees", "representation"):
-                    if k in e:
-                        col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
-                                f"remove {k}")
-        joints = e.get("joints")
-        if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
-            col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
-                    'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
-            joints = None
-        if "model" in e and "motion" not in e:
-            for k in ("joints", "degrees", "representation", "rotation_order"):
-                if k in e:  # a live model declares its own output; a setting here would be silently ignored
-                    col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
-                            f"remove {k} (the model's output is read as its contract declares)")
-        if "model" in e and e["model"] != BUILTIN_REFERENCE and not e["model"].lower().endswith(".onnx"):
-            col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
-        if e.get("id"):
-            conditions.append(Condition(
-                id=e["id"], motion=e.get("motion"), model=e.get("model"),
-                fps=float(e["fps"]) if "fps" in e else None,
-                representation=rep, template=e.get("template"),
-                rotation_order=ro.upper() if ro else None,
-                name_map={k: v for k, v in nm.items() if isinstance(v, str)},
-                joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
-            ))
+        cond = parse_condition(col, f"conditions[{i}]", e)
+        if cond is not None:
+            conditions.append(cond)
     return conditions
+
+
+def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) -> Condition | None:
+    """One well-typed ``[[conditions]]`` table (``e``) checked and turned into a :class:`Condition`; problems
+    go to ``col`` under ``key``. ``pattern`` False: ``motion`` names one file, not a pattern."""
+    if ("motion" in e) == ("model" in e):
+        col.add(key, "needs exactly one of `motion` (file pattern) or `model` (ONNX file)"
+                + (", not both" if "motion" in e else ""),
+                'add motion = "motion/<model>/{stimulus}.bvh" or model = "model.onnx"')
+    if "fps" in e and not (e["fps"] > 0 and math.isfinite(e["fps"])):
+        col.add(f"{key}.fps", f"must be a positive frame rate, got {e['fps']}", "e.g. fps = 15")
+    rep = e.get("representation")
+    if rep is not None:
+        rep = _REPR_ALIASES.get(rep.lower(), rep.lower())
+        if rep in ("6d", "rot6d", "rotation_6d"):
+            col.add(f"{key}.representation", f"{e['representation']!r} is ambiguous: 6D rotations come in two "
+                    "layouts that the numbers cannot tell apart",
+                    'representation = "sixd" (Zhou et al.: first two matrix columns) or "sixd_rows" '
+                    "(PyTorch3D matrix_to_rotation_6d: first two rows)")
+            rep = None
+        elif rep not in REPRESENTATIONS:
+            col.add(f"{key}.representation", f"unknown rotation representation {e['representation']!r}",
+                    did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
+    ro = e.get("rotation_order")
+    if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
+        col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
+    nm = e.get("name_map", {})
+    bad = [k for k, v in nm.items() if not isinstance(v, str)]
+    for k in bad:
+        col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
+    if "motion" in e:
+        fields = pattern_fields(e["motion"]) if pattern else ["stimulus"]
+        if not fields:
+            col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
+                    "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
+        if not e["motion"].lower().endswith(MOTION_SUFFIXES):
+            col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
+                    "convert them first (studyapp convert) or fix the pattern's extension")
+        if e["motion"].lower().endswith((".npz", ".npy")):
+            # Arrays carry neither skeleton, nor rotation layout, nor frame rate: the condition must say.
+            if "template" not in e:
+                col.add(f"{key}.template", "NPZ/NPY motion needs a template BVH for its skeleton",
+                        'add template = "template.bvh" (a BVH of the skeleton the arrays drive)')
+            if "representation" not in e:
+                col.add(f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
+                        f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})')
+            if "fps" not in e:
+                col.add(f"{key}.fps", "NPZ/NPY motion carries no frame rate",
+                        "add the model's output rate, e.g. fps = 15")
+        else:
+            for k in ("joints", "degrees", "representation"):
+                if k in e:
+                    col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
+                            f"remove {k}")
+    joints = e.get("joints")
+    if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
+        col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
+                'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
+        joints = None
+    if "model" in e and "motion" not in e:
+        for k in ("joints", "degrees", "representation", "rotation_order"):
+            if k in e:  # a live model declares its own output; a setting here would be silently ignored
+                col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
+                        f"remove {k} (the model's output is read as its contract declares)")
+    if "model" in e and e["model"] != BUILTIN_REFERENCE and not e["model"].lower().endswith(".onnx"):
+        col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
+    if e.get("id"):
+        return Condition(
+            id=e["id"], motion=e.get("motion"), model=e.get("model"),
+            fps=float(e["fps"]) if "fps" in e else None,
+            representation=rep, template=e.get("template"),
+            rotation_order=ro.upper() if ro else None,
+            name_map={k: v for k, v in nm.items() if isinstance(v, str)},
+            joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
+        )
+    return None
+
+
+def condition_from_settings(settings: dict[str, Any], source: str | Path) -> tuple[Condition | None, list[Problem]]:
+    """A condition from settings given outside a design file (``studyapp view``'s options), with the
+    checks and meaning of a ``[[conditions]]`` table whose ``motion`` names one file, not a pattern.
+
+    Returns the condition (None when unusable) and the problems, keyed by the setting (``fps``, ...).
+
+    >>> cond, problems = condition_from_settings({"motion": "out.npy", "representation": "6d"}, "out.npy")
+    >>> [p.key for p in problems]
+    ['representation', 'template', 'fps']
+    >>> condition_from_settings({"motion": "a.bvh", "rotation_order": "zyx"}, "a.bvh")[0].rotation_order
+    'ZYX'
+    """
+    col = Collector(Path(source), "")
+    entry = check_table(col, {"id": "view", **settings}, Condition, "view")
+    cond = parse_condition(col, "view", entry, pattern=False)
+    for p in col.problems:
+        p.key = p.key.removeprefix("view").removeprefix(".")
+    return cond, col.problems
 
 
 def _stimuli(col: Collector, top: dict, stims: list[tuple[int, dict]], path: Path) -> list[Stimulus]:
