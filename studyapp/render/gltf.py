@@ -5,21 +5,30 @@ What is read
 * ``.gltf`` (JSON with external or ``data:`` URI buffers), ``.glb`` and ``.vrm`` (GLB with a VRM extension).
 * All triangle primitives of all mesh nodes, merged into one mesh. Skinned primitives use the first skin's
   joints (``JOINTS_0``/``WEIGHTS_0``: unsigned byte/short, float or normalized integer weights); meshes
-  without a skin follow their nearest joint ancestor rigidly.
-* The skin's joints become a :class:`~studyapp.motion.skeleton.Skeleton` (depth-first, metres) whose rest
+  without a skin follow their nearest joint ancestor rigidly. A file with no skin at all (VRM 1.0 props
+  hanging from bones) gets its skeleton from the node hierarchy: the VRM humanoid bones, else every node
+  that is an ancestor of a mesh.
+* The joints become a :class:`~studyapp.motion.skeleton.Skeleton` (depth-first, metres) whose rest
   pose is the node TRS rest pose: rotations in ``rest_rotations``, scale (e.g. a centimetre armature)
   folded into the offsets. Geometry is brought into that rest pose in world space, so the renderer's
   inverse bind matrices are plain inverses of the rest transforms.
+* Facing is measured on the rest pose (left-right axis of the hips or shoulders, see
+  :mod:`studyapp.render.avatar_rig`) and the whole figure (geometry, skeleton, binds) is turned about +Y to
+  face +Z, the camera. VRM 0.x files (facing -Z) and three.js's Soldier are turned this way, by measurement.
+* ``bone_map`` (the design's ``[avatar.bone_map]``) names humanoid bones for joints with other names.
 * Morph targets named in ``mesh.extras.targetNames`` (or the primitive's extras) and matched to ARKit names
   with :func:`studyapp.face.arkit.match_arkit_name`; other targets are ignored with a note.
-* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow);
-  ``doubleSided`` on any material turns back-face culling off for the avatar.
+* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow, with
+  ``KHR_texture_transform``); ``doubleSided`` on any material turns back-face culling off for the avatar.
   Several different textures are baked into vertex colours (noted).
 * Sparse accessors. VRM 0.x (``extensions.VRM``) and 1.0 (``extensions.VRMC_vrm``) humanoid bones are
-  renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``); VRM 0.x models, which face
-  -Z, are turned to face +Z.
+  renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``).
+* gltfpack's compression: ``EXT_meshopt_compression`` buffer views (decoded by
+  :mod:`studyapp.render.meshopt`) and ``KHR_mesh_quantization`` (integer and normalized integer positions,
+  normals, UVs and morph deltas, dequantized by the node or bind transforms as the file states).
 
-Unsupported compression extensions (Draco, meshopt, Basis/KTX2) raise :class:`InputError`.
+Other compression (Draco, ``KHR_meshopt_compression``), KTX2/WebP textures and any other *required*
+extension raise :class:`InputError` naming the extension; so does a web page saved as ``.glb``.
 
 >>> import tempfile, pathlib
 >>> from studyapp.render.avatar import build_default_avatar
@@ -54,10 +63,17 @@ _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 51
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _UNSUPPORTED = {
     "KHR_draco_mesh_compression": "Draco-compressed meshes",
-    "EXT_meshopt_compression": "meshopt-compressed buffers",
-    "KHR_meshopt_compression": "meshopt-compressed buffers",
+    "KHR_meshopt_compression": "meshopt-compressed buffers (Khronos version)",
     "KHR_texture_basisu": "Basis Universal / KTX2 textures",
+    "EXT_texture_webp": "WebP textures",
+    "EXT_mesh_gpu_instancing": "GPU instancing",
 }
+# Required extensions that can be read (decoded here, or only changing looks the renderer does not show).
+_READABLE = {"EXT_meshopt_compression", "KHR_mesh_quantization", "KHR_texture_transform", "KHR_materials_unlit",
+             "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
+             "KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_lights_punctual", "VRM", "VRMC_vrm",
+             "VRMC_materials_mtoon", "VRMC_springBone", "VRMC_node_constraint"}
+_FIX = "re-export the avatar without it (e.g. gltfpack without -cc/-tc, or Blender's glTF exporter)"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -76,6 +92,12 @@ class _Doc:
         bin_chunk = None
         if raw[:4] == b"glTF":
             self.gltf, bin_chunk = self._parse_glb(raw)
+        elif path.suffix.lower() in (".glb", ".vrm") or raw.lstrip()[:1] == b"<":
+            # a web page saved under the model's name is the usual case: say what the file starts with
+            head = raw.lstrip()[:9].decode("utf-8", "replace")
+            kind = "glTF" if path.suffix.lower() == ".gltf" else "GLB"
+            raise InputError(path, None, f"not a {kind} file (starts with {head!r}, not 'glTF'); "
+                             "download the model file itself, not the web page showing it")
         else:
             try:
                 self.gltf = json.loads(raw.decode("utf-8-sig"))
@@ -88,16 +110,19 @@ class _Doc:
         version = str(self.gltf.get("asset", {}).get("version", ""))
         if not version.startswith("2"):
             raise InputError(path, "key asset.version", f"only glTF 2.0 is supported, file says {version or 'nothing'!r}")
-        used = set(self.gltf.get("extensionsRequired", [])) | set(self.gltf.get("extensionsUsed", []))
-        for ext, what in _UNSUPPORTED.items():
-            if ext in used:
-                raise InputError(path, "key extensionsUsed",
-                                 f"{ext} ({what}) is not supported; re-export the avatar without compression")
+        required = set(self.gltf.get("extensionsRequired", []))
+        used = required | set(self.gltf.get("extensionsUsed", []))
+        for ext in sorted(used):
+            if ext in _UNSUPPORTED:
+                raise InputError(path, "key extensionsUsed", f"{ext} ({_UNSUPPORTED[ext]}) is not supported; {_FIX}")
+        for ext in sorted(required - _READABLE):
+            raise InputError(path, "key extensionsRequired", f"required extension {ext} is not supported; {_FIX}")
         for i, img in enumerate(self.gltf.get("images", [])):
             if img.get("mimeType") == "image/ktx2" or str(img.get("uri", "")).lower().endswith(".ktx2"):
-                raise InputError(path, f"key images[{i}]", "KTX2 textures are not supported; use PNG or JPEG")
+                raise InputError(path, f"key images[{i}]", "KTX2 textures are not supported; "
+                                 "re-export the avatar with PNG or JPEG textures (gltfpack without -tc)")
         self.buffers = [self._load_buffer(i, b, bin_chunk) for i, b in enumerate(self.gltf.get("buffers", []))]
-        self._cache: dict[int, np.ndarray] = {}
+        self._cache: dict = {}
 
     def _parse_glb(self, raw: bytes) -> tuple[dict, bytes | None]:
         if len(raw) < 20:
@@ -130,6 +155,8 @@ class _Doc:
     def _load_buffer(self, i: int, spec: dict, bin_chunk: bytes | None) -> bytes:
         uri = spec.get("uri")
         where = f"key buffers[{i}]"
+        if uri is None and (i > 0 or bin_chunk is None) and "EXT_meshopt_compression" in spec.get("extensions", {}):
+            return b""  # placeholder for meshopt-compressed views: never read, they are decoded
         if uri is None:
             if bin_chunk is None:
                 raise InputError(self.path, where, "buffer has no uri and the file has no GLB binary chunk")
@@ -157,10 +184,33 @@ class _Doc:
         if not 0 <= index < len(views):
             raise InputError(self.path, f"bufferView {index}", "bufferView index out of range")
         v = views[index]
+        if "EXT_meshopt_compression" in v.get("extensions", {}):
+            return self._meshopt_view(index), 0, v.get("byteStride")
         buf = self.buffers[v["buffer"]]
         off = int(v.get("byteOffset", 0))
         return buf, off, v.get("byteStride")
 
+    def _meshopt_view(self, index: int) -> bytes:
+        """The uncompressed bytes of an ``EXT_meshopt_compression`` buffer view (decoded once)."""
+        if ("view", index) in self._cache:
+            return self._cache[("view", index)]
+        from studyapp.render.meshopt import MeshoptError, decode_view
+
+        ext = self.gltf["bufferViews"][index]["extensions"]["EXT_meshopt_compression"]
+        where = f"key bufferViews[{index}].extensions.EXT_meshopt_compression"
+        try:
+            buf = self.buffers[int(ext["buffer"])]
+            off, length = int(ext.get("byteOffset", 0)), int(ext["byteLength"])
+            if off + length > len(buf):
+                raise MeshoptError("compressed data runs past the end of its buffer")
+            data = decode_view(bytes(buf[off: off + length]), int(ext["count"]), int(ext["byteStride"]),
+                               str(ext.get("mode")), str(ext.get("filter", "NONE")))
+        except (KeyError, IndexError, TypeError) as exc:
+            raise InputError(self.path, where, f"missing or bad {exc}") from None
+        except MeshoptError as exc:
+            raise InputError(self.path, where, f"cannot decode: {exc}") from None
+        self._cache[("view", index)] = data
+        return data
     def accessor(self, index: int) -> np.ndarray:
         """Decode accessor ``index`` to an ``(count, width)`` array (floats when ``normalized``)."""
         if index in self._cache:
@@ -331,6 +381,12 @@ def _vrm_bone_names(gltf: dict) -> dict[int, str]:
     return out
 
 
+def _direction_name(v: np.ndarray) -> str:
+    """'+Z', '-X', ... for the axis nearest to an XZ direction (for notes and reports)."""
+    k = 0 if abs(v[0]) > abs(v[2]) else 2
+    return ("+" if v[k] > 0 else "-") + "XYZ"[k]
+
+
 def _rigid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation (scale removed, via SVD) and translation of a 4x4 matrix."""
     u, _, vt = np.linalg.svd(m[:3, :3])
@@ -345,73 +401,52 @@ def _rigid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # Loader
 # ---------------------------------------------------------------------------------------------
 
-def load_gltf(path: str | Path) -> Avatar:
-    """Load a glTF/GLB/VRM avatar (see the module docstring for what is supported)."""
-    path = Path(path)
-    doc = _Doc(path)
-    g = doc.gltf
-    nodes = g.get("nodes", [])
-    try:
-        world, node_parent = _world_matrices(nodes)
-    except (ValueError, IndexError) as exc:
-        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}") from None
-    notes: list[str] = []
-    if "VRM" in g.get("extensions", {}):
-        # VRM 0.x models face -Z; turn them to face +Z like every other avatar (and the camera)
-        world = np.diag([-1.0, 1.0, -1.0, 1.0])[None] @ world
-        notes.append("VRM 0.x: turned 180 degrees to face +Z")
-    skins = g.get("skins", [])
-    mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
-    if not mesh_nodes:
-        raise InputError(path, "key nodes", "no node has a mesh")
-    skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
-    if skin_index is not None and skin_index >= len(skins):
-        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range")
-    joint_nodes = list(skins[skin_index]["joints"]) if skin_index is not None else []
-    if skin_index is not None and len(skins) > 1:
-        notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
+def _hierarchy_joints(g: dict, node_parent: np.ndarray, mesh_nodes: list[int], vrm: dict[int, str]) -> list[int]:
+    """Joint nodes of a file without a skin: its VRM humanoid bones, else every ancestor of a mesh.
 
-    # skeleton: skin joints in depth-first order (parents before children)
-    if not joint_nodes:
-        joint_nodes = [mesh_nodes[0]]
-        notes.append("no skin: the avatar is a static mesh")
+    Meshes then hang from their nearest joint ancestor and move rigidly with it.
+    """
+    if vrm:
+        return sorted(vrm)
+    out: set[int] = set()
+    for m in mesh_nodes:
+        p = int(node_parent[m])
+        while p >= 0 and p not in out:
+            out.add(p)
+            p = int(node_parent[p])
+    return sorted(out) or [mesh_nodes[0]]
+
+
+def _joint_order(joint_nodes: list[int], node_parent: np.ndarray) -> tuple[list[int], dict[int, int]]:
+    """Joints depth-first (parents before children) and each joint node's nearest joint ancestor (-1: none)."""
     jset = set(joint_nodes)
-
-    def joint_parent(n: int) -> int:
-        p = node_parent[n]
+    up: dict[int, int] = {}
+    for n in joint_nodes:
+        p = int(node_parent[n])
         while p >= 0 and p not in jset:
-            p = node_parent[p]
-        return p
-
+            p = int(node_parent[p])
+        up[n] = p
     children: dict[int, list[int]] = {}
     roots = []
     for n in joint_nodes:
-        p = joint_parent(n)
-        (children.setdefault(p, []) if p >= 0 else roots).append(n)
+        (children.setdefault(up[n], []) if up[n] >= 0 else roots).append(n)
     order: list[int] = []
     stack = list(reversed(roots))
     while stack:
         n = stack.pop()
         order.append(n)
         stack.extend(reversed(children.get(n, [])))
-    from studyapp.render.gpu import MAX_BONES
+    return order, up
 
-    if len(order) > MAX_BONES:
-        raise InputError(path, f"key skins[{skin_index}].joints",
-                         f"{len(order)} joints; the renderer supports at most {MAX_BONES} (remove unused bones)")
+
+def _skeleton(order: list[int], up: dict[int, int], names: list[str], world: np.ndarray) -> Skeleton:
+    """The joints' rest pose from node world matrices: rotations kept, scale folded into the offsets."""
     node_to_joint = {n: j for j, n in enumerate(order)}
-    vrm = _vrm_bone_names(g)
-    names: list[str] = []
-    for n in order:
-        name = vrm.get(n) or nodes[n].get("name") or f"joint{n}"
-        if name in names:
-            name = f"{name}_{n}"
-        names.append(name)
     rots = np.zeros((len(order), 3, 3))
     pos = np.zeros((len(order), 3))
     for j, n in enumerate(order):
         rots[j], pos[j] = _rigid(world[n])
-    parents = np.array([node_to_joint.get(joint_parent(n), -1) for n in order])
+    parents = np.array([node_to_joint.get(up[n], -1) for n in order])
     offsets = np.zeros((len(order), 3))
     local_q = np.zeros((len(order), 4))
     for j in range(len(order)):
@@ -422,8 +457,73 @@ def load_gltf(path: str | Path) -> Avatar:
         else:
             offsets[j] = rots[p].T @ (pos[j] - pos[p])
             local_q[j] = matrix_to_quat(rots[p].T @ rots[j])
-    skeleton = Skeleton(names=tuple(names), parents=parents, offsets=offsets, unit_scale=1.0,
-                        rest_rotations=local_q)
+    return Skeleton(names=tuple(names), parents=parents, offsets=offsets, unit_scale=1.0, rest_rotations=local_q)
+
+
+def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avatar:
+    """Load a glTF/GLB/VRM avatar (see the module docstring for what is supported).
+
+    ``bone_map`` (``{joint name: humanoid bone}``, the design's ``[avatar.bone_map]``) names the humanoid
+    bones of joints whose names are not recognised; joint names may be a VRM node's own name too. It is
+    kept on the avatar (``Avatar.bone_map``) for retargeting and is used to measure the facing.
+    """
+    path = Path(path)
+    doc = _Doc(path)
+    g = doc.gltf
+    nodes = g.get("nodes", [])
+    try:
+        world, node_parent = _world_matrices(nodes)
+    except (ValueError, IndexError) as exc:
+        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}") from None
+    notes: list[str] = []
+    skins = g.get("skins", [])
+    mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
+    if not mesh_nodes:
+        raise InputError(path, "key nodes", "no node has a mesh")
+    skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
+    if skin_index is not None and skin_index >= len(skins):
+        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range")
+    joint_nodes = list(skins[skin_index]["joints"]) if skin_index is not None else []
+    if skin_index is not None and len(skins) > 1:
+        notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
+    vrm = _vrm_bone_names(g)
+    if not joint_nodes:
+        joint_nodes = _hierarchy_joints(g, node_parent, mesh_nodes, vrm)
+        notes.append("no skin: skeleton from the node hierarchy; meshes move rigidly with their bones")
+
+    # skeleton: joints in depth-first order (parents before children)
+    order, up = _joint_order(joint_nodes, node_parent)
+    from studyapp.render.gpu import MAX_BONES
+
+    if len(order) > MAX_BONES:
+        raise InputError(path, f"key skins[{skin_index}].joints",
+                         f"{len(order)} joints; the renderer supports at most {MAX_BONES} (remove unused bones)")
+    node_to_joint = {n: j for j, n in enumerate(order)}
+    names: list[str] = []
+    aliases: dict[str, str] = {}  # a VRM node's own name -> its humanoid joint name
+    for n in order:
+        name = vrm.get(n) or nodes[n].get("name") or f"joint{n}"
+        if name in names:
+            name = f"{name}_{n}"
+        names.append(name)
+        if nodes[n].get("name") and nodes[n]["name"] != name:
+            aliases[nodes[n]["name"]] = name
+    skeleton = _skeleton(order, up, names, world)
+
+    # facing: measured on the rest pose, then the whole file is turned to face +Z (the camera)
+    from studyapp.render.avatar_rig import humanoid_map, resolve_bone_map, rest_facing, yaw_matrix, yaw_to_face_z
+
+    given = resolve_bone_map(skeleton.names, bone_map, aliases)
+    bones = {b: skeleton.index(j) for j, b in humanoid_map(skeleton, given).items()}
+    forward = rest_facing(rest_global_transforms(skeleton)[:, :3, 3], bones)
+    if forward is None:
+        notes.append("facing not measured (no left/right pair of humanoid bones); assumed +Z")
+    else:
+        angle = yaw_to_face_z(forward)
+        if abs(angle) > np.radians(1.0):
+            world = yaw_matrix(angle)[None] @ world
+            skeleton = _skeleton(order, up, names, world)
+            notes.append(f"faced {_direction_name(forward)} at rest: turned {np.degrees(angle):.0f} degrees to face +Z")
     rest = rest_global_transforms(skeleton)
 
     # geometry
@@ -599,6 +699,8 @@ def load_gltf(path: str | Path) -> Avatar:
         double_sided=any(p["double"] for p in parts),
         name=path.stem,
         notes=tuple(notes),
+        bone_map=given,
+        source=str(path),
     )
 
 
