@@ -138,3 +138,27 @@ def yaw_matrix(angle: float) -> np.ndarray:
     m = np.eye(4)
     m[0, 0], m[0, 2], m[2, 0], m[2, 2] = c, s, -s, c
     return m
+
+
+def avatar_problems(path, bone_map: dict | None) -> list[tuple[str | None, str, str]]:
+    """Problems ``(design key or None, message, fix)`` with an avatar file and a design's bone map: the file
+    cannot be read, a bone-map entry is bad (one problem each), or required humanoid bones are missing."""
+    from pathlib import Path
+
+    from studyapp.errors import InputError
+    from studyapp.render.gltf import load_gltf
+
+    path = Path(path)
+    try:
+        avatar = load_gltf(path, bone_map=bone_map or None)
+    except InputError as exc:
+        return [(None, f"cannot use the avatar {path.name}: {', '.join(p for p in (exc.where, exc.problem) if p)}",
+                 "fix or re-export the avatar (`studyapp inspect AVATAR` shows what is read)")]
+    out: list[tuple[str | None, str, str]] = [
+        (f"avatar.bone_map.{joint}", f"{problem} ({path.name})", BONE_MAP_FIX)
+        for joint, problem in bone_map_problems(avatar.skeleton.names, bone_map or {}, avatar.joint_aliases)]
+    missing = missing_bones(avatar.skeleton, avatar.bone_map)
+    if missing:
+        out.append((None, f"{path.name}: {not_humanoid_message(avatar.skeleton, missing)}",
+                    'add [avatar.bone_map] entries ("joint name" = "HumanoidBone") or use another avatar'))
+    return out

@@ -701,6 +701,7 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
         notes=tuple(notes),
         bone_map=given,
         source=str(path),
+        joint_aliases=aliases,
     )
 
 

@@ -235,6 +235,8 @@ class Design:
     criteria: list[Criterion]
     avatar: str = "builtin"
     avatar_by_speaker: dict[str, str] = field(default_factory=dict)
+    #: ``[avatar.bone_map]``: avatar joint name -> Unity humanoid bone, for avatars with their own bone names.
+    avatar_bone_map: dict[str, str] = field(default_factory=dict)
     ordering: str = "balanced-latin-square"
     slot_assignment: str = "balanced"
     slot_labels: tuple[str, str, str] | None = None
@@ -339,7 +341,7 @@ _CONDITION = {"id": (_STR, True), "motion": (_STR, False), "model": (_STR, False
 _STIMULUS = {"id": (_STR, True), "audio": (_STR, True), "face": (_STR, False), "head": (_STR, False),
              "tags": ((dict,), False), "duration_s": (_NUM, False), "in_rotation": (_BOOL, False)}
 _CRITERION = {"id": (_STR, True), "label": (_STR, False), "question": (_STR, True), "explanation": (_STR, False)}
-_AVATAR = {"model": (_STR, False), "by_speaker": ((dict,), False)}
+_AVATAR = {"model": (_STR, False), "by_speaker": ((dict,), False), "bone_map": ((dict,), False)}
 _ORDERING = {"method": (_STR, False), "seed": (_INT, False)}
 _SLOTS = {"assignment": (_STR, False), "labels": (_STR, False)}
 _ATTENTION = {"stimulus": (_STR, True), "kind": (_STR, False), "criterion": (_STR, False), "rank": (_INT, False),
@@ -725,6 +727,19 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         if k not in speakers:
             col.add(f"avatar.by_speaker.{k}", f"no stimulus has tags.speaker = {k!r}",
                     _did_you_mean(k, sorted(x for x in speakers if x)).replace("allowed keys", "speakers"))
+    bone_map = {}
+    for k, v in avatar.get("bone_map", {}).items():  # joint names are checked against the file by validate
+        from studyapp.render.avatar_rig import canonical_bone
+
+        if not isinstance(v, str):
+            col.add(f"avatar.bone_map.{k}", "must map an avatar joint name to a humanoid bone name (a string)",
+                    f'"{k}" = "LeftUpperArm"')
+        elif canonical_bone(v) is None:
+            col.add(f"avatar.bone_map.{k}", f"{v!r} is not a Unity humanoid bone name",
+                    "use Hips, Spine, Chest, UpperChest, Neck, Head, LeftShoulder, LeftUpperArm, LeftLowerArm, "
+                    "LeftHand, LeftUpperLeg, LeftLowerLeg, LeftFoot, LeftToes, LeftIndexProximal, ...")
+        else:
+            bone_map[k] = v
     for akey, name in [("avatar.model", avatar_default)] + [(f"avatar.by_speaker.{k}", v) for k, v in by_speaker.items()]:
         if name != "builtin" and not name.lower().endswith(AVATAR_SUFFIXES):
             col.add(akey, f"{name!r} is neither \"builtin\" nor a .glb/.gltf/.vrm file", 'use "builtin" or a glTF file')
@@ -814,7 +829,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
     design = Design(
         path=path.resolve(), title=top.get("title", ""), instructions=top.get("instructions", "").strip(),
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
-        avatar_by_speaker=by_speaker, ordering=method, slot_assignment=assignment, slot_labels=labels,
+        avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=method, slot_assignment=assignment, slot_labels=labels,
         practice=[str(p) for p in practice], attention_checks=attention, playback=Playback(**playback),
         questionnaire=items, max_attention_failures=maxfail, seed=int(ordering.get("seed", 1)), groups=groups,
     )
