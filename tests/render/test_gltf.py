@@ -191,10 +191,10 @@ def test_vrm_humanoid_bones_get_unity_names(tmp_path, version, expect):
     gltf, data = bar_gltf(vrm=version)
     av = load_gltf(write_gltf(tmp_path, gltf, data, "bar.vrm", "glb"))
     assert av.skeleton.names == expect
-    # VRM 0.x faces -Z and is turned around; VRM 1.0 already faces +Z
+    # facing is measured, not assumed from the VRM version: a bar has no left and right, so it stays as stored
     plain = load_gltf(write_gltf(tmp_path, *bar_gltf(), "plain.gltf"))
-    flip = np.array([-1, 1, -1]) if version == "0" else np.ones(3)
-    assert np.allclose(av.vertices, plain.vertices * flip, atol=1e-6)
+    assert np.allclose(av.vertices, plain.vertices, atol=1e-6)
+    assert any("facing not measured" in n for n in av.notes)
     assert np.allclose(skinning_palettes(av, Motion.rest(av.skeleton, 1)), np.eye(4), atol=1e-6)
 
 
@@ -220,12 +220,33 @@ def test_textured_gltf_renders_its_texture(tmp_path, renderer):
     assert red[0] - red[2] > 80 and red[0] > plain[0] - 10 and red[2] < plain[2] - 80
 
 
-@pytest.mark.parametrize("ext", ["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_texture_basisu"])
+@pytest.mark.parametrize("ext", ["KHR_draco_mesh_compression", "KHR_meshopt_compression", "KHR_texture_basisu"])
 def test_compressed_files_are_refused_clearly(tmp_path, ext):
     gltf, data = bar_gltf(extra={"extensionsUsed": [ext]})
     with pytest.raises(InputError, match=ext) as err:
         load_gltf(write_gltf(tmp_path, gltf, data))
-    assert "bar.gltf" in str(err.value)
+    assert "bar.gltf" in str(err.value) and "re-export" in str(err.value)
+
+
+def test_unknown_required_extension_and_ktx2_images_are_named(tmp_path):
+    gltf, data = bar_gltf(extra={"extensionsRequired": ["EXT_unknown_thing"], "extensionsUsed": ["EXT_unknown_thing"]})
+    with pytest.raises(InputError, match=r"bar.gltf, key extensionsRequired: required extension EXT_unknown_thing"):
+        load_gltf(write_gltf(tmp_path, gltf, data))
+    gltf, data = bar_gltf(extra={"images": [{"uri": "skin.ktx2"}]})
+    with pytest.raises(InputError, match=r"bar.gltf, key images\[0\]: KTX2 textures are not supported"):
+        load_gltf(write_gltf(tmp_path, gltf, data))
+    # extensions that only change looks, or that are decoded, do not stop a file
+    gltf, data = bar_gltf(extra={"extensionsRequired": ["KHR_materials_unlit", "KHR_mesh_quantization"]})
+    assert load_gltf(write_gltf(tmp_path, gltf, data)).n_vertices == 12
+
+
+def test_web_page_saved_as_glb_is_named_as_such(tmp_path):
+    page = tmp_path / "Soldier.glb"
+    page.write_text("<!DOCTYPE html>\n<html><head><title>Soldier.glb - GitHub</title></head></html>")
+    with pytest.raises(InputError) as err:
+        load_gltf(page)
+    assert str(err.value).startswith(str(page) + ": not a GLB file (starts with '<!DOCTYPE'")
+    assert "JSON" not in str(err.value)
 
 
 def test_bad_json_and_missing_buffer(tmp_path):
