@@ -619,6 +619,8 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                 else:
                     notes.append(f"{where}: texture without a PNG/JPEG source ignored")
             uv = doc.accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
+            if uv is not None and "baseColorTexture" in pbr:
+                uv = _texture_transform(uv, pbr["baseColorTexture"].get("extensions", {}).get("KHR_texture_transform"))
             # morph targets
             targets = prim.get("targets", [])
             names_here = list(prim.get("extras", {}).get("targetNames", target_names))
@@ -703,6 +705,22 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
         source=str(path),
         joint_aliases=aliases,
     )
+
+
+def _texture_transform(uv: np.ndarray, spec: dict | None) -> np.ndarray:
+    """``KHR_texture_transform`` (offset, rotation, scale) applied to UVs; gltfpack uses it to dequantize them.
+
+    >>> _texture_transform(np.array([[1.0, 1.0]]), {"offset": [0.5, 0.0], "scale": [0.25, 0.5]}).tolist()
+    [[0.75, 0.5]]
+    """
+    if not spec:
+        return uv
+    sx, sy = spec.get("scale", [1.0, 1.0])
+    ox, oy = spec.get("offset", [0.0, 0.0])
+    r = float(spec.get("rotation", 0.0))
+    c, s = np.cos(r), np.sin(r)
+    u, v = uv[:, 0] * sx, uv[:, 1] * sy
+    return np.c_[c * u + s * v + ox, -s * u + c * v + oy]
 
 
 def _sample(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
