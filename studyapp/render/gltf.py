@@ -83,7 +83,7 @@ _FIX = "re-export the avatar without it (e.g. gltfpack without -cc/-tc, or Blend
 class _Doc:
     """A parsed glTF document with its binary buffers, decoding accessors on demand."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, check: bool = True) -> None:
         self.path = path
         try:
             raw = path.read_bytes()
@@ -110,6 +110,10 @@ class _Doc:
         version = str(self.gltf.get("asset", {}).get("version", ""))
         if not version.startswith("2"):
             raise InputError(path, "key asset.version", f"only glTF 2.0 is supported, file says {version or 'nothing'!r}")
+        self._cache: dict = {}
+        if not check:  # the JSON only (for reports on files that cannot be loaded)
+            self.buffers = []
+            return
         required = set(self.gltf.get("extensionsRequired", []))
         used = required | set(self.gltf.get("extensionsUsed", []))
         for ext in sorted(used):
@@ -122,7 +126,6 @@ class _Doc:
                 raise InputError(path, f"key images[{i}]", "KTX2 textures are not supported; "
                                  "re-export the avatar with PNG or JPEG textures (gltfpack without -tc)")
         self.buffers = [self._load_buffer(i, b, bin_chunk) for i, b in enumerate(self.gltf.get("buffers", []))]
-        self._cache: dict = {}
 
     def _parse_glb(self, raw: bytes) -> tuple[dict, bytes | None]:
         if len(raw) < 20:
