@@ -528,6 +528,8 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
             skeleton = _skeleton(order, up, names, world)
             notes.append(f"faced {_direction_name(forward)} at rest: turned {np.degrees(angle):.0f} degrees to face +Z")
     rest = rest_global_transforms(skeleton)
+    if "Head" in bones and "Hips" in bones and rest[bones["Head"], 1, 3] <= rest[bones["Hips"], 1, 3]:
+        notes.append("the figure is not upright in +Y (its head is not above its hips): re-export it Y up")
 
     # geometry
     skin_ibm = None

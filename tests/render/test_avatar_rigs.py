@@ -237,3 +237,26 @@ def test_relaxed_pose_helper_still_applies_to_the_loaded_vrm0():
     m = posed(av, RELAXED)
     assert np.isfinite(skinning_palettes(av, m)).all()
     assert any("turned" in n for n in av.notes)
+
+
+def test_file_without_skin_or_vrm_gets_its_skeleton_from_the_mesh_ancestors(tmp_path):
+    import json
+
+    from test_gltf import bar_gltf, write_gltf
+    from studyapp.render.gltf import load_gltf
+
+    gltf, data = bar_gltf()
+    g = json.loads(json.dumps(gltf))
+    del g["skins"]
+    del g["nodes"][3]["skin"]
+    g["nodes"][2]["children"] = [3]  # the mesh hangs from Tip, 0.2 m above Root
+    g["scenes"][0]["nodes"] = [0]
+    av = load_gltf(write_gltf(tmp_path, g, data))
+    assert av.skeleton.names == ("Armature", "Root", "Tip")
+    assert (av.joints[:, 0] == av.skeleton.index("Tip")).all()
+    # the mesh sits 0.2 m higher than in the skinned file (its node is under Tip) and turns with Root
+    plain = load_gltf(write_gltf(tmp_path, *bar_gltf(), "plain.gltf"))
+    assert np.allclose(av.vertices, plain.vertices + [0, 0.2, 0], atol=1e-6)
+    moved = skin_cpu(av, skinning_palettes(av, posed(av, {"Root": (90, 0, 0)}))[0])
+    want = Rotation.from_rotvec([np.pi / 2, 0, 0]).apply(av.vertices)  # Root sits at the origin
+    assert np.allclose(moved, want, atol=1e-5)
