@@ -65,15 +65,14 @@ _UNSUPPORTED = {
     "KHR_draco_mesh_compression": "Draco-compressed meshes",
     "KHR_meshopt_compression": "meshopt-compressed buffers (Khronos version)",
     "KHR_texture_basisu": "Basis Universal / KTX2 textures",
-    "EXT_texture_webp": "WebP textures",
-    "EXT_mesh_gpu_instancing": "GPU instancing",
 }
 # Required extensions that can be read (decoded here, or only changing looks the renderer does not show).
 _READABLE = {"EXT_meshopt_compression", "KHR_mesh_quantization", "KHR_texture_transform", "KHR_materials_unlit",
              "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
              "KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_lights_punctual", "VRM", "VRMC_vrm",
              "VRMC_materials_mtoon", "VRMC_springBone", "VRMC_node_constraint"}
-_FIX = "re-export the avatar without it (e.g. gltfpack without -cc/-tc, or Blender's glTF exporter)"
+_FIX = ("re-export the avatar without it (Blender's glTF exporter with Draco off; gltfpack without -tc and "
+        "with the default EXT_meshopt_compression)")
 
 
 # ---------------------------------------------------------------------------------------------
