@@ -260,3 +260,19 @@ def test_file_without_skin_or_vrm_gets_its_skeleton_from_the_mesh_ancestors(tmp_
     moved = skin_cpu(av, skinning_palettes(av, posed(av, {"Root": (90, 0, 0)}))[0])
     want = Rotation.from_rotvec([np.pi / 2, 0, 0]).apply(av.vertices)  # Root sits at the origin
     assert np.allclose(moved, want, atol=1e-5)
+
+
+def test_trial_scene_builder_passes_the_design_bone_map_to_the_avatar():
+    from types import SimpleNamespace
+
+    from studyapp.render.scene import build_trial_scene
+
+    m = beat_left_arm_up()
+    media = SimpleNamespace(motions=(m, m, m), face=None, avatar=str(AVATARS / "RobotExpressive.glb"),
+                            avatar_bone_map=dict(ROBOT_MAP), labels=("A", "B", "C"))
+    scene = build_trial_scene(None, media)
+    av = scene.avatars[0]
+    assert av.bone_map["Palm2.L"] == "LeftHand"
+    hand, head = av.skeleton.index("Palm2.L"), av.skeleton.index("Head")
+    for slot in scene.slots:
+        assert slot.joint_positions[0, hand, 1] > slot.joint_positions[0, head, 1]
