@@ -1,9 +1,9 @@
 """EXT_meshopt_compression and KHR_mesh_quantization: the decoder against published vectors, and gltfpack-style
 files (written here by a small encoder that follows the spec) decoding to the vertices of the uncompressed file.
 
-Neither gltfpack nor the meshoptimizer package is installed here, so the fixtures come from the encoder below;
+gltfpack is not needed to run these tests: the small fixtures come from the encoder below;
 the decoder is also checked on the byte streams from meshoptimizer's own test suite (demo/tests.cpp), which
-its reference decoder turns into the listed values.
+its reference decoder turns into the listed values, and on two files gltfpack itself wrote (see below).
 """
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import json
 import numpy as np
 import pytest
 
+from render_helpers import SAMPLES
 from test_gltf import bar_gltf, write_gltf
 from studyapp.errors import InputError
 from studyapp.render.gltf import load_gltf
@@ -281,3 +282,80 @@ def test_bad_meshopt_stream_names_the_file_and_view(tmp_path):
     with pytest.raises(InputError, match=r"packed.glb, key bufferViews\[\d+\].extensions.EXT_meshopt_compression: "
                                          r"cannot decode"):
         load_gltf(write_gltf(tmp_path, cg, cdata, "packed.glb", "glb"))
+
+
+# --- real gltfpack output ----------------------------------------------------------------------------------
+# Made once with gltfpack 1.3.0 (npm): `gltfpack -i builtin.glb -o builtin.gltfpack-cc.glb -cc -kn -ke` on the
+# built-in avatar exported by export_glb, and the same (without -ke) on RobotExpressive.glb. Positions are
+# 14-bit integers, normals 8-bit, morph deltas quantized; every vertex, index and morph view is meshopt-coded.
+
+PACKED = SAMPLES / "avatars"
+
+
+def _matches(reference, points):
+    from scipy.spatial import cKDTree
+
+    dist, idx = cKDTree(reference).query(points)
+    back, _ = cKDTree(points).query(reference)
+    return dist, back, idx
+
+
+def test_gltfpack_output_of_the_builtin_avatar_decodes_to_its_vertices_and_morphs(avatar):
+    from scipy.spatial import cKDTree
+
+    packed = load_gltf(PACKED / "builtin.gltfpack-cc.glb")
+    assert packed.n_vertices == avatar.n_vertices and packed.n_triangles == avatar.n_triangles
+    assert packed.skeleton.names == avatar.skeleton.names
+    step = float(np.ptp(avatar.vertices, 0).max()) / (2 ** 14 - 1)  # 14-bit positions
+    dist, back, idx = _matches(avatar.vertices, packed.vertices)
+    assert dist.max() < step and back.max() < step  # same point set, to the quantization step
+    # morph deltas of all 52 ARKit shapes come through (gltfpack reorders vertices: matched by position)
+    assert np.abs(packed.morph_deltas - avatar.morph_deltas[:, idx]).max() < 2e-4
+    # normals to 8 bits, against the best of the vertices sharing a position (seams split normals)
+    near = cKDTree(avatar.vertices).query_ball_point(packed.vertices, 2 * step)
+    err = [np.linalg.norm(avatar.normals[n] - packed.normals[j], axis=1).min() for j, n in enumerate(near)]
+    assert max(err) < 0.03
+    # triangles: the same set of corner positions
+    tri_a = np.sort(np.round(avatar.vertices[avatar.indices] / step).astype(np.int64).reshape(-1, 9), 1)
+    tri_b = np.sort(np.round(packed.vertices[packed.indices] / step).astype(np.int64).reshape(-1, 9), 1)
+    assert np.abs(np.sort(tri_a.sum(1)) - np.sort(tri_b.sum(1))).max() <= 9
+
+
+def test_gltfpack_robot_keeps_rigid_parts_on_their_bones():
+    plain = load_gltf(PACKED / "RobotExpressive.glb")
+    packed = load_gltf(PACKED / "RobotExpressive.gltfpack-cc.glb")
+    assert packed.skeleton.names == plain.skeleton.names
+    # gltfpack quantizes all meshes over one range in their own (scaled) units, coarser than the figure's box:
+    # allow 1/4000 of the figure's size (the robot is 4.5 units tall; 1.1 mm on a 1.8 m person)
+    tol = float(np.ptp(plain.vertices, 0).max()) / 4000
+    dist, back, idx = _matches(plain.vertices, packed.vertices)
+    assert dist.max() < tol and back.max() < tol
+    assert (packed.joints[:, 0] == plain.joints[idx, 0]).all()  # each part still hangs from its bone
+
+
+@pytest.mark.gl
+def test_gltfpack_builtin_renders_like_the_builtin(renderer, avatar):
+    from render_helpers import RELAXED, posed
+    from studyapp.render.context import OffscreenTarget
+    from studyapp.render.pose import prepare_slot
+    from studyapp.render.scene import make_scene
+    from studyapp.face.animation import FaceAnimation
+
+    packed = load_gltf(PACKED / "builtin.gltfpack-cc.glb")
+    face = FaceAnimation.neutral(2, 30.0)
+    face.weights[:, avatar.morph_index("jawOpen")] = 1.0
+    images = []
+    camera = None
+    for av in (avatar, packed):
+        slot = prepare_slot(av, posed(av, RELAXED, 2), face)
+        scene = make_scene([slot], av)
+        camera = camera or scene.camera
+        scene.camera = camera
+        target = OffscreenTarget(renderer.ctx, (240, 320))
+        renderer.draw_trial(scene, 0.0, target.fbo)
+        images.append(target.read_rgb().astype(int))
+        target.release()
+    a, b = images
+    # gltfpack drops studyapp's material-id attribute, so highlights differ a little; the figure is the same
+    assert np.abs(a - b).mean() < 2.0
+    assert (np.abs(a - b).max(-1) > 60).mean() < 0.005
