@@ -71,6 +71,9 @@ _READABLE = {"EXT_meshopt_compression", "KHR_mesh_quantization", "KHR_texture_tr
              "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
              "KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_lights_punctual", "VRM", "VRMC_vrm",
              "VRMC_materials_mtoon", "VRMC_springBone", "VRMC_node_constraint"}
+# what to do about a file that breaks the glTF rules (truncated download, buggy exporter)
+_DAMAGED = ("; the file is damaged or breaks the glTF 2.0 rules: download or export it again "
+            "(the Khronos glTF Validator shows what is wrong)")
 _FIX = ("re-export the avatar without it (Blender's glTF exporter with Draco off; gltfpack without -tc and "
         "with the default EXT_meshopt_compression)")
 
@@ -128,12 +131,13 @@ class _Doc:
 
     def _parse_glb(self, raw: bytes) -> tuple[dict, bytes | None]:
         if len(raw) < 20:
-            raise InputError(self.path, "header", "GLB file is truncated")
+            raise InputError(self.path, "header", "GLB file is truncated" + _DAMAGED)
         magic, version, length = struct.unpack_from("<III", raw, 0)
         if version != 2:
             raise InputError(self.path, "header", f"GLB version {version}; only 2 is supported")
         if length > len(raw):
-            raise InputError(self.path, "header", f"GLB says {length} bytes, file has {len(raw)} (truncated?)")
+            raise InputError(self.path, "header",
+                             f"GLB says {length} bytes, file has {len(raw)} (truncated?)" + _DAMAGED)
         pos = 12
         doc = None
         binary = None
@@ -141,17 +145,17 @@ class _Doc:
             clen, ctype = struct.unpack_from("<II", raw, pos)
             data = raw[pos + 8: pos + 8 + clen]
             if len(data) != clen:
-                raise InputError(self.path, f"byte {pos}", "GLB chunk runs past the end of the file")
+                raise InputError(self.path, f"byte {pos}", "GLB chunk runs past the end of the file" + _DAMAGED)
             if ctype == CHUNK_JSON:
                 try:
                     doc = json.loads(data.decode("utf-8"))
                 except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                    raise InputError(self.path, "JSON chunk", f"invalid JSON: {exc}") from None
+                    raise InputError(self.path, "JSON chunk", f"invalid JSON: {exc}" + _DAMAGED) from None
             elif ctype == CHUNK_BIN and binary is None:
                 binary = bytes(data)
             pos += 8 + clen  # chunk lengths are 4-byte aligned by the spec
         if doc is None:
-            raise InputError(self.path, "header", "GLB has no JSON chunk")
+            raise InputError(self.path, "header", "GLB has no JSON chunk" + _DAMAGED)
         return doc, binary
 
     def _load_buffer(self, i: int, spec: dict, bin_chunk: bytes | None) -> bytes:
@@ -161,7 +165,7 @@ class _Doc:
             return b""  # placeholder for meshopt-compressed views: never read, they are decoded
         if uri is None:
             if bin_chunk is None:
-                raise InputError(self.path, where, "buffer has no uri and the file has no GLB binary chunk")
+                raise InputError(self.path, where, "buffer has no uri and the file has no GLB binary chunk" + _DAMAGED)
             data = bin_chunk
         elif uri.startswith("data:"):
             head, _, payload = uri.partition(",")
@@ -178,13 +182,13 @@ class _Doc:
             data = file.read_bytes()
         need = int(spec.get("byteLength", len(data)))
         if len(data) < need:
-            raise InputError(self.path, where, f"buffer has {len(data)} bytes, byteLength says {need}")
+            raise InputError(self.path, where, f"buffer has {len(data)} bytes, byteLength says {need}" + _DAMAGED)
         return data
 
     def view_bytes(self, index: int) -> tuple[bytes, int, int | None]:
         views = self.gltf.get("bufferViews", [])
         if not 0 <= index < len(views):
-            raise InputError(self.path, f"bufferView {index}", "bufferView index out of range")
+            raise InputError(self.path, f"bufferView {index}", "bufferView index out of range" + _DAMAGED)
         v = views[index]
         if "EXT_meshopt_compression" in v.get("extensions", {}):
             return self._meshopt_view(index), 0, v.get("byteStride")
@@ -208,9 +212,9 @@ class _Doc:
             data = decode_view(bytes(buf[off: off + length]), int(ext["count"]), int(ext["byteStride"]),
                                str(ext.get("mode")), str(ext.get("filter", "NONE")))
         except (KeyError, IndexError, TypeError) as exc:
-            raise InputError(self.path, where, f"missing or bad {exc}") from None
+            raise InputError(self.path, where, f"missing or bad {exc}" + _DAMAGED) from None
         except MeshoptError as exc:
-            raise InputError(self.path, where, f"cannot decode: {exc}") from None
+            raise InputError(self.path, where, f"cannot decode: {exc}" + _DAMAGED) from None
         self._cache[("view", index)] = data
         return data
     def accessor(self, index: int) -> np.ndarray:
@@ -219,7 +223,7 @@ class _Doc:
             return self._cache[index]
         accs = self.gltf.get("accessors", [])
         if not 0 <= index < len(accs):
-            raise InputError(self.path, f"accessor {index}", "accessor index out of range")
+            raise InputError(self.path, f"accessor {index}", "accessor index out of range" + _DAMAGED)
         a = accs[index]
         where = f"accessors[{index}]"
         try:
@@ -227,7 +231,7 @@ class _Doc:
             width = _WIDTH[a["type"]]
             count = int(a["count"])
         except KeyError as exc:
-            raise InputError(self.path, f"key {where}", f"missing or unknown {exc}") from None
+            raise InputError(self.path, f"key {where}", f"missing or unknown {exc}" + _DAMAGED) from None
         if "bufferView" in a:
             buf, off, stride = self.view_bytes(a["bufferView"])
             off += int(a.get("byteOffset", 0))
@@ -235,7 +239,7 @@ class _Doc:
             stride = int(stride or elem)
             end = off + stride * (count - 1) + elem if count else off
             if end > len(buf):
-                raise InputError(self.path, f"key {where}", "accessor reads past the end of its buffer")
+                raise InputError(self.path, f"key {where}", "accessor reads past the end of its buffer" + _DAMAGED)
             if stride == elem:
                 out = np.frombuffer(buf, dtype, count * width, off).reshape(count, width)
             else:
@@ -255,7 +259,7 @@ class _Doc:
             vals = np.frombuffer(buf, dtype, n * width, off + int(sv.get("byteOffset", 0))).reshape(n, width)
             ind = ind.astype(np.int64)
             if n and int(ind.max()) >= count:
-                raise InputError(self.path, f"key {where}.sparse", "sparse index beyond the accessor count")
+                raise InputError(self.path, f"key {where}.sparse", "sparse index beyond the accessor count" + _DAMAGED)
             out = out.copy()
             out[ind.astype(np.int64)] = vals
         if a.get("normalized") and dtype.kind in "iu":
@@ -476,7 +480,7 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
     try:
         world, node_parent = _world_matrices(nodes)
     except (ValueError, IndexError) as exc:
-        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}") from None
+        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}" + _DAMAGED) from None
     notes: list[str] = []
     skins = g.get("skins", [])
     mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
@@ -484,7 +488,7 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
         raise InputError(path, "key nodes", "no node has a mesh")
     skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
     if skin_index is not None and skin_index >= len(skins):
-        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range")
+        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range" + _DAMAGED)
     joint_nodes = list(skins[skin_index]["joints"]) if skin_index is not None else []
     if skin_index is not None and len(skins) > 1:
         notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
@@ -555,22 +559,23 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                 if ext in _UNSUPPORTED:
                     raise InputError(path, f"key {where}.extensions", f"{ext} ({_UNSUPPORTED[ext]}) is not supported")
             if "POSITION" not in attrs:
-                raise InputError(path, f"key {where}.attributes", "primitive has no POSITION")
+                raise InputError(path, f"key {where}.attributes", "primitive has no POSITION" + _DAMAGED)
             v = doc.accessor(attrs["POSITION"]).astype(np.float64)
             nv = len(v)
             idx = (doc.accessor(prim["indices"]).reshape(-1).astype(np.int64) if "indices" in prim
                    else np.arange(nv))
             if len(idx) % 3:
-                raise InputError(path, f"key {where}.indices", f"{len(idx)} indices is not a multiple of 3")
+                raise InputError(path, f"key {where}.indices", f"{len(idx)} indices is not a multiple of 3" + _DAMAGED)
             if len(idx) and idx.max() >= nv:
-                raise InputError(path, f"key {where}.indices", "index beyond the vertex count")
+                raise InputError(path, f"key {where}.indices", "index beyond the vertex count" + _DAMAGED)
             tri = idx.reshape(-1, 3)
             nrm = doc.accessor(attrs["NORMAL"]).astype(np.float64) if "NORMAL" in attrs else vertex_normals(v, tri).astype(np.float64)
             if skinned and "JOINTS_0" in attrs and "WEIGHTS_0" in attrs:
                 jj = doc.accessor(attrs["JOINTS_0"]).astype(np.int64)
                 ww = doc.accessor(attrs["WEIGHTS_0"]).astype(np.float64)
                 if jj.max(initial=0) >= len(joint_nodes):
-                    raise InputError(path, f"key {where}.attributes.JOINTS_0", "joint index beyond the skin's joints")
+                    raise InputError(path, f"key {where}.attributes.JOINTS_0",
+                                     "joint index beyond the skin's joints" + _DAMAGED)
                 jj = np.vectorize(lambda k: node_to_joint[joint_nodes[k]])(jj) if jj.size else jj
                 jj = np.asarray(jj, np.int64).reshape(nv, 4)
                 ibm = skin_ibm if skin_ibm is not None else np.broadcast_to(np.eye(4), (len(joint_nodes), 4, 4))

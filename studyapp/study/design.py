@@ -829,7 +829,8 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
     design = Design(
         path=path.resolve(), title=top.get("title", ""), instructions=top.get("instructions", "").strip(),
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
-        avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=method, slot_assignment=assignment, slot_labels=labels,
+        avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=method, slot_assignment=assignment,
+        slot_labels=labels,
         practice=[str(p) for p in practice], attention_checks=attention, playback=Playback(**playback),
         questionnaire=items, max_attention_failures=maxfail, seed=int(ordering.get("seed", 1)), groups=groups,
     )

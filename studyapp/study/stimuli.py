@@ -462,7 +462,8 @@ def _check_avatars(design: Design) -> list[tuple[str, str, str]]:
     from studyapp.render.avatar_rig import avatar_problems
 
     out = []
-    keys = [("avatar.model", design.avatar)] + [(f"avatar.by_speaker.{k}", v) for k, v in design.avatar_by_speaker.items()]
+    keys = [("avatar.model", design.avatar)]
+    keys += [(f"avatar.by_speaker.{k}", v) for k, v in design.avatar_by_speaker.items()]
     for key, name in keys:
         path = resolve(design, name) if name != "builtin" else None
         if path is not None and path.is_file():

@@ -62,7 +62,7 @@ def beat_left_arm_up() -> Motion:
     for name, deg in (("LeftArm", 80), ("RightArm", 60)):
         j = src.skeleton.index(name)
         m.rotations[:, j] = Rotation.from_rotvec([0, 0, np.radians(deg)]).as_quat()
-    return Motion(m.skeleton, m.fps, m.rotations, m.translations, source=str(SAMPLES / "beat75_diffsheg_output_excerpt.bvh"))
+    return Motion(m.skeleton, m.fps, m.rotations, m.translations, source=src.source)
 
 
 def test_the_beat_test_motion_puts_the_left_hand_above_the_head_on_the_left():

@@ -179,7 +179,8 @@ def test_filters_decode_unit_vectors_quaternions_and_floats():
     e = np.array([-20, -20, 0, -20])  # a 24-bit signed mantissa each
     m = np.round(vals / 2.0 ** e).astype(np.int64)
     packed = ((e.astype(np.int64) << 24) | (m & 0xFFFFFF)).astype(np.uint32).astype("<u4")
-    out = np.frombuffer(decode_view(encode_attributes(packed.tobytes(), 4, 4), 4, 4, "ATTRIBUTES", "EXPONENTIAL"), "<f4")
+    enc = encode_attributes(packed.tobytes(), 4, 4)
+    out = np.frombuffer(decode_view(enc, 4, 4, "ATTRIBUTES", "EXPONENTIAL"), "<f4")
     assert np.allclose(out, m * 2.0 ** e, rtol=1e-7) and np.allclose(out, vals, rtol=1e-4)  # 2^-20 steps
 
 
