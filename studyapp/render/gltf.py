@@ -517,9 +517,12 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
     skeleton = _skeleton(order, up, names, world)
 
     # facing: measured on the rest pose, then the whole file is turned to face +Z (the camera)
-    from studyapp.render.avatar_rig import humanoid_map, resolve_bone_map, rest_facing, yaw_matrix, yaw_to_face_z
+    from studyapp.render.avatar_rig import (bone_map_problems, humanoid_map, resolve_bone_map, rest_facing, yaw_matrix,
+                                            yaw_to_face_z)
 
     given = resolve_bone_map(skeleton.names, bone_map, aliases)
+    notes += [f"[avatar.bone_map] {j}: {problem} (entry ignored)"
+              for j, problem in bone_map_problems(skeleton.names, bone_map or {}, aliases)]
     bones = {b: skeleton.index(j) for j, b in humanoid_map(skeleton, given).items()}
     forward = rest_facing(rest_global_transforms(skeleton)[:, :3, 3], bones)
     if forward is None:
