@@ -109,6 +109,7 @@ def summarize_avatar(path: str | Path, bone_map: dict[str, str] | None = None) -
         report["facing_in_file"] = "+Z"
     report["extensions_used"] = sorted(gltf.get("extensionsUsed", []))
     report["extensions_required"] = sorted(gltf.get("extensionsRequired", []))
-    report["notes"] = [n for n in avatar.notes if not n.startswith((_TURNED, _NOT_MEASURED, "no ARKit", "[avatar.bone_map]"))]
+    said = (_TURNED, _NOT_MEASURED, "no ARKit", "[avatar.bone_map]")  # reported above, not again as notes
+    report["notes"] = [n for n in avatar.notes if not n.startswith(said)]
     report["problems"] = problems
     return report
