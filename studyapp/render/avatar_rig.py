@@ -39,6 +39,21 @@ BONE_MAP_FIX = ("use joint names the avatar has (`studyapp inspect AVATAR` lists
                 "LeftHand, LeftUpperLeg, LeftLowerLeg, LeftFoot, ...)")
 
 
+def parse_bone_map(text: str) -> dict[str, str]:
+    """``"joint=Bone,joint=Bone"`` (the command-line form of ``[avatar.bone_map]``) as a dict.
+
+    >>> parse_bone_map("UpperArm.L=LeftUpperArm, LowerArm.L = LeftLowerArm")
+    {'UpperArm.L': 'LeftUpperArm', 'LowerArm.L': 'LeftLowerArm'}
+    """
+    out = {}
+    for item in filter(None, (p.strip() for p in text.split(","))):
+        joint, sep, bone = item.partition("=")
+        if not sep or not joint.strip() or not bone.strip():
+            raise ValueError(f"{item!r} is not joint=Bone")
+        out[joint.strip()] = bone.strip()
+    return out
+
+
 def canonical_bone(name: str) -> str | None:
     """The Unity humanoid bone ``name`` means (any case), or None.
 

@@ -21,6 +21,15 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _bone_map(text: str) -> dict[str, str]:
+    from studyapp.render.avatar_rig import parse_bone_map
+
+    try:
+        return parse_bone_map(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     v = subparsers.add_parser(
         "view", help="play one motion file on the avatar in a window (or render a frame offscreen)",
@@ -30,6 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     v.add_argument("--face", help="ARKit blendshape file (Live Link CSV, BEAT JSON, ...)")
     v.add_argument("--audio", help="WAV file to play along")
     v.add_argument("--avatar", help="glTF/GLB/VRM avatar (default: the built-in one)")
+    v.add_argument("--avatar-bone-map", type=_bone_map, metavar="JOINT=BONE,...",
+                   help="the avatar's [avatar.bone_map], e.g. UpperArm.L=LeftUpperArm,LowerArm.L=LeftLowerArm")
     v.add_argument("--fps", type=float, help="true frame rate of the motion when its header is wrong")
     v.add_argument("--offscreen", action="store_true", help="render one frame headless instead of opening a window")
     v.add_argument("--out", help="PNG to write with --offscreen")
@@ -65,7 +76,7 @@ def _single_scene(args: argparse.Namespace, aspect: float):
         from studyapp.face.io import load_face
 
         face = load_face(args.face)
-    avatar = load_avatar(args.avatar)
+    avatar = load_avatar(args.avatar, bone_map=getattr(args, "avatar_bone_map", None))
     slot = prepare_slot(avatar, motion, face)
     return make_scene([slot], avatar, labels=None, aspect=aspect)
 
