@@ -407,7 +407,7 @@ def _rigid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # Loader
 # ---------------------------------------------------------------------------------------------
 
-def _hierarchy_joints(g: dict, node_parent: np.ndarray, mesh_nodes: list[int], vrm: dict[int, str]) -> list[int]:
+def _hierarchy_joints(node_parent: np.ndarray, mesh_nodes: list[int], vrm: dict[int, str]) -> list[int]:
     """Joint nodes of a file without a skin: its VRM humanoid bones, else every ancestor of a mesh.
 
     Meshes then hang from their nearest joint ancestor and move rigidly with it.
@@ -485,7 +485,8 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
     skins = g.get("skins", [])
     mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
     if not mesh_nodes:
-        raise InputError(path, "key nodes", "no node has a mesh")
+        raise InputError(path, "key nodes", "no node has a mesh; export the character with its mesh, "
+                         "not only its armature or animation")
     skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
     if skin_index is not None and skin_index >= len(skins):
         raise InputError(path, f"key skins[{skin_index}]", "skin index out of range" + _DAMAGED)
@@ -494,7 +495,7 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
         notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
     vrm = _vrm_bone_names(g)
     if not joint_nodes:
-        joint_nodes = _hierarchy_joints(g, node_parent, mesh_nodes, vrm)
+        joint_nodes = _hierarchy_joints(node_parent, mesh_nodes, vrm)
         notes.append("no skin: skeleton from the node hierarchy; meshes move rigidly with their bones")
 
     # skeleton: joints in depth-first order (parents before children)
