@@ -23,11 +23,11 @@ What is read
   Several different textures are baked into vertex colours (noted).
 * Sparse accessors. VRM 0.x (``extensions.VRM``) and 1.0 (``extensions.VRMC_vrm``) humanoid bones are
   renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``).
-* gltfpack's compression: ``EXT_meshopt_compression`` buffer views (decoded by
-  :mod:`studyapp.render.meshopt`) and ``KHR_mesh_quantization`` (integer and normalized integer positions,
+* gltfpack's compression: ``EXT_meshopt_compression`` and ``KHR_meshopt_compression`` buffer views
+  (decoded by :mod:`studyapp.render.meshopt`) and ``KHR_mesh_quantization`` (integer and normalized integer positions,
   normals, UVs and morph deltas, dequantized by the node or bind transforms as the file states).
 
-Other compression (Draco, ``KHR_meshopt_compression``), KTX2/WebP textures and any other *required*
+Other compression (Draco), KTX2/WebP textures and any other *required*
 extension raise :class:`InputError` naming the extension; so does a web page saved as ``.glb``.
 
 >>> import tempfile, pathlib
@@ -63,19 +63,19 @@ _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 51
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _UNSUPPORTED = {
     "KHR_draco_mesh_compression": "Draco-compressed meshes",
-    "KHR_meshopt_compression": "meshopt-compressed buffers (Khronos version)",
     "KHR_texture_basisu": "Basis Universal / KTX2 textures",
 }
 # Required extensions that can be read (decoded here, or only changing looks the renderer does not show).
-_READABLE = {"EXT_meshopt_compression", "KHR_mesh_quantization", "KHR_texture_transform", "KHR_materials_unlit",
-             "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
+_READABLE = {"EXT_meshopt_compression", "KHR_meshopt_compression", "KHR_mesh_quantization", "KHR_texture_transform",
+             "KHR_materials_unlit", "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
              "KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_lights_punctual", "VRM", "VRMC_vrm",
              "VRMC_materials_mtoon", "VRMC_springBone", "VRMC_node_constraint"}
 # what to do about a file that breaks the glTF rules (truncated download, buggy exporter)
 _DAMAGED = ("; the file is damaged or breaks the glTF 2.0 rules: download or export it again "
             "(the Khronos glTF Validator shows what is wrong)")
-_FIX = ("re-export the avatar without it (Blender's glTF exporter with Draco off; gltfpack without -tc and "
-        "with the default EXT_meshopt_compression)")
+_FIX = ("re-export the avatar without it (Blender's glTF exporter with Draco off; gltfpack without -tc: "
+        "its meshopt compression is read)")
+_MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -161,7 +161,7 @@ class _Doc:
     def _load_buffer(self, i: int, spec: dict, bin_chunk: bytes | None) -> bytes:
         uri = spec.get("uri")
         where = f"key buffers[{i}]"
-        if uri is None and (i > 0 or bin_chunk is None) and "EXT_meshopt_compression" in spec.get("extensions", {}):
+        if uri is None and (i > 0 or bin_chunk is None) and set(_MESHOPT) & set(spec.get("extensions", {})):
             return b""  # placeholder for meshopt-compressed views: never read, they are decoded
         if uri is None:
             if bin_chunk is None:
@@ -190,20 +190,22 @@ class _Doc:
         if not 0 <= index < len(views):
             raise InputError(self.path, f"bufferView {index}", "bufferView index out of range" + _DAMAGED)
         v = views[index]
-        if "EXT_meshopt_compression" in v.get("extensions", {}):
+        if set(_MESHOPT) & set(v.get("extensions", {})):
             return self._meshopt_view(index), 0, v.get("byteStride")
         buf = self.buffers[v["buffer"]]
         off = int(v.get("byteOffset", 0))
         return buf, off, v.get("byteStride")
 
     def _meshopt_view(self, index: int) -> bytes:
-        """The uncompressed bytes of an ``EXT_meshopt_compression`` buffer view (decoded once)."""
+        """The uncompressed bytes of a meshopt-compressed buffer view (EXT or KHR; decoded once)."""
         if ("view", index) in self._cache:
             return self._cache[("view", index)]
         from studyapp.render.meshopt import MeshoptError, decode_view
 
-        ext = self.gltf["bufferViews"][index]["extensions"]["EXT_meshopt_compression"]
-        where = f"key bufferViews[{index}].extensions.EXT_meshopt_compression"
+        exts = self.gltf["bufferViews"][index]["extensions"]
+        name = next(n for n in _MESHOPT if n in exts)
+        ext = exts[name]
+        where = f"key bufferViews[{index}].extensions.{name}"
         try:
             buf = self.buffers[int(ext["buffer"])]
             off, length = int(ext.get("byteOffset", 0)), int(ext["byteLength"])

@@ -1,16 +1,19 @@
-"""Decoder for glTF ``EXT_meshopt_compression`` buffer views (numpy; written from the extension's spec).
+"""Decoder for glTF ``EXT_meshopt_compression`` and ``KHR_meshopt_compression`` buffer views (numpy; written
+from the extensions' specs).
 
 gltfpack compresses each buffer view on its own with one of three bitstreams and, for vertex data, an
 optional filter applied after decoding:
 
-* ``ATTRIBUTES`` (header ``0xa0``): elements split into blocks; per block and per byte of the element,
-  zigzag byte deltas from the previous element, in groups of 16 coded as all-zero, 2-bit or 4-bit values
-  with an escape to a full byte, or 16 raw bytes. The first element's baseline sits at the stream's end.
+* ``ATTRIBUTES`` (header ``0xa0``, or ``0xa1`` for KHR's version 1): elements split into blocks; per block
+  and per byte of the element, zigzag byte deltas from the previous element, in groups of 16 coded as
+  all-zero, 2-bit or 4-bit values with an escape to a full byte, or 16 raw bytes. The first element's
+  baseline sits at the stream's end. Version 1 adds 1-bit groups, literal and all-zero bytes, and 16-bit
+  or rotated 32-bit XOR deltas per 4-byte channel.
 * ``TRIANGLES`` (header ``0xe1``): one code byte per triangle that reuses recent edges and vertices
   (16-entry FIFOs), with LEB128 zigzag index deltas for the rest and a 16-byte lookup table at the end.
 * ``INDICES`` (header ``0xd1``): LEB128 zigzag deltas against one of two running baselines.
-* Filters ``OCTAHEDRAL`` (unit vectors), ``QUATERNION`` (unit quaternions) and ``EXPONENTIAL`` (floats as
-  a signed exponent byte and a 24-bit mantissa).
+* Filters ``OCTAHEDRAL`` (unit vectors), ``QUATERNION`` (unit quaternions), ``EXPONENTIAL`` (floats as
+  a signed exponent byte and a 24-bit mantissa) and KHR's ``COLOR`` (YCoCg).
 
 :func:`decode_view` returns the raw bytes the parent buffer view would hold uncompressed, so accessors
 read them as if the file had never been compressed.
@@ -27,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 MODES = ("ATTRIBUTES", "TRIANGLES", "INDICES")
-FILTERS = ("NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL")
+FILTERS = ("NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL", "COLOR")
 
 
 class MeshoptError(ValueError):
@@ -40,21 +43,24 @@ def _unzigzag8(v: np.ndarray) -> np.ndarray:
 
 
 def _decode_group(data: bytes, pos: int, mode: int) -> tuple[np.ndarray, int]:
-    """16 zigzag-coded byte deltas of one group starting at ``data[pos]``; returns them and the bytes used."""
-    if mode == 0:
+    """16 zigzag-coded byte deltas of one version-0 group starting at ``data[pos]``; returns them and the
+    bytes used (mode 0: all zero, 1: 2-bit, 2: 4-bit, 3: 16 raw bytes)."""
+    return _decode_bits(data, pos, (0, 2, 4, 8)[mode])
+
+
+def _decode_bits(data: bytes, pos: int, bits: int) -> tuple[np.ndarray, int]:
+    """16 deltas packed ``bits`` wide (0: all zero, 8: raw bytes), escapes to full bytes after the packed ones."""
+    if bits == 0:
         return np.zeros(16, np.uint8), 0
-    if mode == 3:
-        if pos + 16 > len(data):
-            raise MeshoptError("attribute group runs past the end of the stream")
-        return np.frombuffer(data, np.uint8, 16, pos).copy(), 16
-    bits = 2 if mode == 1 else 4
     packed = 16 * bits // 8
     if pos + packed > len(data):
         raise MeshoptError("attribute group runs past the end of the stream")
     raw = np.frombuffer(data, np.uint8, packed, pos)
+    if bits == 8:
+        return raw.copy(), 16
     per = 8 // bits
-    # most significant bits first inside each byte
-    shifts = np.arange(per - 1, -1, -1) * bits
+    # 2 and 4 bits: most significant first inside each byte; 1 bit: least significant first
+    shifts = np.arange(per) * bits if bits == 1 else np.arange(per - 1, -1, -1) * bits
     vals = ((raw[:, None] >> shifts[None, :]) & ((1 << bits) - 1)).reshape(-1).astype(np.uint8)
     sentinel = (1 << bits) - 1
     escaped = np.flatnonzero(vals == sentinel)
@@ -65,39 +71,93 @@ def _decode_group(data: bytes, pos: int, mode: int) -> tuple[np.ndarray, int]:
     return vals, packed + len(escaped)
 
 
+# bit widths of the four group modes: version 0, and version 1 under byte control modes 0 and 1
+_GROUP_BITS = {0: (0, 2, 4, 8), (1, 0): (0, 1, 2, 4), (1, 1): (1, 2, 4, 8)}
+
+
 def decode_attributes(data: bytes, count: int, stride: int) -> bytes:
-    """Mode 0: ``count`` elements of ``stride`` bytes."""
+    """Mode 0: ``count`` elements of ``stride`` bytes; version 0 (``0xa0``, EXT) or 1 (``0xa1``, KHR).
+
+    Version 1 adds a control mode per byte and block (group widths {0,1,2,4} or {1,2,4,8} bits, all zero,
+    or literal bytes) and a channel mode per 4 bytes in the tail (byte deltas, 16-bit deltas, or 32-bit
+    XOR deltas rotated right by the mode's high nibble).
+    """
     if stride <= 0 or stride > 256 or stride % 4:
         raise MeshoptError(f"byteStride {stride} is not a multiple of 4 up to 256")
-    if len(data) < 1 + stride or data[0] != 0xA0:
-        raise MeshoptError("not an ATTRIBUTES stream (header byte must be 0xa0)")
-    tail = max(stride, 32)
-    baseline = np.frombuffer(data, np.uint8, stride, len(data) - stride).astype(np.int64)
+    if len(data) < 1 or data[0] not in (0xA0, 0xA1):
+        raise MeshoptError("not an ATTRIBUTES stream (header byte must be 0xa0 or 0xa1)")
+    version = data[0] & 0x0F
+    tail_size = stride + (stride // 4 if version else 0)
+    tail = max(tail_size, 24 if version else 32)
+    if len(data) < 1 + tail:
+        raise MeshoptError("ATTRIBUTES stream shorter than its tail")
+    base = len(data) - tail_size
+    baseline = np.frombuffer(data, np.uint8, stride, base).astype(np.int64)
+    channels = (np.frombuffer(data, np.uint8, stride // 4, base + stride) if version
+                else np.zeros(stride // 4, np.uint8))
+    for c in channels:
+        if (c & 0x0F) > 2 or ((c & 0x0F) < 2 and c >> 4):
+            raise MeshoptError(f"invalid channel mode {c:#04x}")
     out = np.zeros((count, stride), np.uint8)
     block_max = min((8192 // stride) & ~15, 256)
     pos = 1
     start = 0
+    limit = len(data) - tail
     while start < count:
         n = min(block_max, count - start)
         groups = (n + 15) // 16
         header_size = (groups + 3) // 4
+        control = b""
+        if version:
+            control = data[pos: pos + stride // 4]
+            pos += stride // 4
+        deltas = np.zeros((stride, n), np.uint8)
         for k in range(stride):
-            if pos + header_size > len(data) - tail:
+            ctrl = (control[k // 4] >> ((k % 4) * 2)) & 3 if version else 0
+            if ctrl == 2:
+                continue  # all deltas zero
+            if ctrl == 3:  # literal bytes, no header
+                if pos + n > limit:
+                    raise MeshoptError("attribute block runs into the stream's tail")
+                deltas[k] = np.frombuffer(data, np.uint8, n, pos)
+                pos += n
+                continue
+            if pos + header_size > limit:
                 raise MeshoptError("attribute block runs into the stream's tail")
             header = data[pos: pos + header_size]
             pos += header_size
-            deltas = np.empty(groups * 16, np.uint8)
+            widths = _GROUP_BITS[(1, ctrl)] if version else _GROUP_BITS[0]
+            col = np.empty(groups * 16, np.uint8)
             for g in range(groups):
                 mode = (header[g // 4] >> ((g % 4) * 2)) & 3
-                deltas[g * 16: g * 16 + 16], used = _decode_group(data, pos, mode)
+                col[g * 16: g * 16 + 16], used = _decode_bits(data, pos, widths[mode])
                 pos += used
-            # byte values wrap around: a running sum modulo 256 from the previous element
-            vals = (baseline[k] + np.cumsum(_unzigzag8(deltas[:n]).astype(np.int64))) & 0xFF
-            out[start: start + n, k] = vals
-            baseline[k] = vals[-1]
+            deltas[k] = col[:n]
+        for c, cm in enumerate(channels):
+            b = slice(4 * c, 4 * c + 4)
+            mode, rot = int(cm & 0x0F), int(cm >> 4)
+            if mode == 0:  # byte deltas: a running sum modulo 256 from the previous element
+                vals = (baseline[b, None] + np.cumsum(_unzigzag8(deltas[b]).astype(np.int64), 1)) & 0xFF
+                out[start: start + n, b] = vals.T
+            elif mode == 1:  # 16-bit deltas, little-endian
+                for h in (4 * c, 4 * c + 2):
+                    d = deltas[h].astype(np.int64) | (deltas[h + 1].astype(np.int64) << 8)
+                    d = np.where(d & 1, ~(d >> 1), d >> 1)
+                    prev = int(baseline[h]) | (int(baseline[h + 1]) << 8)
+                    vals = (prev + np.cumsum(d)) & 0xFFFF
+                    out[start: start + n, h] = vals & 0xFF
+                    out[start: start + n, h + 1] = vals >> 8
+            else:  # 32-bit XOR deltas, rotated right by rot
+                d = sum(deltas[4 * c + i].astype(np.uint64) << np.uint64(8 * i) for i in range(4))
+                d = ((d >> np.uint64(rot)) | (d << np.uint64((32 - rot) % 32))) & np.uint64(0xFFFFFFFF)
+                prev = np.uint64(sum(int(baseline[4 * c + i]) << (8 * i) for i in range(4)))
+                vals = np.bitwise_xor.accumulate(np.r_[prev, d])[1:]
+                for i in range(4):
+                    out[start: start + n, 4 * c + i] = (vals >> np.uint64(8 * i)) & np.uint64(0xFF)
+            baseline[b] = out[start + n - 1, b]
         start += n
-    if len(data) - pos != tail:
-        raise MeshoptError(f"ATTRIBUTES stream has {len(data) - pos - tail} bytes more than it decodes")
+    if pos != limit:
+        raise MeshoptError(f"ATTRIBUTES stream has {limit - pos} bytes more than it decodes")
     return out.tobytes()
 
 
@@ -275,6 +335,21 @@ def _filter_exponential(raw: bytes) -> bytes:
     return (np.ldexp(m.astype(np.float64), e)).astype("<f4").tobytes()
 
 
+def _filter_color(raw: bytes, stride: int) -> bytes:
+    """KHR's COLOR filter: YCoCg with the bit depth K marked by the alpha's top bit, to normalized RGBA."""
+    udt, sdt, top = (np.uint8, np.int8, 255) if stride == 4 else (np.uint16, np.int16, 65535)
+    u = np.frombuffer(raw, udt).reshape(-1, 4).astype(np.int64)
+    sgn = np.frombuffer(raw, sdt).reshape(-1, 4).astype(np.int64)
+    y, co, cg, a_in = u[:, 0], sgn[:, 1], sgn[:, 2], u[:, 3]
+    msb = np.floor(np.log2(np.maximum(a_in, 1))).astype(np.int64)
+    scale = (1 << (msb + 1)) - 1
+    a = a_in & (scale >> 1)
+    a = (a << 1) | (a & 1)
+    ss = top / scale
+    rgba = np.stack([y + co - cg, y + cg, y - co - cg, a], 1) * ss[:, None]
+    return np.clip(np.round(rgba), 0, top).astype(udt).tobytes()
+
+
 def decode_view(data: bytes, count: int, stride: int, mode: str, filter_: str = "NONE") -> bytes:
     """The uncompressed bytes (``count * stride``) of one buffer view's ``EXT_meshopt_compression`` stream.
 
@@ -297,6 +372,10 @@ def decode_view(data: bytes, count: int, stride: int, mode: str, filter_: str = 
             raw = _filter_quaternion(raw)
         elif filter_ == "EXPONENTIAL":
             raw = _filter_exponential(raw)
+        elif filter_ == "COLOR":
+            if stride not in (4, 8):
+                raise MeshoptError(f"COLOR filter needs byteStride 4 or 8, not {stride}")
+            raw = _filter_color(raw, stride)
         return raw
     if stride not in (2, 4):
         raise MeshoptError(f"{mode} needs byteStride 2 or 4, not {stride}")

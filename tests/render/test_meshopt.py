@@ -47,6 +47,29 @@ def test_decoder_reproduces_the_reference_test_vectors():
     assert seq.tolist() == INDEX_SEQUENCE
 
 
+VERTEX_DATA_V1 = bytes([
+    0xa1, 0xee, 0xaa, 0xee, 0x00, 0x4b, 0x4b, 0x4b, 0x00, 0x00, 0x4b, 0x00, 0x00, 0x7d, 0x7d, 0x7d,
+    0x00, 0x00, 0x7d, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x62, 0x00, 0x62])
+# "a valid v1 encoding ... that exercised all features of the format" (kVertexDataV1Custom)
+VERTEX_DATA_V1_CUSTOM = bytes([
+    0xa1, 0xd4, 0x94, 0xd4, 0x01, 0x0e, 0x00, 0x58, 0x57, 0x58, 0x02, 0x02, 0x12, 0x00, 0x00, 0x00,
+    0x00, 0x00, 0x00, 0x03, 0x00, 0x00, 0x58, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00, 0x01, 0x00, 0x00, 0x00, 0x00, 0x02, 0x00,
+    0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x03, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x00, 0x0e, 0x00, 0x7d, 0x7d, 0x7d, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x7d, 0x00, 0x00,
+    0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x00, 0x00, 0x00, 0x00, 0x00, 0x01, 0x62])
+
+
+@pytest.mark.parametrize("stream", [VERTEX_DATA_V1, VERTEX_DATA_V1_CUSTOM])
+def test_decoder_reproduces_the_version_1_reference_vectors(stream):
+    # KHR_meshopt_compression's attribute format: control modes, literal bytes, 16-bit and rotated XOR deltas
+    pv = np.dtype([("p", "<u2", 3), ("n", "u1", 2), ("t", "<u2", 2)])
+    got = np.frombuffer(decode_view(stream, 4, 12, "ATTRIBUTES"), pv)
+    assert [(tuple(r["p"]), tuple(r["n"]), tuple(r["t"])) for r in got] == VERTEX_BUFFER
+
+
 def test_malformed_streams_are_refused():
     with pytest.raises(MeshoptError, match="header"):
         decode_view(b"\x00" + VERTEX_DATA_V0[1:], 4, 12, "ATTRIBUTES")
@@ -320,6 +343,38 @@ def test_gltfpack_output_of_the_builtin_avatar_decodes_to_its_vertices_and_morph
     tri_a = np.sort(np.round(avatar.vertices[avatar.indices] / step).astype(np.int64).reshape(-1, 9), 1)
     tri_b = np.sort(np.round(packed.vertices[packed.indices] / step).astype(np.int64).reshape(-1, 9), 1)
     assert np.abs(np.sort(tri_a.sum(1)) - np.sort(tri_b.sum(1))).max() <= 9
+
+
+def test_gltfpack_khr_version_decodes_to_the_same_bytes_as_the_ext_version():
+    # `gltfpack -cc -ce khr` writes KHR_meshopt_compression with version-1 attribute streams; every buffer view
+    # (vertices, indices, and the octahedral, quaternion and exponential filtered animation data) must decode
+    # to exactly the bytes its EXT (version 0) twin decodes to
+    from studyapp.render.gltf import _Doc
+
+    khr = _Doc(PACKED / "RobotExpressive.gltfpack-khr.glb")
+    ext = _Doc(PACKED / "RobotExpressive.gltfpack-cc.glb")
+    filters = set()
+    for i, view in enumerate(khr.gltf["bufferViews"]):
+        if "KHR_meshopt_compression" in view.get("extensions", {}):
+            spec = view["extensions"]["KHR_meshopt_compression"]
+            filters.add(spec.get("filter", "NONE"))
+            assert khr.view_bytes(i)[0] == ext.view_bytes(i)[0], (i, spec)
+    assert {"OCTAHEDRAL", "QUATERNION", "EXPONENTIAL"} <= filters
+    a, b = load_gltf(PACKED / "RobotExpressive.gltfpack-khr.glb"), load_gltf(PACKED / "RobotExpressive.gltfpack-cc.glb")
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.indices, b.indices)
+
+
+def test_color_filter_decodes_ycocg():
+    # spec appendix B, filter 4, inverted for 8-bit colours with K = 8 (alpha 7 bits + marker bit 7)
+    rgba = np.array([[255, 0, 0, 255], [10, 200, 30, 128], [90, 90, 90, 0]], np.int64)
+    r, g, b, a = rgba.T
+    y = (r + 2 * g + b) // 4
+    co, cg = (r - b) // 2, (2 * g - r - b) // 4
+    a7 = (a >> 1) | 0x80
+    enc = np.stack([y, co, cg, a7], 1).astype(np.int64)
+    raw = (enc & 0xFF).astype(np.uint8).tobytes()
+    dec = np.frombuffer(decode_view(encode_attributes(raw, 3, 4), 3, 4, "ATTRIBUTES", "COLOR"), np.uint8)
+    assert np.abs(dec.reshape(3, 4).astype(int) - rgba).max() <= 3
 
 
 def test_gltfpack_robot_keeps_rigid_parts_on_their_bones():
