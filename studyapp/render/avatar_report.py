@@ -93,6 +93,12 @@ def summarize_avatar(path: str | Path, bone_map: dict[str, str] | None = None) -
     targets = _target_names(gltf)
     arkit = {match_arkit_name(t) for t in targets} - {None}
     report["morph_targets"] = targets
+    from studyapp.render.gltf import _vrm_arkit_expressions
+
+    by_expression = {a for binds in _vrm_arkit_expressions(gltf, gltf.get("nodes", [])).values() for a, _ in binds}
+    if by_expression - arkit:
+        report["arkit_from_vrm_expressions"] = sorted(by_expression - arkit, key=ARKIT_NAMES.index)
+    arkit |= by_expression
     report["arkit_coverage"] = f"{len(arkit)}/{len(ARKIT_NAMES)}"
     if arkit and len(arkit) < len(ARKIT_NAMES):
         report["arkit_missing"] = [n for n in ARKIT_NAMES if n not in arkit]

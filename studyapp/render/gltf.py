@@ -17,7 +17,9 @@ What is read
   face +Z, the camera. VRM 0.x files (facing -Z) and three.js's Soldier are turned this way, by measurement.
 * ``bone_map`` (the design's ``[avatar.bone_map]``) names humanoid bones for joints with other names.
 * Morph targets named in ``mesh.extras.targetNames`` (or the primitive's extras) and matched to ARKit names
-  with :func:`studyapp.face.arkit.match_arkit_name`; other targets are ignored with a note.
+  with :func:`studyapp.face.arkit.match_arkit_name`; VRM 1.0 expressions and VRM 0.x blend shape groups
+  named as ARKit shapes ("perfect sync") supply the shapes no target is named after, as the weighted sum of
+  their bound targets; other targets are ignored with a note.
 * ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow, with
   ``KHR_texture_transform``); ``doubleSided`` on any material turns back-face culling off for the avatar.
   Several different textures are baked into vertex colours (noted).
@@ -395,6 +397,44 @@ def _direction_name(v: np.ndarray) -> str:
     return ("+" if v[k] > 0 else "-") + "XYZ"[k]
 
 
+def _arkit_target_names(gltf: dict) -> set[str]:
+    """ARKit shapes some morph target of the file is named after (those win over VRM expressions)."""
+    found = set()
+    for mesh in gltf.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            names = prim.get("extras", {}).get("targetNames", mesh.get("extras", {}).get("targetNames", []))
+            found |= {match_arkit_name(n) for n in names} - {None}
+    return found
+
+
+def _vrm_arkit_expressions(gltf: dict, nodes: list[dict]) -> dict[tuple[int, int], list[tuple[str, float]]]:
+    """``(mesh, target index) -> [(ARKit name, weight)]`` from VRM expressions named as ARKit shapes.
+
+    "Perfect sync" VRM avatars expose the 52 ARKit shapes as VRM 1.0 custom expressions
+    (``expressions.custom.jawOpen.morphTargetBinds``) or VRM 0.x blend shape groups (weights 0..100)
+    over morph targets with other names.
+    """
+    out: dict[tuple[int, int], list[tuple[str, float]]] = {}
+    ext = gltf.get("extensions", {})
+    if "VRMC_vrm" in ext:
+        expressions = ext["VRMC_vrm"].get("expressions", {})
+        for group in ("preset", "custom"):
+            for name, spec in expressions.get(group, {}).items():
+                arkit = match_arkit_name(name)
+                for bind in (spec.get("morphTargetBinds", []) if arkit else []):
+                    node = bind.get("node")
+                    if isinstance(node, int) and 0 <= node < len(nodes) and "mesh" in nodes[node]:
+                        key = (nodes[node]["mesh"], int(bind.get("index", -1)))
+                        out.setdefault(key, []).append((arkit, float(bind.get("weight", 1.0))))
+    elif "VRM" in ext:
+        for group in ext["VRM"].get("blendShapeMaster", {}).get("blendShapeGroups", []):
+            arkit = match_arkit_name(group.get("name", ""))
+            for bind in (group.get("binds", []) if arkit else []):
+                key = (int(bind.get("mesh", -1)), int(bind.get("index", -1)))
+                out.setdefault(key, []).append((arkit, float(bind.get("weight", 100.0)) / 100.0))
+    return out
+
+
 def _rigid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation (scale removed, via SVD) and translation of a 4x4 matrix."""
     u, _, vt = np.linalg.svd(m[:3, :3])
@@ -548,6 +588,8 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
     textures: dict[int, np.ndarray | None] = {}
     morph_names_found: set[str] = set()
     ignored: set[str] = set()
+    named_arkit = _arkit_target_names(g)
+    expression_binds = _vrm_arkit_expressions(g, nodes)
     for ni in mesh_nodes:
         node = nodes[ni]
         mesh = g["meshes"][node["mesh"]]
@@ -643,7 +685,10 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
             for ti, t in enumerate(targets):
                 raw = names_here[ti] if ti < len(names_here) else f"target{ti}"
                 arkit = match_arkit_name(raw)
-                if arkit is None:
+                # a target named as ARKit counts fully; VRM expressions named as ARKit add their weighted binds
+                uses = [(arkit, 1.0)] if arkit is not None else []
+                uses += [(a, w) for a, w in expression_binds.get((node["mesh"], ti), []) if a not in named_arkit]
+                if not uses:
                     ignored.add(raw)
                     continue
                 d = doc.accessor(t["POSITION"]).astype(np.float64) if "POSITION" in t else np.zeros((nv, 3))
@@ -651,9 +696,10 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                 if blend is not None:
                     d = np.einsum("vij,vj->vi", blend[:, :3, :3], d)
                     dn = np.einsum("vij,vj->vi", blend[:, :3, :3], dn)
-                prev = deltas.get(arkit)
-                deltas[arkit] = (d, dn) if prev is None else (prev[0] + d, prev[1] + dn)
-                morph_names_found.add(arkit)
+                for name, w in uses:
+                    prev = deltas.get(name)
+                    deltas[name] = (w * d, w * dn) if prev is None else (prev[0] + w * d, prev[1] + w * dn)
+                    morph_names_found.add(name)
             parts.append(dict(v=v, n=nrm, tri=tri, col=col, j=jj, w=ww, uv=uv, tex=tex_index, deltas=deltas,
                               mat=material_ids, alpha=factor[3], double=bool(mat.get("doubleSided", False))))
     if not parts:

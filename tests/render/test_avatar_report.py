@@ -77,3 +77,11 @@ def test_inspect_refuses_a_web_page_with_one_line(tmp_path, capsys):
     assert main(["inspect", str(page)]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a GLB file (starts with '<!DOCTYPE'" in err[0] and "Traceback" not in err[0]
+
+
+def test_inspect_counts_arkit_shapes_given_by_vrm_expressions(tmp_path):
+    gltf, data = bar_gltf(vrm="1")
+    gltf["extensions"]["VRMC_vrm"]["expressions"] = {"custom": {
+        "mouthSmileLeft": {"morphTargetBinds": [{"node": 3, "index": 1, "weight": 1.0}]}}}
+    report = summarize_avatar(write_gltf(tmp_path, gltf, data, "bar.vrm", "glb"))
+    assert report["arkit_coverage"] == "2/52" and report["arkit_from_vrm_expressions"] == ["mouthSmileLeft"]

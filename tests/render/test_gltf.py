@@ -295,3 +295,26 @@ def test_round_tripped_avatar_renders_the_same_pixels(tmp_path, avatar, renderer
         target.release()
     diff = np.abs(images[0].astype(int) - images[1].astype(int))
     assert diff.max() <= 1 and (diff > 0).mean() < 0.001
+
+
+@pytest.mark.parametrize("version", ["0", "1"])
+def test_vrm_perfect_sync_expressions_supply_arkit_shapes(tmp_path, version):
+    # the bar's target 1 ("wiggle", 0.01 on every vertex) is not ARKit; a VRM expression named as an ARKit
+    # shape binds it. An expression for a shape a target is already named after (jawOpen) changes nothing.
+    gltf, data = bar_gltf(vrm=version)
+    if version == "1":
+        gltf["extensions"]["VRMC_vrm"]["expressions"] = {"custom": {
+            "mouthSmileLeft": {"morphTargetBinds": [{"node": 3, "index": 1, "weight": 0.5}]},
+            "jawOpen": {"morphTargetBinds": [{"node": 3, "index": 1, "weight": 1.0}]},
+            "happy": {"morphTargetBinds": [{"node": 3, "index": 1, "weight": 1.0}]}}}
+    else:
+        gltf["extensions"]["VRM"]["blendShapeMaster"] = {"blendShapeGroups": [
+            {"name": "MouthSmileLeft", "presetName": "unknown", "binds": [{"mesh": 0, "index": 1, "weight": 50}]},
+            {"name": "JawOpen", "presetName": "unknown", "binds": [{"mesh": 0, "index": 1, "weight": 100}]},
+            {"name": "Joy", "presetName": "joy", "binds": [{"mesh": 0, "index": 1, "weight": 100}]}]}
+    av = load_gltf(write_gltf(tmp_path, gltf, data, "bar.vrm", "glb"))
+    smile = av.morph_deltas[av.morph_index("mouthSmileLeft")]
+    assert np.allclose(smile, 0.005)
+    jaw = av.morph_deltas[av.morph_index("jawOpen")]
+    assert np.allclose(jaw[10], [0, 0.05, 0]) and np.allclose(np.delete(jaw, 10, 0), 0)
+    assert not av.morph_deltas[av.morph_index("mouthSmileRight")].any()
