@@ -60,6 +60,7 @@ class TrialMedia:
     duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
     criteria: the design's criterion ids, in order (what the participant ranks the slots on).
     name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
+    avatar_bone_map: the design's ``[avatar.bone_map]`` (avatar joint -> humanoid bone).
     """
 
     plan: TrialPlan
@@ -71,6 +72,7 @@ class TrialMedia:
     duration_s: float
     criteria: tuple[str, ...] = ()
     name_maps: tuple[dict[str, str], dict[str, str], dict[str, str]] = ({}, {}, {})
+    avatar_bone_map: dict[str, str] | None = None
 
     @property
     def avatar_spec(self) -> str:
@@ -298,7 +300,8 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     maps = tuple(dict(design.condition(cid.removeprefix(FROZEN_PREFIX)).name_map) for cid in plan.slots)
     return TrialMedia(plan=plan, audio=audio, face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
-                      criteria=tuple(design.criterion_ids), name_maps=maps)  # type: ignore[arg-type]
+                      criteria=tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
+                      avatar_bone_map=dict(design.avatar_bone_map))
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -329,6 +332,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     skeletons_checked: set[tuple[int, tuple[str, ...]]] = set()
     cond_index = {c.id: i for i, c in enumerate(design.conditions)}
 
+    problems += _check_avatars(design)
     for ci, cond in enumerate(design.conditions):
         if cond.template is not None and resolve(design, cond.template).is_file():
             try:
@@ -450,6 +454,21 @@ def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]
     short = {k: v for k, v in items.items() if v[0] < stim.duration_s - DURATION_TOLERANCE_S}
     return [(f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {k} is only "
              f"{d:.3f} s long ({p})", "lower duration_s or give longer files") for k, (d, p) in short.items()]
+
+
+def _check_avatars(design: Design) -> list[tuple[str, str, str]]:
+    """Each avatar file loads, is humanoid with the design's ``[avatar.bone_map]``, and every entry of that
+    map names one of its joints (one problem per bad entry)."""
+    from studyapp.render.avatar_rig import avatar_problems
+
+    out = []
+    keys = [("avatar.model", design.avatar)]
+    keys += [(f"avatar.by_speaker.{k}", v) for k, v in design.avatar_by_speaker.items()]
+    for key, name in keys:
+        path = resolve(design, name) if name != "builtin" else None
+        if path is not None and path.is_file():
+            out += [(k or key, msg, fix) for k, msg, fix in avatar_problems(path, design.avatar_bone_map)]
+    return out
 
 
 def _check_retarget(ci: int, cond: Condition, motion: Motion, path: Path) -> list[tuple[str, str, str]]:
