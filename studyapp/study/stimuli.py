@@ -247,10 +247,12 @@ def load_condition_motion(design: Design, condition: Condition, stimulus: Stimul
         kwargs["order"] = condition.rotation_order
     if condition.is_array:
         kwargs.update(joints=list(condition.joints) if condition.joints else None, degrees=condition.degrees)
+    body_model = resolve(design, condition.body_model) if condition.body_model is not None else None
     key = ("motion", _file_id(path), condition.fps, condition.representation, condition.template,
-           condition.rotation_order, condition.joints, condition.degrees)
+           condition.rotation_order, condition.joints, condition.degrees, body_model)
     return _FILES.get(key, lambda: load_motion(path, fps=condition.fps, template=template,
-                                               representation=condition.representation, **kwargs))
+                                               representation=condition.representation, body_model=body_model,
+                                               **kwargs))
 
 
 def _live_motion(design: Design, condition: Condition, stimulus: Stimulus) -> Motion:
@@ -327,6 +329,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     unreadable: dict[tuple[int, str], list[tuple[str, Path]]] = {}  # (condition, problem) -> clips
     wrong_rate: dict[int, tuple[float, float, list[str]]] = {}      # condition -> (file fps, true fps, clips)
     skeletons_checked: set[tuple[int, tuple[str, ...]]] = set()
+    array_settings_missing: set[int] = set()  # conditions whose NPZ/NPY files are raw arrays lacking settings
     cond_index = {c.id: i for i, c in enumerate(design.conditions)}
 
     for ci, cond in enumerate(design.conditions):
@@ -367,13 +370,16 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
         audio_s = items.get("audio", (None, ""))[0]
         for cond in design.conditions:
             ci = cond_index[cond.id]
-            if cond.motion is None or not _array_settings_complete(cond):
-                continue  # live conditions are generated to the audio's length; incomplete settings are reported
+            if cond.motion is None:
+                continue  # live conditions are generated to the audio's length
             try:
                 path = motion_path(design, cond, stim)
             except KeyError:
                 continue  # the pattern names a tag this stimulus lacks: reported with the pattern
             if not path.is_file():
+                continue
+            if not _array_settings_complete(cond) and not _is_smpl_file(path):
+                array_settings_missing.add(ci)  # reported once per condition below
                 continue
             try:
                 motion = load_condition_motion(design, cond, stim)
@@ -390,6 +396,8 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                 skeletons_checked.add(sig)
                 problems += _check_retarget(ci, cond, motion, path)
         problems += _check_durations(si, stim, items, duration_mismatches)
+    for ci in sorted(array_settings_missing):
+        problems += _missing_array_settings(ci, design.conditions[ci])
     # One line per condition and cause, not one per clip: a setting of the condition is usually the cause.
     for (ci, text), where in unreadable.items():
         cond = design.conditions[ci]
@@ -432,6 +440,30 @@ def _likely_true_fps(cond: Condition, motion: Motion, audio_s: float | None) -> 
 
 def _array_settings_complete(cond: Condition) -> bool:
     return not cond.is_array or None not in (cond.template, cond.representation, cond.fps)
+
+
+def _is_smpl_file(path: Path) -> bool:
+    """Whether an NPZ/NPY motion file is an SMPL-family file, which carries its own skeleton, layout and rate."""
+    from studyapp.motion.smpl import recognise_smpl
+
+    return recognise_smpl(path) is not None
+
+
+def _missing_array_settings(ci: int, cond: Condition) -> list[tuple[str, str, str]]:
+    """The keys a raw rotation array's condition must give: arrays carry no skeleton, layout or frame rate."""
+    from studyapp.motion.rotations import REPRESENTATIONS
+
+    key = f"conditions[{ci}]"
+    out = []
+    if cond.template is None:
+        out.append((f"{key}.template", "NPZ/NPY motion that is not an SMPL/SMPL-H/SMPL-X file needs a template "
+                    "BVH for its skeleton", 'add template = "template.bvh" (a BVH of the skeleton the arrays drive)'))
+    if cond.representation is None:
+        out.append((f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
+                    f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})'))
+    if cond.fps is None:
+        out.append((f"{key}.fps", "NPZ/NPY motion carries no frame rate", "add the model's output rate, e.g. fps = 15"))
+    return out
 
 
 def _unreadable_fix(cond: Condition) -> str:

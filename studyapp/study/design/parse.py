@@ -85,18 +85,9 @@ def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> lis
             if not e["motion"].lower().endswith(MOTION_SUFFIXES):
                 col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
                         "convert them first (studyapp convert) or fix the pattern's extension")
-            if e["motion"].lower().endswith((".npz", ".npy")):
-                # Arrays carry neither skeleton, nor rotation layout, nor frame rate: the condition must say.
-                if "template" not in e:
-                    col.add(f"{key}.template", "NPZ/NPY motion needs a template BVH for its skeleton",
-                            'add template = "template.bvh" (a BVH of the skeleton the arrays drive)')
-                if "representation" not in e:
-                    col.add(f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
-                            f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})')
-                if "fps" not in e:
-                    col.add(f"{key}.fps", "NPZ/NPY motion carries no frame rate",
-                            "add the model's output rate, e.g. fps = 15")
-            else:
+            # NPZ/NPY raw arrays need template, representation and fps; SMPL-family files need none. Only reading
+            # a file tells them apart, so stimuli.check_stimulus_files asks for what is missing.
+            if not e["motion"].lower().endswith((".npz", ".npy")):
                 for k in ("joints", "degrees", "representation"):
                     if k in e:
                         col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
@@ -121,6 +112,7 @@ def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> lis
                 rotation_order=ro.upper() if ro else None,
                 name_map={k: v for k, v in nm.items() if isinstance(v, str)},
                 joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
+                body_model=e.get("body_model"),
             ))
     return conditions
 
@@ -360,8 +352,12 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
                 raise
             found = [("", f"stimulus files not checked ({type(exc).__name__}: {exc})",
                       "fix the problems above and validate again")]
+        # An array setting the parser refused (representation = "6d") reaches the file check as missing; its
+        # parse problem already says what to write there.
+        refused = {p.key for p in col.problems if p.key.rsplit(".", 1)[-1] in ("template", "representation", "fps")}
         for key, message, fix in found:
-            col.add(key, message, fix)
+            if key not in refused:
+                col.add(key, message, fix)
     design.design_hash = design_hash(data, {k: p for k, p in files.items()})
     return design, col.problems
 
