@@ -337,3 +337,25 @@ def test_convert_smplx_onto_the_builtin_avatar_writes_the_pose(tmp_path, capsys)
     # 60 degrees below the horizontal (the BVH is in centimetres or metres: only the direction counts)
     elevation = np.degrees(np.arcsin(arm[:, 1] / np.linalg.norm(arm, axis=-1)))
     np.testing.assert_allclose(elevation, -60.0, atol=3.0)
+
+
+# -- the example design's files ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("family, source", [("smplx", "synced"), ("smplh", "lagged")])
+def test_the_example_designs_smpl_files_play_the_demo_motion_they_were_written_from(family, source):
+    """study_designs/smplx_example.toml uses the demo's motion written as SMPL-X (BEAT2 keys) and as SMPL-H
+    (AMASS: Z-up); on the avatar each plays as the demo BVH does, limb for limb."""
+    from studyapp.resources import designs_dir
+
+    demo = designs_dir() / "demo" / "motion"
+    smpl_path = demo / family / "clip01.npz"
+    assert recognise_smpl(smpl_path) == family
+    _, _, _, p_smpl, idx = on_avatar(smpl_path)
+    _, _, _, p_bvh, _ = on_avatar(demo / source / "clip01.bvh")
+    limbs = [("LeftUpperArm", "LeftLowerArm"), ("LeftLowerArm", "LeftHand"), ("RightUpperArm", "RightLowerArm"),
+             ("RightLowerArm", "RightHand"), ("Hips", "Head")]
+    d_smpl = np.stack([p_smpl[:, idx(b)] - p_smpl[:, idx(a)] for a, b in limbs], 1)
+    d_bvh = np.stack([p_bvh[:, idx(b)] - p_bvh[:, idx(a)] for a, b in limbs], 1)
+    assert angle(d_smpl, d_bvh).max() < 4.0
+    assert angle(d_bvh[:, 1], d_bvh[:1, 1]).max() > 15.0  # the forearms do move in this clip
