@@ -27,7 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Play a motion (BVH or array) on the avatar. Keys: space = pause, R = restart, Esc = close.",
     )
     v.add_argument("motion", help="motion file (BVH, NPZ, ...)")
-    v.add_argument("--face", help="ARKit blendshape file (Live Link CSV, BEAT JSON, ...)")
+    v.add_argument("--face", help="ARKit blendshape file (Live Link CSV, BEAT JSON, ...); default for an SMPL-X "
+                   "motion: its jaw drives jawOpen")
+    v.add_argument("--flame-map", help="(E, 52) .npy mapping an SMPL-X file's FLAME expressions to ARKit shapes")
     v.add_argument("--audio", help="WAV file to play along")
     v.add_argument("--avatar", help="glTF/GLB/VRM avatar (default: the built-in one)")
     v.add_argument("--fps", type=float, help="true frame rate of the motion when its header is wrong")
@@ -65,6 +67,10 @@ def _single_scene(args: argparse.Namespace, aspect: float):
         from studyapp.face.io import load_face
 
         face = load_face(args.face)
+    else:
+        from studyapp.cli.motion import smplx_face_of
+
+        face = smplx_face_of(args.motion, fps=args.fps, flame_map=args.flame_map)
     avatar = load_avatar(args.avatar)
     slot = prepare_slot(avatar, motion, face)
     return make_scene([slot], avatar, labels=None, aspect=aspect)
