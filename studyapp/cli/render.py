@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import time
+import warnings
 from pathlib import Path
 
 from studyapp.errors import InputError, StudyappError
@@ -30,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     v.add_argument("--face", help="ARKit blendshape file (Live Link CSV, BEAT JSON, ...); default for an SMPL-X "
                    "motion: its jaw drives jawOpen")
     v.add_argument("--flame-map", help="(E, 52) .npy mapping an SMPL-X file's FLAME expressions to ARKit shapes")
+    v.add_argument("--body-model", help="your SMPL/SMPL-H/SMPL-X model .npz: the rest skeleton of an SMPL-family motion")
     v.add_argument("--audio", help="WAV file to play along")
     v.add_argument("--avatar", help="glTF/GLB/VRM avatar (default: the built-in one)")
     v.add_argument("--fps", type=float, help="true frame rate of the motion when its header is wrong")
@@ -61,7 +64,7 @@ def _single_scene(args: argparse.Namespace, aspect: float):
     from studyapp.render.pose import prepare_slot
     from studyapp.render.scene import load_avatar, make_scene
 
-    motion = load_motion(args.motion, fps=args.fps)
+    motion = load_motion(args.motion, fps=args.fps, body_model=args.body_model)
     face = None
     if args.face:
         from studyapp.face.io import load_face
@@ -70,7 +73,11 @@ def _single_scene(args: argparse.Namespace, aspect: float):
     else:
         from studyapp.cli.motion import smplx_face_of
 
-        face = smplx_face_of(args.motion, fps=args.fps, flame_map=args.flame_map)
+        with warnings.catch_warnings(record=True) as caught:  # one "warning:" line, as convert prints them
+            warnings.simplefilter("always", UserWarning)
+            face = smplx_face_of(args.motion, fps=args.fps, flame_map=args.flame_map)
+        for w in caught:
+            print(f"warning: {w.message}", file=sys.stderr)
     avatar = load_avatar(args.avatar)
     slot = prepare_slot(avatar, motion, face)
     return make_scene([slot], avatar, labels=None, aspect=aspect)
