@@ -269,15 +269,26 @@ _FPS_KEYS = ("mocap_frame_rate", "mocap_framerate", "fps", "frame_rate")
 _AMASS_SPLIT = ("root_orient", "pose_body")
 
 
-def _npz_shapes(path: Path) -> dict[str, tuple[int, ...]] | None:
+def _npz_arrays(path: Path) -> dict[str, np.ndarray] | None:
+    """Every array of an ``.npz`` that is data (pickled objects, which some pipelines add, are skipped)."""
     try:
         with np.load(str(path), allow_pickle=False) as z:
             if not isinstance(z, np.lib.npyio.NpzFile):
                 return None
-            # NpzFile reads each array to learn its shape; these files are a few MB at most
-            return {k: tuple(z[k].shape) for k in z.files if z[k].dtype != object}
+            arrays = {}
+            for k in z.files:  # these files are a few MB at most: read them whole
+                try:
+                    arrays[k] = z[k]
+                except ValueError:  # a pickled object (a dict of settings): not ours to read
+                    continue
+            return arrays
     except (ValueError, OSError, EOFError, zipfile.BadZipFile, AttributeError):
         return None
+
+
+def _npz_shapes(path: Path) -> dict[str, tuple[int, ...]] | None:
+    arrays = _npz_arrays(path)
+    return None if arrays is None else {k: tuple(v.shape) for k, v in arrays.items()}
 
 
 def recognise_smpl(path: str | Path) -> str | None:
@@ -309,8 +320,8 @@ def recognise_smpl(path: str | Path) -> str | None:
     return None
 
 
-def _scalar_text(z, key: str) -> str | None:
-    if key not in z.files:
+def _scalar_text(z: dict[str, np.ndarray], key: str) -> str | None:
+    if key not in z:
         return None
     v = z[key]
     return str(v.item() if v.shape == () else v) if v.dtype.kind in "US" else None
@@ -338,45 +349,48 @@ def read_smpl(path: str | Path, fps: float | None = None) -> SmplData:
         data = SmplData(family, poses.reshape(-1, n_j, 3), trans, float(rate), None, a[:, 165:265],
                         "TalkSHOW npy", None, str(p), notes)
         return _checked(data)
-    with np.load(str(p), allow_pickle=False) as z:
-        if "poses" in z.files and z["poses"].ndim == 2 and z["poses"].shape[1] == 3 * n_j:
-            poses = np.asarray(z["poses"], dtype=np.float64)
-            layout = "npz poses"
+    z = _npz_arrays(p) or {}
+    if "poses" in z and z["poses"].ndim == 2 and z["poses"].shape[1] == 3 * n_j:
+        poses = np.asarray(z["poses"], dtype=np.float64)
+        layout = "npz poses"
+    else:
+        parts = [z["root_orient"], z["pose_body"]]
+        if family == "smplx":
+            f = z["root_orient"].shape[0]
+            parts += [z["pose_jaw"] if "pose_jaw" in z else np.zeros((f, 3)),
+                      z["pose_eye"] if "pose_eye" in z else np.zeros((f, 6))]
+        if family != "smpl":
+            parts.append(z["pose_hand"] if "pose_hand" in z else np.zeros((z["root_orient"].shape[0], 90)))
         else:
-            parts = [z["root_orient"], z["pose_body"]]
-            if family == "smplx":
-                f = z["root_orient"].shape[0]
-                parts += [z["pose_jaw"] if "pose_jaw" in z.files else np.zeros((f, 3)),
-                          z["pose_eye"] if "pose_eye" in z.files else np.zeros((f, 6))]
-            if family != "smpl":
-                parts.append(z["pose_hand"] if "pose_hand" in z.files else np.zeros((z["root_orient"].shape[0], 90)))
-            else:
-                parts.append(np.zeros((z["root_orient"].shape[0], 6)))
-            try:
-                poses = np.concatenate([np.asarray(x, dtype=np.float64).reshape(len(x), -1) for x in parts], axis=1)
-            except ValueError as exc:
-                raise InputError(str(p), "keys root_orient/pose_*", f"arrays disagree in frame count ({exc})") from None
-            layout = "npz AMASS split"
-        f = poses.shape[0]
-        trans = np.asarray(z["trans"], dtype=np.float64) if "trans" in z.files else np.zeros((f, 3))
-        if trans.shape != (f, 3):
-            raise InputError(str(p), "key trans", f"shape {trans.shape}; expected ({f}, 3) like poses")
-        if "trans" not in z.files:
-            notes.append("no `trans`: the root stays in place")
-        rate = fps
-        if rate is None:
-            key = next((k for k in _FPS_KEYS if k in z.files), None)
-            if key is None:
-                raise InputError(str(p), "keys", "the file stores no frame rate (mocap_frame_rate or "
-                                                 "mocap_framerate); set fps on the condition")
+            parts.append(np.zeros((z["root_orient"].shape[0], 6)))
+        try:
+            poses = np.concatenate([np.asarray(x, dtype=np.float64).reshape(len(x), -1) for x in parts], axis=1)
+        except ValueError as exc:
+            raise InputError(str(p), "keys root_orient/pose_*", f"arrays disagree in frame count ({exc})") from None
+        layout = "npz AMASS split"
+    f = poses.shape[0]
+    trans = np.asarray(z["trans"], dtype=np.float64) if "trans" in z else np.zeros((f, 3))
+    if trans.shape != (f, 3):
+        raise InputError(str(p), "key trans", f"shape {trans.shape}; expected ({f}, 3) like poses")
+    if "trans" not in z:
+        notes.append("no `trans`: the root stays in place")
+    rate = fps
+    if rate is None:
+        key = next((k for k in _FPS_KEYS if k in z), None)
+        if key is None:
+            raise InputError(str(p), "keys", "the file stores no frame rate (mocap_frame_rate or "
+                                             "mocap_framerate); set fps on the condition")
+        try:
             rate = float(np.asarray(z[key]).reshape(-1)[0])
-        betas = np.asarray(z["betas"], dtype=np.float64).reshape(-1) if "betas" in z.files else None
-        expr = None
-        for k in ("expressions", "expression", "expr"):
-            if k in z.files and z[k].ndim == 2 and z[k].shape[0] == f:
-                expr = np.asarray(z[k], dtype=np.float64)
-                break
-        gender = _scalar_text(z, "gender")
+        except (ValueError, TypeError, IndexError):
+            raise InputError(str(p), f"key {key}", f"{z[key]!r} is not a frame rate") from None
+    betas = np.asarray(z["betas"], dtype=np.float64).reshape(-1) if "betas" in z else None
+    expr = None
+    for k in ("expressions", "expression", "expr"):
+        if k in z and z[k].ndim == 2 and z[k].shape[0] == f:
+            expr = np.asarray(z[k], dtype=np.float64)
+            break
+    gender = _scalar_text(z, "gender")
     data = SmplData(family, poses.reshape(f, n_j, 3), trans, float(rate), betas, expr, layout, gender, str(p), notes)
     return _checked(data)
 

@@ -251,6 +251,14 @@ def test_other_arrays_are_not_taken_for_smpl(tmp_path):
         load_motion(tmp_path / "rot.npz")
 
 
+def test_pickled_extras_are_skipped_not_fatal(tmp_path):
+    p = tmp_path / "extras.npz"
+    np.savez(p, poses=np.zeros((3, 165)), trans=np.zeros((3, 3)), mocap_frame_rate=np.int32(30),
+             gender=np.array({"gender": "neutral"}, dtype=object))  # some pipelines store a dict like this
+    assert recognise_smpl(p) == "smplx"
+    assert load_motion(p).n_frames == 3
+
+
 def test_a_file_with_no_frame_rate_names_the_keys(tmp_path):
     p = tmp_path / "nofps.npz"
     np.savez(p, poses=np.zeros((3, 165)))
@@ -342,17 +350,41 @@ def test_convert_smplx_onto_the_builtin_avatar_writes_the_pose(tmp_path, capsys)
 # -- the example design's files ------------------------------------------------------------------------------
 
 
+def _written_as(family: str, bvh: Path) -> dict[str, np.ndarray]:
+    """A demo BVH as an SMPL pipeline writes it (how study_designs/smplx_example was made, see its README)."""
+    from studyapp.motion.retarget import retarget
+    from studyapp.motion.rotations import quat_multiply, quat_rotate, quat_to_axis_angle
+    from studyapp.motion.smpl import smpl_skeleton
+
+    m = load_motion(bvh)
+    sk = smpl_skeleton(family)
+    r = retarget(m, sk)
+    q = r.rotations.copy()
+    root = r.translations[:, 0]
+    if family == "smplh":  # AMASS: Z-up, the root turned +90 degrees about x and trans with it
+        y_to_z = np.broadcast_to([np.sin(np.pi / 4), 0.0, 0.0, np.cos(np.pi / 4)], (r.n_frames, 4))
+        q[:, 0] = quat_multiply(y_to_z, q[:, 0])
+        trans = quat_rotate(y_to_z, root) - quat_rotate(y_to_z[0], sk.offsets[0])
+    else:
+        trans = root - sk.offsets[0]
+    return {"poses": quat_to_axis_angle(q).reshape(r.n_frames, -1), "trans": trans}
+
+
 @pytest.mark.parametrize("family, source", [("smplx", "synced"), ("smplh", "lagged")])
 def test_the_example_designs_smpl_files_play_the_demo_motion_they_were_written_from(family, source):
     """study_designs/smplx_example.toml uses the demo's motion written as SMPL-X (BEAT2 keys) and as SMPL-H
-    (AMASS: Z-up); on the avatar each plays as the demo BVH does, limb for limb."""
+    (AMASS: Z-up); they are what their README says, and on the avatar each plays as the demo BVH does."""
     from studyapp.resources import designs_dir
 
-    demo = designs_dir() / "demo" / "motion"
-    smpl_path = demo / family / "clip01.npz"
+    bvh = designs_dir() / "demo" / "motion" / source / "clip01.bvh"
+    smpl_path = designs_dir() / "smplx_example" / family / "clip01.npz"
     assert recognise_smpl(smpl_path) == family
+    shipped = np.load(smpl_path)
+    again = _written_as(family, bvh)
+    np.testing.assert_allclose(shipped["poses"], again["poses"], atol=2e-4)
+    np.testing.assert_allclose(shipped["trans"], again["trans"], atol=2e-4)
     _, _, _, p_smpl, idx = on_avatar(smpl_path)
-    _, _, _, p_bvh, _ = on_avatar(demo / source / "clip01.bvh")
+    _, _, _, p_bvh, _ = on_avatar(bvh)
     limbs = [("LeftUpperArm", "LeftLowerArm"), ("LeftLowerArm", "LeftHand"), ("RightUpperArm", "RightLowerArm"),
              ("RightLowerArm", "RightHand"), ("Hips", "Head")]
     d_smpl = np.stack([p_smpl[:, idx(b)] - p_smpl[:, idx(a)] for a, b in limbs], 1)
