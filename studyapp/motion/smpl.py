@@ -26,8 +26,8 @@ Rest joint positions are not public constants. They come from the user's own lic
 
 Coordinates: the up axis is read from the data (where the pelvis carries the body's up over the clip), so
 Z-up files (AMASS) and upside-down camera-space ones (TalkSHOW) are stood upright about the X axis; ``trans``
-stays in metres and the root keeps its motion; the clip is set on the rest pose's floor (its lowest joint
-over the clip at the height of the rest pose's lowest joint), since data sets put their floor anywhere.
+stays in metres and the root keeps its motion; the clip is set on the rest pose's floor (its lowest ankle
+over the clip at the height of the rest pose's ankles), since data sets put their floor anywhere.
 
 >>> import numpy as np
 >>> poses = np.zeros((2, 165)); poses[:, 16 * 3 + 2] = np.pi / 2    # left shoulder +90 degrees about z
@@ -65,6 +65,7 @@ SMPL_BODY_JOINTS: tuple[str, ...] = (
 _BODY_PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19)
 _FINGERS = ("index", "middle", "pinky", "ring", "thumb")
 _LEFT_WRIST, _RIGHT_WRIST, _HEAD = 20, 21, 15
+_ANKLES = [7, 8]
 
 
 def _hand(side: str) -> tuple[str, ...]:
@@ -450,8 +451,9 @@ def smpl_motion(data: SmplData, rest: np.ndarray | None = None) -> Motion:
 
     Each joint's axis-angle is its local rotation (rest frames align with the world); the root is at its rest
     position plus ``trans``, both turned upright (:func:`up_axis`), then lifted or lowered so the clip's
-    lowest joint over all frames is at the rest pose's lowest joint: the files' floors differ (BEAT2 puts the
-    feet at y = 0 with a template whose pelvis is near 0; AMASS at z = 0).
+    lowest ankle over all frames is as high as the rest pose's: the files' floors differ, and so do the
+    templates' origins (the BEAT2 excerpt's ``trans`` holds about 1.3 m in y, AMASS's some 0.9 m in z). Ankles, not toes: a foot pitched
+    down would otherwise sink the whole figure.
     """
     from studyapp.motion.fk import joint_positions
     from studyapp.motion.rotations import axis_angle_to_quat, matrix_to_quat, quat_multiply
@@ -465,8 +467,8 @@ def smpl_motion(data: SmplData, rest: np.ndarray | None = None) -> Motion:
     trans = np.broadcast_to(sk.offsets, (f, sk.n_joints, 3)).copy()
     trans[:, 0] = (sk.offsets[0] + data.trans) @ stand.T
     motion = Motion(sk, float(data.fps), rot, trans, source=data.source)
-    rest_floor = float((sk.offsets[0, 1] + _rest_positions(sk)[:, 1]).min())
-    clip_floor = float(joint_positions(motion)[:, :, 1].min())
+    rest_floor = float((sk.offsets[0, 1] + _rest_positions(sk)[_ANKLES, 1]).min())
+    clip_floor = float(joint_positions(motion)[:, _ANKLES, 1].min())
     trans[:, 0, 1] += rest_floor - clip_floor
     return Motion(sk, float(data.fps), rot, trans, source=data.source)
 

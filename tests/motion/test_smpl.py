@@ -194,7 +194,14 @@ def test_feet_stay_on_the_floor_whatever_floor_the_file_uses(tmp_path):
     _, pa = world(a)
     _, pb = world(b)
     np.testing.assert_allclose(pa, pb, atol=1e-9)
-    assert abs(pa[:, :, 1].min() - builtin_rest_joints("smplx")[:, 1].min()) < 1e-9
+    ankles = [7, 8]
+    assert abs(pa[:, ankles, 1].min() - builtin_rest_joints("smplx")[ankles, 1].min()) < 1e-9
+    # a foot pitched down (toes lower) does not sink the figure: the ankles stay where they stand at rest
+    pointed = poses.copy()
+    pointed[:, 7 * 3] = pointed[:, 8 * 3] = np.radians(40)  # ankles about x: toes (+z) turn down
+    _, pc = world(load_motion(write_smplx(tmp_path / "c.npz", pointed)))
+    np.testing.assert_allclose(pc[:, :10], pa[:, :10], atol=1e-9)  # pelvis .. ankles, spine: unchanged
+    assert pc[0, 10, 1] < pa[0, 10, 1] - 0.02  # the toes are lower
 
 
 # -- recognition ---------------------------------------------------------------------------------------------
