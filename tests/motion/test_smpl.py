@@ -398,3 +398,17 @@ def test_the_example_designs_smpl_files_play_the_demo_motion_they_were_written_f
     d_bvh = np.stack([p_bvh[:, idx(b)] - p_bvh[:, idx(a)] for a, b in limbs], 1)
     assert angle(d_smpl, d_bvh).max() < 4.0
     assert angle(d_bvh[:, 1], d_bvh[:1, 1]).max() > 15.0  # the forearms do move in this clip
+
+
+def test_convert_to_bvh_keeps_every_joint_where_it_was(tmp_path, capsys):
+    """SMPL's joint order is parent-first but not depth-first (both hips come before either knee); the BVH
+    lists joints depth-first and its channel columns must follow that listing."""
+    out = tmp_path / "beat2.bvh"
+    assert main(["convert", str(BEAT2), str(out)]) == 0
+    written = read_bvh(out)
+    src = load_motion(BEAT2)
+    assert written.skeleton.names != src.skeleton.names  # reordered, so the test means something
+    order = [written.skeleton.names.index(n) for n in src.skeleton.names]
+    _, p_written = world(written)
+    _, p_src = world(src)
+    np.testing.assert_allclose(p_written[:, order], p_src, atol=1e-5)
