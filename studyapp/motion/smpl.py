@@ -52,8 +52,9 @@ from studyapp.motion.skeleton import Motion, Skeleton
 
 __all__ = [
     "FAMILY_JOINTS", "FAMILY_NAMES", "SMPL_BODY_JOINTS", "SMPLX_JOINTS", "SMPLH_JOINTS", "SMPL_JOINTS",
-    "TALKSHOW_WIDTH", "SmplData", "joint_names", "parents", "recognise_smpl", "read_smpl", "builtin_rest_joints",
-    "body_model_rest_joints", "smpl_skeleton", "smpl_motion", "load_smpl_motion", "summarize_smpl",
+    "TALKSHOW_WIDTH", "SmplData", "joint_names", "parents", "recognise_smpl", "read_smpl", "up_axis",
+    "builtin_rest_joints", "body_model_rest_joints", "smpl_skeleton", "smpl_motion", "load_smpl_motion",
+    "summarize_smpl",
 ]
 
 #: The 22 joints SMPL, SMPL-H and SMPL-X share (pelvis and body).
@@ -452,10 +453,10 @@ def smpl_motion(data: SmplData, rest: np.ndarray | None = None) -> Motion:
     Each joint's axis-angle is its local rotation (rest frames align with the world); the root is at its rest
     position plus ``trans``, both turned upright (:func:`up_axis`), then lifted or lowered so the clip's
     lowest ankle over all frames is as high as the rest pose's: the files' floors differ, and so do the
-    templates' origins (the BEAT2 excerpt's ``trans`` holds about 1.3 m in y, AMASS's some 0.9 m in z). Ankles, not toes: a foot pitched
-    down would otherwise sink the whole figure.
+    templates' origins (the BEAT2 excerpt's ``trans`` holds about 1.3 m in y, AMASS's some 0.9 m in z).
+    Ankles, not toes: a foot pitched down would otherwise sink the whole figure.
     """
-    from studyapp.motion.fk import joint_positions
+    from studyapp.motion.fk import joint_positions, rest_joint_positions
     from studyapp.motion.rotations import axis_angle_to_quat, matrix_to_quat, quat_multiply
 
     sk = smpl_skeleton(data.family, rest)
@@ -467,18 +468,10 @@ def smpl_motion(data: SmplData, rest: np.ndarray | None = None) -> Motion:
     trans = np.broadcast_to(sk.offsets, (f, sk.n_joints, 3)).copy()
     trans[:, 0] = (sk.offsets[0] + data.trans) @ stand.T
     motion = Motion(sk, float(data.fps), rot, trans, source=data.source)
-    rest_floor = float((sk.offsets[0, 1] + _rest_positions(sk)[_ANKLES, 1]).min())
+    rest_floor = float(rest_joint_positions(sk)[_ANKLES, 1].min())
     clip_floor = float(joint_positions(motion)[:, _ANKLES, 1].min())
     trans[:, 0, 1] += rest_floor - clip_floor
     return Motion(sk, float(data.fps), rot, trans, source=data.source)
-
-
-def _rest_positions(sk: Skeleton) -> np.ndarray:
-    """Rest joint positions relative to the root joint (rest frames are all world-aligned)."""
-    pos = np.zeros((sk.n_joints, 3))
-    for j in range(1, sk.n_joints):
-        pos[j] = pos[sk.parents[j]] + sk.offsets[j]
-    return pos
 
 
 def load_smpl_motion(path: str | Path, fps: float | None = None, body_model: str | Path | None = None) -> Motion:

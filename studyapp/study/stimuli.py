@@ -469,7 +469,8 @@ def _missing_array_settings(ci: int, cond: Condition) -> list[tuple[str, str, st
 def _unreadable_fix(cond: Condition) -> str:
     if cond.is_array:
         return ("check this condition's template, representation, joints and fps against how the model wrote "
-                "its arrays (`studyapp inspect FILE` shows their shape), or re-export the files")
+                "its arrays (`studyapp inspect FILE` shows their shape), or, for SMPL-family files, its "
+                "body_model; or re-export the files")
     return "fix or re-export the file (`studyapp inspect FILE` shows what is read)"
 
 
