@@ -105,26 +105,42 @@ def make_scene(slots, avatar: Avatar | tuple[Avatar, ...], labels: tuple[str, ..
     return TrialScene(slots=slots, avatars=avatars, labels=labels, camera=camera)
 
 
-def load_avatar(spec: str | Path | None) -> Avatar:
-    """``None``/``"builtin"`` -> the built-in avatar; otherwise a glTF/GLB/VRM file."""
+def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None) -> Avatar:
+    """``None``/``"builtin"`` -> the built-in avatar; otherwise a glTF/GLB/VRM file, which must be humanoid.
+
+    ``bone_map`` is the design's ``[avatar.bone_map]`` (``{joint name: humanoid bone}``). A file whose
+    joints (recognised names plus ``bone_map``) lack a required humanoid bone is refused with a message
+    that names the file, the bones missing and its joints.
+    """
     if spec is None or str(spec).lower() in ("", "builtin", "default"):
         return build_default_avatar()
     path = Path(spec)
     if not path.is_file():
         raise InputError(path, None, "avatar file not found (use 'builtin' for the built-in avatar)")
-    return _load_gltf_cached(str(path.resolve()), path.stat().st_mtime_ns)
+    from studyapp.render.avatar_rig import BONE_MAP_FIX, bone_map_problems, missing_bones, not_humanoid_message
+
+    key = tuple(sorted((bone_map or {}).items()))
+    avatar = _load_gltf_cached(str(path.resolve()), path.stat().st_mtime_ns, key)
+    bad = bone_map_problems(avatar.skeleton.names, bone_map or {}, avatar.joint_aliases)
+    if bad:
+        joint, problem = bad[0]
+        raise InputError(path, f"[avatar.bone_map] {joint}", f"{problem}; {BONE_MAP_FIX}")
+    missing = missing_bones(avatar.skeleton, avatar.bone_map)
+    if missing:
+        raise InputError(path, None, not_humanoid_message(avatar.skeleton, missing))
+    return avatar
 
 
-_GLTF_CACHE: dict[tuple[str, int], Avatar] = {}
+_GLTF_CACHE: dict[tuple, Avatar] = {}
 
 
-def _load_gltf_cached(path: str, mtime: int) -> Avatar:
+def _load_gltf_cached(path: str, mtime: int, bone_map: tuple = ()) -> Avatar:
     from studyapp.render.gltf import load_gltf
 
-    key = (path, mtime)
+    key = (path, mtime, bone_map)
     if key not in _GLTF_CACHE:
         _GLTF_CACHE.clear()  # one custom avatar per study; do not hold old ones
-        _GLTF_CACHE[key] = load_gltf(path)
+        _GLTF_CACHE[key] = load_gltf(path, bone_map=dict(bone_map) or None)
     return _GLTF_CACHE[key]
 
 
@@ -139,7 +155,7 @@ def build_trial_scene(ctx_or_renderer: Any, media: Any, labels: tuple[str, ...] 
     spec = getattr(media, "avatar", None)
     if spec is None:
         spec = getattr(media, "avatar_spec", None)
-    avatar = load_avatar(spec)
+    avatar = load_avatar(spec, bone_map=getattr(media, "avatar_bone_map", None))
     face = getattr(media, "face", None)
     name_map = getattr(media, "name_map", None)
     slots = [prepare_slot(avatar, m, face, name_map=name_map) for m in media.motions]

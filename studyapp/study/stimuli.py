@@ -37,6 +37,7 @@ from studyapp.face.animation import FaceAnimation
 from studyapp.motion.skeleton import Motion
 from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
                                    motion_path, resolve)
+from studyapp.study.design.parse import is_smpl_file, missing_array_settings
 from studyapp.study.schedule import TrialPlan
 
 #: Largest allowed difference between the durations of a stimulus's audio, face and motions (seconds).
@@ -60,6 +61,7 @@ class TrialMedia:
     duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
     criteria: the design's criterion ids, in order (what the participant ranks the slots on).
     name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
+    avatar_bone_map: the design's ``[avatar.bone_map]`` (avatar joint -> humanoid bone).
     """
 
     plan: TrialPlan
@@ -71,6 +73,7 @@ class TrialMedia:
     duration_s: float
     criteria: tuple[str, ...] = ()
     name_maps: tuple[dict[str, str], dict[str, str], dict[str, str]] = ({}, {}, {})
+    avatar_bone_map: dict[str, str] | None = None
 
     @property
     def avatar_spec(self) -> str:
@@ -300,7 +303,8 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     maps = tuple(dict(design.condition(cid.removeprefix(FROZEN_PREFIX)).name_map) for cid in plan.slots)
     return TrialMedia(plan=plan, audio=audio, face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
-                      criteria=tuple(design.criterion_ids), name_maps=maps)  # type: ignore[arg-type]
+                      criteria=tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
+                      avatar_bone_map=dict(design.avatar_bone_map))
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -332,6 +336,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     array_settings_missing: set[int] = set()  # conditions whose NPZ/NPY files are raw arrays lacking settings
     cond_index = {c.id: i for i, c in enumerate(design.conditions)}
 
+    problems += _check_avatars(design)
     for ci, cond in enumerate(design.conditions):
         if cond.template is not None and resolve(design, cond.template).is_file():
             try:
@@ -378,7 +383,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                 continue  # the pattern names a tag this stimulus lacks: reported with the pattern
             if not path.is_file():
                 continue
-            if not _array_settings_complete(cond) and not _is_smpl_file(path):
+            if not _array_settings_complete(cond) and not is_smpl_file(path):
                 array_settings_missing.add(ci)  # reported once per condition below
                 continue
             try:
@@ -397,7 +402,8 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                 problems += _check_retarget(ci, cond, motion, path)
         problems += _check_durations(si, stim, items, duration_mismatches)
     for ci in sorted(array_settings_missing):
-        problems += _missing_array_settings(ci, design.conditions[ci])
+        c = design.conditions[ci]
+        problems += missing_array_settings(f"conditions[{ci}]", c.template, c.representation, c.fps)
     # One line per condition and cause, not one per clip: a setting of the condition is usually the cause.
     for (ci, text), where in unreadable.items():
         cond = design.conditions[ci]
@@ -442,30 +448,6 @@ def _array_settings_complete(cond: Condition) -> bool:
     return not cond.is_array or None not in (cond.template, cond.representation, cond.fps)
 
 
-def _is_smpl_file(path: Path) -> bool:
-    """Whether an NPZ/NPY motion file is an SMPL-family file, which carries its own skeleton, layout and rate."""
-    from studyapp.motion.smpl import recognise_smpl
-
-    return recognise_smpl(path) is not None
-
-
-def _missing_array_settings(ci: int, cond: Condition) -> list[tuple[str, str, str]]:
-    """The keys a raw rotation array's condition must give: arrays carry no skeleton, layout or frame rate."""
-    from studyapp.motion.rotations import REPRESENTATIONS
-
-    key = f"conditions[{ci}]"
-    out = []
-    if cond.template is None:
-        out.append((f"{key}.template", "NPZ/NPY motion that is not an SMPL/SMPL-H/SMPL-X file needs a template "
-                    "BVH for its skeleton", 'add template = "template.bvh" (a BVH of the skeleton the arrays drive)'))
-    if cond.representation is None:
-        out.append((f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
-                    f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})'))
-    if cond.fps is None:
-        out.append((f"{key}.fps", "NPZ/NPY motion carries no frame rate", "add the model's output rate, e.g. fps = 15"))
-    return out
-
-
 def _unreadable_fix(cond: Condition) -> str:
     if cond.is_array:
         return ("check this condition's template, representation, joints and fps against how the model wrote "
@@ -483,6 +465,21 @@ def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]
     short = {k: v for k, v in items.items() if v[0] < stim.duration_s - DURATION_TOLERANCE_S}
     return [(f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {k} is only "
              f"{d:.3f} s long ({p})", "lower duration_s or give longer files") for k, (d, p) in short.items()]
+
+
+def _check_avatars(design: Design) -> list[tuple[str, str, str]]:
+    """Each avatar file loads, is humanoid with the design's ``[avatar.bone_map]``, and every entry of that
+    map names one of its joints (one problem per bad entry)."""
+    from studyapp.render.avatar_rig import avatar_problems
+
+    out = []
+    keys = [("avatar.model", design.avatar)]
+    keys += [(f"avatar.by_speaker.{k}", v) for k, v in design.avatar_by_speaker.items()]
+    for key, name in keys:
+        path = resolve(design, name) if name != "builtin" else None
+        if path is not None and path.is_file():
+            out += [(k or key, msg, fix) for k, msg, fix in avatar_problems(path, design.avatar_bone_map)]
+    return out
 
 
 def _check_retarget(ci: int, cond: Condition, motion: Motion, path: Path) -> list[tuple[str, str, str]]:

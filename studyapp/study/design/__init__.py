@@ -33,7 +33,7 @@ from studyapp.study.design.files import (design_hash, model_path, motion_path, p
                                          resolve)
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
                                          DesignError, Playback, Problem, QuestionItem, Stimulus)
-from studyapp.study.design.parse import REPRESENTATIONS, TABLES, parse_design
+from studyapp.study.design.parse import REPRESENTATIONS, TABLES, condition_from_settings, parse_design
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE, FROZEN_PREFIX,
                                           MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
                                           SLOT_LABELS)
@@ -42,7 +42,7 @@ __all__ = [
     "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
     "MOTION_SUFFIXES", "ORDERINGS", "QUESTION_KINDS", "REPRESENTATIONS", "SLOT_ASSIGNMENTS", "SLOT_LABELS", "TABLES",
     "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Playback", "Problem", "QuestionItem",
-    "Stimulus", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",
+    "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",
     "pattern_fields", "problems_to_json", "referenced_files", "resolve", "validate_design", "visible_text_leaks",
 ]
 

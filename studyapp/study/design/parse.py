@@ -9,6 +9,7 @@ import math
 import re
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from studyapp import tomlfile
 from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
@@ -51,70 +52,125 @@ def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> lis
         col.add("conditions", f"{len(conds)} conditions given; the three-slot viewer shows exactly 3 per trial",
                 "keep exactly 3 [[conditions]] (make one design per set of three models)")
     for i, e in conds:
-        key = f"conditions[{i}]"
-        if ("motion" in e) == ("model" in e):
-            col.add(key, "needs exactly one of `motion` (file pattern) or `model` (ONNX file)"
-                    + (", not both" if "motion" in e else ""),
-                    'add motion = "motion/<model>/{stimulus}.bvh" or model = "model.onnx"')
-        if "fps" in e and not (e["fps"] > 0 and math.isfinite(e["fps"])):
-            col.add(f"{key}.fps", f"must be a positive frame rate, got {e['fps']}", "e.g. fps = 15")
-        rep = e.get("representation")
-        if rep is not None:
-            rep = _REPR_ALIASES.get(rep.lower(), rep.lower())
-            if rep in ("6d", "rot6d", "rotation_6d"):
-                col.add(f"{key}.representation", f"{e['representation']!r} is ambiguous: 6D rotations come in two "
-                        "layouts that the numbers cannot tell apart",
-                        'representation = "sixd" (Zhou et al.: first two matrix columns) or "sixd_rows" '
-                        "(PyTorch3D matrix_to_rotation_6d: first two rows)")
-                rep = None
-            elif rep not in REPRESENTATIONS:
-                col.add(f"{key}.representation", f"unknown rotation representation {e['representation']!r}",
-                        did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
-        ro = e.get("rotation_order")
-        if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
-            col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
-        nm = e.get("name_map", {})
-        bad = [k for k, v in nm.items() if not isinstance(v, str)]
-        for k in bad:
-            col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
-        if "motion" in e:
-            fields = pattern_fields(e["motion"])
-            if not fields:
-                col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
-                        "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
-            if not e["motion"].lower().endswith(MOTION_SUFFIXES):
-                col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
-                        "convert them first (studyapp convert) or fix the pattern's extension")
-            # NPZ/NPY raw arrays need template, representation and fps; SMPL-family files need none. Only reading
-            # a file tells them apart, so stimuli.check_stimulus_files asks for what is missing.
-            if not e["motion"].lower().endswith((".npz", ".npy")):
-                for k in ("joints", "degrees", "representation"):
-                    if k in e:
-                        col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
-                                f"remove {k}")
-        joints = e.get("joints")
-        if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
-            col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
-                    'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
-            joints = None
-        if "model" in e and "motion" not in e:
-            for k in ("joints", "degrees", "representation", "rotation_order"):
-                if k in e:  # a live model declares its own output; a setting here would be silently ignored
-                    col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
-                            f"remove {k} (the model's output is read as its contract declares)")
-        if "model" in e and e["model"] != BUILTIN_REFERENCE and not e["model"].lower().endswith(".onnx"):
-            col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
-        if e.get("id"):
-            conditions.append(Condition(
-                id=e["id"], motion=e.get("motion"), model=e.get("model"),
-                fps=float(e["fps"]) if "fps" in e else None,
-                representation=rep, template=e.get("template"),
-                rotation_order=ro.upper() if ro else None,
-                name_map={k: v for k, v in nm.items() if isinstance(v, str)},
-                joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
-                body_model=e.get("body_model"),
-            ))
+        cond = parse_condition(col, f"conditions[{i}]", e)
+        if cond is not None:
+            conditions.append(cond)
     return conditions
+
+
+def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) -> Condition | None:
+    """One well-typed ``[[conditions]]`` table (``e``) checked and turned into a :class:`Condition`; problems
+    go to ``col`` under ``key``. ``pattern`` False: ``motion`` names one file, not a pattern."""
+    if ("motion" in e) == ("model" in e):
+        col.add(key, "needs exactly one of `motion` (file pattern) or `model` (ONNX file)"
+                + (", not both" if "motion" in e else ""),
+                'add motion = "motion/<model>/{stimulus}.bvh" or model = "model.onnx"')
+    if "fps" in e and not (e["fps"] > 0 and math.isfinite(e["fps"])):
+        col.add(f"{key}.fps", f"must be a positive frame rate, got {e['fps']}", "e.g. fps = 15")
+    rep = e.get("representation")
+    if rep is not None:
+        rep = _REPR_ALIASES.get(rep.lower(), rep.lower())
+        if rep in ("6d", "rot6d", "rotation_6d"):
+            col.add(f"{key}.representation", f"{e['representation']!r} is ambiguous: 6D rotations come in two "
+                    "layouts that the numbers cannot tell apart",
+                    'representation = "sixd" (Zhou et al.: first two matrix columns) or "sixd_rows" '
+                    "(PyTorch3D matrix_to_rotation_6d: first two rows)")
+            rep = None
+        elif rep not in REPRESENTATIONS:
+            col.add(f"{key}.representation", f"unknown rotation representation {e['representation']!r}",
+                    did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
+    ro = e.get("rotation_order")
+    if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
+        col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
+    nm = e.get("name_map", {})
+    bad = [k for k, v in nm.items() if not isinstance(v, str)]
+    for k in bad:
+        col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
+    if "motion" in e:
+        fields = pattern_fields(e["motion"]) if pattern else ["stimulus"]
+        if not fields:
+            col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
+                    "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
+        if not e["motion"].lower().endswith(MOTION_SUFFIXES):
+            col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
+                    "convert them first (studyapp convert) or fix the pattern's extension")
+        if e["motion"].lower().endswith((".npz", ".npy")):
+            # Raw arrays carry neither skeleton, nor rotation layout, nor frame rate; SMPL-family files carry all
+            # three. Only reading a file tells them apart: a design's pattern is checked file by file by
+            # stimuli.check_stimulus_files, one named file (`view`) here.
+            if not pattern and not is_smpl_file(Path(e["motion"])):
+                for problem in missing_array_settings(key, *(e.get(k) for k in ("template", "representation", "fps"))):
+                    col.add(*problem)
+        else:
+            for k in ("joints", "degrees", "representation"):
+                if k in e:
+                    col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
+                            f"remove {k}")
+    joints = e.get("joints")
+    if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
+        col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
+                'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
+        joints = None
+    if "model" in e and "motion" not in e:
+        for k in ("joints", "degrees", "representation", "rotation_order"):
+            if k in e:  # a live model declares its own output; a setting here would be silently ignored
+                col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
+                        f"remove {k} (the model's output is read as its contract declares)")
+    if "model" in e and e["model"] != BUILTIN_REFERENCE and not e["model"].lower().endswith(".onnx"):
+        col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
+    if e.get("id"):
+        return Condition(
+            id=e["id"], motion=e.get("motion"), model=e.get("model"),
+            fps=float(e["fps"]) if "fps" in e else None,
+            representation=rep, template=e.get("template"),
+            rotation_order=ro.upper() if ro else None,
+            name_map={k: v for k, v in nm.items() if isinstance(v, str)},
+            joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
+            body_model=e.get("body_model"),
+        )
+    return None
+
+
+def is_smpl_file(path: Path) -> bool:
+    """Whether an NPZ/NPY motion file is an SMPL-family file, which carries its own skeleton, layout and rate."""
+    from studyapp.motion.smpl import recognise_smpl
+
+    return path.is_file() and recognise_smpl(path) is not None
+
+
+def missing_array_settings(key: str, template: Any, representation: Any, fps: Any) -> list[tuple[str, str, str]]:
+    """``(key, message, fix)`` for each setting a raw rotation array's condition lacks (``None``): arrays carry
+    no skeleton, rotation layout or frame rate."""
+    out = []
+    if template is None:
+        out.append((f"{key}.template", "NPZ/NPY motion that is not an SMPL/SMPL-H/SMPL-X file needs a template "
+                    "BVH for its skeleton", 'add template = "template.bvh" (a BVH of the skeleton the arrays drive)'))
+    if representation is None:
+        out.append((f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
+                    f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})'))
+    if fps is None:
+        out.append((f"{key}.fps", "NPZ/NPY motion carries no frame rate", "add the model's output rate, e.g. fps = 15"))
+    return out
+
+
+def condition_from_settings(settings: dict[str, Any], source: str | Path) -> tuple[Condition | None, list[Problem]]:
+    """A condition from settings given outside a design file (``studyapp view``'s options), with the
+    checks and meaning of a ``[[conditions]]`` table whose ``motion`` names one file, not a pattern.
+
+    Returns the condition (None when unusable) and the problems, keyed by the setting (``fps``, ...).
+
+    >>> cond, problems = condition_from_settings({"motion": "out.npy", "representation": "6d"}, "out.npy")
+    >>> [p.key for p in problems]
+    ['representation', 'template', 'fps']
+    >>> condition_from_settings({"motion": "a.bvh", "rotation_order": "zyx"}, "a.bvh")[0].rotation_order
+    'ZYX'
+    """
+    col = Collector(Path(source), "")
+    entry = check_table(col, {"id": "view", **settings}, Condition, "view")
+    cond = parse_condition(col, "view", entry, pattern=False)
+    for p in col.problems:
+        p.key = p.key.removeprefix("view").removeprefix(".")
+    return cond, col.problems
 
 
 def _stimuli(col: Collector, top: dict, stims: list[tuple[int, dict]], path: Path) -> list[Stimulus]:
@@ -173,6 +229,24 @@ def _avatar(col: Collector, avatar: AvatarTable, stims: list[tuple[int, dict]]) 
         if name != "builtin" and not name.lower().endswith(AVATAR_SUFFIXES):
             col.add(akey, f"{name!r} is neither \"builtin\" nor a .glb/.gltf/.vrm file", 'use "builtin" or a glTF file')
     return avatar_default, by_speaker
+
+
+def _avatar_bone_map(col: Collector, avatar: AvatarTable) -> dict[str, str]:
+    """``[avatar.bone_map]`` entries naming humanoid bones (joint names are checked against the file by validate)."""
+    from studyapp.render.avatar_rig import canonical_bone
+
+    bone_map = {}
+    for k, v in avatar.bone_map.items():
+        if not isinstance(v, str):
+            col.add(f"avatar.bone_map.{k}", "must map an avatar joint name to a humanoid bone name (a string)",
+                    f'"{k}" = "LeftUpperArm"')
+        elif canonical_bone(v) is None:
+            col.add(f"avatar.bone_map.{k}", f"{v!r} is not a Unity humanoid bone name",
+                    "use Hips, Spine, Chest, UpperChest, Neck, Head, LeftShoulder, LeftUpperArm, LeftLowerArm, "
+                    "LeftHand, LeftUpperLeg, LeftLowerLeg, LeftFoot, LeftToes, LeftIndexProximal, ...")
+        else:
+            bone_map[k] = v
+    return bone_map
 
 
 def _ordering_and_slots(col: Collector, ordering: OrderingTable, slots: SlotsTable):
@@ -316,6 +390,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     # As for stimuli: a criterion with a problem of its own is still known by its id to attention checks.
     crit_ids = [e["id"] for _, e in crits if e.get("id")] if "criteria" in top else [c.id for c in criteria]
     avatar_default, by_speaker = _avatar(col, avatar, stims)
+    bone_map = _avatar_bone_map(col, avatar)
     labels = _ordering_and_slots(col, ordering, slots)
     practice = top.get("practice", key_default(DesignFile, "practice"))
     for j, sid in enumerate(practice):
@@ -329,7 +404,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     design = Design(
         path=path.resolve(), title=top.get("title", ""), instructions=top.get("instructions", "").strip(),
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
-        avatar_by_speaker=by_speaker, ordering=ordering.method, slot_assignment=slots.assignment,
+        avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=ordering.method, slot_assignment=slots.assignment,
         slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
         playback=Playback(**playback), questionnaire=items, max_attention_failures=maxfail,
         seed=int(ordering.seed), groups=groups,
