@@ -578,6 +578,9 @@ def test_smpl_family_conditions_need_no_template_representation_or_fps(study: Pa
                               'motion = "motion/a/{stimulus}.npz"\nbody_model = "models/SMPLX_NEUTRAL.npz"')
     p = only(problems_for(study, with_model), "conditions[0].body_model")
     assert "SMPLX_NEUTRAL.npz" in str(p)
+    # on a BVH condition a body model would be silently ignored: refused instead
+    on_bvh = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{stimulus}.bvh"\nbody_model = "m.npz"')
+    assert any("not one" in p.message for p in problems_for(study, on_bvh) if p.key == "conditions[2].body_model")
     # a raw array in the same place still needs its settings, asked for once for the condition
     _write_arrays(study, 75)
     raw = GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.npy"')

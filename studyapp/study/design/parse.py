@@ -102,7 +102,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
                 for problem in missing_array_settings(key, *(e.get(k) for k in ("template", "representation", "fps"))):
                     col.add(*problem)
         else:
-            for k in ("joints", "degrees", "representation"):
+            for k in ("joints", "degrees", "representation", "body_model"):
                 if k in e:
                     col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
                             f"remove {k}")
@@ -112,7 +112,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
                 'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
         joints = None
     if "model" in e and "motion" not in e:
-        for k in ("joints", "degrees", "representation", "rotation_order"):
+        for k in ("joints", "degrees", "representation", "rotation_order", "body_model"):
             if k in e:  # a live model declares its own output; a setting here would be silently ignored
                 col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
                         f"remove {k} (the model's output is read as its contract declares)")
