@@ -22,7 +22,7 @@ along +X, every joint's rest frame aligned with the world, so a joint's axis-ang
 
 Rest joint positions are not public constants. They come from the user's own licensed body model file
 (:func:`body_model_rest_joints`: ``J_regressor @ (v_template + shapedirs @ betas)``) or, without one, from
-:data:`BUILTIN_REST` (average adult proportions written here).
+:func:`builtin_rest_joints` (average adult proportions written here).
 
 Coordinates: the up axis is read from the data (where the pelvis carries the body's up over the clip), so
 Z-up files (AMASS) and upside-down camera-space ones (TalkSHOW) are stood upright about the X axis; ``trans``
