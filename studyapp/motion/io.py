@@ -64,11 +64,15 @@ def load_motion(
         check_numpy_file(p)
         if ext == ".npz" and is_motion_npz(p) and template is None:
             return load_motion_npz(p, fps=fps)
-        if template is None and representation is None:
-            from studyapp.motion.smpl import load_smpl_motion, recognise_smpl
+        from studyapp.motion.smpl import FAMILY_NAMES, load_smpl_motion, recognise_smpl
 
-            if recognise_smpl(p) is not None:
-                return load_smpl_motion(p, fps=fps, body_model=body_model)
+        family = recognise_smpl(p)
+        if family is not None:
+            if template is not None or representation is not None:
+                # read as a raw array it would fail on a joint count ("55 joints ... 75 mapped"), hiding the cause
+                raise InputError(str(path), None, f"an {FAMILY_NAMES[family]} file carries its own skeleton, rotation "
+                                                  "layout and frame rate: drop the template and representation")
+            return load_smpl_motion(p, fps=fps, body_model=body_model)
         if template is None or representation is None:
             raise InputError(
                 str(path), None,

@@ -249,6 +249,13 @@ def test_talkshow_npy_layout(tmp_path):
     assert any("30 fps" in w for w in s["warnings"])
 
 
+def test_a_template_on_an_smpl_file_is_refused_with_the_reason(tmp_path, capsys):
+    assert main(["convert", str(BEAT2), str(tmp_path / "x.bvh"), "--template", "beat",
+                 "--representation", "axis_angle", "--in-fps", "30"]) == 2
+    err = capsys.readouterr().err
+    assert "SMPL-X file carries its own skeleton" in err and "drop the template" in err and str(BEAT2) in err
+
+
 def test_other_arrays_are_not_taken_for_smpl(tmp_path):
     np.savez(tmp_path / "rot.npz", poses=np.zeros((5, 47 * 6)))
     np.save(tmp_path / "rot.npy", np.zeros((5, 165)))
