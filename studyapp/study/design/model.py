@@ -34,6 +34,10 @@ class Condition:
     joints: template joint names the columns of NPZ/NPY arrays drive, in order (default: all template
         joints, or BEAT's 47 upper-body joints for 47-joint arrays on a BEAT-like template).
     degrees: whether NPZ/NPY Euler angles are in degrees (default) or radians.
+    body_model: the user's own SMPL/SMPL-H/SMPL-X model ``.npz`` (``J_regressor``, ``v_template``,
+        ``shapedirs``) giving SMPL-family motion files their rest skeleton, shaped by each file's ``betas``;
+        without it a built-in skeleton of average proportions is used. SMPL-family files need no
+        ``template``, ``representation`` or ``fps``: they are recognised by their keys.
     """
 
     id: str = key(STR, required=True)
@@ -46,6 +50,7 @@ class Condition:
     name_map: dict[str, str] = key(TABLE, default_factory=dict)
     joints: tuple[str, ...] | None = key(LIST, default=None)
     degrees: bool = key(BOOL, default=True)
+    body_model: str | None = key(STR, default=None)
 
     @property
     def is_live(self) -> bool:
@@ -54,7 +59,8 @@ class Condition:
 
     @property
     def is_array(self) -> bool:
-        """True when the motion files are NPZ/NPY rotation arrays (read with template, representation, fps)."""
+        """True when the motion files are NPZ/NPY: rotation arrays (read with template, representation, fps)
+        or SMPL-family files (recognised when read)."""
         return self.motion is not None and self.motion.lower().endswith((".npz", ".npy"))
 
 
