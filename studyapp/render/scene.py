@@ -11,7 +11,7 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from studyapp.errors import InputError
 from studyapp.render.avatar import Avatar, build_default_avatar
-from studyapp.render.camera import Camera, fit_camera
+from studyapp.render.camera import DEFAULT_FRAMING, Camera, fit_box, follow_offsets, framing_box
 from studyapp.render.pose import SlotAnimation, prepare_slot
 
 #: Aspect ratio (width / height) of one slot in the standard 1280x720 three-slot layout.
@@ -39,7 +39,7 @@ class TrialScene:
     labels:
         Neutral slot labels (``("A", "B", "C")``, ``("Left", "Middle", "Right")``) or None. Never model names.
     camera:
-        The one camera every slot uses (see :func:`studyapp.render.camera.fit_camera`).
+        The one camera every slot uses (see :func:`frame_camera`).
     """
 
     slots: tuple[SlotAnimation, ...]
@@ -71,37 +71,100 @@ class TrialScene:
 
 #: Fraction of the frame height kept free above the heads when slot labels are shown.
 LABEL_SPACE = 0.09
+#: Thickness of the skin around a joint that has children (metres; the bone's own joints bound its length).
+LIMB_PAD = 0.06
+_LEG_WORDS = ("leg", "foot", "toe", "knee", "ankle", "thigh", "shin", "calf")
+
+
+def _joint_sets(avatar: Avatar) -> tuple[np.ndarray, np.ndarray, int]:
+    """``(legs, hands, hips)``: masks of leg/foot and hand/finger joints (by name) and the hips' index."""
+    sk = avatar.skeleton
+    low = [n.lower() for n in sk.names]
+    legs = np.array([any(k in n for k in _LEG_WORDS) for n in low], bool)
+    hands = np.array(["hand" in n for n in low], bool)
+    for j in range(sk.n_joints):  # fingers hang below the hand, whatever their names
+        if sk.parents[j] >= 0 and hands[sk.parents[j]]:
+            hands[j] = True
+    hips = next((j for j, n in enumerate(low) if "hips" in n or "pelvis" in n), int(np.flatnonzero(sk.parents < 0)[0]))
+    return legs, hands, hips
+
+
+def _joint_reach(avatar: Avatar) -> tuple[np.ndarray, np.ndarray]:
+    """Rest joint positions ``(J, 3)`` and how far the skin reaches beyond each joint ``(J,)``.
+
+    A joint with children reaches ``LIMB_PAD`` (its children carry the bone's length); a joint without
+    (fingertips, toes, a head with no children) reaches its farthest vertex; the head joint reaches the top
+    of the head in any case, so the head top follows the head when it nods or leans.
+    """
+    sk = avatar.skeleton
+    rest = np.linalg.inv(avatar.inverse_bind.astype(np.float64))[:, :3, 3]
+    reach = np.full(sk.n_joints, LIMB_PAD)
+    owner = avatar.joints[np.arange(avatar.n_vertices), avatar.weights.argmax(1)].astype(np.int64)
+    dist = np.linalg.norm(avatar.vertices.astype(np.float64) - rest[owner], axis=1)
+    far = np.zeros(sk.n_joints)
+    np.maximum.at(far, owner, dist)
+    leaf = np.ones(sk.n_joints, bool)
+    leaf[sk.parents[sk.parents >= 0]] = False
+    reach[leaf] = np.maximum(far[leaf], LIMB_PAD)
+    top = float(avatar.vertices[:, 1].max()) if avatar.n_vertices else 0.0
+    for j, n in enumerate(sk.names):
+        if n.lower().endswith("head") or n.lower().endswith("head_end"):
+            reach[j] = max(reach[j], top - rest[j, 1])
+    return rest, reach
+
+
+def follow_hips(slot: SlotAnimation, hips: int, rest_hips: np.ndarray) -> SlotAnimation:
+    """``slot`` as seen by a camera that follows its hips across the floor (smoothed, see
+    :func:`~studyapp.render.camera.follow_offsets`): the horizontal travel is taken out of its palettes and
+    joint positions. The slot itself when it does not travel (within a millimetre)."""
+    if slot.n_frames == 0:
+        return slot
+    off = follow_offsets(slot.joint_positions[:, hips, [0, 2]], slot.fps, np.asarray(rest_hips)[[0, 2]])
+    if np.abs(off).max() < 1e-3:
+        return slot
+    shift = np.zeros((slot.n_frames, 3), np.float32)
+    shift[:, [0, 2]] = off
+    palettes = slot.palettes.copy()
+    palettes[:, :, :3, 3] -= shift[:, None]
+    return replace(slot, palettes=palettes, joint_positions=slot.joint_positions - shift[:, None])
 
 
 def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar: Avatar, aspect: float,
-                 top_reserve: float = 0.0) -> Camera:
-    """The shared camera for these slots: fitted to every joint of every slot over the whole clip.
+                 top_reserve: float = 0.0, framing: str = DEFAULT_FRAMING) -> Camera:
+    """The shared camera for these slots (already following their hips): see
+    :func:`~studyapp.render.camera.framing_box` for what each ``framing`` shows.
 
-    Joint positions are padded with the avatar's reach beyond its joints (head top, fingertips) so the
-    fitted box holds the surface, not just the skeleton.
+    Joints are padded with the avatar's skin beyond them (head top, fingertips), so the frame holds the
+    surface, not just the skeleton.
     """
-    # legs are left out: the framing is the upper body (head, arms, hands) down to the hips
-    sk = avatar.skeleton
-    upper = [j for j, n in enumerate(sk.names) if not any(k in n for k in ("Leg", "Foot", "Toes", "Knee", "Ankle"))]
-    pts = np.concatenate([s.joint_positions[:, upper].reshape(-1, 3) for s in slots])
-    lo, hi = avatar.bounds()
-    rest_top = float(hi[1])
-    jp_rest_top = float(np.max(slots[0].joint_positions[0, :, 1])) if slots[0].n_frames else rest_top
-    pad_top = max(0.0, rest_top - jp_rest_top)
-    # the head top and the fingertips stick out beyond the joints
-    extra = pts.copy()
-    extra[:, 1] += pad_top
-    return fit_camera(np.concatenate([pts, extra]), aspect, top_reserve=top_reserve)
+    legs, hands, hips = _joint_sets(avatar)
+    rest, reach = _joint_reach(avatar)
+    head_only = not legs.any() and not hands.any()
+    joints = np.concatenate([s.joint_positions for s in slots if s.n_frames] or [rest[None]])
+    box = framing_box(framing, joints, reach, legs, float(rest[hips, 1]), avatar.bounds(), head_only=head_only)
+    return fit_box(box, aspect, top_reserve=top_reserve)
 
 
 def make_scene(slots, avatar: Avatar | tuple[Avatar, ...], labels: tuple[str, ...] | None = None,
-               aspect: float | None = None) -> TrialScene:
-    """A scene from prepared slots; one avatar object for all slots (shared GPU buffers) or one per slot."""
+               aspect: float | None = None, framing: str = DEFAULT_FRAMING) -> TrialScene:
+    """A scene from prepared slots; one avatar object for all slots (shared GPU buffers) or one per slot.
+
+    Each slot is shown following its hips (:func:`follow_hips`) and the camera frames what ``framing``
+    (``"upper-body"`` or ``"full-body"``) asks for. ``aspect`` is the slot's width / height the camera is
+    made for; it refits itself to the aspect it is drawn at.
+    """
     slots = tuple(slots)
     avatars = tuple(avatar) if isinstance(avatar, (tuple, list)) else (avatar,) * len(slots)
     if aspect is None:
         aspect = THREE_SLOT_ASPECT if len(slots) == 3 else (1280 / len(slots)) / 720
-    camera = frame_camera(slots, avatars[0], aspect, top_reserve=LABEL_SPACE if labels else 0.0)
+    followed = {}
+    for s, av in zip(slots, avatars):
+        if id(s) not in followed:  # the same slot object in several places stays one object
+            _, _, hips = _joint_sets(av)
+            rest_hips = np.linalg.inv(av.inverse_bind[hips].astype(np.float64))[:3, 3]
+            followed[id(s)] = follow_hips(s, hips, rest_hips)
+    slots = tuple(followed[id(s)] for s in slots)
+    camera = frame_camera(slots, avatars[0], aspect, top_reserve=LABEL_SPACE if labels else 0.0, framing=framing)
     return TrialScene(slots=slots, avatars=avatars, labels=labels, camera=camera)
 
 
@@ -145,7 +208,7 @@ def build_trial_scene(ctx_or_renderer: Any, media: Any, labels: tuple[str, ...] 
     slots = [prepare_slot(avatar, m, face, name_map=name_map) for m in media.motions]
     if labels is None:
         labels = getattr(media, "labels", None)
-    scene = make_scene(slots, avatar, labels=labels)
+    scene = make_scene(slots, avatar, labels=labels, framing=getattr(media, "framing", None) or DEFAULT_FRAMING)
     if hasattr(ctx_or_renderer, "upload_avatar"):
         ctx_or_renderer.upload_avatar(avatar)
     return scene

@@ -28,11 +28,12 @@ import os
 import re
 import string
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from studyapp.errors import InputError
+from studyapp.render.camera import DEFAULT_FRAMING, FRAMINGS
 
 # ---------------------------------------------------------------------------------------------------------
 # Data classes
@@ -134,6 +135,17 @@ class Playback:
     allow_replay: bool = True       # replay the current clip (never earlier ones)
     allow_ties: bool = False        # may two slots share a rank
     pause_on_focus_loss: bool = True  # pause playback when the window loses focus
+
+
+@dataclass(frozen=True)
+class Display:
+    """How the figures are shown (``[display]``); the schema of the table is derived from these fields.
+
+    ``framing``: ``"upper-body"`` (default: hips up, the hands' whole range in view, as large as the window
+    allows) or ``"full-body"`` (head to feet). See :mod:`studyapp.render.camera`.
+    """
+
+    framing: str = DEFAULT_FRAMING
 
 
 #: Attention-check kinds and what they show (see :class:`AttentionCheck`).
@@ -241,6 +253,7 @@ class Design:
     practice: list[str] = field(default_factory=list)
     attention_checks: list[AttentionCheck] = field(default_factory=list)
     playback: Playback = field(default_factory=Playback)
+    display: Display = field(default_factory=Display)
     questionnaire: list[QuestionItem] = field(default_factory=list)
     max_attention_failures: int | None = None
     seed: int = 1
@@ -331,7 +344,7 @@ _TOP = {
     "conditions": ((list,), True), "stimuli": ((list,), True), "criteria": ((list,), False),
     "avatar": ((dict,), False), "ordering": ((dict,), False), "slots": ((dict,), False),
     "attention_checks": ((list,), False), "playback": ((dict,), False), "questionnaire": ((list,), False),
-    "participants": ((dict,), False),
+    "participants": ((dict,), False), "display": ((dict,), False),
 }
 _CONDITION = {"id": (_STR, True), "motion": (_STR, False), "model": (_STR, False), "fps": (_NUM, False),
               "representation": (_STR, False), "template": (_STR, False), "rotation_order": (_STR, False),
@@ -346,6 +359,7 @@ _ATTENTION = {"stimulus": (_STR, True), "kind": (_STR, False), "criterion": (_ST
               "condition": (_STR, False)}
 _PLAYBACK = {"must_watch_fully": (_BOOL, False), "allow_replay": (_BOOL, False), "allow_ties": (_BOOL, False),
              "pause_on_focus_loss": (_BOOL, False)}
+_DISPLAY = {f.name: ((type(f.default),), False) for f in fields(Display)}
 _QUESTION = {"id": (_STR, True), "kind": (_STR, False), "text": (_STR, True), "scale": (_STR, False),
              "points": (_INT, False), "anchors": ((list,), False)}
 _PARTICIPANTS = {"max_attention_failures": (_INT, False), "groups": ((dict,), False)}
@@ -583,6 +597,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
     ordering = _check_table(col, top.get("ordering", {}), _ORDERING, "ordering")
     slots = _check_table(col, top.get("slots", {}), _SLOTS, "slots")
     playback = _check_table(col, top.get("playback", {}), _PLAYBACK, "playback")
+    display = _check_table(col, top.get("display", {}), _DISPLAY, "display")
     participants = _check_table(col, top.get("participants", {}), _PARTICIPANTS, "participants")
     _check_ids(col, "conditions", conds, "condition")
     _check_ids(col, "stimuli", stims, "stimulus")
@@ -729,6 +744,12 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         if name != "builtin" and not name.lower().endswith(AVATAR_SUFFIXES):
             col.add(akey, f"{name!r} is neither \"builtin\" nor a .glb/.gltf/.vrm file", 'use "builtin" or a glTF file')
 
+    # -- display
+    if display.get("framing", DEFAULT_FRAMING) not in FRAMINGS:
+        col.add("display.framing", f"unknown framing {display['framing']!r}",
+                _did_you_mean(display["framing"], FRAMINGS).replace("allowed keys", "allowed values"))
+        display.pop("framing")
+
     # -- ordering and slots
     method = ordering.get("method", "balanced-latin-square")
     if method not in ORDERINGS:
@@ -816,6 +837,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
         avatar_by_speaker=by_speaker, ordering=method, slot_assignment=assignment, slot_labels=labels,
         practice=[str(p) for p in practice], attention_checks=attention, playback=Playback(**playback),
+        display=Display(**display),
         questionnaire=items, max_attention_failures=maxfail, seed=int(ordering.get("seed", 1)), groups=groups,
     )
     for key, cid in visible_text_leaks(design):

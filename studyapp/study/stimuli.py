@@ -60,6 +60,7 @@ class TrialMedia:
     duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
     criteria: the design's criterion ids, in order (what the participant ranks the slots on).
     name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
+    framing: the design's ``[display] framing`` (``"upper-body"`` or ``"full-body"``).
     """
 
     plan: TrialPlan
@@ -71,6 +72,7 @@ class TrialMedia:
     duration_s: float
     criteria: tuple[str, ...] = ()
     name_maps: tuple[dict[str, str], dict[str, str], dict[str, str]] = ({}, {}, {})
+    framing: str = "upper-body"
 
     @property
     def avatar_spec(self) -> str:
@@ -298,7 +300,8 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     maps = tuple(dict(design.condition(cid.removeprefix(FROZEN_PREFIX)).name_map) for cid in plan.slots)
     return TrialMedia(plan=plan, audio=audio, face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
-                      criteria=tuple(design.criterion_ids), name_maps=maps)  # type: ignore[arg-type]
+                      criteria=tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
+                      framing=design.display.framing)
 
 
 # ---------------------------------------------------------------------------------------------------------
