@@ -144,41 +144,42 @@ def robust_box(lows: np.ndarray, highs: np.ndarray, percentile: float = 99.5,
     return lo, hi
 
 
-def framing_box(framing: str, joints: np.ndarray, reach: np.ndarray, legs: np.ndarray, hips_y: float,
+def framing_box(framing: str, points: np.ndarray, legs: np.ndarray, hips_y: float,
                 rest_bounds: tuple[np.ndarray, np.ndarray], head_only: bool = False,
                 percentile: float = 99.5) -> tuple[np.ndarray, np.ndarray]:
-    """The box a framing shows, from joint positions over the clip and the avatar's rest pose.
+    """The box a framing shows, from the skin's extent over the clip and the avatar's rest pose.
 
-    ``joints`` is ``(F, J, 3)`` world positions over the clip (all slots stacked on F), already following
-    the hips (:func:`follow_offsets`); ``reach`` ``(J,)`` how far the skin reaches beyond each joint (the
-    head's to the top of the head, a fingertip's to the tip, others the limb's thickness); ``legs`` a
-    ``(J,)`` mask of leg and foot joints; ``hips_y`` the rest pose's hips height; ``rest_bounds`` the rest
-    pose mesh's ``(lo, hi)``.
+    ``points`` is ``(F, J, K, 3)``: for every frame (all slots stacked on F) and joint, K world points
+    that bound the skin the joint carries (the corners of its vertices' box, moved with the joint), already
+    following the hips (:func:`follow_offsets`); ``legs`` a ``(J,)`` mask of leg and foot joints;
+    ``hips_y`` the rest pose's hips height; ``rest_bounds`` the rest pose mesh's ``(lo, hi)``. Frames
+    beyond ``percentile`` (per side) are ignored, so one glitching frame cannot shrink every figure.
 
-    * Upper body: the skin of every non-leg joint over the clip (hands and arms wherever they go, a
-      leaning head), at least from ``BELOW_HIPS`` under the hips to the rest pose's head top.
-    * Full body: every joint over the clip, at least from the rest pose's soles to its head top.
-    * ``head_only`` (no legs, no hands: an ARKit face model or a bust): the whole rest mesh plus wherever
-      the joints move, whatever ``framing`` says, so the face camera shows the mouth and chin.
+    * Upper body: every non-leg joint's skin over the clip (hands and arms wherever they go, a leaning
+      head), at least from ``BELOW_HIPS`` under the hips to the rest pose's head top.
+    * Full body: every joint's skin over the clip, at least from the rest pose's soles to its head top.
+    * ``head_only`` (no legs, no hands: an ARKit face model or a bust): the whole rest mesh and wherever
+      the joints move it, whatever ``framing`` says, so the face camera shows the mouth and chin.
 
-    >>> joints = np.array([[[0, 1.0, 0], [0, 1.5, 0], [0.3, 0.8, 0], [0, 0.1, 0]]])  # hips, head, hand, foot
-    >>> reach = np.array([0.05, 0.25, 0.15, 0.1]); legs = np.array([False, False, False, True])
+    >>> pts = np.array([[[[0, 1.0, 0]], [[0, 1.75, 0.1]], [[0.4, 0.7, 0]], [[0, 0.0, 0]]]])  # hips, head, hand, foot
+    >>> legs = np.array([False, False, False, True])
     >>> bounds = (np.array([-0.9, 0.0, -0.1]), np.array([0.9, 1.76, 0.1]))
-    >>> lo, hi = framing_box("upper-body", joints, reach, legs, 1.0, bounds, percentile=100)
+    >>> lo, hi = framing_box("upper-body", pts, legs, 1.0, bounds)
     >>> lo.round(2).tolist(), hi.round(2).tolist()
-    ([-0.5, 0.6, -0.3], [0.5, 1.81, 0.3])
-    >>> framing_box("full-body", joints, reach, legs, 1.0, bounds, percentile=100)[0].round(2).tolist()
-    [-0.5, -0.05, -0.3]
+    ([-0.45, 0.65, -0.05], [0.45, 1.81, 0.15])
+    >>> framing_box("full-body", pts, legs, 1.0, bounds)[0].round(2).tolist()
+    [-0.45, -0.05, -0.05]
     """
     if framing not in FRAMINGS:
         raise ValueError(f"framing must be one of {FRAMINGS}, got {framing!r}")
     legs = np.asarray(legs, bool)
-    joints = np.asarray(joints, np.float64).reshape(-1, len(legs), 3)
-    reach = np.asarray(reach, np.float64)[:, None]
+    pts = np.asarray(points, np.float64)
+    pts = pts.reshape(pts.shape[0], len(legs), -1, 3)
     rlo, rhi = (np.asarray(b, np.float64) for b in rest_bounds)
     keep = ~legs if framing == "upper-body" and not head_only else np.ones(len(legs), bool)
-    lo, hi = robust_box(joints[:, keep] - reach[keep], joints[:, keep] + reach[keep], percentile, MARGIN)
-    hi[1] = max(hi[1], rhi[1] + MARGIN)  # the head top, even when the joints do not reach it
+    flat = pts[:, keep].reshape(len(pts), -1, 3)
+    lo, hi = robust_box(flat.min(axis=1), flat.max(axis=1), percentile, MARGIN)  # per frame, then over frames
+    hi[1] = max(hi[1], rhi[1] + MARGIN)  # the head top, even where the joints do not reach it
     if head_only:
         blo, bhi = robust_box(rlo[None], rhi[None], 100.0, MARGIN)
         return np.minimum(lo, blo), np.maximum(hi, bhi)

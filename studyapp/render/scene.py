@@ -71,8 +71,8 @@ class TrialScene:
 
 #: Fraction of the frame height kept free above the heads when slot labels are shown.
 LABEL_SPACE = 0.09
-#: Thickness of the skin around a joint that has children (metres; the bone's own joints bound its length).
-LIMB_PAD = 0.06
+#: Frames of a clip looked at for framing, at most (evenly spread): plenty for the hands' range.
+FRAMING_SAMPLES = 600
 _LEG_WORDS = ("leg", "foot", "toe", "knee", "ankle", "thigh", "shin", "calf")
 
 
@@ -89,28 +89,23 @@ def _joint_sets(avatar: Avatar) -> tuple[np.ndarray, np.ndarray, int]:
     return legs, hands, hips
 
 
-def _joint_reach(avatar: Avatar) -> tuple[np.ndarray, np.ndarray]:
-    """Rest joint positions ``(J, 3)`` and how far the skin reaches beyond each joint ``(J,)``.
-
-    A joint with children reaches ``LIMB_PAD`` (its children carry the bone's length); a joint without
-    (fingertips, toes, a head with no children) reaches its farthest vertex; the head joint reaches the top
-    of the head in any case, so the head top follows the head when it nods or leans.
-    """
-    sk = avatar.skeleton
+def _skin_corners(avatar: Avatar) -> np.ndarray:
+    """``(J, 8, 4)`` bind-pose corners (homogeneous) of the box around the vertices each joint carries most;
+    a joint that carries none is a point at its bind position. Moved by a skinning matrix they bound that
+    part of the skin in any pose."""
     rest = np.linalg.inv(avatar.inverse_bind.astype(np.float64))[:, :3, 3]
-    reach = np.full(sk.n_joints, LIMB_PAD)
-    owner = avatar.joints[np.arange(avatar.n_vertices), avatar.weights.argmax(1)].astype(np.int64)
-    dist = np.linalg.norm(avatar.vertices.astype(np.float64) - rest[owner], axis=1)
-    far = np.zeros(sk.n_joints)
-    np.maximum.at(far, owner, dist)
-    leaf = np.ones(sk.n_joints, bool)
-    leaf[sk.parents[sk.parents >= 0]] = False
-    reach[leaf] = np.maximum(far[leaf], LIMB_PAD)
-    top = float(avatar.vertices[:, 1].max()) if avatar.n_vertices else 0.0
-    for j, n in enumerate(sk.names):
-        if n.lower().endswith("head") or n.lower().endswith("head_end"):
-            reach[j] = max(reach[j], top - rest[j, 1])
-    return rest, reach
+    n = avatar.skeleton.n_joints
+    lo, hi = rest.copy(), rest.copy()
+    if avatar.n_vertices:
+        owner = avatar.joints[np.arange(avatar.n_vertices), avatar.weights.argmax(1)].astype(np.int64)
+        v = avatar.vertices.astype(np.float64)
+        for j in np.unique(owner):
+            sel = v[owner == j]
+            lo[j], hi[j] = sel.min(axis=0), sel.max(axis=0)
+    corners = np.ones((n, 8, 4))
+    for k in range(8):
+        corners[:, k, :3] = np.where([(k >> 2) & 1, (k >> 1) & 1, k & 1], hi, lo)
+    return corners
 
 
 def follow_hips(slot: SlotAnimation, hips: int, rest_hips: np.ndarray) -> SlotAnimation:
@@ -134,14 +129,22 @@ def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar:
     """The shared camera for these slots (already following their hips): see
     :func:`~studyapp.render.camera.framing_box` for what each ``framing`` shows.
 
-    Joints are padded with the avatar's skin beyond them (head top, fingertips), so the frame holds the
-    surface, not just the skeleton.
+    The box is fitted to the skin, not the skeleton: each joint's part of the mesh (head top, fingertips)
+    is moved with its skinning matrix over the clip.
     """
     legs, hands, hips = _joint_sets(avatar)
-    rest, reach = _joint_reach(avatar)
+    corners = _skin_corners(avatar)
     head_only = not legs.any() and not hands.any()
-    joints = np.concatenate([s.joint_positions for s in slots if s.n_frames] or [rest[None]])
-    box = framing_box(framing, joints, reach, legs, float(rest[hips, 1]), avatar.bounds(), head_only=head_only)
+    pts = []
+    for s in slots:
+        if s.n_frames:
+            idx = np.unique(np.linspace(0, s.n_frames - 1, min(s.n_frames, FRAMING_SAMPLES)).round().astype(int))
+            pal = s.palettes[idx].astype(np.float64)
+            pts.append(np.einsum("fjab,jkb->fjka", pal[:, :, :3], corners))
+    if not pts:
+        pts = [corners[None, :, :, :3]]
+    rest_hips_y = float(np.linalg.inv(avatar.inverse_bind[hips].astype(np.float64))[1, 3])
+    box = framing_box(framing, np.concatenate(pts), legs, rest_hips_y, avatar.bounds(), head_only=head_only)
     return fit_box(box, aspect, top_reserve=top_reserve)
 
 
