@@ -33,8 +33,11 @@ class Painter:
         self.layer = None  # set by the app: fonts live there
         #: ``(text, why)`` for every string drawn so far that did not fit where it was drawn.
         self.cut_off: list[tuple[str, str]] = []
+        self._frame = 0
+        self._windows: dict[int, tuple[int, int]] = {}  # window id -> (first, last) frame drawn in a row
 
     def begin_frame(self) -> None:
+        self._frame += 1
         self.frame_strings = []
         self.rects = {}
 
@@ -64,7 +67,14 @@ class Painter:
         lo, hi = dl.get_clip_rect_min(), dl.get_clip_rect_max()
         if a.x < lo.x - 0.5 or b.x > hi.x + 0.5:
             self.cut_off.append((s, f"x {a.x:.0f}..{b.x:.0f} outside {lo.x:.0f}..{hi.x:.0f}"))
-        elif b.y > hi.y + 0.5 and not win.scrollbar_y:
+            return
+        first, last = self._windows.get(win.id_, (self._frame, self._frame))
+        if last < self._frame - 1:
+            first = self._frame
+        self._windows[win.id_] = (first, self._frame)
+        # ImGui measures a new window's content in its first frame and shows a scrollbar from the third
+        settled = self._frame - first >= 2 or int(win.flags) & int(imgui.WindowFlags_.no_scrollbar)
+        if b.y > hi.y + 0.5 and not win.scrollbar_y and settled:
             self.cut_off.append((s, f"bottom {b.y:.0f} below {hi.y:.0f}, no scrollbar"))
 
     def check_box_fits(self, s: str, size: tuple[float, float], box: tuple[float, float]) -> None:
