@@ -155,3 +155,104 @@ def test_hands_are_large_enough_to_judge_in_the_ranking_layout(tmp_path):
     finally:
         bot.close()
         db.close()
+
+
+def _screens_run(tmp_path: Path, size: tuple[int, int], *, allow_ties: bool = False, extra_toml: str = "",
+                 out_dir: Path | None = None):
+    """A scripted participant through every screen at ``size``; returns (screens seen, cut-off strings)."""
+    from studyapp.study.design import load_design
+    from studyapp.study.storage import ResultsDB
+    from studyapp.study.synthetic import write_synthetic_study
+
+    path = write_synthetic_study(tmp_path / "s", n_stimuli=1, seconds=1.0, practice=False, questionnaire=True,
+                                 allow_ties=allow_ties)
+    if extra_toml:
+        path.write_text(path.read_text() + extra_toml)
+    design = load_design(path)
+    db = ResultsDB(tmp_path / "r.sqlite", design)
+    bot = UIBot(design, db, "P1", "ordered", 1, size=size, out_dir=out_dir)
+    screens = []
+    orig = bot.frame
+
+    def frame() -> None:
+        orig()
+        key = bot.app.screen_key()
+        if not screens or screens[-1] != key:
+            screens.append(key)
+
+    bot.frame = frame
+    try:
+        assert bot.run() == 0
+        return screens, list(bot.app.ui.cut_off)
+    finally:
+        bot.close()
+        db.close()
+
+
+#: A Likert item whose anchors are too long for one row with the points (they must wrap, not be cut).
+LONG_ANCHORS = """
+[[questionnaire]]
+id = "long"
+kind = "likert"
+text = "The three figures were easy to tell apart."
+points = 7
+anchors = ["Strongly disagree with every single word of this statement",
+           "Strongly agree with every single word of this statement"]
+"""
+
+
+@pytest.mark.parametrize("size,ties", [((1280, 720), False), ((1280, 720), True), ((1920, 1080), False),
+                                       ((3840, 2160), False)])
+def test_no_text_is_cut_off_on_any_screen(tmp_path, size, ties):
+    """Every string of every screen (welcome to done, the trial in all its states) lies inside what its
+    window shows: not past a side, not below a bottom that cannot be scrolled to (Painter.cut_off)."""
+    screens, cut = _screens_run(tmp_path, size, allow_ties=ties, extra_toml=LONG_ANCHORS)
+    for screen in ("welcome", "instructions", "env_check", "trials:ready", "trials:playing", "trials:ranking",
+                   "trials:ranked", "questionnaire", "done"):
+        assert screen in screens, (screen, screens)
+    assert cut == [], sorted(set(cut))[:10]
+
+
+def test_the_cut_off_check_finds_text_that_does_not_fit(tmp_path, monkeypatch):
+    """The check itself, on a page drawn for the purpose: a line too long for its window, and wrapped text
+    taller than a window with no scrollbar, are reported; text that fits and a scrolling page are not."""
+    from imgui_bundle import imgui
+
+    from studyapp.ui.screens import welcome
+    from studyapp.ui.screens.common import PAGE_FLAGS
+
+    long_line = "An unwrapped line " * 30
+    tall = "Wrapped text that goes on. " * 200
+
+    def draw(app):
+        s = app.scale
+        imgui.set_next_window_pos((20 * s, 20 * s))
+        imgui.set_next_window_size((400 * s, 200 * s))
+        imgui.begin("##cramped", None, PAGE_FLAGS)  # no scrollbar
+        app.ui.text("Fits.")
+        app.ui.text(long_line)
+        app.ui.wrapped(tall)
+        imgui.end()
+        imgui.set_next_window_pos((500 * s, 20 * s))
+        imgui.set_next_window_size((400 * s, 200 * s))
+        imgui.begin("##scrolling", None, imgui.WindowFlags_.no_decoration & ~imgui.WindowFlags_.no_scrollbar)
+        app.ui.wrapped("Scrolls: " + tall)
+        imgui.end()
+
+    monkeypatch.setattr(welcome, "draw", draw)
+    from studyapp.study.design import load_design
+    from studyapp.study.storage import ResultsDB
+    from studyapp.study.synthetic import write_synthetic_study
+
+    design = load_design(write_synthetic_study(tmp_path / "s", n_stimuli=1, seconds=1.0))
+    db = ResultsDB(tmp_path / "r.sqlite", design)
+    bot = UIBot(design, db, "P1", "ordered", 1, size=(1280, 720))
+    try:
+        for _ in range(4):  # past the frames a new window needs to settle
+            bot.frame()
+        texts = {t for t, _ in bot.app.ui.cut_off}
+    finally:
+        bot.close()
+        db.close()
+    assert long_line in texts and tall in texts
+    assert "Fits." not in texts and "Scrolls: " + tall not in texts
