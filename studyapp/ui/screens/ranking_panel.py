@@ -14,6 +14,7 @@ the next figure placed with the one above it (``1 = 2 3``). Without ties the pan
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from imgui_bundle import imgui
@@ -68,7 +69,9 @@ def row_heights(app: Any, avail_w: float | None = None) -> list[float]:
     if avail_w is None:
         avail_w = app.fb_size[0] - 2 * 20 * s  # the panel's width inside its padding (trial.draw)
     text_w = _text_width(app, avail_w)
-    return [max(ROW_PX * s, _text_height(app, c, text_w) + 2 * ROW_PAD_PX[1] * s + 2 * s) for c in app.design.criteria]
+    # whole pixels, so boxes and their outlines sit on pixel rows (no half-covered edges)
+    return [float(math.ceil(max(ROW_PX * s, _text_height(app, c, text_w) + 2 * ROW_PAD_PX[1] * s + 2 * s)))
+            for c in app.design.criteria]
 
 
 def height(app: Any) -> float:
@@ -191,7 +194,7 @@ def draw(app: Any, view: Any) -> None:
             ui.muted(crit.explanation, wrap_x=wrap, size=0.9)
         # the three places, best to worst
         mid = row_h / 2 - ROW_PAD_PX[1] * s  # the row's middle, in the child's content coordinates
-        imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 20 * s, top + mid - box_h / 2))
+        imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 20 * s, round(top + mid - box_h / 2)))
         for p in range(3):
             if p and r.allow_ties:
                 imgui.same_line(0, link_gap)
