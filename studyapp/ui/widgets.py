@@ -61,24 +61,39 @@ class Painter:
         else:
             a, b = imgui.ImVec2(rect[0], rect[1]), imgui.ImVec2(rect[2], rect[3])
         win = imgui.internal.get_current_window()
-        if int(win.flags) & int(imgui.WindowFlags_.tooltip) or win.hidden:
-            return  # tooltips (and drag previews) size themselves to their text a frame later
+        if int(win.flags) & int(imgui.WindowFlags_.tooltip) or win.hidden or win.skip_items:
+            # tooltips (and drag previews) size themselves to their text a frame later; a window scrolled
+            # wholly out of view draws nothing
+            return
         dl = imgui.get_window_draw_list()
         lo, hi = dl.get_clip_rect_min(), dl.get_clip_rect_max()
         if a.x < lo.x - 0.5 or b.x > hi.x + 0.5:
             self.cut_off.append((s, f"x {a.x:.0f}..{b.x:.0f} outside {lo.x:.0f}..{hi.x:.0f}"))
             return
+        # Below the bottom: cut off by the first window, from the item's own outwards, whose inside it
+        # passes, unless a window on the way can scroll (a scrollbar shows) and so bring it into view.
+        w = win
+        while w is not None and b.y > hi.y + 0.5:
+            if w.scrollbar_y or not self._settled(w):
+                return
+            if b.y > w.inner_rect.max.y + 0.5:
+                self.cut_off.append((s, f"bottom {b.y:.0f} below {w.inner_rect.max.y:.0f}, no scrollbar"))
+                return
+            w = w.parent_window
+
+    def _settled(self, win: Any) -> bool:
+        """True once ImGui knows whether ``win`` needs a scrollbar: it measures a new window's content in its
+        first frame and shows the scrollbar from the third (windows that never scroll are settled at once)."""
         first, last = self._windows.get(win.id_, (self._frame, self._frame))
         if last < self._frame - 1:
             first = self._frame
         self._windows[win.id_] = (first, self._frame)
-        # ImGui measures a new window's content in its first frame and shows a scrollbar from the third
-        settled = self._frame - first >= 2 or int(win.flags) & int(imgui.WindowFlags_.no_scrollbar)
-        if b.y > hi.y + 0.5 and not win.scrollbar_y and settled:
-            self.cut_off.append((s, f"bottom {b.y:.0f} below {hi.y:.0f}, no scrollbar"))
+        return self._frame - first >= 2 or bool(int(win.flags) & int(self.imgui.WindowFlags_.no_scrollbar))
 
     def check_box_fits(self, s: str, size: tuple[float, float], box: tuple[float, float]) -> None:
         """Note ``s`` as cut off when text of ``size`` (w, h) is drawn into a ``box`` (w, h) too small."""
+        if self.imgui.internal.get_current_window().skip_items:
+            return
         if size[0] > box[0] + 0.5 or size[1] > box[1] + 0.5:
             self.cut_off.append((s, f"{size[0]:.0f}x{size[1]:.0f} text in a {box[0]:.0f}x{box[1]:.0f} box"))
 

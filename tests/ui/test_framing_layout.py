@@ -256,3 +256,37 @@ def test_the_cut_off_check_finds_text_that_does_not_fit(tmp_path, monkeypatch):
         db.close()
     assert long_line in texts and tall in texts
     assert "Fits." not in texts and "Scrolls: " + tall not in texts
+
+
+def test_seven_questions_scroll_instead_of_being_cut_off(tmp_path):
+    """More questions than the panel's share of the window holds: the rows scroll instead of being cut
+    off (the last ones start below the window), the 3D view keeps its share, and a participant who scrolls
+    (the scripted one uses the mouse wheel) answers them all."""
+    from studyapp.study.design import load_design
+    from studyapp.study.storage import ResultsDB
+    from studyapp.study.synthetic import write_synthetic_study
+
+    path = write_synthetic_study(tmp_path / "s", n_stimuli=1, seconds=1.0, practice=False)
+    path.write_text(path.read_text() + "".join(
+        f'\n[[criteria]]\nid = "c{i}"\nlabel = "Question {i}"\nquestion = "Which motion is best on point {i}?"\n'
+        f'explanation = "What to look for on this point, in a sentence long enough to wrap onto a second line."\n'
+        for i in range(7)))
+    design = load_design(path)
+    db = ResultsDB(tmp_path / "r.sqlite", design)
+    bot = UIBot(design, db, "P1", "ordered", 1, size=(1280, 720))
+    try:
+        _until(bot, "trials:ranking")
+        for _ in range(3):
+            bot.frame()
+        rh = bot.app._scene_req[2][3]
+        last = bot.app.ui.rects[("crit", "c6")]
+        assert bot.app.ui.cut_off == [], bot.app.ui.cut_off[:5]
+        assert bot.run() == 0
+        assert bot.app.ui.cut_off == [], bot.app.ui.cut_off[:5]
+        answered = {r["criterion"] for r in db.responses("P1")}
+    finally:
+        bot.close()
+        db.close()
+    assert rh >= 0.38 * 720
+    assert last[1] > 720  # the last question starts below the window: reached by scrolling
+    assert answered == {f"c{i}" for i in range(7)}

@@ -62,7 +62,10 @@ def draw(app: Any) -> None:
     _progress(app, view)
     _transport(app, view, t)
     if view.ranking_open():
+        # the rows scroll when a design has more questions than the panel's share of the window holds
+        imgui.begin_child("##ranks", imgui.ImVec2(0, 0))
         ranking_panel.draw(app, view)
+        imgui.end_child()
     imgui.end()
 
 
