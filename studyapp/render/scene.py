@@ -11,6 +11,7 @@
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -111,8 +112,8 @@ def _skin_corners(avatar: Avatar) -> np.ndarray:
 def follow_hips(slot: SlotAnimation, hips: int, rest_hips: np.ndarray) -> SlotAnimation:
     """``slot`` as seen by a camera that follows its hips across the floor (smoothed, see
     :func:`~studyapp.render.camera.follow_offsets`): the horizontal travel is taken out of its palettes and
-    joint positions. The slot itself when it does not travel (within a millimetre)."""
-    if slot.n_frames == 0:
+    joint positions. The slot itself when it does not travel (within a millimetre) or already follows."""
+    if slot.n_frames == 0 or slot in _FOLLOWING:
         return slot
     off = follow_offsets(slot.joint_positions[:, hips, [0, 2]], slot.fps, np.asarray(rest_hips)[[0, 2]])
     if np.abs(off).max() < 1e-3:
@@ -121,7 +122,12 @@ def follow_hips(slot: SlotAnimation, hips: int, rest_hips: np.ndarray) -> SlotAn
     shift[:, [0, 2]] = off
     palettes = slot.palettes.copy()
     palettes[:, :, :3, 3] -= shift[:, None]
-    return replace(slot, palettes=palettes, joint_positions=slot.joint_positions - shift[:, None])
+    out = replace(slot, palettes=palettes, joint_positions=slot.joint_positions - shift[:, None])
+    _FOLLOWING.add(out)  # a scene remade from this one's slots (a resized window) does not follow twice
+    return out
+
+
+_FOLLOWING: "weakref.WeakSet[SlotAnimation]" = weakref.WeakSet()
 
 
 def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar: Avatar, aspect: float,
