@@ -175,6 +175,9 @@ class Window:
         Window size in screen coordinates (ignored for fullscreen, which uses the monitor's mode).
     fullscreen:
         Open on the primary monitor in its current video mode.
+    maximized:
+        Open maximized (GLFW ``MAXIMIZED`` hint; the window manager decides, ``size`` is the size it
+        returns to). The participant window opens so: the figures get the whole screen but the title bar.
     vsync:
         Swap at the display's refresh rate (``swap_interval(1)``).
     resizable, visible:
@@ -187,7 +190,8 @@ class Window:
     """
 
     def __init__(self, size: tuple[int, int] = (1280, 720), *, fullscreen: bool = False, vsync: bool = True,
-                 resizable: bool = True, visible: bool = True, title: str = WINDOW_TITLE) -> None:
+                 resizable: bool = True, visible: bool = True, title: str = WINDOW_TITLE,
+                 maximized: bool = False) -> None:
         import glfw
 
         self._glfw = glfw
@@ -206,6 +210,7 @@ class Window:
         glfw.window_hint(glfw.RESIZABLE, glfw.TRUE if resizable else glfw.FALSE)
         glfw.window_hint(glfw.VISIBLE, glfw.TRUE if visible else glfw.FALSE)
         glfw.window_hint(glfw.SCALE_TO_MONITOR, glfw.TRUE)
+        glfw.window_hint(glfw.MAXIMIZED, glfw.TRUE if maximized and not fullscreen else glfw.FALSE)
         monitor = glfw.get_primary_monitor() if fullscreen else None
         w, h = int(size[0]), int(size[1])
         if monitor:

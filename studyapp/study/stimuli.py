@@ -62,6 +62,7 @@ class TrialMedia:
     criteria: the design's criterion ids, in order (what the participant ranks the slots on).
     name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
     avatar_bone_map: the design's ``[avatar.bone_map]`` (avatar joint -> humanoid bone).
+    framing: the design's ``[display] framing`` (``"upper-body"`` or ``"full-body"``).
     """
 
     plan: TrialPlan
@@ -74,6 +75,7 @@ class TrialMedia:
     criteria: tuple[str, ...] = ()
     name_maps: tuple[dict[str, str], dict[str, str], dict[str, str]] = ({}, {}, {})
     avatar_bone_map: dict[str, str] | None = None
+    framing: str = "upper-body"
 
     @property
     def avatar_spec(self) -> str:
@@ -304,7 +306,7 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     return TrialMedia(plan=plan, audio=audio, face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
                       criteria=tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
-                      avatar_bone_map=dict(design.avatar_bone_map))
+                      avatar_bone_map=dict(design.avatar_bone_map), framing=design.display.framing)
 
 
 # ---------------------------------------------------------------------------------------------------------

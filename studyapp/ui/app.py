@@ -309,13 +309,14 @@ class WindowRunner:
     """
 
     def __init__(self, design: Any, session: Any, clock: Any, *, fullscreen: bool = False,
-                 size: tuple[int, int] = (1280, 720), vsync: bool = True, timer: Any = None) -> None:
+                 size: tuple[int, int] = (1280, 720), vsync: bool = True, timer: Any = None,
+                 maximized: bool = False) -> None:
         import glfw
 
         from studyapp.render.context import Window
         from studyapp.render.loop import FrameLoop, WallTimer, WindowTarget
 
-        self.window = Window(size, fullscreen=fullscreen, vsync=vsync)
+        self.window = Window(size, fullscreen=fullscreen, vsync=vsync, maximized=maximized)
         self.queue = InputQueue()
         self.queue.attach_glfw(self.window)
         monitor = glfw.get_window_monitor(self.window.handle) or glfw.get_primary_monitor()
@@ -380,7 +381,8 @@ def run_window(design: Any, db: Any, participant_id: str, fullscreen: bool = Fal
     session = Session(design, db, participant_id)
     runner = None
     try:
-        runner = WindowRunner(design, session, clock, fullscreen=fullscreen, size=size)
+        # maximized: the figures get the whole screen; F11 switches to full screen and back
+        runner = WindowRunner(design, session, clock, fullscreen=fullscreen, size=size, maximized=True)
         runner.run()
     finally:
         if runner is not None:

@@ -3,7 +3,8 @@
 Every participant-visible string goes through :class:`Painter`, which records it, so tests can assert
 that no condition id or model name is ever drawn (:meth:`Painter.leaks`); every interactive item records
 its rectangle under a stable key, so the offscreen bot and the window tests know where to click
-(through :mod:`studyapp.ui.input`, like a participant).
+(through :mod:`studyapp.ui.input`, like a participant). Every text item is also checked against what its
+window shows (:attr:`Painter.cut_off`), so tests can assert that no text is cut off at any window size.
 """
 from __future__ import annotations
 
@@ -30,8 +31,13 @@ class Painter:
         self.frame_strings: list[str] = []
         self.rects: dict[Any, Rect] = {}
         self.layer = None  # set by the app: fonts live there
+        #: ``(text, why)`` for every string drawn so far that did not fit where it was drawn.
+        self.cut_off: list[tuple[str, str]] = []
+        self._frame = 0
+        self._windows: dict[int, tuple[int, int]] = {}  # window id -> (first, last) frame drawn in a row
 
     def begin_frame(self) -> None:
+        self._frame += 1
         self.frame_strings = []
         self.rects = {}
 
@@ -46,6 +52,51 @@ class Painter:
             a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
             self.rects[key] = (a.x, a.y, b.x, b.y)
 
+    def _check_fits(self, s: str, rect: Rect | None = None) -> None:
+        """Note ``s`` (the last item, or text drawn at ``rect``) as cut off when it reaches past the left or
+        right edge of what its window shows, or below the bottom of a window with no scrollbar to reach it."""
+        imgui = self.imgui
+        if rect is None:
+            a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+        else:
+            a, b = imgui.ImVec2(rect[0], rect[1]), imgui.ImVec2(rect[2], rect[3])
+        win = imgui.internal.get_current_window()
+        if int(win.flags) & int(imgui.WindowFlags_.tooltip) or win.hidden or win.skip_items:
+            # tooltips (and drag previews) size themselves to their text a frame later; a window scrolled
+            # wholly out of view draws nothing
+            return
+        dl = imgui.get_window_draw_list()
+        lo, hi = dl.get_clip_rect_min(), dl.get_clip_rect_max()
+        if a.x < lo.x - 0.5 or b.x > hi.x + 0.5:
+            self.cut_off.append((s, f"x {a.x:.0f}..{b.x:.0f} outside {lo.x:.0f}..{hi.x:.0f}"))
+            return
+        # Below the bottom: cut off by the first window, from the item's own outwards, whose inside it
+        # passes, unless a window on the way can scroll (a scrollbar shows) and so bring it into view.
+        w = win
+        while w is not None and b.y > hi.y + 0.5:
+            if w.scrollbar_y or not self._settled(w):
+                return
+            if b.y > w.inner_rect.max.y + 0.5:
+                self.cut_off.append((s, f"bottom {b.y:.0f} below {w.inner_rect.max.y:.0f}, no scrollbar"))
+                return
+            w = w.parent_window
+
+    def _settled(self, win: Any) -> bool:
+        """True once ImGui knows whether ``win`` needs a scrollbar: it measures a new window's content in its
+        first frame and shows the scrollbar from the third (windows that never scroll are settled at once)."""
+        first, last = self._windows.get(win.id_, (self._frame, self._frame))
+        if last < self._frame - 1:
+            first = self._frame
+        self._windows[win.id_] = (first, self._frame)
+        return self._frame - first >= 2 or bool(int(win.flags) & int(self.imgui.WindowFlags_.no_scrollbar))
+
+    def check_box_fits(self, s: str, size: tuple[float, float], box: tuple[float, float]) -> None:
+        """Note ``s`` as cut off when text of ``size`` (w, h) is drawn into a ``box`` (w, h) too small."""
+        if self.imgui.internal.get_current_window().skip_items:
+            return
+        if size[0] > box[0] + 0.5 or size[1] > box[1] + 0.5:
+            self.cut_off.append((s, f"{size[0]:.0f}x{size[1]:.0f} text in a {box[0]:.0f}x{box[1]:.0f} box"))
+
     # -- text ----------------------------------------------------------------------------------
     def text(self, s: str, *, color: tuple[float, float, float, float] | None = None, key: Any = None) -> None:
         self.record(s)
@@ -55,6 +106,7 @@ class Painter:
             self.imgui.push_style_color(self.imgui.Col_.text, self.imgui.ImVec4(*color))
             self.imgui.text_unformatted(s)
             self.imgui.pop_style_color()
+        self._check_fits(s)
         self._item_rect(key)
 
     def wrapped(self, s: str, *, key: Any = None, wrap_x: float = 0.0) -> None:
@@ -63,6 +115,7 @@ class Painter:
         self.imgui.push_text_wrap_pos(wrap_x)
         self.imgui.text_unformatted(s)
         self.imgui.pop_text_wrap_pos()
+        self._check_fits(s)
         self._item_rect(key)
 
     def muted(self, s: str, *, wrap_x: float = 0.0, size: float = 1.0) -> None:
@@ -75,6 +128,7 @@ class Painter:
         imgui.push_text_wrap_pos(wrap_x)
         imgui.text_unformatted(s)
         imgui.pop_text_wrap_pos()
+        self._check_fits(s)
         if size != 1.0:
             imgui.pop_font()
         imgui.pop_style_color()
@@ -88,6 +142,7 @@ class Painter:
         imgui.push_text_wrap_pos(wrap_x)
         imgui.text_unformatted(s)
         imgui.pop_text_wrap_pos()
+        self._check_fits(s)
         imgui.pop_font()
         self._item_rect(key)
 
@@ -116,18 +171,27 @@ class Painter:
         imgui.end_disabled()
         if primary and enabled:
             imgui.pop_style_color(3)
+        text = visible_label(label)
+        if text:  # the label, centred in the button: inside the button and inside what the window shows
+            a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+            tw = imgui.calc_text_size(text)
+            self.check_box_fits(text, (tw.x, tw.y), (b.x - a.x, b.y - a.y))
+            cx, cy = (a.x + b.x) / 2, (a.y + b.y) / 2
+            self._check_fits(text, (cx - tw.x / 2, cy - tw.y / 2, cx + tw.x / 2, cy + tw.y / 2))
         self._item_rect(key if key is not None else visible_label(label))
         return bool(pressed) and enabled
 
     def radio(self, label: str, active: bool, *, key: Any = None) -> bool:
         self.record(visible_label(label))
         pressed = self.imgui.radio_button(label, active)
+        self._check_fits(visible_label(label))
         self._item_rect(key)
         return bool(pressed)
 
     def checkbox(self, label: str, value: bool, *, key: Any = None) -> bool:
         self.record(visible_label(label))
         _, value = self.imgui.checkbox(label, value)
+        self._check_fits(visible_label(label))
         self._item_rect(key)
         return bool(value)
 

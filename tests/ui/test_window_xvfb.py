@@ -274,3 +274,42 @@ def test_f11_switches_fullscreen_and_back(xvfb_display, tiny_study, tmp_path):
         d.key("F11")
         d.until(lambda: app.fb_size == (960, 540), 10)
         assert not runner.window.is_fullscreen
+
+
+def test_participant_window_asks_to_open_maximized(xvfb_display, tiny_study, monkeypatch):
+    """run_window opens the participant's window with GLFW's MAXIMIZED hint (Xvfb has no window manager
+    to act on it, so the test checks the request; F11 full screen is tested above)."""
+    import glfw
+
+    from studyapp.render.context import Window
+    from studyapp.ui import app as app_mod
+
+    from studyapp.render.context import ContextError
+
+    hints = []
+    real_hint = glfw.window_hint
+    monkeypatch.setattr(glfw, "window_hint", lambda h, v: (hints.append((h, v)), real_hint(h, v))[1])
+    # no window is made (a second GL window in one process upsets GLX): the hints given are what counts
+    monkeypatch.setattr(glfw, "create_window", lambda *a: None)
+    for maximized in (True, False):
+        hints.clear()
+        with pytest.raises(ContextError):
+            Window((320, 200), visible=False, maximized=maximized)
+        assert (glfw.MAXIMIZED, glfw.TRUE if maximized else glfw.FALSE) in hints
+
+    made = {}
+
+    class Runner:  # stands in for the window: records how run_window asks for it
+        def __init__(self, *args, **kwargs):
+            made.update(kwargs)
+
+        def run(self):
+            pass
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(app_mod, "WindowRunner", Runner)
+    design, db = tiny_study
+    assert app_mod.run_window(design, db, "M1") == 1  # closed before the end
+    assert made.get("maximized") is True

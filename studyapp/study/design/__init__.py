@@ -32,7 +32,7 @@ from studyapp.study.design.blinding import conditions_named_in, visible_text_lea
 from studyapp.study.design.files import (design_hash, model_path, motion_path, pattern_fields, referenced_files,
                                          resolve)
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
-                                         DesignError, Playback, Problem, QuestionItem, Stimulus)
+                                         DesignError, Display, Playback, Problem, QuestionItem, Stimulus)
 from studyapp.study.design.parse import REPRESENTATIONS, TABLES, condition_from_settings, parse_design
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE, FROZEN_PREFIX,
                                           MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
@@ -41,7 +41,7 @@ from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUIL
 __all__ = [
     "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
     "MOTION_SUFFIXES", "ORDERINGS", "QUESTION_KINDS", "REPRESENTATIONS", "SLOT_ASSIGNMENTS", "SLOT_LABELS", "TABLES",
-    "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Playback", "Problem", "QuestionItem",
+    "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Display", "Playback", "Problem", "QuestionItem",
     "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",
     "pattern_fields", "problems_to_json", "referenced_files", "resolve", "validate_design", "visible_text_leaks",
 ]

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from studyapp.errors import InputError
+from studyapp.render.camera import DEFAULT_FRAMING
 from studyapp.study.design.files import resolve
 from studyapp.study.design.schema import BOOL, FROZEN_PREFIX, INT, LIST, NUM, STR, TABLE, key
 
@@ -120,6 +121,17 @@ class Playback:
     pause_on_focus_loss: bool = key(BOOL, default=True)  # pause playback when the window loses focus
 
 
+@dataclass(frozen=True)
+class Display:
+    """How the figures are shown (``[display]``).
+
+    ``framing``: ``"upper-body"`` (default: hips up, the hands' whole range in view, as large as the window
+    allows) or ``"full-body"`` (head to feet). See :mod:`studyapp.render.camera`.
+    """
+
+    framing: str = key(STR, default=DEFAULT_FRAMING)
+
+
 @dataclass
 class AttentionCheck:
     """A trial whose correct answer is known, to spot participants who do not watch.
@@ -216,6 +228,7 @@ class Design:
     practice: list[str] = field(default_factory=list)
     attention_checks: list[AttentionCheck] = field(default_factory=list)
     playback: Playback = field(default_factory=Playback)
+    display: Display = field(default_factory=Display)
     questionnaire: list[QuestionItem] = field(default_factory=list)
     max_attention_failures: int | None = None
     seed: int = 1

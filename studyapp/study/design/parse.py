@@ -16,7 +16,7 @@ from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
 from studyapp.study.design.blinding import visible_text_leaks
 from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
 from studyapp.study.design.files import design_hash, pattern_fields, referenced_files, resolve
-from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
+from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design, Display,
                                              Playback, Problem, QuestionItem, Stimulus)
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
                                               MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
@@ -34,7 +34,8 @@ _REPR_ALIASES = {"axis-angle": "axis_angle", "axisangle": "axis_angle", "rotvec"
 TABLES: dict[str, type] = {"": DesignFile, "conditions": Condition, "stimuli": Stimulus, "criteria": Criterion,
                            "avatar": AvatarTable, "ordering": OrderingTable, "slots": SlotsTable,
                            "attention_checks": AttentionCheckTable, "playback": Playback,
-                           "questionnaire": QuestionItem, "participants": ParticipantsTable}
+                           "questionnaire": QuestionItem, "participants": ParticipantsTable,
+                           "display": Display}
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -318,6 +319,16 @@ def _questionnaire(col: Collector, questions: list[tuple[int, dict]]) -> list[Qu
     return items
 
 
+def _display(col: Collector, display: dict) -> Display:
+    from studyapp.render.camera import FRAMINGS
+
+    if display.get("framing", key_default(Display, "framing")) not in FRAMINGS:
+        col.add("display.framing", f"unknown framing {display['framing']!r}",
+                did_you_mean(display["framing"], FRAMINGS).replace("allowed keys", "allowed values"))
+        display.pop("framing")
+    return Display(**display)
+
+
 def _participants(col: Collector, participants: ParticipantsTable) -> tuple[int | None, dict[str, str]]:
     maxfail = participants.max_attention_failures
     if maxfail is not None and maxfail < 0:
@@ -373,6 +384,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     ordering = OrderingTable(**check_table(col, top.get("ordering", {}), OrderingTable, "ordering"))
     slots = SlotsTable(**check_table(col, top.get("slots", {}), SlotsTable, "slots"))
     playback = check_table(col, top.get("playback", {}), Playback, "playback")
+    display = _display(col, check_table(col, top.get("display", {}), Display, "display"))
     participants = ParticipantsTable(**check_table(col, top.get("participants", {}), ParticipantsTable,
                                                     "participants"))
     check_ids(col, "conditions", conds, "condition")
@@ -406,7 +418,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
         avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=ordering.method, slot_assignment=slots.assignment,
         slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
-        playback=Playback(**playback), questionnaire=items, max_attention_failures=maxfail,
+        playback=Playback(**playback), display=display, questionnaire=items, max_attention_failures=maxfail,
         seed=int(ordering.seed), groups=groups,
     )
     for key, cid in visible_text_leaks(design):

@@ -75,6 +75,7 @@ class DesignFile:
     playback: dict = key(TABLE, default_factory=dict)
     questionnaire: list = key(LIST, default_factory=list)
     participants: dict = key(TABLE, default_factory=dict)
+    display: dict = key(TABLE, default_factory=dict)
 
 
 @dataclass

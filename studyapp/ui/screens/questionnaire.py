@@ -35,15 +35,27 @@ def draw(app: Any) -> None:
             app.question_moved = False
         if q.kind == "likert":
             left, right = q.anchors
-            imgui.align_text_to_frame_padding()
-            ui.text(left, color=(0.70, 0.72, 0.77, 1.0))
-            imgui.same_line(0, 14 * s)
-            for v in range(1, int(q.points) + 1):
+            points = int(q.points)
+            # one row "left (1) ... (n) right" when it fits the column, else the anchors on a wrapped line
+            # above the points, so long anchors are never cut off at the window's edge
+            radio_w = imgui.get_frame_height() + imgui.get_style().item_inner_spacing.x
+            row_w = (imgui.calc_text_size(left).x + imgui.calc_text_size(right).x + 14 * s
+                     + sum(radio_w + imgui.calc_text_size(str(v)).x + 12 * s for v in range(1, points + 1)))
+            inline = row_w <= imgui.get_content_region_avail().x
+            if inline:
+                imgui.align_text_to_frame_padding()
+                ui.text(left, color=(0.70, 0.72, 0.77, 1.0))
+                imgui.same_line(0, 14 * s)
+            else:
+                ui.muted(f"1 = {left};  {points} = {right}")
+            for v in range(1, points + 1):
                 if ui.radio(f"{v}##{q.id}", answers.get(q.id) == v, key=("likert", q.id, v)):
                     answers[q.id] = v
                     app.question_active = qi
-                imgui.same_line(0, 12 * s)
-            ui.text(right, color=(0.70, 0.72, 0.77, 1.0))
+                if inline or v < points:
+                    imgui.same_line(0, 12 * s)
+            if inline:
+                ui.text(right, color=(0.70, 0.72, 0.77, 1.0))
         else:
             old = answers.get(q.id, "") or ""
             if active and app.focus_text:

@@ -14,6 +14,7 @@ the next figure placed with the one above it (``1 = 2 3``). Without ties the pan
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from imgui_bundle import imgui
@@ -21,8 +22,12 @@ from imgui_bundle import imgui
 from studyapp.ui.input import digit_key
 from studyapp.ui.ranking import ORDINALS
 
-ROW_PX = 86.0
+#: Smallest height of a question's row (at scale 1); a row grows when its text needs more lines.
+ROW_PX = 74.0
 GAP_PX = 6.0
+#: Inner padding of a row (at scale 1) and the height of the place boxes and chips.
+ROW_PAD_PX = (12.0, 8.0)
+BOX_PX = 54.0
 PLACE_NAMES = ("1st (best)", "2nd", "3rd (worst)")
 #: Width of the ``>`` / ``=`` button between two places (designs with ties only).
 LINK_PX = 28.0
@@ -30,11 +35,48 @@ LINK_PX = 28.0
 TIE_PLACE_PX = 112.0
 TIE_COLOR = (0.93, 0.68, 0.22, 1.0)
 TIE_HINT = "Click > to tie two."
+PLACE_PX = 132.0
+CHIP_PX = 60.0
+
+
+def _text_width(app: Any, avail_w: float) -> float:
+    """Width of the question column in a row ``avail_w`` pixels wide (inside the panel's padding)."""
+    s = app.scale
+    inner = avail_w - 2 * ROW_PAD_PX[0] * s
+    return max(240 * s, inner - 3 * PLACE_PX * s - 3 * CHIP_PX * s - 126 * s)
+
+
+def _text_height(app: Any, crit: Any, text_w: float) -> float:
+    """Pixels the label, question and explanation of ``crit`` take, wrapped at ``text_w``."""
+    base = imgui.get_style().font_size_base
+    spacing = imgui.get_style().item_spacing
+    imgui.push_font(app.layer.font_bold if app.layer else None, base * 1.05)
+    label = imgui.calc_text_size(crit.label)
+    imgui.pop_font()
+    q_w = max(1.0, text_w - label.x - 10 * app.scale)
+    question = imgui.calc_text_size(crit.question, False, q_w)
+    h = max(label.y, question.y)
+    if crit.explanation:
+        imgui.push_font(None, base * 0.9)
+        h += spacing.y + imgui.calc_text_size(crit.explanation, False, text_w).y
+        imgui.pop_font()
+    return h
+
+
+def row_heights(app: Any, avail_w: float | None = None) -> list[float]:
+    """Pixel height of each question's row: at least ``ROW_PX``, more when its text wraps to more lines."""
+    s = app.scale
+    if avail_w is None:
+        avail_w = app.fb_size[0] - 2 * 20 * s  # the panel's width inside its padding (trial.draw)
+    text_w = _text_width(app, avail_w)
+    # whole pixels, so boxes and their outlines sit on pixel rows (no half-covered edges)
+    return [float(math.ceil(max(ROW_PX * s, _text_height(app, c, text_w) + 2 * ROW_PAD_PX[1] * s + 2 * s)))
+            for c in app.design.criteria]
 
 
 def height(app: Any) -> float:
     """Pixels the ranking rows need below the transport row."""
-    return (ROW_PX + GAP_PX) * len(app.design.criteria) * app.scale + 8 * app.scale
+    return sum(row_heights(app)) + GAP_PX * len(app.design.criteria) * app.scale + 8 * app.scale
 
 
 def _box_text(app: Any, caption: str, value: str, filled: bool) -> None:
@@ -57,6 +99,8 @@ def _box_text(app: Any, caption: str, value: str, filled: bool) -> None:
     top = a.y + (b.y - a.y - cap_size - val_size - 2) / 2
     grey = imgui.get_color_u32(imgui.ImVec4(0.80, 0.82, 0.86, 1.0))
     white = imgui.get_color_u32(imgui.ImVec4(1.0, 1.0, 1.0, 1.0 if filled else 0.45))
+    ui.check_box_fits(caption, (cw, cap_size + val_size + 2), (b.x - a.x, b.y - a.y))
+    ui.check_box_fits(value, (vw, cap_size + val_size + 2), (b.x - a.x, b.y - a.y))
     dl.add_text(app.layer.font, cap_size, imgui.ImVec2(cx - cw / 2, top), grey, caption)
     dl.add_text(bold, val_size, imgui.ImVec2(cx - vw / 2, top + cap_size + 2), white, value)
 
@@ -117,10 +161,11 @@ def draw(app: Any, view: Any) -> None:
     s = app.scale
     r = view.ranking
     names = app.slot_names
-    place_w, box_h, chip_w = 132 * s, 60 * s, 60 * s
+    place_w, box_h, chip_w = PLACE_PX * s, BOX_PX * s, CHIP_PX * s
     link_w, link_gap = LINK_PX * s, 4 * s
     avail_w = imgui.get_content_region_avail().x
-    text_w = max(240 * s, avail_w - 3 * place_w - 3 * chip_w - 150 * s)
+    text_w = _text_width(app, avail_w)
+    heights = row_heights(app, avail_w)
     if r.allow_ties:
         # Narrower places and the two links fit in the room of the three places without ties, so the
         # questions keep their width and still fit their row.
@@ -129,8 +174,9 @@ def draw(app: Any, view: Any) -> None:
         active = ci == r.active
         bg = (0.21, 0.25, 0.32, 1.0) if active else (0.16, 0.17, 0.20, 1.0)
         imgui.push_style_color(imgui.Col_.child_bg, imgui.ImVec4(*bg))
-        imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(12 * s, 8 * s))
-        imgui.begin_child(f"##crit{ci}", imgui.ImVec2(0, ROW_PX * s),
+        row_h = heights[ci]
+        imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(ROW_PAD_PX[0] * s, ROW_PAD_PX[1] * s))
+        imgui.begin_child(f"##crit{ci}", imgui.ImVec2(0, row_h),
                           imgui.ChildFlags_.borders | imgui.ChildFlags_.always_use_window_padding,
                           imgui.WindowFlags_.no_scrollbar)
         imgui.pop_style_var()
@@ -147,7 +193,8 @@ def draw(app: Any, view: Any) -> None:
         if crit.explanation:
             ui.muted(crit.explanation, wrap_x=wrap, size=0.9)
         # the three places, best to worst
-        imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 20 * s, top + (ROW_PX - 16) * s / 2 - box_h / 2))
+        mid = row_h / 2 - ROW_PAD_PX[1] * s  # the row's middle, in the child's content coordinates
+        imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 20 * s, round(top + mid - box_h / 2)))
         for p in range(3):
             if p and r.allow_ties:
                 imgui.same_line(0, link_gap)
@@ -192,7 +239,7 @@ def draw(app: Any, view: Any) -> None:
                 ui.text(names[slot])
                 imgui.end_drag_drop_source()
         if r.is_complete(crit.id):
-            imgui.set_cursor_pos(imgui.ImVec2(chips_x, top + (ROW_PX - 16) * s / 2 - imgui.get_font_size() / 2))
+            imgui.set_cursor_pos(imgui.ImVec2(chips_x, top + mid - imgui.get_font_size() / 2))
             ui.muted("Done. Click a box to change it.", size=0.9)
         imgui.end_child()
     _keys(app, view)

@@ -1,8 +1,10 @@
 """A trial: the three figures play with the sound; Play / Pause / Replay; the ranking panel below.
 
-Layout (framebuffer pixels, top to bottom): a progress bar ("Clip 3 of 8", a Practice badge), the 3D
-view (the renderer draws the three avatars there), and the control panel (transport, then the ranking
-once the clip has been watched). Attention-check trials look exactly like the others.
+Layout (framebuffer pixels, top to bottom): the 3D view (the renderer draws the three avatars there) and
+the control panel: one row with where the participant is ("Clip 3 of 8", amber for practice clips) and
+the transport, then the ranking once the clip has been watched. Nothing sits above the figures, so they
+keep as much of the window's height as the panel leaves (the camera frames them for the view's shape).
+Attention-check trials look exactly like the others.
 """
 from __future__ import annotations
 
@@ -13,8 +15,9 @@ from imgui_bundle import imgui
 from studyapp.ui.screens import ranking_panel
 from studyapp.ui.screens.common import PAGE_FLAGS
 
-TOP_PX = 46.0
 CONTROLS_PX = 68.0
+PRACTICE_COLOR = (1.0, 0.80, 0.35, 1.0)
+PRACTICE_NOTE = "Practice: its answers are not analysed."
 
 
 def _fmt(t: float) -> str:
@@ -23,43 +26,25 @@ def _fmt(t: float) -> str:
 
 
 def layout(app: Any, view: Any) -> dict[str, tuple[float, float, float, float]]:
-    """Pixel rectangles (x, y, w, h; y down) of the top bar, the 3D view and the panel."""
+    """Pixel rectangles (x, y, w, h; y down) of the 3D view and the panel below it."""
     w, h = app.fb_size
     s = app.scale
-    top = TOP_PX * s
     panel = CONTROLS_PX * s
     if view.ranking_open():
         panel += ranking_panel.height(app)
     panel = min(panel, 0.62 * h)
-    return {"top": (0, 0, w, top), "scene": (0, top, w, h - top - panel), "panel": (0, h - panel, w, panel)}
+    return {"scene": (0, 0, w, h - panel), "panel": (0, h - panel, w, panel)}
 
 
 def draw(app: Any) -> None:
-    ui = app.ui
     s = app.scale
     view = app.trial_view()
-    session = app.session
     if view is None or not view.loaded:
         _loading(app)
         return
     view.update()
     _keys(app, view)
     rects = layout(app, view)
-
-    # -- top bar: progress, practice badge -----------------------------------------------------
-    x, y, w, h = rects["top"]
-    imgui.set_next_window_pos((x, y))
-    imgui.set_next_window_size((w, h))
-    imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 9 * s))
-    imgui.begin("##topbar", None, PAGE_FLAGS)
-    imgui.pop_style_var()
-    ui.heading(session.progress_label(), 1.25, key="progress")
-    if view.plan.is_practice:
-        imgui.same_line(0, 24 * s)
-        imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
-        ui.text("PRACTICE  -  this clip is for getting used to the task; its answers are not analysed",
-                color=(1.0, 0.80, 0.35, 1.0), key="practice_badge")
-    imgui.end()
 
     # -- the 3D view: drawn by the renderer before the UI ------------------------------------------
     t = view.media_time(app.now)
@@ -74,10 +59,30 @@ def draw(app: Any) -> None:
     imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(20 * s, 10 * s))
     imgui.begin("##panel", None, PAGE_FLAGS)
     imgui.pop_style_var()
+    _progress(app, view)
     _transport(app, view, t)
     if view.ranking_open():
+        # the rows scroll when a design has more questions than the panel's share of the window holds
+        imgui.begin_child("##ranks", imgui.ImVec2(0, 0))
         ranking_panel.draw(app, view)
+        imgui.end_child()
     imgui.end()
+
+
+def _progress(app: Any, view: Any) -> None:
+    """Where the participant is ("Clip 3 of 8"), at the start of the transport row; amber for practice."""
+    s = app.scale
+    row = imgui.get_cursor_pos()
+    imgui.set_cursor_pos(imgui.ImVec2(row.x, row.y + 9 * s))  # centred on the 44 px buttons
+    if view.plan.is_practice:
+        imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(*PRACTICE_COLOR))
+    app.ui.heading(app.session.progress_label(), 1.25, key="progress")
+    if view.plan.is_practice:
+        imgui.pop_style_color()
+        app.ui.tooltip(PRACTICE_NOTE)
+    # the transport starts a new line at the row's top (a same_line here would put it 9 px lower)
+    end_x = imgui.get_item_rect_max().x - imgui.get_window_pos().x
+    imgui.set_cursor_pos(imgui.ImVec2(end_x + 24 * s, row.y))
 
 
 def _loading(app: Any) -> None:
@@ -115,13 +120,14 @@ def _transport(app: Any, view: Any, t: float) -> None:
     imgui.same_line(0, 20 * s)
     frac = 0.0 if view.duration_s <= 0 else min(1.0, t / view.duration_s)
     imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 10 * s)
-    imgui.progress_bar(frac, imgui.ImVec2(260 * s, 24 * s), f"{_fmt(t)} / {_fmt(view.duration_s)}")
+    imgui.progress_bar(frac, imgui.ImVec2(200 * s, 24 * s), f"{_fmt(t)} / {_fmt(view.duration_s)}")
     if view.ranking_open():
         ranking_panel.next_button(app, view)
     else:
         imgui.same_line(0, 20 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
-        ui.muted(_status_text(app, view, state))
+        status = _status_text(app, view, state)
+        ui.muted(f"{PRACTICE_NOTE} {status}" if view.plan.is_practice and state == "ready" else status)
 
 
 def _status_text(app: Any, view: Any, state: str) -> str:
