@@ -123,7 +123,7 @@ def _view_window(args: argparse.Namespace, audio) -> int:
             if abs(fw / fh - state["aspect"]) > 1e-3:
                 from studyapp.render.scene import make_scene
 
-                scene = make_scene(scene.slots, scene.avatars, None, aspect=fw / fh)
+                scene = make_scene(scene.slots, scene.avatars, None, aspect=fw / fh, duration=scene.duration)
                 state["aspect"] = fw / fh
             win.use()
             renderer.draw_trial(scene, clock.time(), win.fbo, (0, 0, fw, fh))

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from studyapp.errors import InputError
+from studyapp.study.timeline import MOTION_END_CHOICES
 
 # ---------------------------------------------------------------------------------------------------------
 # Data classes
@@ -56,6 +57,9 @@ class Condition:
     joints: template joint names the columns of NPZ/NPY arrays drive, in order (default: all template
         joints, or BEAT's 47 upper-body joints for 47-joint arrays on a BEAT-like template).
     degrees: whether NPZ/NPY Euler angles are in degrees (default) or radians.
+    motion_end: what the motion does when it ends before the trial (see :mod:`studyapp.study.timeline`):
+        ``"hold"`` its last frame or ``"loop"`` from its first; None (default): ``validate`` refuses a motion
+        shorter than the trial.
     """
 
     id: str
@@ -68,6 +72,7 @@ class Condition:
     name_map: dict[str, str] = field(default_factory=dict)
     joints: tuple[str, ...] | None = None
     degrees: bool = True
+    motion_end: str | None = None
 
     @property
     def is_live(self) -> bool:
@@ -335,7 +340,8 @@ _TOP = {
 }
 _CONDITION = {"id": (_STR, True), "motion": (_STR, False), "model": (_STR, False), "fps": (_NUM, False),
               "representation": (_STR, False), "template": (_STR, False), "rotation_order": (_STR, False),
-              "name_map": ((dict,), False), "joints": ((list,), False), "degrees": (_BOOL, False)}
+              "name_map": ((dict,), False), "joints": ((list,), False), "degrees": (_BOOL, False),
+              "motion_end": (_STR, False)}
 _STIMULUS = {"id": (_STR, True), "audio": (_STR, True), "face": (_STR, False), "head": (_STR, False),
              "tags": ((dict,), False), "duration_s": (_NUM, False), "in_rotation": (_BOOL, False)}
 _CRITERION = {"id": (_STR, True), "label": (_STR, False), "question": (_STR, True), "explanation": (_STR, False)}
@@ -623,6 +629,11 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
         ro = e.get("rotation_order")
         if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
             col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
+        motion_end = e.get("motion_end")
+        if motion_end is not None and motion_end not in MOTION_END_CHOICES:
+            col.add(f"{key}.motion_end", f"unknown motion_end {motion_end!r}",
+                    'use "hold" (freeze on the last frame) or "loop" (start again from the first)')
+            motion_end = None
         nm = e.get("name_map", {})
         bad = [k for k, v in nm.items() if not isinstance(v, str)]
         for k in bad:
@@ -671,6 +682,7 @@ def _parse(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]
                 rotation_order=ro.upper() if ro else None,
                 name_map={k: v for k, v in nm.items() if isinstance(v, str)},
                 joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", True)),
+                motion_end=motion_end,
             ))
 
     # -- stimuli
