@@ -38,7 +38,7 @@ from studyapp.motion.skeleton import Motion
 from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
                                    motion_path, resolve)
 from studyapp.study.schedule import TrialPlan
-from studyapp.study.timeline import (DURATION_TOLERANCE_S, cut_audio, fit_face, fit_motion, medium_end,
+from studyapp.study.timeline import (DURATION_TOLERANCE_S, MOTION_END_CHOICES, cut_audio, fit_face, fit_motion, medium_end,
                                      trial_duration)
 
 #: Frame rate of the neutral face used for stimuli without face data.
@@ -403,7 +403,10 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             ready.append(ci)
         problems += _check_durations(si, stim, items, duration_mismatches,
                                      {f"motion:{c.id}": (i, c) for i, c in enumerate(design.conditions)})
-        if "audio" in items and len(problems) == n_before:
+        avatar = design.avatar_for(stim)
+        present = all(f is None or Path(f).is_file() for f in (stim.face, stim.head)) and (
+            avatar in ("builtin", "") or Path(avatar).is_file())  # missing files are the loader's to report
+        if "audio" in items and present and len(problems) == n_before:
             # Only a stimulus whose files passed the checks above: a scene from bad files fails for reasons
             # already reported, with a less helpful message.
             good = [ci for ci in sorted(ready) if ci not in retarget_bad]
@@ -458,7 +461,8 @@ def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str
         while chunk:
             try:
                 media = _assemble(design, plan)
-                build_trial_scene(None, media)
+                labels = media.labels[:len(chunk)] if media.labels else None  # fewer slots when a check failed
+                build_trial_scene(None, media, labels=labels)
                 break
             except SlotError as exc:
                 ci = chunk[exc.slot]
@@ -545,8 +549,9 @@ def _unreadable_fix(cond: Condition) -> str:
 
 def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]], mismatches,
                      conditions: dict[str, tuple[int, Condition]] | None = None) -> list:
-    """Each medium against the trial's timeline: one too short is a problem (a motion only when its
-    condition has no ``motion_end``); without ``duration_s`` media longer than the audio are one too."""
+    """Each medium against the trial's timeline. A motion too short for it is its condition's problem unless
+    the condition has a ``motion_end``; other media too short are the stimulus's. Without ``duration_s``
+    the media must also not outlast the audio (they would be cut, but it usually means a wrong file or rate)."""
     key = f"stimuli[{si}]"
     conditions = conditions or {}
     if stim.duration_s is None and "audio" not in items:
@@ -556,28 +561,26 @@ def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]
     out, rest = [], {}
     for label, (d, path) in items.items():
         ci, cond = conditions.get(label, (-1, None))
-        end = medium_end(d, trial_s, cond.motion_end if cond is not None else None)
-        if end != "short":
+        if cond is None:
             rest[label] = (d, path)
-        elif cond is not None:
-            out.append((f"conditions[{ci}]", f"condition {cond.id!r}, stimulus {stim.id!r}: the "
-                        f"motion {path} lasts {d:.3f} s but the trial plays {trial_s:.3f} s (its {where}); it "
-                        "would freeze for the rest of the trial",
+            continue
+        end = medium_end(d, trial_s, cond.motion_end)
+        if end == "short":
+            out.append((f"conditions[{ci}]", f"condition {cond.id!r}, stimulus {stim.id!r}: the motion {path} "
+                        f"lasts {d:.3f} s but the trial plays {trial_s:.3f} s (its {where}); it would freeze for "
+                        "the rest of the trial",
                         f'set motion_end = "hold" or "loop" on condition {cond.id!r}, '
                         f"{'lower' if stim.duration_s is not None else 'set'} duration_s (stimulus {stim.id!r}) "
                         f"to at most {d:.3f}, or give a motion at least {trial_s:.3f} s long"))
-        elif stim.duration_s is not None:
-            out.append((f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {label} is "
-                        f"only {d:.3f} s long ({path})", "lower duration_s or give longer files"))
-        else:
-            out.append((key, f"stimulus {stim.id!r}: {label} lasts {d:.3f} s but the audio {trial_s:.3f} s "
-                        f"({path})", "re-export the files to the same length, or set duration_s to play only "
-                        "the common part"))
+        elif not (end in MOTION_END_CHOICES and d < trial_s - DURATION_TOLERANCE_S):
+            rest[label] = (d, path)  # a short motion its condition holds or loops is the timeline's business
     if stim.duration_s is None:  # longer media are cut to the audio, but usually mean a wrong file or rate
-        out += [(key, f"stimulus {stim.id!r}: {m}",
-                 "re-export the files to the same length, or set duration_s to play only the common part")
-                for m in mismatches(rest, DURATION_TOLERANCE_S)]
-    return out
+        return out + [(key, f"stimulus {stim.id!r}: {m}",
+                       "re-export the files to the same length, or set duration_s to play only the common part")
+                      for m in mismatches(rest, DURATION_TOLERANCE_S)]
+    return out + [(f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {k} is only "
+                   f"{d:.3f} s long ({p})", "lower duration_s or give longer files")
+                  for k, (d, p) in rest.items() if d < stim.duration_s - DURATION_TOLERANCE_S]
 
 
 def _check_retarget(ci: int, cond: Condition, motion: Motion, path: Path) -> list[tuple[str, str, str]]:
