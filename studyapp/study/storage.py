@@ -484,6 +484,22 @@ class ResultsDB:
         assert rec is not None
         return rec
 
+    def discard_unstarted(self, participant_id: str) -> bool:
+        """Remove a participant who has no answered trial, with their sessions and plays; False (and nothing
+        removed) when they have answers.
+
+        For a session that could not start (an avatar that fails to load, a file gone missing): it must not
+        leave the participant registered with 0 trials on a row they never used, in a database whose design
+        is about to be fixed.
+        """
+        with self.transaction() as con:
+            if con.execute("SELECT 1 FROM trials WHERE participant = ? LIMIT 1", (participant_id,)).fetchone():
+                return False
+            for table in ("plays", "questionnaire", "sessions"):
+                con.execute(f"DELETE FROM {table} WHERE participant = ?", (participant_id,))
+            con.execute("DELETE FROM participants WHERE id = ?", (participant_id,))
+        return True
+
     def set_status(self, participant_id: str, status: str) -> None:
         if status not in PARTICIPANT_STATUSES:
             raise ValueError(f"unknown participant status {status!r}")
