@@ -344,6 +344,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                 if cond.model is not None and model_path(design, cond).is_file()
                 and not any(p[0].startswith(f"conditions[{ci}]") for p in problems)}
     retarget_bad: set[int] = set()
+    built: set[tuple] = set()  # scenes the dry run built (see _scene_identity)
     dry_failures: dict[tuple[str, str], list[tuple[int, str, str]]] = {}  # (avatar, problem) -> (ci, stim, file)
     for si, stim in enumerate(design.stimuli):
         items: dict[str, tuple[float, str]] = {}
@@ -410,8 +411,13 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             # Only a stimulus whose files passed the checks above: a scene from bad files fails for reasons
             # already reported, with a less helpful message.
             good = [ci for ci in sorted(ready) if ci not in retarget_bad]
-            for key, failure in _dry_run(design, stim, good).items():
-                dry_failures.setdefault(key, []).extend(failure)
+            # A clip reused under another id (a practice copy, tag patterns) gives the very same scene: build it
+            # once, so no file's palettes are computed twice.
+            scene_id = _scene_identity(design, stim, good)
+            if scene_id not in built:
+                built.add(scene_id)
+                for key, failure in _dry_run(design, stim, good).items():
+                    dry_failures.setdefault(key, []).extend(failure)
     for (avatar, text), where in dry_failures.items():
         problems.append(_dry_run_problem(design, avatar, text, where))
     # One line per condition and cause, not one per clip: a setting of the condition is usually the cause.
@@ -431,6 +437,20 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                          f"({', '.join(clips)}): the files' frame rate (BVH Frame Time) is probably wrong",
                          f"add fps = {rate:g} to this condition (it overrides the files' frame rate)"))
     return problems
+
+
+def _scene_identity(design: Design, stim: Stimulus, conds: list[int]) -> tuple:
+    """What a stimulus's dry-run scene depends on: its files, their reading settings, avatar and length."""
+    def fid(path: Path | None):
+        return None if path is None else _file_id(path)
+
+    motions = []
+    for ci in conds:
+        c = design.conditions[ci]
+        src = fid(model_path(design, c)) if c.model is not None else fid(motion_path(design, c, stim))
+        motions.append((src, c.fps, c.representation, c.template, c.rotation_order, c.joints, c.degrees,
+                        tuple(sorted(c.name_map.items())), c.motion_end))
+    return (tuple(motions), fid(stim.audio), fid(stim.face), fid(stim.head), design.avatar_for(stim), stim.duration_s)
 
 
 def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str, str], list[tuple[int, str, str]]]:
