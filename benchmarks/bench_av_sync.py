@@ -3,7 +3,7 @@
 Plays a synthesized 60 s clip on a real audio output (the null PulseAudio sink started here when no
 sound server is running; it is paced in real time like a sound card) and runs a simulated 60 Hz vsync
 loop: each frame asks the audio clock where the sound is, draws for the time the sound will have
-reached at the next flip (``studyapp.ui.frames``), waits for the flip, then reads the audio clock again.
+reached at the next flip (``studyapp.render.frames``), waits for the flip, then reads the audio clock again.
 The difference is the audio/video offset a participant would see. Printed per 5 s window: mean and max
 offset in ms against the 16.7 ms frame period, and for comparison the offsets without latency
 compensation (video following the samples handed to the device) and without the flip lead.
@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from studyapp.audio.playback import AudioPlayer, Pcm  # noqa: E402
-from studyapp.ui.frames import FlipPredictor, PlayRecorder, media_time_for_flip  # noqa: E402
+from studyapp.render.frames import FlipPredictor, PlayRecorder, media_time_for_flip  # noqa: E402
 
 REFRESH_HZ = 60.0
 

@@ -9,7 +9,8 @@ import time
 from studyapp.resources import demo_design
 from studyapp.study import stimuli
 from studyapp.study.careful import careful_scores
-from studyapp.study.design import _HASH_CACHE, load_design
+from studyapp.study.design import load_design
+from studyapp.study.design.files import _HASH_CACHE
 from studyapp.study.schedule import full_schedule, participant_schedule
 
 

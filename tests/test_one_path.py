@@ -26,7 +26,7 @@ from studyapp.motion.bvh import write_bvh
 from studyapp.motion.io import load_motion
 from studyapp.motion.skeleton import Motion
 
-SAMPLES = Path(__file__).parent / "data" / "samples"
+SAMPLES = Path(__file__).parent / "data" / "samples" / "motion"
 CLI = [sys.executable, "-m", "studyapp.cli"]
 AUDIO_S = 4.9
 TRIAL_S = 1.2

@@ -14,12 +14,12 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
-import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import platformdirs
 
 from studyapp.audio.features import compute_features, n_feature_frames
 from studyapp.audio.wav import AudioClip
@@ -42,14 +42,7 @@ RUN_COUNT = 0
 def cache_dir() -> Path:
     """The folder generated motion is cached in (created on first use)."""
     env = os.environ.get("STUDYAPP_CACHE_DIR")
-    if env:
-        base = Path(env)
-    elif sys.platform == "win32":
-        base = Path(os.environ.get("LOCALAPPDATA", Path.home() / "AppData" / "Local")) / "studyapp" / "Cache"
-    elif sys.platform == "darwin":
-        base = Path.home() / "Library" / "Caches" / "studyapp"
-    else:
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "studyapp"
+    base = Path(env) if env else Path(platformdirs.user_cache_dir("studyapp", appauthor=False))
     return base / "models"
 
 

@@ -6,7 +6,10 @@ but the humanoid set lacks (BEAT's ``Spine2``, ``Neck1``, finger metacarpals, en
 out and their rotations get composed into the next mapped bone by :mod:`studyapp.motion.retarget`.
 
 A map may name one bone for several joints of a chain (BEAT ``Neck`` and ``Neck1``); the joint
-deepest in the hierarchy gets the bone. Built-in maps: ``"beat"`` (BEAT 75 joints), ``"mixamo"`` (``mixamorig:`` prefix), ``"vrm0"``
+deepest in the hierarchy gets the bone. Built-in maps: ``"beat"`` (BEAT 75 joints; ZEGGS uses the same
+names), ``"mixamo"`` (``mixamorig:`` prefix, any number after it), ``"cmu"`` (CMU converted from ASF, and
+the Xia/PFNN rig), ``"daz"`` (CMU as Daz/MotionBuilder export it: ``lShldr``, ``lThigh``), ``"lafan1"``,
+``"bandai"`` (``UpperArm_L``), ``"smpl"`` (SMPL, SMPL-H and SMPL-X joint names), ``"vrm0"``
 (``J_Bip_C_Hips`` node names of VRoid/VRM 0.x models), ``"vrm1"`` (VRM 1.0 humanoid names such as
 ``hips``, ``upperChest``, ``leftUpperArm``; the thumb is Metacarpal/Proximal/Distal there) and
 ``"unity"`` (the humanoid names themselves). Names match case-insensitively.
@@ -29,6 +32,11 @@ __all__ = [
     "VRM0_MAP",
     "VRM1_MAP",
     "UNITY_MAP",
+    "BANDAI_MAP",
+    "CMU_MAP",
+    "DAZ_MAP",
+    "LAFAN1_MAP",
+    "SMPL_MAP",
 ]
 
 FINGERS: tuple[str, ...] = ("Thumb", "Index", "Middle", "Ring", "Little")
@@ -175,7 +183,73 @@ def _vrm1_map() -> dict[str, str]:
     return m
 
 
+def _bandai_map() -> dict[str, str]:
+    """Bandai-Namco Research Motiondataset: ``UpperArm_L``, ``Hand_L``, ..., under a ``joint_Root``."""
+    m = {"Hips": "Hips", "Spine": "Spine", "Chest": "Chest", "Neck": "Neck", "Head": "Head"}
+    for s, c in (("Left", "L"), ("Right", "R")):
+        for part in ("Shoulder", "UpperArm", "LowerArm", "Hand", "UpperLeg", "LowerLeg", "Foot", "Toes"):
+            m[f"{part}_{c}"] = f"{s}{part}"
+    return m
+
+
+def _cmu_map() -> dict[str, str]:
+    """CMU mocap as converted from ASF (and the Xia/PFNN rig built on it): ``LowerBack``, ``LHipJoint``, ..."""
+    m = {"Hips": "Hips", "LowerBack": "Spine", "Spine": "Chest", "Spine1": "UpperChest",
+         "Neck": "Neck", "Neck1": "Neck", "Head": "Head"}
+    m.update(_mixamo_style_limbs())
+    for s, c in (("Left", "L"), ("Right", "R")):
+        m[f"{c}Thumb"] = f"{s}ThumbProximal"
+    return m
+
+
+def _daz_map() -> dict[str, str]:
+    """CMU as exported by Daz / MotionBuilder: ``hip``, ``abdomen``, ``chest``, ``lShldr``, ``lThigh``, ..."""
+    m = {"hip": "Hips", "abdomen": "Spine", "abdomen2": "Chest", "chest": "UpperChest", "neck": "Neck",
+         "neck1": "Neck", "head": "Head", "pelvis": "Hips"}
+    fingers = {"Thumb": "Thumb", "Index": "Index", "Mid": "Middle", "Ring": "Ring", "Pinky": "Little"}
+    for s, c in (("Left", "l"), ("Right", "r")):
+        m.update({f"{c}Collar": f"{s}Shoulder", f"{c}Shldr": f"{s}UpperArm", f"{c}ShldrBend": f"{s}UpperArm",
+                  f"{c}ForeArm": f"{s}LowerArm", f"{c}ForearmBend": f"{s}LowerArm", f"{c}Hand": f"{s}Hand",
+                  f"{c}Thigh": f"{s}UpperLeg", f"{c}ThighBend": f"{s}UpperLeg", f"{c}Shin": f"{s}LowerLeg",
+                  f"{c}Foot": f"{s}Foot", f"{c}Toe": f"{s}Toes"})
+        for src, f in fingers.items():
+            for k, ph in enumerate(_PHALANGES, start=1):
+                m[f"{c}{src}{k}"] = f"{s}{f}{ph}"
+    return m
+
+
+def _lafan1_map() -> dict[str, str]:
+    """Ubisoft LAFAN1: Mixamo-like limbs without prefix, ``Spine``..``Spine2``, ``LeftToe``."""
+    m = {"Hips": "Hips", "Spine": "Spine", "Spine1": "Chest", "Spine2": "UpperChest", "Neck": "Neck",
+         "Head": "Head"}
+    m.update(_mixamo_style_limbs())
+    for s in _SIDES:
+        m[f"{s}Toe"] = f"{s}Toes"
+    return m
+
+
+def _smpl_map() -> dict[str, str]:
+    """SMPL / SMPL-H / SMPL-X joint names (``pelvis``, ``left_hip``, ``left_index1``, ...)."""
+    m = {"pelvis": "Hips", "spine1": "Spine", "spine2": "Chest", "spine3": "UpperChest", "neck": "Neck",
+         "head": "Head", "jaw": "Jaw"}
+    fingers = {"thumb": "Thumb", "index": "Index", "middle": "Middle", "ring": "Ring", "pinky": "Little"}
+    for s, c in (("Left", "left"), ("Right", "right")):
+        m.update({f"{c}_collar": f"{s}Shoulder", f"{c}_shoulder": f"{s}UpperArm", f"{c}_elbow": f"{s}LowerArm",
+                  f"{c}_wrist": f"{s}Hand", f"{c}_hip": f"{s}UpperLeg", f"{c}_knee": f"{s}LowerLeg",
+                  f"{c}_ankle": f"{s}Foot", f"{c}_foot": f"{s}Toes", f"{c}_eye": f"{s}Eye",
+                  f"{c}_eye_smplhf": f"{s}Eye"})
+        for src, f in fingers.items():
+            for k, ph in enumerate(_PHALANGES, start=1):
+                m[f"{c}_{src}{k}"] = f"{s}{f}{ph}"
+    return m
+
+
 BEAT_MAP: dict[str, str] = _beat_map()
+BANDAI_MAP: dict[str, str] = _bandai_map()
+CMU_MAP: dict[str, str] = _cmu_map()
+DAZ_MAP: dict[str, str] = _daz_map()
+LAFAN1_MAP: dict[str, str] = _lafan1_map()
+SMPL_MAP: dict[str, str] = _smpl_map()
 MIXAMO_MAP: dict[str, str] = _mixamo_map()
 VRM0_MAP: dict[str, str] = _vrm0_map()
 VRM1_MAP: dict[str, str] = _vrm1_map()
@@ -188,4 +262,9 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
     "mixamo": MIXAMO_MAP,
     "vrm0": VRM0_MAP,
     "vrm1": VRM1_MAP,
+    "cmu": CMU_MAP,
+    "lafan1": LAFAN1_MAP,
+    "bandai": BANDAI_MAP,
+    "daz": DAZ_MAP,
+    "smpl": SMPL_MAP,
 }

@@ -165,4 +165,30 @@ def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, An
         height_m=None if sk.unit_scale is None else round(height * sk.unit_scale, 4),
         warnings=[str(w.message) for w in caught],
     )
+    rig = _rig_facts(motion, str(path))
+    out["warnings"] = out["warnings"] + rig.pop("warnings", [])
+    out.update(rig)
     return out
+
+
+def _rig_facts(motion: Motion, path: str) -> dict[str, Any]:
+    """What retargeting will make of this skeleton: the rig recognised, bone by bone, and what is missing."""
+    from studyapp.motion.bone_frames import is_standing
+    from studyapp.motion.fk import rest_joint_positions
+    from studyapp.motion.humanoid import HUMANOID_BONES, REQUIRED_BONES
+    from studyapp.motion.rigs import recognise_rig
+
+    rig, mapping = recognise_rig(motion.skeleton)
+    by_bone = {b: j for j, b in mapping.items()}
+    facts: dict[str, Any] = {"rig": rig, "humanoid_map": {b: by_bone[b] for b in HUMANOID_BONES if b in by_bone}}
+    missing = [b for b in REQUIRED_BONES if b not in by_bone]
+    facts["missing_bones"] = missing
+    if missing:
+        facts["warnings"] = [f"no joint found for the humanoid bones {', '.join(missing)}: a study needs a name_map "
+                             f"for this rig (`studyapp inspect {path} --name-map-template` writes one to fill in)"]
+    else:
+        standing = is_standing(rest_joint_positions(motion.skeleton), {b: motion.skeleton.index(j)
+                                                                       for b, j in by_bone.items()})
+        facts["zero_pose"] = ("standing (its rest orientations are used)" if standing else
+                              "not a standing figure (bone twist is read from the animation)")
+    return facts

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from studyapp.render.context import OffscreenTarget, create_offscreen_context
+from studyapp.audio.clock import SilentClock
+from studyapp.render.context import create_offscreen_context
+from studyapp.render.loop import FrameLoop, OffscreenFrames, ScenePlayer, VirtualTimer
 from studyapp.render.renderer import Renderer
 
 _CONTEXT = None
@@ -38,14 +40,40 @@ def _even(size: tuple[int, int]) -> tuple[int, int]:
 
 
 def render_frames(scene, times, size: tuple[int, int] = (1280, 720), renderer: Renderer | None = None):
-    """Yield ``(H, W, 3) uint8`` frames of ``scene`` at the given times (headless)."""
+    """Yield ``(H, W, 3) uint8`` frames of ``scene`` at the given times (headless).
+
+    Each frame goes through the frame loop (:mod:`studyapp.render.loop`) with a virtual clock set to
+    that time, exactly as :func:`render_video` and ``studyapp view --offscreen`` draw theirs.
+    """
     ctx = renderer.ctx if renderer is not None else _shared_context()
     renderer = renderer or Renderer(ctx)
-    target = OffscreenTarget(ctx, size)
+    target = OffscreenFrames(ctx, size)
+    player = ScenePlayer(renderer, scene, SilentClock(virtual=True, reason="offscreen render"))
+    loop = FrameLoop(target, VirtualTimer(30.0), player.draw, player.after_flip, capture=True)
     try:
         for t in times:
-            renderer.draw_trial(scene, float(t), target.fbo)
-            yield target.read_rgb()
+            player.start(float(t))
+            loop.step()
+            yield loop.last_rgb
+    finally:
+        target.release()
+
+
+def play_frames(scene, fps: float, n_frames: int, size: tuple[int, int] = (1280, 720),
+                renderer: Renderer | None = None, duration: float | None = None):
+    """Yield the ``n_frames`` frames of one play of ``scene`` from its start, on a virtual clock that the
+    frame loop moves by exactly ``1 / fps`` per frame (frame ``k`` shows time ``k / fps``)."""
+    ctx = renderer.ctx if renderer is not None else _shared_context()
+    renderer = renderer or Renderer(ctx)
+    target = OffscreenFrames(ctx, size)
+    clock = SilentClock(virtual=True, reason="offscreen render")
+    player = ScenePlayer(renderer, scene, clock, duration_s=duration)
+    loop = FrameLoop(target, VirtualTimer(fps, clocks=[clock]), player.draw, player.after_flip, capture=True)
+    player.start(0.0)
+    try:
+        for _ in range(int(n_frames)):
+            loop.step()
+            yield loop.last_rgb
     finally:
         target.release()
 
@@ -94,8 +122,7 @@ def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (12
             samples = samples[: int(round(duration * float(audio.sample_rate))), :2]
             astream = container.add_stream("aac", rate=int(audio.sample_rate))
             astream.layout = layout
-        times = np.arange(n_frames) / float(fps)
-        for img in render_frames(scene, times, size, renderer):
+        for img in play_frames(scene, fps, n_frames, size, renderer, duration=duration):
             frame = av.VideoFrame.from_ndarray(img, format="rgb24")
             for packet in vstream.encode(frame):
                 container.mux(packet)

@@ -38,16 +38,17 @@ import re
 import secrets
 import shutil
 import sqlite3
-import sys
 import tempfile
-import tomllib
 import zipfile
 import zlib
+
+import platformdirs
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
 
 from studyapp import __version__
+from studyapp import tomlfile
 from studyapp.errors import InputError, StudyappError
 
 BUNDLE_FORMAT = "studyapp-bundle"
@@ -57,26 +58,15 @@ FORMAT_VERSION = 1
 
 # ------------------------------------------------------------------------------------------ places
 def user_data_dir() -> Path:
-    """Per-user data folder: ``%APPDATA%\\studyapp``, ``~/Library/Application Support/studyapp`` or
-    ``$XDG_DATA_HOME/studyapp`` (default ``~/.local/share/studyapp``)."""
-    if sys.platform == "win32":
-        base = Path(os.environ.get("APPDATA") or Path.home() / "AppData" / "Roaming")
-    elif sys.platform == "darwin":
-        base = Path.home() / "Library" / "Application Support"
-    else:
-        base = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
-    return base / "studyapp"
+    """Per-user data folder (``%APPDATA%\\studyapp``, ``~/Library/Application Support/studyapp``,
+    ``$XDG_DATA_HOME/studyapp``), as platformdirs knows it for each system."""
+    return Path(platformdirs.user_data_dir("studyapp", appauthor=False, roaming=True))
 
 
 def user_cache_dir() -> Path:
-    """Per-user cache folder (``%LOCALAPPDATA%``, ``~/Library/Caches``, ``$XDG_CACHE_HOME``)."""
-    if sys.platform == "win32":
-        base = Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
-    elif sys.platform == "darwin":
-        base = Path.home() / "Library" / "Caches"
-    else:
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "studyapp"
+    """Per-user cache folder (``%LOCALAPPDATA%\\studyapp\\Cache``, ``~/Library/Caches/studyapp``,
+    ``$XDG_CACHE_HOME/studyapp``)."""
+    return Path(platformdirs.user_cache_dir("studyapp", appauthor=False))
 
 
 def results_folder() -> Path:
@@ -98,54 +88,6 @@ def _sha256_file(path: Path) -> str:
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-.") or "study"
-
-
-# ------------------------------------------------------------------------------------------ TOML writing
-def _toml_key(k: str) -> str:
-    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
-
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)  # a JSON string is a valid TOML basic string
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
-
-
-def dump_toml(data: dict[str, Any]) -> str:
-    """TOML text for a design-shaped dict: scalars and lists on top, ``[table]`` and ``[[array]]`` blocks.
-
-    >>> print(dump_toml({"title": "T", "slots": {"labels": "ABC"}, "conditions": [{"id": "a"}]}).strip())
-    title = "T"
-    <BLANKLINE>
-    [slots]
-    labels = "ABC"
-    <BLANKLINE>
-    [[conditions]]
-    id = "a"
-    """
-    lines: list[str] = []
-    tables, arrays = [], []
-    for k, v in data.items():
-        if isinstance(v, dict):
-            tables.append((k, v))
-        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
-            arrays.append((k, v))
-        else:
-            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
-    for k, v in tables:
-        lines += ["", f"[{_toml_key(k)}]"] + [f"{_toml_key(a)} = {_toml_value(b)}" for a, b in v.items()]
-    for k, items in arrays:
-        for item in items:
-            lines += ["", f"[[{_toml_key(k)}]]"] + [f"{_toml_key(a)} = {_toml_value(b)}" for a, b in item.items()]
-    return "\n".join(lines) + "\n"
 
 
 # ------------------------------------------------------------------------------------------ making bundles
@@ -188,7 +130,7 @@ def make_bundle(
     if named:
         raise InputError(output, None, f"the bundle's file name names condition {named[0]!r}, and participants see "
                          "it: that unblinds the study; choose a neutral name (e.g. the study's title)")
-    raw = tomllib.loads(design_path.read_text(encoding="utf-8"))
+    raw = tomlfile.loads(design_path.read_text(encoding="utf-8"))
     salt = salt or secrets.token_hex(16)
 
     def opaque(kind: str, text: str, n: int = 8) -> str:
@@ -285,7 +227,7 @@ def make_bundle(
         if "by_speaker" in av:
             av["by_speaker"] = {k: v if v == "builtin" else add_file(resolve(design, v)) for k, v in av["by_speaker"].items()}
         out["avatar"] = av
-    design_text = dump_toml(out)
+    design_text = tomlfile.dumps(out)
 
     # The hash the participant's copy will compute: load the rewritten design from a scratch folder.
     with tempfile.TemporaryDirectory(prefix="studyapp-bundle-") as tmp:

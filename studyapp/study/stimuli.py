@@ -515,8 +515,11 @@ def _dry_run_problem(design: Design, avatar: str, text: str, where: list[tuple[i
         key = f"conditions[{ci}]"
         msg = (f"condition {design.conditions[ci].id!r}, stimulus {sid!r}: the motion {path} cannot be shown on "
                f"{name}{more}: {text}")
-        fix = ("give a humanoid avatar (its bones named like Hips, Spine, Head, LeftUpperArm, ... or a VRM), or "
-               "add a [conditions.name_map] for this condition's joints")
+        if "avatar" in text or "target skeleton" in text:  # the avatar lacks humanoid bones, not the motion
+            fix = ("give a humanoid avatar (bones named like Hips, Spine, Head, LeftUpperArm, ..., or a VRM), or "
+                   "map its bones as the message says")
+        else:
+            fix = "add a [conditions.name_map] for this condition's joints, or re-export the motion"
     return key, msg, fix
 
 

@@ -2,5 +2,5 @@
 
 Entry points: :func:`studyapp.ui.app.run_window` (a participant in a window),
 :func:`studyapp.ui.app.run_offscreen_bot` (a scripted participant through the same UI, offscreen) and
-``studyapp doctor`` (:mod:`studyapp.ui.cli`).
+``studyapp doctor`` (:mod:`studyapp.cli.doctor`, which uses :mod:`studyapp.ui.envcheck`).
 """

@@ -1,8 +1,9 @@
 """The participant application: the session's screens drawn with Dear ImGui over the 3D view.
 
-:class:`StudyApp` is the whole UI for one GL context and is driven one frame at a time, so the same
-code runs in a GLFW window (:func:`run_window`, :class:`WindowRunner`) and offscreen for the scripted
-participant (:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`). Each frame:
+:class:`StudyApp` is the whole UI for one GL context and is driven one frame at a time by the frame
+loop (:class:`studyapp.render.loop.FrameLoop`), so the same code runs in a GLFW window (:func:`run_window`,
+:class:`WindowRunner`, on the audio or wall clock) and offscreen for the scripted participant
+(:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`, on a virtual clock). Each frame:
 
 1. queued input (:mod:`studyapp.ui.input`) goes to ImGui;
 2. the screen for the session's state builds the UI and, on a trial, asks for the 3D view at the media
@@ -15,13 +16,12 @@ from __future__ import annotations
 
 import logging
 import os
-import time
 import wave
 from pathlib import Path
 from typing import Any
 
 from studyapp.errors import StudyappError
-from studyapp.ui.frames import FlipPredictor
+from studyapp.render.frames import FlipPredictor
 from studyapp.ui.input import InputQueue
 from studyapp.ui.layer import ImGuiLayer
 from studyapp.ui.trial import TrialView
@@ -299,17 +299,21 @@ def _clip_seconds(stim: Any) -> float:
 # -- the window -----------------------------------------------------------------------------------------
 
 class WindowRunner:
-    """The participant window: a GLFW :class:`~studyapp.render.context.Window` driving a StudyApp.
+    """The participant window: a GLFW :class:`~studyapp.render.context.Window` driving a StudyApp through
+    the frame loop (:class:`~studyapp.render.loop.FrameLoop`).
 
     :meth:`step` runs one frame (tests interleave it with xdotool events); :meth:`run` loops until the
-    participant finishes or closes the window.
+    participant finishes or closes the window. ``timer``: the loop's frame timer, real time by default
+    (a :class:`~studyapp.render.loop.VirtualTimer` makes the window play frame for frame what the
+    offscreen path plays, for comparing the two).
     """
 
     def __init__(self, design: Any, session: Any, clock: Any, *, fullscreen: bool = False,
-                 size: tuple[int, int] = (1280, 720), vsync: bool = True) -> None:
+                 size: tuple[int, int] = (1280, 720), vsync: bool = True, timer: Any = None) -> None:
         import glfw
 
         from studyapp.render.context import Window
+        from studyapp.render.loop import FrameLoop, WallTimer, WindowTarget
 
         self.window = Window(size, fullscreen=fullscreen, vsync=vsync)
         self.queue = InputQueue()
@@ -321,29 +325,37 @@ class WindowRunner:
                    self.window.content_scale[0])
         self.app = StudyApp(design, session, self.window.ctx, clock, queue=self.queue, refresh_hz=refresh,
                             display=display)
-        self.last_rgb = None
-        self.capture = False
+        self.loop = FrameLoop(WindowTarget(self.window), timer if timer is not None else WallTimer(),
+                              self._draw, self._after_flip, running=lambda: not self.app.quit)
+
+    @property
+    def capture(self) -> bool:
+        """Read each frame back into :attr:`last_rgb` (tests)."""
+        return self.loop.capture
+
+    @capture.setter
+    def capture(self, on: bool) -> None:
+        self.loop.capture = bool(on)
+
+    @property
+    def last_rgb(self) -> Any:
+        return self.loop.last_rgb
+
+    def _draw(self, fbo: Any, size: tuple[int, int], now: float) -> None:
+        self.app.frame(fbo, size, now, self.window.content_scale[0])
+
+    def _after_flip(self, flip_time: float) -> None:
+        self.app.after_flip(flip_time)
+        if self.app.fullscreen_toggle:
+            self.app.fullscreen_toggle = False
+            self.window.set_fullscreen(not self.window.is_fullscreen)
 
     def step(self) -> bool:
         """One frame; False once the window should close (participant done or window closed)."""
-        win = self.window
-        win.poll_events()
-        if win.should_close or self.app.quit:
-            return False
-        win.use()
-        self.app.frame(win.fbo, win.framebuffer_size, time.perf_counter(), win.content_scale[0])
-        if self.capture:
-            self.last_rgb = win.read_rgb()
-        win.swap_buffers()
-        self.app.after_flip(time.perf_counter())
-        if self.app.fullscreen_toggle:
-            self.app.fullscreen_toggle = False
-            win.set_fullscreen(not win.is_fullscreen)
-        return True
+        return self.loop.step()
 
     def run(self) -> None:
-        while self.step():
-            pass
+        self.loop.run()
 
     def close(self) -> None:
         self.app.shutdown()

@@ -7,7 +7,8 @@ careful). To exercise every ranking method it drags the chips for the first ques
 the second and uses the number keys for the rest. When the design allows ties and the policy chose some,
 it enters them the same way: a click on the ``>`` between two places for the mouse questions, ``=`` typed
 before the next figure for the keyboard ones. Time is virtual: each frame while a clip plays moves the
-silent clock ahead by a fraction of the clip.
+silent clock ahead by a fraction of the clip (``frames_per_play``; None plays every frame at ``fps``).
+Its frames go through the same frame loop as the participant's window (:mod:`studyapp.render.loop`).
 """
 from __future__ import annotations
 
@@ -47,8 +48,10 @@ class UIBot:
 
     def __init__(self, design: Any, db: Any, participant_id: str, policy: str, seed: int, *,
                  size: tuple[int, int] = (1280, 720), out_dir: Path | str | None = None,
-                 max_frames_per_trial: int = 400, session: Any = None) -> None:
-        from studyapp.render.context import OffscreenTarget, create_offscreen_context
+                 max_frames_per_trial: int = 400, session: Any = None, fps: float = 60.0,
+                 frames_per_play: int | None = FRAMES_PER_PLAY) -> None:
+        from studyapp.render.context import create_offscreen_context
+        from studyapp.render.loop import FrameLoop, OffscreenFrames, VirtualTimer
         from studyapp.study.bots import POLICIES
         from studyapp.study.session import Session
 
@@ -62,31 +65,45 @@ class UIBot:
         self.max_frames_per_trial = int(max_frames_per_trial)
         self.session = session or Session(design, db, participant_id)
         self.ctx = create_offscreen_context()
-        self.target = OffscreenTarget(self.ctx, self.size)
+        self.target = OffscreenFrames(self.ctx, self.size)
         self.clock = SilentClock(virtual=True, reason="offscreen scripted participant")
-        self.app = StudyApp(design, self.session, self.ctx, self.clock, refresh_hz=60.0,
-                            display=("offscreen", self.size, 60.0, 1.0), bench_frames=3)
+        self.frames_per_play = frames_per_play
+        self.app = StudyApp(design, self.session, self.ctx, self.clock, refresh_hz=float(fps),
+                            display=("offscreen", self.size, float(fps), 1.0), bench_frames=3)
+        # frames_per_play None: the clip plays in real frames, the clock moving 1/fps per frame with the loop
+        timer = VirtualTimer(fps, clocks=[self.clock] if frames_per_play is None else [])
+        self.loop = FrameLoop(self.target, timer, self._draw, self.app.after_flip, capture=False)
         self.steps: deque[Callable[[], None]] = deque()
-        self.t = 0.0
         self.shots: list[Path] = []
         self._shot_keys: set[str] = set()
         self._planned_for: Any = None
-        self.frames = 0
         self.last_rgb: np.ndarray | None = None
         self._prev_key: str | None = None
         self._q_planned = False
+        self._per_trial = 0
+        self._last_trial: int | None = None
 
     # -- frame loop ----------------------------------------------------------------------------------
-    def frame(self) -> None:
-        """One frame at virtual time ``t``: the clip advances first, then the frame is drawn and
-        "flipped" at that same instant (virtual time does not pass while drawing)."""
+    @property
+    def t(self) -> float:
+        """The virtual time of the next frame."""
+        return self.loop.timer.now()
+
+    @property
+    def frames(self) -> int:
+        return self.loop.frames
+
+    def _draw(self, fbo: Any, size: tuple[int, int], now: float) -> None:
+        # Fast mode: the clip advances first by a fraction of its length, then the frame is drawn and
+        # "flipped" at that same instant (virtual time does not pass while drawing).
         view = self.app._view
-        if view is not None and view.in_play and not self.clock.paused:
-            self.clock.advance(max(view.duration_s / FRAMES_PER_PLAY, 1.0 / 60.0))
-        self.app.frame(self.target.fbo, self.size, self.t, 1.0)
-        self.app.after_flip(self.t)
-        self.frames += 1
-        self.t += 1.0 / 60.0
+        if self.frames_per_play and view is not None and view.in_play and not self.clock.paused:
+            self.clock.advance(max(view.duration_s / self.frames_per_play, 1.0 / 60.0))
+        self.app.frame(fbo, size, now, 1.0)
+
+    def frame(self) -> None:
+        """One frame at the virtual time :attr:`t`, through the frame loop."""
+        self.loop.step()
 
     def screenshot(self, name: str) -> np.ndarray:
         rgb = self.target.read_rgb()
@@ -98,28 +115,30 @@ class UIBot:
         return rgb
 
     def run(self) -> int:
-        per_trial = 0
-        last_trial = None
         total_limit = self.max_frames_per_trial * (len(self.session.plans) + 6)
         while not self.app.quit and self.frames < total_limit:
-            self.frame()
-            key = self.app.screen_key()
-            # A new screen is complete on its second frame (ImGui hides a new window for one frame).
-            if key not in self._shot_keys and self._stable(key):
-                self._shot_keys.add(key)
-                self.screenshot(key.replace(":", "_"))
-            plan = self.session.current_trial()
-            cur = None if plan is None else plan.trial_index
-            per_trial = per_trial + 1 if cur == last_trial else 0
-            last_trial = cur
-            if cur is not None and per_trial > self.max_frames_per_trial:
-                raise StudyappError(f"the scripted participant got stuck on trial {cur} "
-                                    f"(screen {key!r}) after {per_trial} frames")
-            if self.steps:
-                self.steps.popleft()()
-            else:
-                self._plan(key)
+            self.step()
         return 0 if self.session.finished else 1
+
+    def step(self) -> None:
+        """One frame, then the next input action (or a plan for the screen shown)."""
+        self.frame()
+        key = self.app.screen_key()
+        # A new screen is complete on its second frame (ImGui hides a new window for one frame).
+        if key not in self._shot_keys and self._stable(key):
+            self._shot_keys.add(key)
+            self.screenshot(key.replace(":", "_"))
+        plan = self.session.current_trial()
+        cur = None if plan is None else plan.trial_index
+        self._per_trial = self._per_trial + 1 if cur == self._last_trial else 0
+        self._last_trial = cur
+        if cur is not None and self._per_trial > self.max_frames_per_trial:
+            raise StudyappError(f"the scripted participant got stuck on trial {cur} "
+                                f"(screen {key!r}) after {self._per_trial} frames")
+        if self.steps:
+            self.steps.popleft()()
+        else:
+            self._plan(key)
 
     def _stable(self, key: str) -> bool:
         stable = self._prev_key == key

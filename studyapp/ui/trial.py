@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from studyapp.ui.frames import PlayRecorder, media_time_for_flip
+from studyapp.render.frames import PlayRecorder, clock_media_time
 from studyapp.ui.ranking import RankingState
 
 
@@ -101,11 +101,7 @@ class TrialView:
         """Clip time to draw now: the audio clock plus the time until this frame is shown."""
         if not self.in_play:
             return self.duration_s if self.watched else 0.0
-        pos = self.clock.position_s()
-        if self.clock.paused:
-            return pos
-        t = media_time_for_flip(pos, now, self.app.predictor.predict(now))
-        return min(t, self.duration_s)
+        return clock_media_time(self.clock, now, self.app.predictor, self.duration_s)
 
     def after_flip(self, flip_time: float) -> None:
         if self.in_play and self.recorder is not None and self.drawn_media_s is not None \

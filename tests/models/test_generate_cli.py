@@ -13,7 +13,7 @@ from studyapp.audio.wav import AudioClip, save_wav
 from studyapp.errors import InputError
 from studyapp.face.animation import FaceAnimation
 from studyapp.face.io import save_face_csv
-from studyapp.models import cli
+from studyapp.cli import models as cli
 from studyapp.models.live import stimulus_inputs
 from studyapp.models.runner import StreamingGestureModel
 from studyapp.motion import rotations as R

@@ -10,7 +10,7 @@ import pytest
 
 from motion_helpers import BEAT_SAMPLE, MIXAMO_SAMPLE, PYBVH_SAMPLE, SAMPLES, SMALL_BVH, write
 from studyapp.errors import InputError
-from studyapp.motion import cli as motion_cli
+from studyapp.cli import motion as motion_cli
 from studyapp.motion.arrays import load_motion_npz, load_rotation_array, save_motion_npz
 from studyapp.motion.beat import BEAT_UPPER_BODY
 from studyapp.motion.bvh import read_bvh, read_bvh_channels
@@ -201,7 +201,10 @@ def test_summarize_samples():
 def test_summary_reports_header_disagreement(tmp_path):
     s = summarize_motion(write(tmp_path, SMALL_BVH.replace("Frames: 2", "Frames: 5")))
     assert s["frames"] == 2 and s["header_frames"] == 5
-    assert len(s["warnings"]) == 1 and "Frames: 5" in s["warnings"][0]
+    header = [w for w in s["warnings"] if "Frames:" in w]
+    assert len(header) == 1 and "Frames: 5" in header[0]
+    # a two-joint skeleton is no humanoid: the other warning says a study would need a name_map
+    assert s["missing_bones"] and any("name_map" in w for w in s["warnings"])
 
 
 # --- CLI --------------------------------------------------------------------------------------

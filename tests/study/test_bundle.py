@@ -347,7 +347,7 @@ def test_own_stimulus_tag_named_like_a_condition_tag_is_an_error_not_lost(tmp_pa
     design_path = write_synthetic_study(tmp_path / "s", n_stimuli=3)
     info = make_bundle(design_path, tmp_path / "a.zip", results=tmp_path / "lab.sqlite", salt="fixed")
     bundled = zipfile.ZipFile(info.path).read("study.toml").decode()
-    cid = re.findall(r'^id = "(c_[0-9a-f]+)"', bundled, flags=re.M)[0]
+    cid = re.findall(r'\bid = "(c_[0-9a-f]+)"', bundled)[0]
     text = design_path.read_text()
     design_path.write_text(text.replace('tags = { speaker = "spk1" }', f'tags = {{ speaker = "spk1", {cid} = "x" }}', 1))
     with pytest.raises(InputError, match=rf"tags\.{cid}.*rename the tag"):

@@ -58,7 +58,7 @@ def test_a_non_humanoid_avatar_is_one_problem_naming_condition_stimulus_and_file
     assert p.key == "conditions[0]" and "Fox.glb" in p.message and "'synced'" in p.message
     assert "stimulus 's1'" in p.message and str(study.parent / "motion" / "synced" / "s1.bvh") in p.message
     assert "5 more condition x stimulus pairs" in p.message  # 3 conditions x 2 stimuli, said once
-    assert "no joint for Hips" in p.message and "humanoid avatar" in p.fix
+    assert "cannot retarget" in p.message and "LeftUpperLeg" in p.message and "humanoid avatar" in p.fix
 
 
 def test_an_avatar_with_a_singular_bind_matrix_is_a_problem_not_a_crash(study: Path, tmp_path: Path) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -80,8 +81,9 @@ def _secrets_of(design) -> list[str]:
 def xvfb_display():
     """A private Xvfb display (1280x800x24) for the window tests; DISPLAY is set while the module runs.
 
-    One display per module, not per test: GLFW stays initialised on the first X display it opened in this
-    process, so a second window test on a fresh Xvfb would talk to a display that is gone.
+    One display per module, not per test: GLFW stays initialised on the X display it opened, so the
+    display lives as long as the module's windows, and GLFW is shut down with it (the next module's
+    windows then open on that module's own display).
     """
     if shutil.which("Xvfb") is None:
         pytest.skip("Xvfb is not installed (apt install xvfb)")
@@ -99,6 +101,8 @@ def xvfb_display():
     try:
         yield f":{n}"
     finally:
+        if "glfw" in sys.modules:
+            sys.modules["glfw"].terminate()  # else GLFW keeps talking to this display once it is gone
         if old is None:
             os.environ.pop("DISPLAY", None)
         else:

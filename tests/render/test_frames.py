@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from studyapp.ui.frames import FlipPredictor, PlayRecorder, media_time_for_flip
+from studyapp.render.frames import FlipPredictor, PlayRecorder, media_time_for_flip
 
 
 def test_dropped_frames_counts_intervals_over_one_and_a_half_periods():

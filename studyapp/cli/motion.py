@@ -1,13 +1,16 @@
 """``studyapp inspect`` and ``studyapp convert``.
 
-inspect PATH [--fps F] [--json]
+inspect PATH [--fps F] [--json] [--name-map-template]
     Summary of a motion (BVH / NPZ / NPY), a face file (JSON / CSV, an NPZ with ``weights`` and
     ``names``, a bare ``(F, 52)`` NPY when ``--fps`` is given) or a WAV. For a raw rotation array it
     lists the representations whose width fits each array's shape and, when a 6D reading fits, says
-    that ``sixd`` (columns) and ``sixd_rows`` (rows) cannot be told apart from the numbers.
+    that ``sixd`` (columns) and ``sixd_rows`` (rows) cannot be told apart from the numbers. For a
+    skeleton it shows the rig recognised and its humanoid map; ``--name-map-template`` prints the
+    ``[conditions.name_map]`` table to complete when bones are missing.
 convert IN OUT [--fps F] [--in-fps F] [--order XYZ] [--template T] [--representation R] ...
     BVH -> BVH (new rotation order and/or frame rate), NPZ/NPY rotation arrays -> BVH or NPZ (needs
-    ``--template``), BVH -> NPZ (studyapp motion NPZ with world joint positions).
+    ``--template``), BVH -> NPZ (studyapp motion NPZ with world joint positions). ``--avatar builtin|FILE``
+    writes the motion as it plays on that avatar (humanoid bone names, zero pose = the avatar's rest).
 """
 from __future__ import annotations
 
@@ -36,6 +39,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("path", help="file to inspect")
     p.add_argument("--fps", type=float, default=None, help="true frame rate (overrides a BVH header's Frame Time)")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.add_argument("--name-map-template", action="store_true",
+                   help="print a [conditions.name_map] TOML table for a motion file's skeleton: the bones found "
+                        "filled in, every other joint as a comment to complete")
     p.set_defaults(func=cmd_inspect)
 
     c = subparsers.add_parser(
@@ -67,6 +73,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--root-key", default=None, help="NPZ array name holding the (F, 3) root translation")
     c.add_argument("--radians", action="store_true", help="Euler array angles are radians, not degrees")
     c.add_argument("--precision", type=int, default=6, help="decimals written to BVH (default 6)")
+    c.add_argument("--avatar", default=None,
+                   help="write the motion as it plays on this avatar ('builtin' or a glTF/GLB/VRM file): retargeted "
+                        "onto its skeleton, humanoid bone names, Y up, zero pose = the avatar's rest pose facing +Z")
     c.set_defaults(func=cmd_convert)
 
 
@@ -178,6 +187,15 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
+    if args.name_map_template:
+        from studyapp.motion.io import load_motion
+        from studyapp.motion.rigs import name_map_template
+
+        if Path(args.path).suffix.lower() != ".bvh":
+            raise InputError(args.path, None, "--name-map-template reads a BVH file's skeleton (for an array, "
+                                              "give its template BVH)")
+        print(name_map_template(load_motion(args.path, fps=args.fps).skeleton, Path(args.path).name), end="")
+        return 0
     summary = summarize_any(args.path, fps=args.fps)
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
@@ -251,6 +269,20 @@ def cmd_convert(args: argparse.Namespace) -> int:
                 warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
+def _on_avatar(motion: Any, spec: str) -> Any:
+    """The motion as the study plays it on an avatar (the same retargeting and placement), its zero pose
+    the avatar's rest pose and its joints named as humanoid bones, ready to check in Blender."""
+    from studyapp.motion.rest_frame import humanoid_names, zero_at_rest
+    from studyapp.motion.rigs import merge_name_map
+    from studyapp.render.pose import to_avatar_skeleton
+    from studyapp.render.scene import load_avatar
+
+    avatar = load_avatar(spec)
+    played = to_avatar_skeleton(avatar, motion)
+    mapping = merge_name_map(avatar.skeleton, getattr(avatar, "bone_map", None) or None)
+    return humanoid_names(zero_at_rest(played), mapping)
+
+
 def _convert(args: argparse.Namespace, src: Path, dst: Path, out_ext: str) -> int:
     from studyapp.motion.arrays import save_motion_npz
     from studyapp.motion.bvh import write_bvh
@@ -273,6 +305,8 @@ def _convert(args: argparse.Namespace, src: Path, dst: Path, out_ext: str) -> in
     motion = load_motion(src, fps=in_fps, template=template, representation=args.representation, **kw)
     if args.fps is not None and float(args.fps) != float(motion.fps):
         motion = resample(motion, args.fps)
+    if args.avatar is not None:
+        motion = _on_avatar(motion, args.avatar)
     if out_ext == ".bvh":
         order = args.order.upper() if args.order else None
         if order is not None and (len(order) != 3 or set(order) != set("XYZ")):

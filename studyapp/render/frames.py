@@ -14,6 +14,7 @@ audio clock read at the flip: that difference is the audio/video offset the part
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,33 @@ def media_time_for_flip(audio_pos_s: float, now: float, predicted_flip: float | 
     if predicted_flip is None:
         return audio_pos_s
     return audio_pos_s + max(0.0, predicted_flip - now)
+
+
+def clock_media_time(clock: Any, now: float, predictor: "FlipPredictor | None", duration_s: float) -> float:
+    """The clip time a frame drawn at ``now`` shows, for a clip playing on ``clock`` (a media clock).
+
+    Paused: the clock's position (nothing moves). Playing: where the clock will be at the predicted flip,
+    never past the end. Without a predictor, or on a virtual clock (offscreen: no time passes between
+    drawing and the "flip"), the clock's position.
+
+    >>> from studyapp.audio.clock import SilentClock
+    >>> fp = FlipPredictor(60.0); fp.flipped(10.0)
+    >>> clock = SilentClock(virtual=True); clock.play(None, 0.5, duration_s=2.0)
+    >>> clock_media_time(clock, 10.0, fp, 2.0)
+    0.5
+    >>> class Wall(SilentClock):                                 # a clock that stands at 0.5 s here
+    ...     def position_s(self): return 0.5
+    >>> wall = Wall(); wall.play(None, duration_s=2.0)
+    >>> round(clock_media_time(wall, 10.0, fp, 2.0), 4)         # shown at the next flip, 1/60 s later
+    0.5167
+    """
+    pos = clock.position_s()
+    if clock.paused:
+        return pos
+    if getattr(clock, "virtual", False):  # virtual time does not pass between drawing and the flip
+        predictor = None
+    t = media_time_for_flip(pos, now, predictor.predict(now) if predictor is not None else None)
+    return min(t, duration_s)
 
 
 class FlipPredictor:
@@ -64,9 +92,12 @@ class PlayRecorder:
     refresh_hz: float | None = None
     flips: list[float] = field(default_factory=list)
     offsets_s: list[float] = field(default_factory=list)
+    #: The clip time each shown frame was drawn for (what the participant saw, frame by frame).
+    drawn_s: list[float] = field(default_factory=list)
 
     def flip(self, flip_time: float, drawn_media_s: float, audio_at_flip_s: float) -> None:
         self.flips.append(float(flip_time))
+        self.drawn_s.append(float(drawn_media_s))
         self.offsets_s.append(float(drawn_media_s) - float(audio_at_flip_s))
 
     @property

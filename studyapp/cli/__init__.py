@@ -1,26 +1,27 @@
-"""The ``studyapp`` command line.
+"""The ``studyapp`` command line: the application shell, on top of every domain package.
 
-Each area registers its own sub-commands (``register(subparsers)`` in ``<area>/cli.py``) so this file
-stays a dispatcher and the areas stay independent.
+Each command module here registers its own sub-commands (``register(subparsers)``) and this file stays a
+dispatcher. The shell imports the domain packages (``motion``, ``render``, ``study``, ``ui``, ...); none of
+them imports the shell, so they form a one-way stack (``tests/test_architecture.py`` checks it).
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import sys
 
 from studyapp import __version__
+from studyapp.cli import demo, design, doctor, models, motion, render, session
 from studyapp.errors import StudyappError
 
 _COMMAND_MODULES = (
-    "studyapp.motion.cli",   # inspect, convert
-    "studyapp.render.cli",   # render, view
-    "studyapp.study.design_cli",   # validate, schedule
-    "studyapp.study.session_cli",  # run, export, bundle, merge
-    "studyapp.models.cli",   # generate
-    "studyapp.ui.cli",       # doctor
-    "studyapp.demo_cli",     # demo
+    motion,    # inspect, convert
+    render,    # render, view
+    design,    # validate, schedule
+    session,   # run, export, bundle, merge
+    models,    # generate
+    doctor,    # doctor
+    demo,      # demo
 )
 
 
@@ -32,8 +33,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"studyapp {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="print debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in _COMMAND_MODULES:
-        importlib.import_module(name).register(sub)
+    for module in _COMMAND_MODULES:
+        module.register(sub)
     return parser
 
 
@@ -63,7 +64,3 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 import logging
-import time
+import os
 from pathlib import Path
 
 from studyapp.errors import InputError, StudyappError
@@ -21,16 +21,39 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _names(text: str) -> tuple[str, ...]:
+    names = tuple(n for n in text.replace(",", " ").split() if n)
+    if not names:
+        raise argparse.ArgumentTypeError("--joints needs joint names, e.g. Spine,Spine1,Neck")
+    return names
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     v = subparsers.add_parser(
         "view", help="play one motion file on the avatar in a window (or render a frame offscreen)",
-        description="Play a motion (BVH or array) on the avatar. Keys: space = pause, R = restart, Esc = close.",
+        description="Play a motion (BVH or NPZ/NPY array) on the avatar, looping, on the same media clock as "
+        "a study (the sound card's when --audio plays). The condition options mean what the same keys mean "
+        "in a design's [[conditions]]. Keys: space = pause, R = restart, Esc = close.",
     )
-    v.add_argument("motion", help="motion file (BVH, NPZ, ...)")
+    v.add_argument("motion", help="motion file (BVH, NPZ, NPY)")
     v.add_argument("--face", help="ARKit blendshape file (Live Link CSV, BEAT JSON, ...)")
-    v.add_argument("--audio", help="WAV file to play along")
+    v.add_argument("--audio", help="WAV file to play along (it sets how long one loop lasts)")
     v.add_argument("--avatar", help="glTF/GLB/VRM avatar (default: the built-in one)")
-    v.add_argument("--fps", type=float, help="true frame rate of the motion when its header is wrong")
+    c = v.add_argument_group("condition options (as in a design's [[conditions]])")
+    c.add_argument("--fps", type=float, help="true frame rate of the motion (arrays have none; BVH headers can lie)")
+    c.add_argument("--name-map", action="append", metavar="JOINT=BONE|FILE.toml",
+                   help="source joint -> humanoid bone; repeat it, or give a TOML file "
+                   "(what `studyapp inspect FILE --name-map-template` writes)")
+    c.add_argument("--template", help="BVH whose skeleton an NPZ/NPY array drives")
+    c.add_argument("--representation", help="rotations of an NPZ/NPY array: euler, axis_angle, quat, quat_wxyz, "
+                   "sixd (Zhou's columns), sixd_rows (PyTorch3D's rows), matrix")
+    c.add_argument("--rotation-order", help="Euler order of an euler array, e.g. XYZ")
+    c.add_argument("--joints", type=_names, help="template joints the array's columns drive, in order "
+                   "(comma-separated)")
+    deg = c.add_mutually_exclusive_group()
+    deg.add_argument("--degrees", dest="degrees", action="store_true", default=None,
+                     help="Euler arrays are in degrees (the default)")
+    deg.add_argument("--radians", dest="degrees", action="store_false", help="Euler arrays are in radians")
     v.add_argument("--offscreen", action="store_true", help="render one frame headless instead of opening a window")
     v.add_argument("--out", help="PNG to write with --offscreen")
     v.add_argument("--time", type=float, default=0.0, help="time in seconds of the offscreen frame")
@@ -55,18 +78,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _single_scene(args: argparse.Namespace, aspect: float):
-    from studyapp.motion.io import load_motion
+    """The scene ``view`` plays: the motion read with the condition options, as a design reads it."""
     from studyapp.render.pose import prepare_slot
     from studyapp.render.scene import load_avatar, make_scene
+    from studyapp.study.preview import load_preview_motion, parse_name_map, preview_condition
 
-    motion = load_motion(args.motion, fps=args.fps)
+    cond = preview_condition(args.motion, fps=args.fps, name_map=parse_name_map(args.name_map),
+                             template=args.template, representation=args.representation,
+                             rotation_order=args.rotation_order, joints=args.joints, degrees=args.degrees)
+    motion = load_preview_motion(args.motion, cond)
     face = None
     if args.face:
         from studyapp.face.io import load_face
 
         face = load_face(args.face)
     avatar = load_avatar(args.avatar)
-    slot = prepare_slot(avatar, motion, face)
+    slot = prepare_slot(avatar, motion, face, name_map=cond.name_map or None)
     return make_scene([slot], avatar, labels=None, aspect=aspect)
 
 
@@ -83,7 +110,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         from studyapp.render.video import render_still
 
         scene = _single_scene(args, w / h)
-        render_still(scene, args.time, args.out, size=(w, h))
+        render_still(scene, args.time, args.out, size=(w, h))  # the frame loop, on a virtual clock
         print(f"wrote {args.out}")
         return 0
     return _view_window(args, audio)
@@ -93,15 +120,22 @@ def _view_window(args: argparse.Namespace, audio) -> int:
     import glfw
 
     from studyapp.render.context import Window
+    from studyapp.render.frames import FlipPredictor
+    from studyapp.render.loop import FrameLoop, ScenePlayer, WallTimer, WindowTarget
     from studyapp.render.renderer import Renderer
+    from studyapp.render.scene import make_scene
 
     win = Window(args.size, fullscreen=args.fullscreen)
+    clock = _open_clock(audio)
+    renderer = None
     try:
         fw, fh = win.framebuffer_size
         scene = _single_scene(args, fw / max(fh, 1))
         renderer = Renderer(win.ctx)
-        clock = _Clock(audio, scene.duration)
-        state = {"aspect": fw / max(fh, 1)}
+        # One loop lasts the audio when there is some (as a stimulus without duration_s), else the motion.
+        duration = audio.duration if audio is not None else None
+        player = ScenePlayer(renderer, scene, clock, audio=audio, duration_s=duration, loop=True,
+                             predictor=FlipPredictor(_refresh_hz(win)))
 
         def on_key(key: int, _sc: int, action: int, _mods: int) -> None:
             if action != glfw.PRESS:
@@ -109,83 +143,53 @@ def _view_window(args: argparse.Namespace, audio) -> int:
             if key == glfw.KEY_ESCAPE:
                 win.request_close()
             elif key == glfw.KEY_SPACE:
-                clock.toggle()
+                player.toggle_pause()
             elif key == glfw.KEY_R:
-                clock.restart()
+                player.start(0.0)
+
+        aspect_now = [fw / max(fh, 1)]
+
+        def draw(fbo, size, now) -> None:
+            aspect = size[0] / size[1]
+            if abs(aspect - aspect_now[0]) > 1e-3:  # the window was resized: frame the figure anew
+                player.scene = make_scene(player.scene.slots, player.scene.avatars, None, aspect=aspect,
+                                          duration=player.scene.duration)
+                aspect_now[0] = aspect
+            player.draw(fbo, size, now)
 
         win.on_key(on_key)
-        while not win.should_close:
-            win.poll_events()
-            fw, fh = win.framebuffer_size
-            if fw == 0 or fh == 0:  # minimised
-                time.sleep(0.05)
-                continue
-            if abs(fw / fh - state["aspect"]) > 1e-3:
-                from studyapp.render.scene import make_scene
-
-                scene = make_scene(scene.slots, scene.avatars, None, aspect=fw / fh, duration=scene.duration)
-                state["aspect"] = fw / fh
-            win.use()
-            renderer.draw_trial(scene, clock.time(), win.fbo, (0, 0, fw, fh))
-            win.swap_buffers()
-        clock.close()
-        renderer.release()
+        player.start(0.0)
+        FrameLoop(WindowTarget(win), WallTimer(), draw, player.after_flip).run()
     finally:
+        clock.close()
+        if renderer is not None:
+            renderer.release()
         win.close()
     return 0
 
 
-class _Clock:
-    """Looping playback time: the audio device's clock when there is one, else the wall clock."""
+def _open_clock(audio):
+    """The media clock of ``view``: the sound card's when there is audio to play, else the wall clock."""
+    from studyapp.audio.clock import SilentClock
 
-    def __init__(self, audio, duration: float) -> None:
-        self.audio = audio
-        self.duration = max(duration, (len(audio.samples) / audio.sample_rate) if audio is not None else 0.0, 1e-3)
-        self.player = None
-        if audio is not None:
-            try:
-                from studyapp.audio.playback import AudioPlayer
+    if audio is None:
+        return SilentClock(reason="no --audio")
+    from studyapp.audio.playback import open_clock
 
-                self.player = AudioPlayer()
-            except Exception as exc:  # no sound card: play silently
-                log.warning("no audio output (%s); playing silently", exc)
-        self._t0 = time.perf_counter()
-        self._paused_at: float | None = None
-        self._start_audio()
+    # the output a study session would use (run_window reads the same variable)
+    clock, message = open_clock(os.environ.get("STUDYAPP_AUDIO_DEVICE") or None)
+    log.info("%s", message)
+    if isinstance(clock, SilentClock):
+        print(message, flush=True)
+    return clock
 
-    def _start_audio(self) -> None:
-        if self.player is not None:
-            self.player.play(self.audio)
 
-    def time(self) -> float:
-        if self._paused_at is not None:
-            return self._paused_at
-        t = time.perf_counter() - self._t0
-        if t >= self.duration:  # loop
-            self.restart()
-            t = 0.0
-        return t
+def _refresh_hz(win) -> float | None:
+    import glfw
 
-    def toggle(self) -> None:
-        if self._paused_at is None:
-            self._paused_at = time.perf_counter() - self._t0
-            if self.player is not None:
-                self.player.pause()
-        else:
-            self._t0 = time.perf_counter() - self._paused_at
-            self._paused_at = None
-            if self.player is not None:
-                self.player.resume()
-
-    def restart(self) -> None:
-        self._t0 = time.perf_counter()
-        if self._paused_at is not None:
-            self._paused_at = 0.0
-        self._start_audio()
-
-    def close(self) -> None:
-        if self.player is not None:
-            self.player.close()
+    monitor = glfw.get_window_monitor(win.handle) or glfw.get_primary_monitor()
+    mode = glfw.get_video_mode(monitor) if monitor else None
+    return float(mode.refresh_rate) if mode and mode.refresh_rate else None
 
 
 def cmd_render(args: argparse.Namespace) -> int:

@@ -210,7 +210,7 @@ def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:
         from studyapp.ui.app import run_offscreen_bot
 
         return int(run_offscreen_bot(design, db, pid, args.bot, args.seed) or 0)
-    from studyapp.demo_cli import display_available
+    from studyapp.cli.demo import display_available
 
     if not display_available():
         raise StudyappError("no display found to open the participant window; run on a desktop, or use "

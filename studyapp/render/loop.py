@@ -1,0 +1,312 @@
+"""The one frame loop: every picture studyapp shows or writes is made here, one frame at a time.
+
+For each frame :class:`FrameLoop` asks its timer for the time of the frame, has the drawing function
+draw into the target (a window's back buffer or an offscreen framebuffer), reads the frame back when
+asked, presents it (a buffer swap; nothing offscreen) and reports the flip. What is drawn comes from a
+media clock (:mod:`studyapp.audio.clock`): the audio clock when sound plays, a wall clock without a
+sound device, a virtual clock offscreen that the :class:`VirtualTimer` moves by exactly 1/fps per frame
+(no real time passes while drawing, so a 10 s clip renders in as many frames as it has, however slow).
+
+The participant window (:class:`studyapp.ui.app.WindowRunner`), the offscreen scripted participant
+(:mod:`studyapp.ui.bot`), ``studyapp view`` and video/still export (:mod:`studyapp.render.video`) all
+run through it. :class:`ScenePlayer` is the drawing function of the last two: one scene played on a
+media clock with the same A/V bookkeeping as a trial (:mod:`studyapp.render.frames`).
+
+>>> from studyapp.audio.clock import SilentClock
+>>> clock = SilentClock(virtual=True)
+>>> shown = []
+>>> loop = FrameLoop(NullTarget(), VirtualTimer(4.0, clocks=[clock]),
+...                  draw=lambda fbo, size, now: shown.append((now, clock.position_s())))
+>>> clock.play(None, duration_s=1.0)
+>>> loop.run(3)
+3
+>>> shown                                  # frame time and media time move 1/fps per frame
+[(0.0, 0.0), (0.25, 0.25), (0.5, 0.5)]
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable
+from typing import Any, Protocol
+
+import numpy as np
+
+from studyapp.audio.clock import MediaClock
+from studyapp.render.frames import FlipPredictor, PlayRecorder, clock_media_time
+
+
+# -- targets: where a frame goes -------------------------------------------------------------------------
+
+class FrameTarget(Protocol):
+    """Something frames are drawn into and presented on."""
+
+    @property
+    def fbo(self) -> Any: ...
+    @property
+    def size(self) -> tuple[int, int]: ...
+    def begin(self) -> bool: ...        # before a frame: handle events; False when the target closes
+    def use(self) -> None: ...
+    def read_rgb(self) -> np.ndarray: ...
+    def present(self) -> None: ...
+
+
+class WindowTarget:
+    """A :class:`~studyapp.render.context.Window`: events are polled before each frame, presenting swaps."""
+
+    def __init__(self, window: Any) -> None:
+        self.window = window
+
+    @property
+    def fbo(self) -> Any:
+        return self.window.fbo  # replaced on resize
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.window.framebuffer_size
+
+    def begin(self) -> bool:
+        self.window.poll_events()
+        return not self.window.should_close
+
+    def use(self) -> None:
+        self.window.use()
+
+    def read_rgb(self) -> np.ndarray:
+        return self.window.read_rgb()
+
+    def present(self) -> None:
+        self.window.swap_buffers()
+
+
+class OffscreenFrames:
+    """An offscreen framebuffer (:class:`~studyapp.render.context.OffscreenTarget`) of a fixed size."""
+
+    def __init__(self, ctx: Any, size: tuple[int, int]) -> None:
+        from studyapp.render.context import OffscreenTarget
+
+        self.target = OffscreenTarget(ctx, size)
+        self.size = self.target.size
+
+    @property
+    def fbo(self) -> Any:
+        return self.target.fbo
+
+    def begin(self) -> bool:
+        return True
+
+    def use(self) -> None:
+        self.target.fbo.use()
+
+    def read_rgb(self) -> np.ndarray:
+        return self.target.read_rgb()
+
+    def present(self) -> None:
+        pass  # nothing to show: the frame is read back or drawn on by the caller
+
+    def release(self) -> None:
+        self.target.release()
+
+
+class NullTarget:
+    """No pixels at all (doctests, timing logic): drawing functions receive ``fbo=None``."""
+
+    fbo = None
+    size = (1, 1)
+
+    def begin(self) -> bool:
+        return True
+
+    def use(self) -> None:
+        pass
+
+    def read_rgb(self) -> np.ndarray:
+        return np.zeros((1, 1, 3), np.uint8)
+
+    def present(self) -> None:
+        pass
+
+
+# -- timers: when a frame happens -------------------------------------------------------------------------
+
+class WallTimer:
+    """Real time (``time.perf_counter``): frames happen when they happen, flips are stamped after the swap."""
+
+    virtual = False
+
+    def now(self) -> float:
+        return time.perf_counter()
+
+    def flip_time(self) -> float:
+        return time.perf_counter()
+
+    def tick(self) -> None:
+        pass
+
+    def idle(self) -> None:
+        time.sleep(0.05)  # a minimised window: nothing to draw, do not spin
+
+
+class VirtualTimer:
+    """Frame ``k`` happens at ``k / fps`` and is flipped at that same instant; after each frame the
+    attached virtual media clocks (:class:`~studyapp.audio.clock.SilentClock` ``virtual=True``) move on by
+    exactly one frame, so frame ``k`` of a clip started at frame 0 shows media time ``k / fps``."""
+
+    virtual = True
+
+    def __init__(self, fps: float, clocks: Iterable[Any] = ()) -> None:
+        if not fps > 0:
+            raise ValueError(f"fps must be positive, got {fps}")
+        self.fps = float(fps)
+        self.clocks = list(clocks)
+        self.frame = 0
+
+    def now(self) -> float:
+        return self.frame / self.fps
+
+    def flip_time(self) -> float:
+        return self.now()
+
+    def tick(self) -> None:
+        self.frame += 1
+        for clock in self.clocks:
+            clock.advance(1.0 / self.fps)
+
+    def idle(self) -> None:
+        self.tick()
+
+
+# -- the loop ------------------------------------------------------------------------------------------------
+
+DrawFn = Callable[[Any, tuple[int, int], float], None]
+
+
+class FrameLoop:
+    """Draws frames into ``target`` at the times ``timer`` gives.
+
+    Parameters
+    ----------
+    target:
+        Where frames go (:class:`WindowTarget`, :class:`OffscreenFrames`).
+    timer:
+        :class:`WallTimer` (windows) or :class:`VirtualTimer` (offscreen).
+    draw:
+        ``draw(fbo, (w, h), now)``: draws the whole frame for time ``now``.
+    after_flip:
+        ``after_flip(flip_time)``: called once the frame is presented (A/V bookkeeping, slow work).
+    running:
+        Checked before each frame; the loop stops when it returns False (a participant finished).
+    capture:
+        Read every frame back into :attr:`last_rgb` (before presenting, while the back buffer holds it).
+    """
+
+    def __init__(self, target: FrameTarget, timer: Any, draw: DrawFn,
+                 after_flip: Callable[[float], None] | None = None, *,
+                 running: Callable[[], bool] | None = None, capture: bool = False) -> None:
+        self.target = target
+        self.timer = timer
+        self.draw = draw
+        self.after_flip = after_flip
+        self.running = running
+        self.capture = capture
+        self.last_rgb: np.ndarray | None = None
+        self.frames = 0
+
+    def step(self) -> bool:
+        """One frame; False (nothing drawn) once the target closed or ``running`` says stop."""
+        if not self.target.begin():
+            return False
+        if self.running is not None and not self.running():
+            return False
+        size = self.target.size
+        if size[0] <= 0 or size[1] <= 0:  # minimised
+            self.timer.idle()
+            return True
+        now = self.timer.now()
+        self.target.use()
+        self.draw(self.target.fbo, size, now)
+        if self.capture:
+            self.last_rgb = self.target.read_rgb()
+        self.target.present()
+        flip = self.timer.flip_time()
+        if self.after_flip is not None:
+            self.after_flip(flip)
+        self.timer.tick()
+        self.frames += 1
+        return True
+
+    def run(self, max_frames: int | None = None) -> int:
+        """Step until the target closes (or ``max_frames`` frames); returns the frames drawn."""
+        start = self.frames
+        while max_frames is None or self.frames - start < max_frames:
+            if not self.step():
+                break
+        return self.frames - start
+
+
+# -- one scene on a media clock -------------------------------------------------------------------------------
+
+class ScenePlayer:
+    """Plays a :class:`~studyapp.render.scene.TrialScene` on a media clock (``view``, stills, videos).
+
+    Parameters
+    ----------
+    renderer:
+        The :class:`~studyapp.render.renderer.Renderer` that draws the scene.
+    scene:
+        What to show; its ``duration`` is how long one play lasts unless ``duration_s`` says otherwise.
+    clock:
+        The media clock (audio player, wall or virtual :class:`~studyapp.audio.clock.SilentClock`).
+    audio:
+        The clip the clock plays (None: silence).
+    duration_s:
+        Length of one play (default: the scene's duration).
+    loop:
+        Start again from the beginning (with the sound) at the end (``view``).
+    predictor:
+        Flip prediction of a real display (windows); None offscreen.
+    """
+
+    def __init__(self, renderer: Any, scene: Any, clock: MediaClock, *, audio: Any = None,
+                 duration_s: float | None = None, loop: bool = False,
+                 predictor: FlipPredictor | None = None) -> None:
+        self.renderer = renderer
+        self.scene = scene
+        self.clock = clock
+        self.audio = audio
+        self.duration_s = float(scene.duration if duration_s is None else duration_s)
+        self.loop = loop
+        self.predictor = predictor
+        self.recorder = PlayRecorder(refresh_hz=predictor.nominal_hz if predictor is not None else None)
+        self.plays = 0
+        self._drawn: float | None = None
+
+    def start(self, at_s: float = 0.0) -> None:
+        """Play from ``at_s`` seconds (a new play: the frame record starts afresh)."""
+        self.clock.play(self.audio, at_s, duration_s=max(self.duration_s, float(at_s)))
+        self.recorder = PlayRecorder(refresh_hz=self.recorder.refresh_hz)
+        self.plays += 1
+
+    def toggle_pause(self) -> None:
+        if self.clock.paused:
+            self.clock.resume()
+        else:
+            self.clock.pause()
+
+    def media_time(self, now: float) -> float:
+        """The clip time the frame drawn at ``now`` shows (see :func:`~studyapp.render.frames.clock_media_time`)."""
+        if self.loop and self.clock.finished:
+            self.start(0.0)
+        return clock_media_time(self.clock, now, self.predictor, self.clock.duration_s)
+
+    def draw(self, fbo: Any, size: tuple[int, int], now: float) -> None:
+        t = self.media_time(now)
+        self.renderer.draw_trial(self.scene, t, fbo, (0, 0, int(size[0]), int(size[1])))
+        self._drawn = t
+
+    def after_flip(self, flip_time: float) -> None:
+        if self.predictor is not None:
+            self.predictor.flipped(flip_time)
+        # Only frames shown while the clip runs count (before a device starts, picture and sound both wait).
+        if self._drawn is not None and self.clock.started and not self.clock.paused:
+            self.recorder.flip(flip_time, self._drawn, self.clock.position_s())
+        self._drawn = None

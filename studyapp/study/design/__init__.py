@@ -1,0 +1,71 @@
+"""Study designs: TOML files that say what a study shows, in which order, and what it asks.
+
+A design is read in two passes. The first pass (:func:`validate_design`) collects *every* problem in the
+file -- syntax, unknown keys, wrong types, missing or mismatched stimulus files, skeletons that cannot be
+retargeted -- so an experimenter fixes them all in one go instead of one per run. Only a design without
+problems becomes a :class:`Design` (:func:`load_design`).
+
+The format is documented by example in ``study_designs/example_beat.toml``. Paths in a design are relative
+to the design file. A condition's ``motion`` is a pattern: ``{stimulus}`` is replaced by the stimulus id and
+``{<tag>}`` by the stimulus's tag of that name (e.g. ``{speaker}``).
+
+The package, one job a module: :mod:`.schema` declares every key once (a dataclass field with the types it
+accepts and its default), :mod:`.model` holds the validated classes, :mod:`.parse` reads a file into them,
+:mod:`.files` knows the files a design names and its hash, :mod:`.blinding` keeps condition names out of
+participants' sight.
+
+Example
+-------
+>>> from studyapp.resources import demo_design
+>>> d = load_design(demo_design())
+>>> [c.id for c in d.conditions]
+['synced', 'lagged', 'static']
+>>> motion_path(d, d.conditions[0], d.stimuli[0]).name
+'clip01.bvh'
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from studyapp.study.design.blinding import conditions_named_in, visible_text_leaks
+from studyapp.study.design.files import (design_hash, model_path, motion_path, pattern_fields, referenced_files,
+                                         resolve)
+from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
+                                         DesignError, Playback, Problem, QuestionItem, Stimulus)
+from studyapp.study.design.parse import REPRESENTATIONS, TABLES, condition_from_settings, parse_design
+from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE, FROZEN_PREFIX,
+                                          MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
+                                          SLOT_LABELS)
+
+__all__ = [
+    "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
+    "MOTION_SUFFIXES", "ORDERINGS", "QUESTION_KINDS", "REPRESENTATIONS", "SLOT_ASSIGNMENTS", "SLOT_LABELS", "TABLES",
+    "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Playback", "Problem", "QuestionItem",
+    "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",
+    "pattern_fields", "problems_to_json", "referenced_files", "resolve", "validate_design", "visible_text_leaks",
+]
+
+
+def validate_design(path: str | Path, *, check_files: bool = True) -> list[Problem]:
+    """Every problem of a design file; an empty list means the design can run.
+
+    ``check_files=False`` skips reading stimulus files (durations, skeletons) but still reports missing ones.
+
+    >>> from studyapp.resources import demo_design
+    >>> validate_design(demo_design())
+    []
+    """
+    return parse_design(Path(path), check_files)[1]
+
+
+def load_design(path: str | Path, *, check_files: bool = True) -> Design:
+    """Read and validate a design; raises :class:`DesignError` listing all problems."""
+    design, problems = parse_design(Path(path), check_files)
+    if problems or design is None:
+        raise DesignError(path, problems)
+    return design
+
+
+def problems_to_json(problems: list[Problem]) -> str:
+    return json.dumps([p.to_json() for p in problems], indent=2)

@@ -1,0 +1,139 @@
+"""Checks shared by every table of a design: types against the declared keys, ids, and where a key sits.
+
+Every problem is collected with the line of its key (tomllib reports no positions), so one run of
+``validate`` lists them all.
+"""
+from __future__ import annotations
+
+import difflib
+import re
+from pathlib import Path
+from typing import Any, Sequence
+
+from studyapp.study.design.model import Problem
+from studyapp.study.design.schema import ID_RE, TYPE_NAMES, DesignFile, toml_keys
+
+_TOP_KEYS = toml_keys(DesignFile)
+
+
+class Collector:
+    """Gathers problems and points each at the line of its key (tomllib reports no positions)."""
+
+    def __init__(self, path: Path, text: str) -> None:
+        self.path = str(path)
+        self.lines = text.splitlines()
+        self.problems: list[Problem] = []
+
+    def add(self, key: str, message: str, fix: str = "") -> None:
+        self.problems.append(Problem(self.path, key, message, fix, self._line_of(key)))
+
+    def _line_of(self, key: str) -> int | None:
+        """Best-effort line number of a dotted key like ``stimuli[2].audio`` or ``slots.labels``."""
+        parts = re.findall(r"([A-Za-z0-9_\-]+)(?:\[(\d+)\])?", key)
+        if not parts:
+            return None
+        start, end = 0, len(self.lines)
+        head, idx = parts[0]
+        if idx:  # array of tables: find the idx-th "[[head]]"
+            hits = [i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)]
+            if not hits:  # an inline list (practice = [...]): its element sits on the key's line
+                hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
+                return None if hit is None else hit + 1
+            if len(hits) <= int(idx):
+                return None
+            start = hits[int(idx)]
+            nxt = [i for i, ln in enumerate(self.lines) if i > start and re.match(r"^\s*\[\[", ln)]
+            end = nxt[0] if nxt else end
+            if len(parts) == 1:
+                return start + 1
+            rest = parts[1:]
+        else:
+            hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\s*{re.escape(head)}\s*\]", ln)), None)
+            if hit is None:
+                hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
+            if hit is None:  # a problem with a whole array of tables: point at its first block
+                hit = next((i for i, ln in enumerate(self.lines)
+                            if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)), None)
+                return None if hit is None else hit + 1
+            if not re.match(r"^\s*\[", self.lines[hit]):
+                return hit + 1
+            start = hit
+            if len(parts) == 1:
+                return start + 1
+            rest = parts[1:]
+            # The table ends at the next header that is not one of its own sub-tables.
+            nxt = [i for i, ln in enumerate(self.lines) if i > start and re.match(r"^\s*\[", ln)
+                   and not re.match(rf"^\s*\[\s*{re.escape(head)}\.", ln)]
+            end = nxt[0] if nxt else end
+        found = start
+        for name, _ in rest:  # each deeper part is searched for after the line of the one before
+            for i in range(found, end):
+                if re.match(rf"^\s*\[?\s*[\w.\-\[]*?{re.escape(name)}\s*[=\]]", self.lines[i]):
+                    found = i
+                    break
+            else:
+                break
+        return found + 1
+
+
+def did_you_mean(word: str, options: Sequence[str]) -> str:
+    close = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}?" if close else f"allowed keys: {', '.join(sorted(options))}"
+
+
+def check_table(col: Collector, table: Any, cls: type, where: str) -> dict:
+    """Type-check one table against the keys its class declares; returns only the well-typed keys."""
+    schema = toml_keys(cls)
+    if not isinstance(table, dict):
+        col.add(where, f"must be a table, got {type(table).__name__}", f"write it as [{where}] with key = value lines")
+        return {}
+    good: dict = {}
+    for key, value in table.items():
+        kpath = f"{where}.{key}" if where else key
+        if key not in schema:
+            if where and key in _TOP_KEYS and not where.startswith(("conditions", "stimuli")):
+                # TOML puts every key after a [table] header into that table: a classic slip.
+                col.add(kpath, f"unknown key {key!r} in [{where.split('[')[0]}]",
+                        f"`{key}` is a top-level key: move it above the first [table] header")
+            else:
+                col.add(kpath, f"unknown key {key!r}", did_you_mean(key, schema))
+            continue
+        types, _ = schema[key]
+        ok = isinstance(value, types) and not (bool not in types and isinstance(value, bool))
+        if not ok:
+            want = " or ".join(TYPE_NAMES[t] for t in types)
+            col.add(kpath, f"must be {want}, got {type(value).__name__} {value!r}"[:200], f"write {key} as {want}")
+            continue
+        good[key] = value
+    for key, (types, required) in schema.items():
+        if required and key not in table:
+            fix = f"add [[{key}]] blocks (see study_designs/example_beat.toml)" if types == (list,) else f"add {key} = ..."
+            col.add(f"{where}.{key}" if where else key, "is required but missing", fix)
+    return good
+
+
+def check_array(col: Collector, raw: dict, name: str, cls: type) -> list[tuple[int, dict]]:
+    items = raw.get(name, [])
+    out = []
+    for i, item in enumerate(items):
+        if not isinstance(item, dict):
+            col.add(f"{name}[{i}]", "must be a table", f"write each entry as a [[{name}]] block")
+            continue
+        out.append((i, check_table(col, item, cls, f"{name}[{i}]")))
+    return out
+
+
+def check_ids(col: Collector, name: str, entries: list[tuple[int, dict]], what: str) -> None:
+    seen: dict[str, int] = {}
+    for i, e in entries:
+        ident = e.get("id")
+        if ident is None:
+            continue
+        if not ID_RE.match(ident):
+            col.add(f"{name}[{i}].id", f"{what} id {ident!r} may only hold letters, digits, '_', '-' and '.'",
+                    "rename it, e.g. " + repr(re.sub(r"[^A-Za-z0-9_.\-]", "_", ident) or "c1"))
+        if ident in seen:
+            col.add(f"{name}[{i}].id", f"duplicate {what} id {ident!r} (also {name}[{seen[ident]}])",
+                    f"give every {what} its own id")
+        else:
+            seen[ident] = i

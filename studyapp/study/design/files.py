@@ -1,0 +1,134 @@
+"""Files a design names: paths relative to the design, motion patterns, the design's hash.
+
+A design's hash covers the design file and every file it references, so any changed stimulus changes it.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import string
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
+
+from studyapp.study.design.schema import BUILTIN_REFERENCE
+
+if TYPE_CHECKING:
+    from studyapp.study.design.model import Condition, Design, Stimulus
+
+
+class ProblemSink(Protocol):
+    """Where a check reports a problem (the parser's collector)."""
+
+    def add(self, key: str, message: str, fix: str = "") -> None: ...
+
+
+def resolve(design: Design | Path | str, relpath: str | Path) -> Path:
+    """Absolute path of a file named in a design (relative paths are relative to the design file).
+
+    >>> resolve(Path("/studies/a.toml"), "clips/c1.wav").as_posix()
+    '/studies/clips/c1.wav'
+    """
+    base = Path(getattr(design, "path", design)).resolve().parent
+    p = Path(os.path.expanduser(str(relpath)))
+    return p if p.is_absolute() else (base / p).resolve()
+
+
+def pattern_fields(pattern: str) -> list[str]:
+    """Placeholder names used in a motion pattern (``{stimulus}``, ``{speaker}``, ...)."""
+    try:
+        return [f for _, f, _, _ in string.Formatter().parse(pattern) if f is not None]
+    except ValueError:
+        return ["<unbalanced braces>"]
+
+
+def motion_path(design: Design, condition: Condition | str, stimulus: Stimulus | str) -> Path:
+    """The motion file of one condition for one stimulus (the condition's pattern filled in)."""
+    cond = design.condition(condition) if isinstance(condition, str) else condition
+    stim = design.stimulus(stimulus) if isinstance(stimulus, str) else stimulus
+    if cond.motion is None:
+        raise ValueError(f"condition {cond.id!r} is a live model ({cond.model}); it has no motion files")
+    return resolve(design, cond.motion.format(**{**stim.tags, "stimulus": stim.id}))
+
+
+def model_path(design: Design, condition: Condition) -> Path:
+    """The ONNX file of a live condition (``builtin:reference``: the reference model shipped with studyapp)."""
+    if condition.model is None:
+        raise ValueError(f"condition {condition.id!r} has motion files, not a live model")
+    if condition.model == BUILTIN_REFERENCE:
+        from studyapp.models.reference import shipped_reference_model
+
+        return shipped_reference_model()
+    return resolve(design, condition.model)
+
+
+_HASH_CACHE: dict[tuple[str, int, int], str] = {}
+
+
+def _file_digest(path: Path) -> str:
+    try:
+        st = path.stat()
+    except OSError:
+        return "missing"
+    if not path.is_file():
+        return "not a file"
+    key = (str(path), st.st_mtime_ns, st.st_size)
+    if key not in _HASH_CACHE:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+        _HASH_CACHE[key] = h.hexdigest()
+    return _HASH_CACHE[key]
+
+
+def design_hash(design_bytes: bytes, files: dict[str, Path]) -> str:
+    """sha256 over the design file and every file it references, so any changed stimulus changes it."""
+    h = hashlib.sha256(design_bytes)
+    for name in sorted(files):
+        h.update(f"\0{name}\0{_file_digest(files[name])}".encode())
+    return h.hexdigest()
+
+
+def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str, Path]:
+    """Every file a design refers to, keyed by the design key it comes from (``stimuli[0].audio``, ...).
+
+    Motion files are keyed ``conditions[i].motion[<stimulus id>]``. With ``col`` given, missing files are
+    reported there, one problem per file.
+    """
+    files: dict[str, Path] = {}
+    for i, s in enumerate(design.stimuli):
+        files[f"stimuli[{i}].audio"] = s.audio
+        if s.face is not None:
+            files[f"stimuli[{i}].face"] = s.face
+        if s.head is not None:
+            files[f"stimuli[{i}].head"] = s.head
+    for i, c in enumerate(design.conditions):
+        if c.model is not None:
+            files[f"conditions[{i}].model"] = model_path(design, c)
+        if c.template is not None:
+            files[f"conditions[{i}].template"] = resolve(design, c.template)
+        if c.motion is not None and pattern_fields(c.motion):
+            for s in design.stimuli:
+                try:
+                    files[f"conditions[{i}].motion[{s.id}]"] = motion_path(design, c, s)
+                except (KeyError, IndexError, ValueError) as exc:
+                    if col is not None:
+                        col.add(f"conditions[{i}].motion", f"pattern {c.motion!r} uses {exc} but stimulus "
+                                f"{s.id!r} has no such tag", "add the tag to that stimulus or use only {stimulus}")
+    if design.avatar != "builtin":
+        files["avatar.model"] = resolve(design, design.avatar)
+    for k, v in design.avatar_by_speaker.items():
+        if v != "builtin":
+            files[f"avatar.by_speaker.{k}"] = resolve(design, v)
+    if col is not None:
+        for key, p in files.items():
+            if not p.is_file():
+                what = key.split(".")[-1].split("[")[0]
+                if ".motion[" in key:
+                    ckey, stim = key[:-1].split(".motion[")
+                    cond = design.conditions[int(ckey.split("[")[1].rstrip("]"))].id
+                    col.add(f"{ckey}.motion", f"motion file of condition {cond!r} for stimulus {stim!r} not "
+                            f"found: {p}", "generate or copy it there, or fix the pattern")
+                else:
+                    col.add(key, f"{what} file not found: {p}", "fix the path (relative to the design file)")
+    return files

@@ -1,0 +1,279 @@
+"""The validated study design: what a study shows, in which order, and what it asks.
+
+These classes are what every other part of studyapp reads; :mod:`.parse` builds them from a TOML file.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+from studyapp.errors import InputError
+from studyapp.study.design.files import resolve
+from studyapp.study.design.schema import BOOL, FROZEN_PREFIX, INT, LIST, NUM, STR, TABLE, key
+
+# ---------------------------------------------------------------------------------------------------------
+# Data classes
+
+
+@dataclass
+class Condition:
+    """One model (or source of motion) compared in the study.
+
+    Attributes
+    ----------
+    id: short name recorded with every answer; never shown to participants.
+    motion: path pattern of the pre-computed motion files, relative to the design file, with ``{stimulus}``.
+    model: path of an ONNX gesture model run live on each stimulus instead of ``motion``.
+    fps: frame rate to use instead of what the motion file says (BVH headers can lie; NPZ/NPY have none).
+    representation: rotation representation of NPZ/NPY motion arrays (``euler``, ``axis_angle``, ``quat``,
+        ``sixd`` (Zhou's first two matrix columns), ``sixd_rows`` (PyTorch3D's first two rows), ``matrix``).
+    template: BVH whose skeleton NPZ/NPY arrays (and live model outputs) are laid onto.
+    rotation_order: Euler order of NPZ/NPY euler arrays (e.g. ``"XYZ"``).
+    name_map: source joint name -> humanoid bone name, for skeletons whose names are not recognised.
+    joints: template joint names the columns of NPZ/NPY arrays drive, in order (default: all template
+        joints, or BEAT's 47 upper-body joints for 47-joint arrays on a BEAT-like template).
+    degrees: whether NPZ/NPY Euler angles are in degrees (default) or radians.
+    motion_end: what the motion does when it ends before the trial (see :mod:`studyapp.study.timeline`):
+        ``"hold"`` its last frame or ``"loop"`` from its first; None (default): ``validate`` refuses a motion
+        shorter than the trial.
+    """
+
+    id: str = key(STR, required=True)
+    motion: str | None = key(STR, default=None)
+    model: str | None = key(STR, default=None)
+    fps: float | None = key(NUM, default=None)
+    representation: str | None = key(STR, default=None)
+    template: str | None = key(STR, default=None)
+    rotation_order: str | None = key(STR, default=None)
+    name_map: dict[str, str] = key(TABLE, default_factory=dict)
+    joints: tuple[str, ...] | None = key(LIST, default=None)
+    degrees: bool = key(BOOL, default=True)
+    motion_end: str | None = key(STR, default=None)
+
+    @property
+    def is_live(self) -> bool:
+        """True when the motion comes from an ONNX model run on the stimulus rather than from files."""
+        return self.model is not None
+
+    @property
+    def is_array(self) -> bool:
+        """True when the motion files are NPZ/NPY rotation arrays (read with template, representation, fps)."""
+        return self.motion is not None and self.motion.lower().endswith((".npz", ".npy"))
+
+
+@dataclass
+class Stimulus:
+    """One speech clip: audio and face are shared by all three slots, only the body motion differs.
+
+    Attributes
+    ----------
+    id: short name, also the ``{stimulus}`` in motion patterns.
+    audio: WAV file (absolute, resolved against the design file).
+    face: ARKit blendshape animation (CSV, Live Link Face CSV, BEAT JSON, NPY) or None for a neutral face.
+    head: optional head motion file shown with the face.
+    tags: free labels recorded with every answer, e.g. ``speaker``; ``speaker`` also picks the avatar.
+    duration_s: play only the first ``duration_s`` seconds (None: the audio's length).
+    in_rotation: False for stimuli only used as practice or attention checks (outside the balanced order).
+    """
+
+    id: str = key(STR, required=True)
+    audio: Path = key(STR, required=True)
+    face: Path | None = key(STR, default=None)
+    head: Path | None = key(STR, default=None)
+    tags: dict[str, str] = key(TABLE, default_factory=dict)
+    duration_s: float | None = key(NUM, default=None)
+    in_rotation: bool = key(BOOL, default=True)
+
+
+@dataclass
+class Criterion:
+    """One question the three motions are ranked on (rank 1 = best)."""
+
+    id: str = key(STR, required=True)
+    label: str = key(STR)                # default: the id, capitalised
+    question: str = key(STR, required=True)
+    explanation: str = key(STR, default="")
+
+
+#: The three criteria of the published study; used when a design has no ``[[criteria]]``.
+DEFAULT_CRITERIA: tuple[Criterion, ...] = (
+    Criterion("realism", "Realism", "Which motion looks most realistic?",
+              "Natural human movement: no odd body orientation, no jitter, no frozen or robotic poses."),
+    Criterion("synchronization", "Synchronization", "Which motion is best synchronized with the speech?",
+              "The gestures follow the rhythm and intonation of the speech: emphasis in the voice comes with "
+              "movement, pauses with calm."),
+    Criterion("diversity", "Diversity", "Which motion is most diverse?",
+              "Rich and varied gestures: not motionless, not the same movement repeated over and over."),
+)
+
+
+@dataclass
+class Playback:
+    """What the participant may do while watching a trial."""
+
+    must_watch_fully: bool = key(BOOL, default=True)     # answers unlock only after the clip played to its end once
+    allow_replay: bool = key(BOOL, default=True)         # replay the current clip (never earlier ones)
+    allow_ties: bool = key(BOOL, default=False)          # may two slots share a rank
+    pause_on_focus_loss: bool = key(BOOL, default=True)  # pause playback when the window loses focus
+
+
+@dataclass
+class AttentionCheck:
+    """A trial whose correct answer is known, to spot participants who do not watch.
+
+    Rule (documented once, used by the schedule, the media loader and the session):
+
+    * ``kind = "frozen"``: the trial plays ``stimulus`` with the usual three conditions, except that one slot
+      shows a *frozen* pose -- the first frame of the condition it replaces, held for the whole clip. That
+      slot's condition id is ``"frozen:<replaced id>"``. The participant passes when the frozen slot gets
+      rank ``expected["rank"]`` (default 3, i.e. last) on ``expected["criterion"]`` (default realism).
+    * ``kind = "known-worst"``: nothing is replaced; ``expected["condition"]`` names a condition known to be
+      worst (e.g. a static pose condition) and must get rank ``expected["rank"]`` (default 3) on
+      ``expected["criterion"]``.
+
+    With ties allowed, a tie that includes the expected rank counts as a pass.
+
+    Example
+    -------
+    >>> c = AttentionCheck("clip02", "frozen", {"criterion": "realism", "rank": 3})
+    >>> c.passed(("synced", "frozen:lagged", "static"), {"realism": (1, 3, 2)})
+    True
+    >>> c.passed(("synced", "frozen:lagged", "static"), {"realism": (1, 2, 3)})
+    False
+    """
+
+    stimulus: str
+    kind: str = "frozen"
+    expected: dict = field(default_factory=lambda: {"criterion": "realism", "rank": 3})
+
+    @property
+    def criterion(self) -> str:
+        return str(self.expected.get("criterion", "realism"))
+
+    @property
+    def rank(self) -> int:
+        return int(self.expected.get("rank", 3))
+
+    def target_slot(self, slots: Sequence[str]) -> int:
+        """Index (0 left, 1 middle, 2 right) of the slot whose rank decides the check."""
+        for i, cid in enumerate(slots):
+            if self.kind == "frozen" and cid.startswith(FROZEN_PREFIX):
+                return i
+            if self.kind == "known-worst" and cid == self.expected.get("condition"):
+                return i
+        raise ValueError(f"attention check on {self.stimulus!r}: no deciding slot among {tuple(slots)}")
+
+    def passed(self, slots: Sequence[str], ranks: Mapping[str, Sequence[float]]) -> bool:
+        """Did the participant answer as expected? ``ranks[criterion]`` lists ranks per slot (left..right).
+
+        Works for any tie convention (shared minimum rank or averaged rank): the deciding slot's tie group
+        covers the positions after the slots ranked strictly better; the check passes when the expected
+        rank is one of those positions.
+        """
+        r = [float(x) for x in ranks[self.criterion]]
+        mine = r[self.target_slot(slots)]
+        better = sum(x < mine for x in r)
+        better_or_equal = sum(x <= mine for x in r)
+        return better + 1 <= self.rank <= better_or_equal
+
+
+@dataclass
+class QuestionItem:
+    """One questionnaire item, asked after the last trial.
+
+    ``scale`` groups Likert items into one construct (Cronbach's alpha is computed per scale);
+    ``anchors`` label the lowest and highest point.
+    """
+
+    id: str = key(STR, required=True)
+    kind: str = key(STR)  # "likert" (the default) or "text"
+    text: str = key(STR, required=True)
+    scale: str | None = key(STR, default=None)
+    points: int = key(INT, default=7)
+    anchors: tuple[str, str] = key(LIST, default=("Strongly disagree", "Strongly agree"))
+
+
+@dataclass
+class Design:
+    """A validated study design (see :func:`load_design`)."""
+
+    path: Path
+    title: str
+    instructions: str
+    conditions: list[Condition]
+    stimuli: list[Stimulus]
+    criteria: list[Criterion]
+    avatar: str = "builtin"
+    avatar_by_speaker: dict[str, str] = field(default_factory=dict)
+    ordering: str = "balanced-latin-square"
+    slot_assignment: str = "balanced"
+    slot_labels: tuple[str, str, str] | None = None
+    practice: list[str] = field(default_factory=list)
+    attention_checks: list[AttentionCheck] = field(default_factory=list)
+    playback: Playback = field(default_factory=Playback)
+    questionnaire: list[QuestionItem] = field(default_factory=list)
+    max_attention_failures: int | None = None
+    seed: int = 1
+    design_hash: str = ""
+    groups: dict[str, str] = field(default_factory=dict)
+
+    def condition(self, cid: str) -> Condition:
+        for c in self.conditions:
+            if c.id == cid:
+                return c
+        raise KeyError(f"no condition {cid!r} in {self.path.name}; have {[c.id for c in self.conditions]}")
+
+    def stimulus(self, sid: str) -> Stimulus:
+        for s in self.stimuli:
+            if s.id == sid:
+                return s
+        raise KeyError(f"no stimulus {sid!r} in {self.path.name}; have {[s.id for s in self.stimuli]}")
+
+    @property
+    def condition_ids(self) -> list[str]:
+        return [c.id for c in self.conditions]
+
+    @property
+    def criterion_ids(self) -> list[str]:
+        return [c.id for c in self.criteria]
+
+    @property
+    def rotation_stimuli(self) -> list[str]:
+        """Ids of the stimuli in the balanced order (every stimulus not marked ``in_rotation = false``)."""
+        return [s.id for s in self.stimuli if s.in_rotation]
+
+    def avatar_for(self, stimulus: Stimulus | str) -> str:
+        """``"builtin"`` or the absolute path of the glTF/VRM avatar for a stimulus (by its speaker tag)."""
+        stim = self.stimulus(stimulus) if isinstance(stimulus, str) else stimulus
+        name = self.avatar_by_speaker.get(stim.tags.get("speaker", ""), self.avatar)
+        return name if name == "builtin" else str(resolve(self, name))
+
+
+@dataclass
+class Problem:
+    """One thing wrong with a design: where it is, what is wrong, how to fix it."""
+
+    path: str
+    key: str
+    message: str
+    fix: str = ""
+    line: int | None = None
+
+    def __str__(self) -> str:
+        where = f"{self.path}:{self.line}" if self.line else self.path
+        text = f"{where}: {self.key}: {self.message}" if self.key else f"{where}: {self.message}"
+        return f"{text} -- fix: {self.fix}" if self.fix else text
+
+    def to_json(self) -> dict:
+        return {"file": self.path, "key": self.key, "line": self.line, "message": self.message, "fix": self.fix}
+
+
+class DesignError(InputError):
+    """A design has problems; ``problems`` lists all of them, the message shows one per line."""
+
+    def __init__(self, path: str | Path, problems: list[Problem]) -> None:
+        self.problems = list(problems)
+        n = len(self.problems)
+        body = "\n".join(f"  {p}" for p in self.problems)
+        super().__init__(path, None, f"{n} problem{'s' if n != 1 else ''} in the design:\n{body}")

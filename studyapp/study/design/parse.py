@@ -1,0 +1,404 @@
+"""Read a design file: every problem in one pass, each pointing at its line, then the :class:`Design`.
+
+The keys each table accepts, and their defaults, come from the classes that declare them
+(:mod:`.schema`, :mod:`.model`); this module checks values and how they refer to each other.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from studyapp import tomlfile
+from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
+from studyapp.study.design.blinding import visible_text_leaks
+from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
+from studyapp.study.design.files import design_hash, pattern_fields, referenced_files, resolve
+from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
+                                             Playback, Problem, QuestionItem, Stimulus)
+from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
+                                              MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
+                                              SLOT_LABELS, AttentionCheckTable, AvatarTable,
+                                              DesignFile, OrderingTable, ParticipantsTable, SlotsTable,
+                                              key_default)
+from studyapp.study.timeline import MOTION_END_CHOICES
+
+#: Rotation representations of NPZ/NPY arrays (those :mod:`studyapp.motion.rotations` reads).
+REPRESENTATIONS = tuple(_REPRESENTATION_WIDTHS)
+# "6d"/"rot6d" are left out on purpose: the two 6D layouts cannot be told apart from the numbers, so a
+# design must say which one (sixd = Zhou's columns, sixd_rows = PyTorch3D's rows).
+_REPR_ALIASES = {"axis-angle": "axis_angle", "axisangle": "axis_angle", "rotvec": "axis_angle",
+                 "quaternion": "quat", "quat_xyzw": "quat", "rotmat": "matrix"}
+#: Every table of a design file and the class declaring its keys ("" is the top level).
+TABLES: dict[str, type] = {"": DesignFile, "conditions": Condition, "stimuli": Stimulus, "criteria": Criterion,
+                           "avatar": AvatarTable, "ordering": OrderingTable, "slots": SlotsTable,
+                           "attention_checks": AttentionCheckTable, "playback": Playback,
+                           "questionnaire": QuestionItem, "participants": ParticipantsTable}
+
+
+# ---------------------------------------------------------------------------------------------------------
+# One function per part of the design
+
+
+def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> list[Condition]:
+    conditions: list[Condition] = []
+    if "conditions" not in top:
+        pass  # reported as a missing required key
+    elif len(conds) < 2:
+        col.add("conditions", f"{len(conds)} condition(s) given; a comparison needs at least 2, and the "
+                "three-slot viewer needs exactly 3", "add [[conditions]] blocks until there are 3")
+    elif len(conds) != 3:
+        col.add("conditions", f"{len(conds)} conditions given; the three-slot viewer shows exactly 3 per trial",
+                "keep exactly 3 [[conditions]] (make one design per set of three models)")
+    for i, e in conds:
+        cond = parse_condition(col, f"conditions[{i}]", e)
+        if cond is not None:
+            conditions.append(cond)
+    return conditions
+
+
+def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) -> Condition | None:
+    """One well-typed ``[[conditions]]`` table (``e``) checked and turned into a :class:`Condition`; problems
+    go to ``col`` under ``key``. ``pattern`` False: ``motion`` names one file, not a pattern."""
+    if ("motion" in e) == ("model" in e):
+        col.add(key, "needs exactly one of `motion` (file pattern) or `model` (ONNX file)"
+                + (", not both" if "motion" in e else ""),
+                'add motion = "motion/<model>/{stimulus}.bvh" or model = "model.onnx"')
+    if "fps" in e and not (e["fps"] > 0 and math.isfinite(e["fps"])):
+        col.add(f"{key}.fps", f"must be a positive frame rate, got {e['fps']}", "e.g. fps = 15")
+    rep = e.get("representation")
+    if rep is not None:
+        rep = _REPR_ALIASES.get(rep.lower(), rep.lower())
+        if rep in ("6d", "rot6d", "rotation_6d"):
+            col.add(f"{key}.representation", f"{e['representation']!r} is ambiguous: 6D rotations come in two "
+                    "layouts that the numbers cannot tell apart",
+                    'representation = "sixd" (Zhou et al.: first two matrix columns) or "sixd_rows" '
+                    "(PyTorch3D matrix_to_rotation_6d: first two rows)")
+            rep = None
+        elif rep not in REPRESENTATIONS:
+            col.add(f"{key}.representation", f"unknown rotation representation {e['representation']!r}",
+                    did_you_mean(rep, REPRESENTATIONS).replace("allowed keys", "allowed values"))
+    ro = e.get("rotation_order")
+    if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
+        col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
+    motion_end = e.get("motion_end")
+    if motion_end is not None and motion_end not in MOTION_END_CHOICES:
+        col.add(f"{key}.motion_end", f"unknown motion_end {motion_end!r}",
+                'use "hold" (freeze on the last frame) or "loop" (start again from the first)')
+        motion_end = None
+    nm = e.get("name_map", {})
+    bad = [k for k, v in nm.items() if not isinstance(v, str)]
+    for k in bad:
+        col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
+    if "motion" in e:
+        fields = pattern_fields(e["motion"]) if pattern else ["stimulus"]
+        if not fields:
+            col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
+                    "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
+        if not e["motion"].lower().endswith(MOTION_SUFFIXES):
+            col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
+                    "convert them first (studyapp convert) or fix the pattern's extension")
+        if e["motion"].lower().endswith((".npz", ".npy")):
+            # Arrays carry neither skeleton, nor rotation layout, nor frame rate: the condition must say.
+            if "template" not in e:
+                col.add(f"{key}.template", "NPZ/NPY motion needs a template BVH for its skeleton",
+                        'add template = "template.bvh" (a BVH of the skeleton the arrays drive)')
+            if "representation" not in e:
+                col.add(f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
+                        f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})')
+            if "fps" not in e:
+                col.add(f"{key}.fps", "NPZ/NPY motion carries no frame rate",
+                        "add the model's output rate, e.g. fps = 15")
+        else:
+            for k in ("joints", "degrees", "representation"):
+                if k in e:
+                    col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
+                            f"remove {k}")
+    joints = e.get("joints")
+    if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
+        col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
+                'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
+        joints = None
+    if "model" in e and "motion" not in e:
+        for k in ("joints", "degrees", "representation", "rotation_order"):
+            if k in e:  # a live model declares its own output; a setting here would be silently ignored
+                col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
+                        f"remove {k} (the model's output is read as its contract declares)")
+    if "model" in e and e["model"] != BUILTIN_REFERENCE and not e["model"].lower().endswith(".onnx"):
+        col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
+    if e.get("id"):
+        return Condition(
+            id=e["id"], motion=e.get("motion"), model=e.get("model"),
+            fps=float(e["fps"]) if "fps" in e else None,
+            representation=rep, template=e.get("template"),
+            rotation_order=ro.upper() if ro else None,
+            name_map={k: v for k, v in nm.items() if isinstance(v, str)},
+            joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
+            motion_end=motion_end,
+        )
+    return None
+
+
+def condition_from_settings(settings: dict[str, Any], source: str | Path) -> tuple[Condition | None, list[Problem]]:
+    """A condition from settings given outside a design file (``studyapp view``'s options), with the
+    checks and meaning of a ``[[conditions]]`` table whose ``motion`` names one file, not a pattern.
+
+    Returns the condition (None when unusable) and the problems, keyed by the setting (``fps``, ...).
+
+    >>> cond, problems = condition_from_settings({"motion": "out.npy", "representation": "6d"}, "out.npy")
+    >>> [p.key for p in problems]
+    ['representation', 'template', 'fps']
+    >>> condition_from_settings({"motion": "a.bvh", "rotation_order": "zyx"}, "a.bvh")[0].rotation_order
+    'ZYX'
+    """
+    col = Collector(Path(source), "")
+    entry = check_table(col, {"id": "view", **settings}, Condition, "view")
+    cond = parse_condition(col, "view", entry, pattern=False)
+    for p in col.problems:
+        p.key = p.key.removeprefix("view").removeprefix(".")
+    return cond, col.problems
+
+
+def _stimuli(col: Collector, top: dict, stims: list[tuple[int, dict]], path: Path) -> list[Stimulus]:
+    stimuli: list[Stimulus] = []
+    if "stimuli" in top and not stims:
+        col.add("stimuli", "no stimuli", "add [[stimuli]] blocks with id, audio and face")
+    for i, e in stims:
+        key = f"stimuli[{i}]"
+        tags = e.get("tags", {})
+        for k, v in tags.items():
+            if not isinstance(v, (str, int, float)) or isinstance(v, bool):
+                col.add(f"{key}.tags.{k}", "tag values must be strings", f'{k} = "value"')
+        if "duration_s" in e and not e["duration_s"] > 0:
+            col.add(f"{key}.duration_s", f"must be positive, got {e['duration_s']}", "remove it or give seconds > 0")
+        if e.get("id") and "audio" in e:
+            stimuli.append(Stimulus(
+                id=e["id"], audio=resolve(path, e["audio"]),
+                face=resolve(path, e["face"]) if "face" in e else None,
+                head=resolve(path, e["head"]) if "head" in e else None,
+                tags={k: str(v) for k, v in tags.items() if not isinstance(v, (dict, list, bool))},
+                duration_s=float(e["duration_s"]) if "duration_s" in e else None,
+                in_rotation=bool(e.get("in_rotation", key_default(Stimulus, "in_rotation"))),
+            ))
+    if stimuli and not any(s.in_rotation for s in stimuli):
+        col.add("stimuli", "every stimulus has in_rotation = false: there are no rated trials",
+                "set in_rotation = true (the default) on the clips to be rated")
+    return stimuli
+
+
+def _criteria(col: Collector, top: dict, crits: list[tuple[int, dict]]) -> list[Criterion]:
+    if "criteria" in top:
+        criteria = [Criterion(e["id"], e.get("label", e["id"].capitalize()), e["question"],
+                              e.get("explanation", key_default(Criterion, "explanation")))
+                    for _, e in crits if e.get("id") and "question" in e]
+    else:
+        criteria = [replace(c) for c in DEFAULT_CRITERIA]  # copies: an edit to one design must not reach others
+    if "criteria" in top and not crits:
+        col.add("criteria", "empty list of criteria", "remove `criteria` to use the default three, or add some")
+    return criteria
+
+
+def _avatar(col: Collector, avatar: AvatarTable, stims: list[tuple[int, dict]]) -> tuple[str, dict[str, str]]:
+    avatar_default = avatar.model
+    by_speaker = {}
+    for k, v in avatar.by_speaker.items():
+        if not isinstance(v, str):
+            col.add(f"avatar.by_speaker.{k}", "must be \"builtin\" or a glTF/VRM path", f'{k} = "builtin"')
+        else:
+            by_speaker[k] = v
+    speakers = {str(e.get("tags", {}).get("speaker")) for _, e in stims if "speaker" in e.get("tags", {})}
+    for k in by_speaker:
+        if k not in speakers:
+            col.add(f"avatar.by_speaker.{k}", f"no stimulus has tags.speaker = {k!r}",
+                    did_you_mean(k, sorted(x for x in speakers if x)).replace("allowed keys", "speakers"))
+    for akey, name in [("avatar.model", avatar_default)] + [(f"avatar.by_speaker.{k}", v) for k, v in by_speaker.items()]:
+        if name != "builtin" and not name.lower().endswith(AVATAR_SUFFIXES):
+            col.add(akey, f"{name!r} is neither \"builtin\" nor a .glb/.gltf/.vrm file", 'use "builtin" or a glTF file')
+    return avatar_default, by_speaker
+
+
+def _ordering_and_slots(col: Collector, ordering: OrderingTable, slots: SlotsTable):
+    if ordering.method not in ORDERINGS:
+        col.add("ordering.method", f"unknown ordering {ordering.method!r}",
+                did_you_mean(ordering.method, ORDERINGS).replace("allowed keys", "allowed values"))
+    if slots.assignment not in SLOT_ASSIGNMENTS:
+        col.add("slots.assignment", f"unknown slot assignment {slots.assignment!r}",
+                did_you_mean(slots.assignment, SLOT_ASSIGNMENTS).replace("allowed keys", "allowed values"))
+    if slots.labels not in SLOT_LABELS:
+        col.add("slots.labels", f"unknown slot labels {slots.labels!r}", 'use "ABC", "LMR", "123" or "none"')
+    return SLOT_LABELS.get(slots.labels, ("A", "B", "C"))
+
+
+def _attention_checks(col: Collector, checks: list[tuple[int, dict]], stim_ids: list[str], crit_ids: list[str],
+                      ids_ok: list[str]) -> list[AttentionCheck]:
+    attention: list[AttentionCheck] = []
+    for i, e in checks:
+        key = f"attention_checks[{i}]"
+        kind = e.get("kind", key_default(AttentionCheckTable, "kind"))
+        if "stimulus" in e and e["stimulus"] not in stim_ids:
+            col.add(f"{key}.stimulus", f"unknown stimulus {e['stimulus']!r}",
+                    did_you_mean(e["stimulus"], stim_ids).replace("allowed keys", "stimuli"))
+        if kind not in ATTENTION_KINDS:
+            col.add(f"{key}.kind", f"unknown attention check kind {kind!r}", 'use "frozen" or "known-worst"')
+        crit = e.get("criterion", key_default(AttentionCheckTable, "criterion"))
+        if crit not in crit_ids:
+            col.add(f"{key}.criterion", f"unknown criterion {crit!r}",
+                    did_you_mean(crit, crit_ids).replace("allowed keys", "criteria"))
+        rank = e.get("rank", key_default(AttentionCheckTable, "rank"))
+        if rank not in (1, 2, 3):
+            col.add(f"{key}.rank", f"rank must be 1, 2 or 3, got {rank}", "3 means ranked last")
+        expected: dict = {"criterion": crit, "rank": rank}
+        if kind == "known-worst":
+            if "condition" not in e:
+                col.add(f"{key}.condition", "a known-worst check must name the condition expected at `rank`",
+                        f'condition = "{ids_ok[-1] if ids_ok else "static"}"')
+            elif e["condition"] not in ids_ok:
+                col.add(f"{key}.condition", f"unknown condition {e['condition']!r}",
+                        did_you_mean(e["condition"], ids_ok).replace("allowed keys", "conditions"))
+            else:
+                expected["condition"] = e["condition"]
+        elif "condition" in e:
+            col.add(f"{key}.condition", "only known-worst checks name a condition (frozen checks replace a slot)",
+                    'remove it or set kind = "known-worst"')
+        if "stimulus" in e:
+            attention.append(AttentionCheck(e["stimulus"], kind, expected))
+    return attention
+
+
+def _questionnaire(col: Collector, questions: list[tuple[int, dict]]) -> list[QuestionItem]:
+    items: list[QuestionItem] = []
+    for i, e in questions:
+        key = f"questionnaire[{i}]"
+        kind = e.get("kind", "likert")
+        if kind not in QUESTION_KINDS:
+            col.add(f"{key}.kind", f"unknown item kind {kind!r}", 'use "likert" or "text"')
+        points = e.get("points", key_default(QuestionItem, "points") if kind == "likert" else 0)
+        if kind == "likert" and not 2 <= points <= 11:
+            col.add(f"{key}.points", f"a Likert item needs 2..11 points, got {points}", "e.g. points = 7")
+        anchors = e.get("anchors", list(key_default(QuestionItem, "anchors")) if kind == "likert" else ["", ""])
+        if len(anchors) != 2 or not all(isinstance(a, str) for a in anchors):
+            col.add(f"{key}.anchors", "must be two strings: the labels of the lowest and highest point",
+                    'anchors = ["Strongly disagree", "Strongly agree"]')
+            anchors = ["", ""]
+        if e.get("id") and "text" in e:
+            items.append(QuestionItem(e["id"], kind, e["text"], e.get("scale"), points if kind == "likert" else 0,
+                                      (anchors[0], anchors[1])))
+    return items
+
+
+def _participants(col: Collector, participants: ParticipantsTable) -> tuple[int | None, dict[str, str]]:
+    maxfail = participants.max_attention_failures
+    if maxfail is not None and maxfail < 0:
+        col.add("participants.max_attention_failures", "must be 0 or more", "e.g. 1")
+    groups = {}
+    for k, v in participants.groups.items():
+        if isinstance(v, (dict, list)):
+            col.add(f"participants.groups.{k}", "group labels must be strings", f'{k} = "v1"')
+        else:
+            groups[k] = str(v)
+    return maxfail, groups
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The whole file
+
+
+def _read(path: Path) -> tuple[bytes, str, dict] | Problem:
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        return Problem(str(path), "", f"cannot read the design file: {exc.strerror or exc}", "check the path")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return Problem(str(path), "", f"not UTF-8 text (byte {exc.start})", "save the file as UTF-8")
+    try:
+        return data, text, tomlfile.loads(text)
+    except tomlfile.TOMLDecodeError as exc:
+        m = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
+        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(exc))
+        line = int(m.group(1)) if m else None
+        where = f"line {m.group(1)}, column {m.group(2)}" if m else ""
+        return Problem(str(path), where, f"TOML syntax error: {msg}",
+                       "see https://toml.io; strings need quotes, tables [name], lists [a, b]", line)
+
+
+def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]:
+    """The design in ``path`` (None when it cannot be read) and every problem found in it."""
+    path = Path(path)
+    got = _read(path)
+    if isinstance(got, Problem):
+        return None, [got]
+    data, text, raw = got
+    col = Collector(path, text)
+    top = check_table(col, raw, DesignFile, "")
+    conds = check_array(col, top, "conditions", Condition)
+    stims = check_array(col, top, "stimuli", Stimulus)
+    crits = check_array(col, top, "criteria", Criterion)
+    checks = check_array(col, top, "attention_checks", AttentionCheckTable)
+    questions = check_array(col, top, "questionnaire", QuestionItem)
+    avatar = AvatarTable(**check_table(col, top.get("avatar", {}), AvatarTable, "avatar"))
+    ordering = OrderingTable(**check_table(col, top.get("ordering", {}), OrderingTable, "ordering"))
+    slots = SlotsTable(**check_table(col, top.get("slots", {}), SlotsTable, "slots"))
+    playback = check_table(col, top.get("playback", {}), Playback, "playback")
+    participants = ParticipantsTable(**check_table(col, top.get("participants", {}), ParticipantsTable,
+                                                    "participants"))
+    check_ids(col, "conditions", conds, "condition")
+    check_ids(col, "stimuli", stims, "stimulus")
+    check_ids(col, "criteria", crits, "criterion")
+    check_ids(col, "questionnaire", questions, "questionnaire item")
+
+    conditions = _conditions(col, top, conds)
+    ids_ok = [e.get("id") for _, e in conds if e.get("id")]
+    stimuli = _stimuli(col, top, stims, path)
+    # Every stimulus that has an id counts as known, even one with another problem (say, no audio): a
+    # reference to it from `practice` or an attention check is not a second problem.
+    stim_ids = [e["id"] for _, e in stims if e.get("id")]
+    criteria = _criteria(col, top, crits)
+    # As for stimuli: a criterion with a problem of its own is still known by its id to attention checks.
+    crit_ids = [e["id"] for _, e in crits if e.get("id")] if "criteria" in top else [c.id for c in criteria]
+    avatar_default, by_speaker = _avatar(col, avatar, stims)
+    labels = _ordering_and_slots(col, ordering, slots)
+    practice = top.get("practice", key_default(DesignFile, "practice"))
+    for j, sid in enumerate(practice):
+        if sid not in stim_ids:
+            col.add(f"practice[{j}]", f"unknown stimulus {sid!r}",
+                    did_you_mean(str(sid), stim_ids).replace("allowed keys", "stimuli"))
+    attention = _attention_checks(col, checks, stim_ids, crit_ids, ids_ok)
+    items = _questionnaire(col, questions)
+    maxfail, groups = _participants(col, participants)
+
+    design = Design(
+        path=path.resolve(), title=top.get("title", ""), instructions=top.get("instructions", "").strip(),
+        conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
+        avatar_by_speaker=by_speaker, ordering=ordering.method, slot_assignment=slots.assignment,
+        slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
+        playback=Playback(**playback), questionnaire=items, max_attention_failures=maxfail,
+        seed=int(ordering.seed), groups=groups,
+    )
+    for key, cid in visible_text_leaks(design):
+        col.add(key, f"participants read this text and it names condition {cid!r}: that unblinds the study",
+                "reword the text, or give the condition another id")
+    files = referenced_files(design, col)
+    if check_files:
+        from studyapp.study.stimuli import check_stimulus_files
+
+        # File contents are checked even when the design has other problems, so one run reports them all.
+        # A design with problems may be only partly built; should a check trip over that, say so instead of
+        # crashing, since fixing the reported problems comes first anyway.
+        partial = bool(col.problems)
+        try:
+            found = check_stimulus_files(design)
+        except Exception as exc:
+            if not partial:
+                raise
+            found = [("", f"stimulus files not checked ({type(exc).__name__}: {exc})",
+                      "fix the problems above and validate again")]
+        for key, message, fix in found:
+            col.add(key, message, fix)
+    design.design_hash = design_hash(data, {k: p for k, p in files.items()})
+    return design, col.problems
+
+

@@ -1,0 +1,120 @@
+"""Design keys, each declared once: a TOML key is a dataclass field carrying its accepted types.
+
+The runtime classes (:mod:`.model`) declare the keys of the tables that mirror them (``[[conditions]]``,
+``[[stimuli]]``, ``[[criteria]]``, ``[playback]``, ``[[questionnaire]]``); the tables that only feed the
+design (``[avatar]``, ``[ordering]``, ``[slots]``, ``[[attention_checks]]``, ``[participants]`` and the top
+level) are declared here. The parser checks a table against :func:`toml_keys` of its class and takes
+defaults from the class, so adding a key is adding one field.
+
+>>> toml_keys(OrderingTable)
+{'method': ((<class 'str'>,), False), 'seed': ((<class 'int'>,), False)}
+>>> OrderingTable().method
+'balanced-latin-square'
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any
+
+STR, NUM, INT, BOOL, LIST, TABLE = (str,), (int, float), (int,), (bool,), (list,), (dict,)
+TYPE_NAMES = {str: "a string", int: "an integer", float: "a number", bool: "true or false", list: "a list",
+              dict: "a table"}
+
+ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+ORDERINGS = ("balanced-latin-square", "random", "fixed")
+SLOT_ASSIGNMENTS = ("balanced", "random")
+SLOT_LABELS = {"ABC": ("A", "B", "C"), "LMR": ("L", "M", "R"), "123": ("1", "2", "3"), "none": None}
+QUESTION_KINDS = ("likert", "text")
+MOTION_SUFFIXES = (".bvh", ".npz", ".npy")
+AVATAR_SUFFIXES = (".glb", ".gltf", ".vrm")
+#: Attention-check kinds and what they show (see :class:`~.model.AttentionCheck`).
+ATTENTION_KINDS = ("frozen", "known-worst")
+#: ``model = "builtin:reference"`` runs the reference ONNX model shipped with studyapp.
+BUILTIN_REFERENCE = "builtin:reference"
+#: Prefix of the pseudo condition id of a frozen attention-check slot.
+FROZEN_PREFIX = "frozen:"
+
+
+def key(types: tuple[type, ...], *, required: bool = False, default: Any = MISSING,
+        default_factory: Any = MISSING) -> Any:
+    """A dataclass field that is also a design key accepting values of ``types``."""
+    meta = {"toml": tuple(types), "required": required}
+    if default_factory is not MISSING:
+        return field(default_factory=default_factory, metadata=meta)
+    if default is not MISSING:
+        return field(default=default, metadata=meta)
+    return field(metadata=meta)
+
+
+def toml_keys(cls: type) -> dict[str, tuple[tuple[type, ...], bool]]:
+    """``{key: (accepted types, required)}`` of a class's design keys, in declaration order."""
+    return {f.name: (f.metadata["toml"], f.metadata["required"]) for f in fields(cls) if "toml" in f.metadata}
+
+
+def key_default(cls: type, name: str) -> Any:
+    """The default a class declares for one key."""
+    f = next(f for f in fields(cls) if f.name == name)
+    return f.default_factory() if f.default_factory is not MISSING else f.default
+
+
+@dataclass
+class DesignFile:
+    """The top level of a design file."""
+
+    title: str = key(STR, required=True, default="")
+    instructions: str = key(STR, default="")
+    practice: list = key(LIST, default_factory=list)
+    conditions: list = key(LIST, required=True, default_factory=list)
+    stimuli: list = key(LIST, required=True, default_factory=list)
+    criteria: list = key(LIST, default_factory=list)
+    avatar: dict = key(TABLE, default_factory=dict)
+    ordering: dict = key(TABLE, default_factory=dict)
+    slots: dict = key(TABLE, default_factory=dict)
+    attention_checks: list = key(LIST, default_factory=list)
+    playback: dict = key(TABLE, default_factory=dict)
+    questionnaire: list = key(LIST, default_factory=list)
+    participants: dict = key(TABLE, default_factory=dict)
+
+
+@dataclass
+class AvatarTable:
+    """``[avatar]``: the character every slot shows (``"builtin"`` or a glTF/GLB/VRM file), per speaker."""
+
+    model: str = key(STR, default="builtin")
+    by_speaker: dict = key(TABLE, default_factory=dict)
+
+
+@dataclass
+class OrderingTable:
+    """``[ordering]``: how clip order is drawn, and the seed of every random choice."""
+
+    method: str = key(STR, default="balanced-latin-square")
+    seed: int = key(INT, default=1)
+
+
+@dataclass
+class SlotsTable:
+    """``[slots]``: how conditions are put in slots and what the slots are called on screen."""
+
+    assignment: str = key(STR, default="balanced")
+    labels: str = key(STR, default="ABC")
+
+
+@dataclass
+class AttentionCheckTable:
+    """``[[attention_checks]]``: see :class:`~.model.AttentionCheck` for what each kind shows."""
+
+    stimulus: str = key(STR, required=True, default="")
+    kind: str = key(STR, default="frozen")
+    criterion: str = key(STR, default="realism")
+    rank: int = key(INT, default=3)
+    condition: str | None = key(STR, default=None)
+
+
+@dataclass
+class ParticipantsTable:
+    """``[participants]``: when a session ends early, and groups participants belong to."""
+
+    max_attention_failures: int | None = key(INT, default=None)
+    groups: dict = key(TABLE, default_factory=dict)
