@@ -166,12 +166,19 @@ class TrialSource(Protocol):
     are already fitted to the trial's timeline, which lasts ``duration_s``.
     """
 
-    motions: Sequence["Motion"]
-    face: "FaceAnimation | None"
-    name_maps: Sequence[Mapping[str, str]]
-    avatar: str | tuple[str, ...]
-    labels: tuple[str, ...] | None
-    duration_s: float
+    # read-only properties, so a dataclass whose fields are narrower (``avatar: str``) still conforms
+    @property
+    def motions(self) -> Sequence["Motion"]: ...
+    @property
+    def face(self) -> "FaceAnimation | None": ...
+    @property
+    def name_maps(self) -> Sequence[Mapping[str, str]]: ...
+    @property
+    def avatar(self) -> str | Sequence[str]: ...
+    @property
+    def labels(self) -> tuple[str, ...] | None: ...
+    @property
+    def duration_s(self) -> float: ...
 
 
 class AvatarUploader(Protocol):

@@ -38,8 +38,8 @@ from studyapp.motion.skeleton import Motion
 from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
                                    motion_path, resolve)
 from studyapp.study.schedule import TrialPlan
-from studyapp.study.timeline import (DURATION_TOLERANCE_S, MOTION_END_CHOICES, cut_audio, fit_face, fit_motion, medium_end,
-                                     trial_duration)
+from studyapp.study.timeline import (DURATION_TOLERANCE_S, MOTION_END_CHOICES, cut_audio, fit_face, fit_motion,
+                                     medium_end, trial_duration)
 
 #: Frame rate of the neutral face used for stimuli without face data.
 NEUTRAL_FACE_FPS = 30.0
