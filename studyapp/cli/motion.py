@@ -2,7 +2,8 @@
 
 inspect PATH [--fps F] [--json] [--name-map-template]
     Summary of a motion (BVH / NPZ / NPY), a face file (JSON / CSV, an NPZ with ``weights`` and
-    ``names``, a bare ``(F, 52)`` NPY when ``--fps`` is given) or a WAV. For a raw rotation array it
+    ``names``, a bare ``(F, 52)`` NPY when ``--fps`` is given), a WAV or an avatar (GLB / glTF / VRM: see
+    :mod:`studyapp.render.avatar_report`). For a raw rotation array it
     lists the representations whose width fits each array's shape and, when a 6D reading fits, says
     that ``sixd`` (columns) and ``sixd_rows`` (rows) cannot be told apart from the numbers. For a
     skeleton it shows the rig recognised and its humanoid map; ``--name-map-template`` prints the
@@ -28,13 +29,15 @@ from studyapp.motion.rotations import REPRESENTATIONS
 
 _FACE_EXT = (".json", ".csv")
 _AUDIO_EXT = (".wav",)
+_AVATAR_EXT = (".glb", ".gltf", ".vrm")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "inspect",
-        help="summarize a motion, face or audio file",
-        description="Print what studyapp reads from a BVH/NPZ/NPY motion, a face JSON/CSV/NPZ/NPY or a WAV file.",
+        help="summarize a motion, face, audio or avatar file",
+        description="Print what studyapp reads from a BVH/NPZ/NPY motion, a face JSON/CSV/NPZ/NPY, a WAV file "
+                    "or a GLB/glTF/VRM avatar (joints, humanoid bones, ARKit morph targets, facing, extensions).",
     )
     p.add_argument("path", help="file to inspect")
     p.add_argument("--fps", type=float, default=None, help="true frame rate (overrides a BVH header's Frame Time)")
@@ -99,14 +102,18 @@ def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
         from studyapp.audio.wav import summarize as wav_summarize
 
         return {"kind": "audio", **wav_summarize(path)}
+    if ext in _AVATAR_EXT:
+        from studyapp.render.avatar_report import summarize_avatar
+
+        return {"kind": "avatar", **summarize_avatar(path)}
     if ext in (".npz", ".npy") and _looks_like_face_array(p, fps):
         from studyapp.face.io import summarize as face_summarize
 
         return {"kind": "face", **face_summarize(path, fps=fps)}
     if ext not in _MOTION_EXT:
-        known = ", ".join(sorted(_MOTION_EXT | set(_FACE_EXT) | set(_AUDIO_EXT)))
+        known = ", ".join(sorted(_MOTION_EXT | set(_FACE_EXT) | set(_AUDIO_EXT) | set(_AVATAR_EXT)))
         raise InputError(path, None, f"inspect does not know {ext or 'files without an extension'}; it reads "
-                                     f"motion, face and audio files ({known})")
+                                     f"motion, face, audio and avatar files ({known})")
     from studyapp.motion.io import summarize_motion
 
     summary = {"kind": "motion", **summarize_motion(path, fps=fps)}

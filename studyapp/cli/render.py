@@ -28,6 +28,15 @@ def _names(text: str) -> tuple[str, ...]:
     return names
 
 
+def _bone_map(text: str) -> dict[str, str]:
+    from studyapp.render.avatar_rig import parse_bone_map
+
+    try:
+        return parse_bone_map(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     v = subparsers.add_parser(
         "view", help="play one motion file on the avatar in a window (or render a frame offscreen)",
@@ -54,6 +63,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     deg.add_argument("--degrees", dest="degrees", action="store_true", default=None,
                      help="Euler arrays are in degrees (the default)")
     deg.add_argument("--radians", dest="degrees", action="store_false", help="Euler arrays are in radians")
+    v.add_argument("--avatar-bone-map", type=_bone_map, metavar="JOINT=BONE,...",
+                   help="the avatar's [avatar.bone_map], e.g. UpperArm.L=LeftUpperArm,LowerArm.L=LeftLowerArm")
     v.add_argument("--offscreen", action="store_true", help="render one frame headless instead of opening a window")
     v.add_argument("--out", help="PNG to write with --offscreen")
     v.add_argument("--time", type=float, default=0.0, help="time in seconds of the offscreen frame")
@@ -92,7 +103,7 @@ def _single_scene(args: argparse.Namespace, aspect: float):
         from studyapp.face.io import load_face
 
         face = load_face(args.face)
-    avatar = load_avatar(args.avatar)
+    avatar = load_avatar(args.avatar, bone_map=args.avatar_bone_map)
     slot = prepare_slot(avatar, motion, face, name_map=cond.name_map or None)
     return make_scene([slot], avatar, labels=None, aspect=aspect)
 

@@ -45,8 +45,10 @@ ARKIT_INDEX: dict[str, int] = {name.lower(): i for i, name in enumerate(ARKIT_NA
 N_ARKIT = len(ARKIT_NAMES)
 
 # Decorations seen in rigs and exports, tried on the lower-cased, separator-free key:
-# "ak17jawopen" (AK_17_JawOpen), "arkitjawopen", "bsjawopen", "blendshapejawopen", "17jawopen".
-_PREFIX = re.compile(r"^(?:(?:ak|arkit|bs|blendshapes?|shapes?|morph|target|face|facial)\d*|\d+)")
+# "ak17jawopen" (AK_17_JawOpen), "arkitjawopen", "bsjawopen", "blendshapejawopen", "17jawopen",
+# "a25jawopen" (Character Creator 4's A01..A52 ARKit set). MetaHuman's CTRL_expressions_* curves are
+# controls with their own semantics, not ARKit shapes, and stay unmatched.
+_PREFIX = re.compile(r"^(?:(?:ak|arkit|bs|blendshapes?|shapes?|morph|target|face|facial)\d*|a\d\d|\d+)")
 _SUFFIX = re.compile(r"(?:(?:bs|blendshapes?|shape|morph|target)\d*|\d+)$")
 _SEPARATORS = re.compile(r"[\s_\-]+")
 _NAMESPACE = re.compile(r"[.|:/\\]")
@@ -73,11 +75,14 @@ def match_arkit_name(name: str) -> str | None:
 
     Matching is case-insensitive and tolerant of the decorations pipelines add: Maya node paths
     (``blendShape1.jawOpen``), namespaces (``face:jawOpen``), numbered prefixes (``AK_01_EyeBlinkLeft``),
-    ``ARKit_`` / ``bs_`` prefixes, Blender duplicate suffixes (``jawOpen.001``), Live Link PascalCase and
-    ``_L`` / ``_R`` side suffixes.
+    ``ARKit_`` / ``bs_`` prefixes, Blender duplicate suffixes (``jawOpen.001``), Live Link PascalCase,
+    ``_L`` / ``_R`` side suffixes and Character Creator 4's numbered set (``A01_Brow_Inner_Up``). Names that
+    could mean either side (``Eye_Blink``) or are not ARKit (VRoid's ``Fcl_EYE_Close``) give ``None``.
 
     >>> match_arkit_name("EyeBlinkLeft"), match_arkit_name("ARKit_tongue_out"), match_arkit_name("jaw")
     ('eyeBlinkLeft', 'tongueOut', None)
+    >>> match_arkit_name("A38_Mouth_Smile_Left"), match_arkit_name("Eye_Blink"), match_arkit_name("Fcl_EYE_Close")
+    ('mouthSmileLeft', None, None)
     """
     if not isinstance(name, str):
         return None

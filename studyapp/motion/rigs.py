@@ -102,13 +102,16 @@ def _side(words: list[str], name: str) -> str | None:
 
 
 def _sided_part(words: list[str]) -> str | None:
+    """The part whose most specific spelling the words contain (``upper leg`` beats ``leg``)."""
     bag = set(words)
     if bag & _FINGER_WORDS:
         return None
+    best, size = None, 0
     for part, spellings in _SIDED_PARTS:
-        if any(s <= bag for s in spellings):
-            return part
-    return None
+        for s in spellings:
+            if s <= bag and len(s) > size:
+                best, size = part, len(s)
+    return best
 
 
 def fuzzy_name_map(skeleton: Skeleton, taken: dict[str, str] | None = None) -> dict[str, str]:

@@ -74,6 +74,13 @@ class Avatar:
         Free text for logs (never shown to participants).
     notes:
         Messages from loading (ignored morph targets, ...).
+    bone_map:
+        ``{joint name: Unity humanoid bone}`` for joints whose names the retargeting does not recognise
+        (the design's ``[avatar.bone_map]``); empty when every name is recognised (built-in, VRM, Mixamo).
+    source:
+        The file the avatar was loaded from (for messages), None for the built-in one.
+    joint_aliases:
+        Other names of joints (a VRM node's own name -> its humanoid joint name), accepted in bone maps.
     """
 
     skeleton: Skeleton
@@ -94,6 +101,9 @@ class Avatar:
     double_sided: bool = False
     name: str = "avatar"
     notes: tuple[str, ...] = ()
+    bone_map: dict[str, str] = field(default_factory=dict)
+    source: str | None = None
+    joint_aliases: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.vertices = np.ascontiguousarray(self.vertices, np.float32).reshape(-1, 3)

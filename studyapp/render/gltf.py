@@ -5,21 +5,32 @@ What is read
 * ``.gltf`` (JSON with external or ``data:`` URI buffers), ``.glb`` and ``.vrm`` (GLB with a VRM extension).
 * All triangle primitives of all mesh nodes, merged into one mesh. Skinned primitives use the first skin's
   joints (``JOINTS_0``/``WEIGHTS_0``: unsigned byte/short, float or normalized integer weights); meshes
-  without a skin follow their nearest joint ancestor rigidly.
-* The skin's joints become a :class:`~studyapp.motion.skeleton.Skeleton` (depth-first, metres) whose rest
+  without a skin follow their nearest joint ancestor rigidly. A file with no skin at all (VRM 1.0 props
+  hanging from bones) gets its skeleton from the node hierarchy: the VRM humanoid bones, else every node
+  that is an ancestor of a mesh.
+* The joints become a :class:`~studyapp.motion.skeleton.Skeleton` (depth-first, metres) whose rest
   pose is the node TRS rest pose: rotations in ``rest_rotations``, scale (e.g. a centimetre armature)
   folded into the offsets. Geometry is brought into that rest pose in world space, so the renderer's
   inverse bind matrices are plain inverses of the rest transforms.
+* Facing is measured on the rest pose (left-right axis of the hips or shoulders, see
+  :mod:`studyapp.render.avatar_rig`) and the whole figure (geometry, skeleton, binds) is turned about +Y to
+  face +Z, the camera. VRM 0.x files (facing -Z) and three.js's Soldier are turned this way, by measurement.
+* ``bone_map`` (the design's ``[avatar.bone_map]``) names humanoid bones for joints with other names.
 * Morph targets named in ``mesh.extras.targetNames`` (or the primitive's extras) and matched to ARKit names
-  with :func:`studyapp.face.arkit.match_arkit_name`; other targets are ignored with a note.
-* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow);
-  ``doubleSided`` on any material turns back-face culling off for the avatar.
+  with :func:`studyapp.face.arkit.match_arkit_name`; VRM 1.0 expressions and VRM 0.x blend shape groups
+  named as ARKit shapes ("perfect sync") supply the shapes no target is named after, as the weighted sum of
+  their bound targets; other targets are ignored with a note.
+* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow, with
+  ``KHR_texture_transform``); ``doubleSided`` on any material turns back-face culling off for the avatar.
   Several different textures are baked into vertex colours (noted).
 * Sparse accessors. VRM 0.x (``extensions.VRM``) and 1.0 (``extensions.VRMC_vrm``) humanoid bones are
-  renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``); VRM 0.x models, which face
-  -Z, are turned to face +Z.
+  renamed to Unity humanoid names (``leftUpperArm`` -> ``LeftUpperArm``).
+* gltfpack's compression: ``EXT_meshopt_compression`` and ``KHR_meshopt_compression`` buffer views
+  (decoded by :mod:`studyapp.render.meshopt`) and ``KHR_mesh_quantization`` (integer and normalized integer positions,
+  normals, UVs and morph deltas, dequantized by the node or bind transforms as the file states).
 
-Unsupported compression extensions (Draco, meshopt, Basis/KTX2) raise :class:`InputError`.
+Other compression (Draco), KTX2/WebP textures and any other *required*
+extension raise :class:`InputError` naming the extension; so does a web page saved as ``.glb``.
 
 >>> import tempfile, pathlib
 >>> from studyapp.render.avatar import build_default_avatar
@@ -54,10 +65,19 @@ _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 51
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _UNSUPPORTED = {
     "KHR_draco_mesh_compression": "Draco-compressed meshes",
-    "EXT_meshopt_compression": "meshopt-compressed buffers",
-    "KHR_meshopt_compression": "meshopt-compressed buffers",
     "KHR_texture_basisu": "Basis Universal / KTX2 textures",
 }
+# Required extensions that can be read (decoded here, or only changing looks the renderer does not show).
+_READABLE = {"EXT_meshopt_compression", "KHR_meshopt_compression", "KHR_mesh_quantization", "KHR_texture_transform",
+             "KHR_materials_unlit", "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
+             "KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_lights_punctual", "VRM", "VRMC_vrm",
+             "VRMC_materials_mtoon", "VRMC_springBone", "VRMC_node_constraint"}
+# what to do about a file that breaks the glTF rules (truncated download, buggy exporter)
+_DAMAGED = ("; the file is damaged or breaks the glTF 2.0 rules: download or export it again "
+            "(the Khronos glTF Validator shows what is wrong)")
+_FIX = ("re-export the avatar without it (Blender's glTF exporter with Draco off; gltfpack without -tc: "
+        "its meshopt compression is read)")
+_MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -67,7 +87,7 @@ _UNSUPPORTED = {
 class _Doc:
     """A parsed glTF document with its binary buffers, decoding accessors on demand."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, check: bool = True) -> None:
         self.path = path
         try:
             raw = path.read_bytes()
@@ -76,6 +96,12 @@ class _Doc:
         bin_chunk = None
         if raw[:4] == b"glTF":
             self.gltf, bin_chunk = self._parse_glb(raw)
+        elif path.suffix.lower() in (".glb", ".vrm") or raw.lstrip()[:1] == b"<":
+            # a web page saved under the model's name is the usual case: say what the file starts with
+            head = raw.lstrip()[:9].decode("utf-8", "replace")
+            kind = "glTF" if path.suffix.lower() == ".gltf" else "GLB"
+            raise InputError(path, None, f"not a {kind} file (starts with {head!r}, not 'glTF'); "
+                             "download the model file itself, not the web page showing it")
         else:
             try:
                 self.gltf = json.loads(raw.decode("utf-8-sig"))
@@ -88,25 +114,32 @@ class _Doc:
         version = str(self.gltf.get("asset", {}).get("version", ""))
         if not version.startswith("2"):
             raise InputError(path, "key asset.version", f"only glTF 2.0 is supported, file says {version or 'nothing'!r}")
-        used = set(self.gltf.get("extensionsRequired", [])) | set(self.gltf.get("extensionsUsed", []))
-        for ext, what in _UNSUPPORTED.items():
-            if ext in used:
-                raise InputError(path, "key extensionsUsed",
-                                 f"{ext} ({what}) is not supported; re-export the avatar without compression")
+        self._cache: dict = {}
+        if not check:  # the JSON only (for reports on files that cannot be loaded)
+            self.buffers = []
+            return
+        required = set(self.gltf.get("extensionsRequired", []))
+        used = required | set(self.gltf.get("extensionsUsed", []))
+        for ext in sorted(used):
+            if ext in _UNSUPPORTED:
+                raise InputError(path, "key extensionsUsed", f"{ext} ({_UNSUPPORTED[ext]}) is not supported; {_FIX}")
+        for ext in sorted(required - _READABLE):
+            raise InputError(path, "key extensionsRequired", f"required extension {ext} is not supported; {_FIX}")
         for i, img in enumerate(self.gltf.get("images", [])):
             if img.get("mimeType") == "image/ktx2" or str(img.get("uri", "")).lower().endswith(".ktx2"):
-                raise InputError(path, f"key images[{i}]", "KTX2 textures are not supported; use PNG or JPEG")
+                raise InputError(path, f"key images[{i}]", "KTX2 textures are not supported; "
+                                 "re-export the avatar with PNG or JPEG textures (gltfpack without -tc)")
         self.buffers = [self._load_buffer(i, b, bin_chunk) for i, b in enumerate(self.gltf.get("buffers", []))]
-        self._cache: dict[int, np.ndarray] = {}
 
     def _parse_glb(self, raw: bytes) -> tuple[dict, bytes | None]:
         if len(raw) < 20:
-            raise InputError(self.path, "header", "GLB file is truncated")
+            raise InputError(self.path, "header", "GLB file is truncated" + _DAMAGED)
         magic, version, length = struct.unpack_from("<III", raw, 0)
         if version != 2:
             raise InputError(self.path, "header", f"GLB version {version}; only 2 is supported")
         if length > len(raw):
-            raise InputError(self.path, "header", f"GLB says {length} bytes, file has {len(raw)} (truncated?)")
+            raise InputError(self.path, "header",
+                             f"GLB says {length} bytes, file has {len(raw)} (truncated?)" + _DAMAGED)
         pos = 12
         doc = None
         binary = None
@@ -114,25 +147,27 @@ class _Doc:
             clen, ctype = struct.unpack_from("<II", raw, pos)
             data = raw[pos + 8: pos + 8 + clen]
             if len(data) != clen:
-                raise InputError(self.path, f"byte {pos}", "GLB chunk runs past the end of the file")
+                raise InputError(self.path, f"byte {pos}", "GLB chunk runs past the end of the file" + _DAMAGED)
             if ctype == CHUNK_JSON:
                 try:
                     doc = json.loads(data.decode("utf-8"))
                 except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                    raise InputError(self.path, "JSON chunk", f"invalid JSON: {exc}") from None
+                    raise InputError(self.path, "JSON chunk", f"invalid JSON: {exc}" + _DAMAGED) from None
             elif ctype == CHUNK_BIN and binary is None:
                 binary = bytes(data)
             pos += 8 + clen  # chunk lengths are 4-byte aligned by the spec
         if doc is None:
-            raise InputError(self.path, "header", "GLB has no JSON chunk")
+            raise InputError(self.path, "header", "GLB has no JSON chunk" + _DAMAGED)
         return doc, binary
 
     def _load_buffer(self, i: int, spec: dict, bin_chunk: bytes | None) -> bytes:
         uri = spec.get("uri")
         where = f"key buffers[{i}]"
+        if uri is None and (i > 0 or bin_chunk is None) and set(_MESHOPT) & set(spec.get("extensions", {})):
+            return b""  # placeholder for meshopt-compressed views: never read, they are decoded
         if uri is None:
             if bin_chunk is None:
-                raise InputError(self.path, where, "buffer has no uri and the file has no GLB binary chunk")
+                raise InputError(self.path, where, "buffer has no uri and the file has no GLB binary chunk" + _DAMAGED)
             data = bin_chunk
         elif uri.startswith("data:"):
             head, _, payload = uri.partition(",")
@@ -149,25 +184,50 @@ class _Doc:
             data = file.read_bytes()
         need = int(spec.get("byteLength", len(data)))
         if len(data) < need:
-            raise InputError(self.path, where, f"buffer has {len(data)} bytes, byteLength says {need}")
+            raise InputError(self.path, where, f"buffer has {len(data)} bytes, byteLength says {need}" + _DAMAGED)
         return data
 
     def view_bytes(self, index: int) -> tuple[bytes, int, int | None]:
         views = self.gltf.get("bufferViews", [])
         if not 0 <= index < len(views):
-            raise InputError(self.path, f"bufferView {index}", "bufferView index out of range")
+            raise InputError(self.path, f"bufferView {index}", "bufferView index out of range" + _DAMAGED)
         v = views[index]
+        if set(_MESHOPT) & set(v.get("extensions", {})):
+            return self._meshopt_view(index), 0, v.get("byteStride")
         buf = self.buffers[v["buffer"]]
         off = int(v.get("byteOffset", 0))
         return buf, off, v.get("byteStride")
 
+    def _meshopt_view(self, index: int) -> bytes:
+        """The uncompressed bytes of a meshopt-compressed buffer view (EXT or KHR; decoded once)."""
+        if ("view", index) in self._cache:
+            return self._cache[("view", index)]
+        from studyapp.render.meshopt import MeshoptError, decode_view
+
+        exts = self.gltf["bufferViews"][index]["extensions"]
+        name = next(n for n in _MESHOPT if n in exts)
+        ext = exts[name]
+        where = f"key bufferViews[{index}].extensions.{name}"
+        try:
+            buf = self.buffers[int(ext["buffer"])]
+            off, length = int(ext.get("byteOffset", 0)), int(ext["byteLength"])
+            if off + length > len(buf):
+                raise MeshoptError("compressed data runs past the end of its buffer")
+            data = decode_view(bytes(buf[off: off + length]), int(ext["count"]), int(ext["byteStride"]),
+                               str(ext.get("mode")), str(ext.get("filter", "NONE")))
+        except (KeyError, IndexError, TypeError) as exc:
+            raise InputError(self.path, where, f"missing or bad {exc}" + _DAMAGED) from None
+        except MeshoptError as exc:
+            raise InputError(self.path, where, f"cannot decode: {exc}" + _DAMAGED) from None
+        self._cache[("view", index)] = data
+        return data
     def accessor(self, index: int) -> np.ndarray:
         """Decode accessor ``index`` to an ``(count, width)`` array (floats when ``normalized``)."""
         if index in self._cache:
             return self._cache[index]
         accs = self.gltf.get("accessors", [])
         if not 0 <= index < len(accs):
-            raise InputError(self.path, f"accessor {index}", "accessor index out of range")
+            raise InputError(self.path, f"accessor {index}", "accessor index out of range" + _DAMAGED)
         a = accs[index]
         where = f"accessors[{index}]"
         try:
@@ -175,7 +235,7 @@ class _Doc:
             width = _WIDTH[a["type"]]
             count = int(a["count"])
         except KeyError as exc:
-            raise InputError(self.path, f"key {where}", f"missing or unknown {exc}") from None
+            raise InputError(self.path, f"key {where}", f"missing or unknown {exc}" + _DAMAGED) from None
         if "bufferView" in a:
             buf, off, stride = self.view_bytes(a["bufferView"])
             off += int(a.get("byteOffset", 0))
@@ -183,7 +243,7 @@ class _Doc:
             stride = int(stride or elem)
             end = off + stride * (count - 1) + elem if count else off
             if end > len(buf):
-                raise InputError(self.path, f"key {where}", "accessor reads past the end of its buffer")
+                raise InputError(self.path, f"key {where}", "accessor reads past the end of its buffer" + _DAMAGED)
             if stride == elem:
                 out = np.frombuffer(buf, dtype, count * width, off).reshape(count, width)
             else:
@@ -203,7 +263,7 @@ class _Doc:
             vals = np.frombuffer(buf, dtype, n * width, off + int(sv.get("byteOffset", 0))).reshape(n, width)
             ind = ind.astype(np.int64)
             if n and int(ind.max()) >= count:
-                raise InputError(self.path, f"key {where}.sparse", "sparse index beyond the accessor count")
+                raise InputError(self.path, f"key {where}.sparse", "sparse index beyond the accessor count" + _DAMAGED)
             out = out.copy()
             out[ind.astype(np.int64)] = vals
         if a.get("normalized") and dtype.kind in "iu":
@@ -331,6 +391,50 @@ def _vrm_bone_names(gltf: dict) -> dict[int, str]:
     return out
 
 
+def _direction_name(v: np.ndarray) -> str:
+    """'+Z', '-X', ... for the axis nearest to an XZ direction (for notes and reports)."""
+    k = 0 if abs(v[0]) > abs(v[2]) else 2
+    return ("+" if v[k] > 0 else "-") + "XYZ"[k]
+
+
+def _arkit_target_names(gltf: dict) -> set[str]:
+    """ARKit shapes some morph target of the file is named after (those win over VRM expressions)."""
+    found = set()
+    for mesh in gltf.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            names = prim.get("extras", {}).get("targetNames", mesh.get("extras", {}).get("targetNames", []))
+            found |= {match_arkit_name(n) for n in names} - {None}
+    return found
+
+
+def _vrm_arkit_expressions(gltf: dict, nodes: list[dict]) -> dict[tuple[int, int], list[tuple[str, float]]]:
+    """``(mesh, target index) -> [(ARKit name, weight)]`` from VRM expressions named as ARKit shapes.
+
+    "Perfect sync" VRM avatars expose the 52 ARKit shapes as VRM 1.0 custom expressions
+    (``expressions.custom.jawOpen.morphTargetBinds``) or VRM 0.x blend shape groups (weights 0..100)
+    over morph targets with other names.
+    """
+    out: dict[tuple[int, int], list[tuple[str, float]]] = {}
+    ext = gltf.get("extensions", {})
+    if "VRMC_vrm" in ext:
+        expressions = ext["VRMC_vrm"].get("expressions", {})
+        for group in ("preset", "custom"):
+            for name, spec in expressions.get(group, {}).items():
+                arkit = match_arkit_name(name)
+                for bind in (spec.get("morphTargetBinds", []) if arkit else []):
+                    node = bind.get("node")
+                    if isinstance(node, int) and 0 <= node < len(nodes) and "mesh" in nodes[node]:
+                        key = (nodes[node]["mesh"], int(bind.get("index", -1)))
+                        out.setdefault(key, []).append((arkit, float(bind.get("weight", 1.0))))
+    elif "VRM" in ext:
+        for group in ext["VRM"].get("blendShapeMaster", {}).get("blendShapeGroups", []):
+            arkit = match_arkit_name(group.get("name", ""))
+            for bind in (group.get("binds", []) if arkit else []):
+                key = (int(bind.get("mesh", -1)), int(bind.get("index", -1)))
+                out.setdefault(key, []).append((arkit, float(bind.get("weight", 100.0)) / 100.0))
+    return out
+
+
 def _rigid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation (scale removed, via SVD) and translation of a 4x4 matrix."""
     u, _, vt = np.linalg.svd(m[:3, :3])
@@ -345,73 +449,52 @@ def _rigid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # Loader
 # ---------------------------------------------------------------------------------------------
 
-def load_gltf(path: str | Path) -> Avatar:
-    """Load a glTF/GLB/VRM avatar (see the module docstring for what is supported)."""
-    path = Path(path)
-    doc = _Doc(path)
-    g = doc.gltf
-    nodes = g.get("nodes", [])
-    try:
-        world, node_parent = _world_matrices(nodes)
-    except (ValueError, IndexError) as exc:
-        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}") from None
-    notes: list[str] = []
-    if "VRM" in g.get("extensions", {}):
-        # VRM 0.x models face -Z; turn them to face +Z like every other avatar (and the camera)
-        world = np.diag([-1.0, 1.0, -1.0, 1.0])[None] @ world
-        notes.append("VRM 0.x: turned 180 degrees to face +Z")
-    skins = g.get("skins", [])
-    mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
-    if not mesh_nodes:
-        raise InputError(path, "key nodes", "no node has a mesh")
-    skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
-    if skin_index is not None and skin_index >= len(skins):
-        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range")
-    joint_nodes = list(skins[skin_index]["joints"]) if skin_index is not None else []
-    if skin_index is not None and len(skins) > 1:
-        notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
+def _hierarchy_joints(node_parent: np.ndarray, mesh_nodes: list[int], vrm: dict[int, str]) -> list[int]:
+    """Joint nodes of a file without a skin: its VRM humanoid bones, else every ancestor of a mesh.
 
-    # skeleton: skin joints in depth-first order (parents before children)
-    if not joint_nodes:
-        joint_nodes = [mesh_nodes[0]]
-        notes.append("no skin: the avatar is a static mesh")
+    Meshes then hang from their nearest joint ancestor and move rigidly with it.
+    """
+    if vrm:
+        return sorted(vrm)
+    out: set[int] = set()
+    for m in mesh_nodes:
+        p = int(node_parent[m])
+        while p >= 0 and p not in out:
+            out.add(p)
+            p = int(node_parent[p])
+    return sorted(out) or [mesh_nodes[0]]
+
+
+def _joint_order(joint_nodes: list[int], node_parent: np.ndarray) -> tuple[list[int], dict[int, int]]:
+    """Joints depth-first (parents before children) and each joint node's nearest joint ancestor (-1: none)."""
     jset = set(joint_nodes)
-
-    def joint_parent(n: int) -> int:
-        p = node_parent[n]
+    up: dict[int, int] = {}
+    for n in joint_nodes:
+        p = int(node_parent[n])
         while p >= 0 and p not in jset:
-            p = node_parent[p]
-        return p
-
+            p = int(node_parent[p])
+        up[n] = p
     children: dict[int, list[int]] = {}
     roots = []
     for n in joint_nodes:
-        p = joint_parent(n)
-        (children.setdefault(p, []) if p >= 0 else roots).append(n)
+        (children.setdefault(up[n], []) if up[n] >= 0 else roots).append(n)
     order: list[int] = []
     stack = list(reversed(roots))
     while stack:
         n = stack.pop()
         order.append(n)
         stack.extend(reversed(children.get(n, [])))
-    from studyapp.render.gpu import MAX_BONES
+    return order, up
 
-    if len(order) > MAX_BONES:
-        raise InputError(path, f"key skins[{skin_index}].joints",
-                         f"{len(order)} joints; the renderer supports at most {MAX_BONES} (remove unused bones)")
+
+def _skeleton(order: list[int], up: dict[int, int], names: list[str], world: np.ndarray) -> Skeleton:
+    """The joints' rest pose from node world matrices: rotations kept, scale folded into the offsets."""
     node_to_joint = {n: j for j, n in enumerate(order)}
-    vrm = _vrm_bone_names(g)
-    names: list[str] = []
-    for n in order:
-        name = vrm.get(n) or nodes[n].get("name") or f"joint{n}"
-        if name in names:
-            name = f"{name}_{n}"
-        names.append(name)
     rots = np.zeros((len(order), 3, 3))
     pos = np.zeros((len(order), 3))
     for j, n in enumerate(order):
         rots[j], pos[j] = _rigid(world[n])
-    parents = np.array([node_to_joint.get(joint_parent(n), -1) for n in order])
+    parents = np.array([node_to_joint.get(up[n], -1) for n in order])
     offsets = np.zeros((len(order), 3))
     local_q = np.zeros((len(order), 4))
     for j in range(len(order)):
@@ -422,9 +505,80 @@ def load_gltf(path: str | Path) -> Avatar:
         else:
             offsets[j] = rots[p].T @ (pos[j] - pos[p])
             local_q[j] = matrix_to_quat(rots[p].T @ rots[j])
-    skeleton = Skeleton(names=tuple(names), parents=parents, offsets=offsets, unit_scale=1.0,
-                        rest_rotations=local_q)
+    return Skeleton(names=tuple(names), parents=parents, offsets=offsets, unit_scale=1.0, rest_rotations=local_q)
+
+
+def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avatar:
+    """Load a glTF/GLB/VRM avatar (see the module docstring for what is supported).
+
+    ``bone_map`` (``{joint name: humanoid bone}``, the design's ``[avatar.bone_map]``) names the humanoid
+    bones of joints whose names are not recognised; joint names may be a VRM node's own name too. It is
+    kept on the avatar (``Avatar.bone_map``) for retargeting and is used to measure the facing.
+    """
+    path = Path(path)
+    doc = _Doc(path)
+    g = doc.gltf
+    nodes = g.get("nodes", [])
+    try:
+        world, node_parent = _world_matrices(nodes)
+    except (ValueError, IndexError) as exc:
+        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}" + _DAMAGED) from None
+    notes: list[str] = []
+    skins = g.get("skins", [])
+    mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
+    if not mesh_nodes:
+        raise InputError(path, "key nodes", "no node has a mesh; export the character with its mesh, "
+                         "not only its armature or animation")
+    skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
+    if skin_index is not None and skin_index >= len(skins):
+        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range" + _DAMAGED)
+    joint_nodes = list(skins[skin_index]["joints"]) if skin_index is not None else []
+    if skin_index is not None and len(skins) > 1:
+        notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
+    vrm = _vrm_bone_names(g)
+    if not joint_nodes:
+        joint_nodes = _hierarchy_joints(node_parent, mesh_nodes, vrm)
+        notes.append("no skin: skeleton from the node hierarchy; meshes move rigidly with their bones")
+
+    # skeleton: joints in depth-first order (parents before children)
+    order, up = _joint_order(joint_nodes, node_parent)
+    from studyapp.render.gpu import MAX_BONES
+
+    if len(order) > MAX_BONES:
+        raise InputError(path, f"key skins[{skin_index}].joints",
+                         f"{len(order)} joints; the renderer supports at most {MAX_BONES} (remove unused bones)")
+    node_to_joint = {n: j for j, n in enumerate(order)}
+    names: list[str] = []
+    aliases: dict[str, str] = {}  # a VRM node's own name -> its humanoid joint name
+    for n in order:
+        name = vrm.get(n) or nodes[n].get("name") or f"joint{n}"
+        if name in names:
+            name = f"{name}_{n}"
+        names.append(name)
+        if nodes[n].get("name") and nodes[n]["name"] != name:
+            aliases[nodes[n]["name"]] = name
+    skeleton = _skeleton(order, up, names, world)
+
+    # facing: measured on the rest pose, then the whole file is turned to face +Z (the camera)
+    from studyapp.render.avatar_rig import (bone_map_problems, humanoid_map, resolve_bone_map, rest_facing, yaw_matrix,
+                                            yaw_to_face_z)
+
+    given = resolve_bone_map(skeleton.names, bone_map, aliases)
+    notes += [f"[avatar.bone_map] {j}: {problem} (entry ignored)"
+              for j, problem in bone_map_problems(skeleton.names, bone_map or {}, aliases)]
+    bones = {b: skeleton.index(j) for j, b in humanoid_map(skeleton, given).items()}
+    forward = rest_facing(rest_global_transforms(skeleton)[:, :3, 3], bones)
+    if forward is None:
+        notes.append("facing not measured (no left/right pair of humanoid bones); assumed +Z")
+    else:
+        angle = yaw_to_face_z(forward)
+        if abs(angle) > np.radians(1.0):
+            world = yaw_matrix(angle)[None] @ world
+            skeleton = _skeleton(order, up, names, world)
+            notes.append(f"faced {_direction_name(forward)} at rest: turned {np.degrees(angle):.0f} degrees to face +Z")
     rest = rest_global_transforms(skeleton)
+    if "Head" in bones and "Hips" in bones and rest[bones["Head"], 1, 3] <= rest[bones["Hips"], 1, 3]:
+        notes.append("the figure is not upright in +Y (its head is not above its hips): re-export it Y up")
 
     # geometry
     skin_ibm = None
@@ -434,6 +588,8 @@ def load_gltf(path: str | Path) -> Avatar:
     textures: dict[int, np.ndarray | None] = {}
     morph_names_found: set[str] = set()
     ignored: set[str] = set()
+    named_arkit = _arkit_target_names(g)
+    expression_binds = _vrm_arkit_expressions(g, nodes)
     for ni in mesh_nodes:
         node = nodes[ni]
         mesh = g["meshes"][node["mesh"]]
@@ -451,22 +607,23 @@ def load_gltf(path: str | Path) -> Avatar:
                 if ext in _UNSUPPORTED:
                     raise InputError(path, f"key {where}.extensions", f"{ext} ({_UNSUPPORTED[ext]}) is not supported")
             if "POSITION" not in attrs:
-                raise InputError(path, f"key {where}.attributes", "primitive has no POSITION")
+                raise InputError(path, f"key {where}.attributes", "primitive has no POSITION" + _DAMAGED)
             v = doc.accessor(attrs["POSITION"]).astype(np.float64)
             nv = len(v)
             idx = (doc.accessor(prim["indices"]).reshape(-1).astype(np.int64) if "indices" in prim
                    else np.arange(nv))
             if len(idx) % 3:
-                raise InputError(path, f"key {where}.indices", f"{len(idx)} indices is not a multiple of 3")
+                raise InputError(path, f"key {where}.indices", f"{len(idx)} indices is not a multiple of 3" + _DAMAGED)
             if len(idx) and idx.max() >= nv:
-                raise InputError(path, f"key {where}.indices", "index beyond the vertex count")
+                raise InputError(path, f"key {where}.indices", "index beyond the vertex count" + _DAMAGED)
             tri = idx.reshape(-1, 3)
             nrm = doc.accessor(attrs["NORMAL"]).astype(np.float64) if "NORMAL" in attrs else vertex_normals(v, tri).astype(np.float64)
             if skinned and "JOINTS_0" in attrs and "WEIGHTS_0" in attrs:
                 jj = doc.accessor(attrs["JOINTS_0"]).astype(np.int64)
                 ww = doc.accessor(attrs["WEIGHTS_0"]).astype(np.float64)
                 if jj.max(initial=0) >= len(joint_nodes):
-                    raise InputError(path, f"key {where}.attributes.JOINTS_0", "joint index beyond the skin's joints")
+                    raise InputError(path, f"key {where}.attributes.JOINTS_0",
+                                     "joint index beyond the skin's joints" + _DAMAGED)
                 jj = np.vectorize(lambda k: node_to_joint[joint_nodes[k]])(jj) if jj.size else jj
                 jj = np.asarray(jj, np.int64).reshape(nv, 4)
                 ibm = skin_ibm if skin_ibm is not None else np.broadcast_to(np.eye(4), (len(joint_nodes), 4, 4))
@@ -519,6 +676,8 @@ def load_gltf(path: str | Path) -> Avatar:
                 else:
                     notes.append(f"{where}: texture without a PNG/JPEG source ignored")
             uv = doc.accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
+            if uv is not None and "baseColorTexture" in pbr:
+                uv = _texture_transform(uv, pbr["baseColorTexture"].get("extensions", {}).get("KHR_texture_transform"))
             # morph targets
             targets = prim.get("targets", [])
             names_here = list(prim.get("extras", {}).get("targetNames", target_names))
@@ -526,7 +685,10 @@ def load_gltf(path: str | Path) -> Avatar:
             for ti, t in enumerate(targets):
                 raw = names_here[ti] if ti < len(names_here) else f"target{ti}"
                 arkit = match_arkit_name(raw)
-                if arkit is None:
+                # a target named as ARKit counts fully; VRM expressions named as ARKit add their weighted binds
+                uses = [(arkit, 1.0)] if arkit is not None else []
+                uses += [(a, w) for a, w in expression_binds.get((node["mesh"], ti), []) if a not in named_arkit]
+                if not uses:
                     ignored.add(raw)
                     continue
                 d = doc.accessor(t["POSITION"]).astype(np.float64) if "POSITION" in t else np.zeros((nv, 3))
@@ -534,9 +696,10 @@ def load_gltf(path: str | Path) -> Avatar:
                 if blend is not None:
                     d = np.einsum("vij,vj->vi", blend[:, :3, :3], d)
                     dn = np.einsum("vij,vj->vi", blend[:, :3, :3], dn)
-                prev = deltas.get(arkit)
-                deltas[arkit] = (d, dn) if prev is None else (prev[0] + d, prev[1] + dn)
-                morph_names_found.add(arkit)
+                for name, w in uses:
+                    prev = deltas.get(name)
+                    deltas[name] = (w * d, w * dn) if prev is None else (prev[0] + w * d, prev[1] + w * dn)
+                    morph_names_found.add(name)
             parts.append(dict(v=v, n=nrm, tri=tri, col=col, j=jj, w=ww, uv=uv, tex=tex_index, deltas=deltas,
                               mat=material_ids, alpha=factor[3], double=bool(mat.get("doubleSided", False))))
     if not parts:
@@ -599,7 +762,26 @@ def load_gltf(path: str | Path) -> Avatar:
         double_sided=any(p["double"] for p in parts),
         name=path.stem,
         notes=tuple(notes),
+        bone_map=given,
+        source=str(path),
+        joint_aliases=aliases,
     )
+
+
+def _texture_transform(uv: np.ndarray, spec: dict | None) -> np.ndarray:
+    """``KHR_texture_transform`` (offset, rotation, scale) applied to UVs; gltfpack uses it to dequantize them.
+
+    >>> _texture_transform(np.array([[1.0, 1.0]]), {"offset": [0.5, 0.0], "scale": [0.25, 0.5]}).tolist()
+    [[0.75, 0.5]]
+    """
+    if not spec:
+        return uv
+    sx, sy = spec.get("scale", [1.0, 1.0])
+    ox, oy = spec.get("offset", [0.0, 0.0])
+    r = float(spec.get("rotation", 0.0))
+    c, s = np.cos(r), np.sin(r)
+    u, v = uv[:, 0] * sx, uv[:, 1] * sy
+    return np.c_[c * u + s * v + ox, -s * u + c * v + oy]
 
 
 def _sample(img: np.ndarray, uv: np.ndarray) -> np.ndarray:

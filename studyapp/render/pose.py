@@ -126,7 +126,7 @@ def to_avatar_skeleton(avatar: Avatar, motion: Motion, name_map: dict[str, str] 
         return motion
     from studyapp.motion.retarget import retarget
 
-    out = retarget(motion, target, name_map=name_map)
+    out = retarget(motion, target, name_map=name_map, target_map=avatar.bone_map or None)
     # Presentation, not retargeting: every slot starts centred on its own floor spot whatever the source's
     # position on the capture stage was, so no avatar stands off-centre in its third of the screen.
     trans = out.translations.copy()

@@ -123,37 +123,53 @@ def make_scene(slots, avatar: Avatar | tuple[Avatar, ...], labels: tuple[str, ..
     return TrialScene(slots=slots, avatars=avatars, labels=labels, camera=camera, duration=duration)
 
 
-def load_avatar(spec: str | Path | None) -> Avatar:
-    """``None``/``"builtin"`` -> the built-in avatar; otherwise a glTF/GLB/VRM file."""
+def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None) -> Avatar:
+    """``None``/``"builtin"`` -> the built-in avatar; otherwise a glTF/GLB/VRM file, which must be humanoid.
+
+    ``bone_map`` is the design's ``[avatar.bone_map]`` (``{joint name: humanoid bone}``). A file whose
+    joints (recognised names plus ``bone_map``) lack a required humanoid bone is refused with a message
+    that names the file, the bones missing and its joints.
+    """
     if spec is None or str(spec).lower() in ("", "builtin", "default"):
         return build_default_avatar()
     path = Path(spec)
     if not path.is_file():
         raise InputError(path, None, "avatar file not found (use 'builtin' for the built-in avatar)")
+    from studyapp.render.avatar_rig import BONE_MAP_FIX, bone_map_problems, missing_bones, not_humanoid_message
+
+    key = tuple(sorted((bone_map or {}).items()))
     try:
-        return _load_gltf_cached(str(path.resolve()), path.stat().st_mtime_ns)
+        avatar = _load_gltf_cached(str(path.resolve()), path.stat().st_mtime_ns, key)
     except InputError:
         raise
     except (ValueError, ArithmeticError, np.linalg.LinAlgError, KeyError, IndexError) as exc:
         # a damaged file (e.g. a singular inverse bind matrix) must read as a problem with this file, not a crash
         raise InputError(path, "avatar", f"cannot load the avatar ({type(exc).__name__}: {exc}); export it "
                          "again from the modelling tool, or use 'builtin'") from exc
+    bad = bone_map_problems(avatar.skeleton.names, bone_map or {}, avatar.joint_aliases)
+    if bad:
+        joint, problem = bad[0]
+        raise InputError(path, f"[avatar.bone_map] {joint}", f"{problem}; {BONE_MAP_FIX}")
+    missing = missing_bones(avatar.skeleton, avatar.bone_map)
+    if missing:
+        raise InputError(path, None, not_humanoid_message(avatar.skeleton, missing))
+    return avatar
 
 
-#: Loaded glTF avatars by (path, mtime). A few, not one: a study may give each speaker (or slot) its own, and
-#: ``validate`` walks every stimulus; an avatar is loaded (and its inverse binds checked) once per file.
-_GLTF_CACHE: OrderedDict[tuple[str, int], Avatar] = OrderedDict()
+#: Loaded glTF avatars by (path, mtime, bone map). A few, not one: a study may give each speaker (or slot) its
+#: own, and ``validate`` walks every stimulus; an avatar is loaded (and its inverse binds checked) once per file.
+_GLTF_CACHE: OrderedDict[tuple, Avatar] = OrderedDict()
 _GLTF_CACHE_SIZE = 4
 
 
-def _load_gltf_cached(path: str, mtime: int) -> Avatar:
+def _load_gltf_cached(path: str, mtime: int, bone_map: tuple = ()) -> Avatar:
     from studyapp.render.gltf import load_gltf
 
-    key = (path, mtime)
+    key = (path, mtime, bone_map)
     if key in _GLTF_CACHE:
         _GLTF_CACHE.move_to_end(key)
     else:
-        _GLTF_CACHE[key] = load_gltf(path)
+        _GLTF_CACHE[key] = load_gltf(path, bone_map=dict(bone_map) or None)
         while len(_GLTF_CACHE) > _GLTF_CACHE_SIZE:
             _GLTF_CACHE.popitem(last=False)
     return _GLTF_CACHE[key]
@@ -179,6 +195,8 @@ class TrialSource(Protocol):
     def labels(self) -> tuple[str, ...] | None: ...
     @property
     def duration_s(self) -> float: ...
+    @property
+    def avatar_bone_map(self) -> Mapping[str, str] | None: ...
 
 
 class AvatarUploader(Protocol):
@@ -195,9 +213,10 @@ class SlotError(InputError):
         super().__init__(path, where, problem)
 
 
-def slot_avatars(spec: str | Sequence[str] | None, n_slots: int) -> tuple[Avatar, ...]:
+def slot_avatars(spec: str | Sequence[str] | None, n_slots: int,
+                 bone_map: Mapping[str, str] | None = None) -> tuple[Avatar, ...]:
     """One avatar per slot from one spec (all slots) or one spec per slot; the same file gives the same object,
-    so slots that share an avatar share its GPU buffers."""
+    so slots that share an avatar share its GPU buffers. ``bone_map``: the design's ``[avatar.bone_map]``."""
     specs = [spec] * n_slots if spec is None or isinstance(spec, (str, Path)) else list(spec)
     if len(specs) != n_slots:
         raise ValueError(f"{len(specs)} avatars for {n_slots} slots")
@@ -206,7 +225,7 @@ def slot_avatars(spec: str | Sequence[str] | None, n_slots: int) -> tuple[Avatar
     for sp in specs:
         key = "builtin" if sp is None or str(sp).lower() in ("", "builtin", "default") else str(sp)
         if key not in loaded:
-            loaded[key] = load_avatar(None if key == "builtin" else key)
+            loaded[key] = load_avatar(None if key == "builtin" else key, bone_map=dict(bone_map or {}) or None)
         out.append(loaded[key])
     return tuple(out)
 
@@ -221,7 +240,7 @@ def build_trial_scene(renderer: AvatarUploader | None, media: TrialSource,
     context or None is accepted too (``validate`` builds scenes with no GL at all).
     """
     motions = tuple(media.motions)
-    avatars = slot_avatars(media.avatar, len(motions))
+    avatars = slot_avatars(media.avatar, len(motions), media.avatar_bone_map)
     name_maps = tuple(media.name_maps)
     if len(name_maps) != len(motions):
         raise ValueError(f"{len(name_maps)} name maps for {len(motions)} slots")

@@ -62,6 +62,7 @@ class TrialMedia:
     duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
     criteria: the design's criterion ids, in order (what the participant ranks the slots on).
     name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
+    avatar_bone_map: the design's ``[avatar.bone_map]`` (avatar joint -> humanoid bone).
     """
 
     plan: TrialPlan
@@ -73,6 +74,7 @@ class TrialMedia:
     duration_s: float
     criteria: tuple[str, ...] = ()
     name_maps: tuple[dict[str, str], dict[str, str], dict[str, str]] = ({}, {}, {})
+    avatar_bone_map: dict[str, str] | None = None
 
     @property
     def avatar_spec(self) -> str:
@@ -297,7 +299,8 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     maps = tuple(dict(cond.name_map) for cond in conds)
     return TrialMedia(plan=plan, audio=cut_audio(audio, duration), face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
-                      criteria=tuple(design.criterion_ids), name_maps=maps)  # type: ignore[arg-type]
+                      criteria=tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
+                      avatar_bone_map=dict(design.avatar_bone_map))
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -330,6 +333,8 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     skeletons_checked: set[tuple[int, tuple[str, ...]]] = set()
     cond_index = {c.id: i for i, c in enumerate(design.conditions)}
 
+    found, bad_avatars = _check_avatars(design)
+    problems += found
     for ci, cond in enumerate(design.conditions):
         if cond.template is not None and resolve(design, cond.template).is_file():
             try:
@@ -406,7 +411,8 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                                      {f"motion:{c.id}": (i, c) for i, c in enumerate(design.conditions)})
         avatar = design.avatar_for(stim)
         present = all(f is None or Path(f).is_file() for f in (stim.face, stim.head)) and (
-            avatar in ("builtin", "") or Path(avatar).is_file())  # missing files are the loader's to report
+            avatar in ("builtin", "") or Path(avatar).is_file()) and avatar not in bad_avatars
+        # (missing files are the loader's to report, bad avatars _check_avatars's)
         if "audio" in items and present and len(problems) == n_before:
             # Only a stimulus whose files passed the checks above: a scene from bad files fails for reasons
             # already reported, with a less helpful message.
@@ -466,7 +472,7 @@ def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str
     avatar = design.avatar_for(stim)
     out: dict[tuple[str, str], list[tuple[int, str, str]]] = {}
     try:
-        slot_avatars(avatar, 1)
+        slot_avatars(avatar, 1, design.avatar_bone_map)
     except (InputError, OSError) as exc:
         # The avatar itself: every condition fails the same way, one line says it (for every stimulus using it).
         return {(avatar, f"cannot load the avatar: {_problem_text(exc, with_path=False)}"):
@@ -492,9 +498,8 @@ def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str
                 # not one slot's fault (the face, the audio): every condition of this stimulus shares it
                 out.setdefault((avatar, _problem_text(exc)), []).extend((ci, stim.id, str(stim.audio)) for ci in chunk)
                 break
-            # the other slots of this scene still need their own check
-            k = chunk.index(ci)
-            chunk = chunk[:k] + chunk[k + 1:]
+            # slots left of the refused one were built; those right of it still need their check
+            chunk = chunk[chunk.index(ci) + 1:]
             plan = TrialPlan(trial_index=-1, stimulus_id=stim.id,  # type: ignore[arg-type]
                              slots=tuple(design.conditions[c].id for c in chunk), is_practice=False,
                              is_attention_check=False, row=0)
@@ -604,6 +609,30 @@ def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]
     return out + [(f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {k} is only "
                    f"{d:.3f} s long ({p})", "lower duration_s or give longer files")
                   for k, (d, p) in rest.items() if d < stim.duration_s - DURATION_TOLERANCE_S]
+
+
+def _check_avatars(design: Design) -> tuple[list[tuple[str, str, str]], set[str]]:
+    """Each avatar file loads, is humanoid with the design's ``[avatar.bone_map]``, and every entry of that
+    map names one of its joints (one problem per bad entry). Also returns the avatars with a problem (the dry
+    run skips them: a scene on them fails for the reason already given)."""
+    from studyapp.render.avatar_rig import avatar_problems
+
+    out, bad = [], set()
+    keys = [("avatar.model", design.avatar)]
+    keys += [(f"avatar.by_speaker.{k}", v) for k, v in design.avatar_by_speaker.items()]
+    for key, name in keys:
+        path = resolve(design, name) if name != "builtin" else None
+        if path is not None and path.is_file():
+            try:
+                found = [(k or key, msg, fix) for k, msg, fix in avatar_problems(path, design.avatar_bone_map)]
+            except (ValueError, ArithmeticError, KeyError, IndexError) as exc:
+                # numbers no skinning can use (a singular inverse bind matrix is a LinAlgError, a ValueError)
+                found = [(key, f"cannot load the avatar {path}: {type(exc).__name__}: {exc}",
+                          "export the avatar again from the modelling tool, or use the built-in one")]
+            out += found
+            if found:
+                bad.add(str(path))
+    return out, bad
 
 
 def _check_retarget(ci: int, cond: Condition, motion: Motion, path: Path) -> list[tuple[str, str, str]]:

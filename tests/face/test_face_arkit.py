@@ -101,3 +101,28 @@ def test_matcher_is_total_and_idempotent(raw: str) -> None:
     assert got is None or got in ARKIT_NAMES
     if got is not None:
         assert match_arkit_name(got) == got
+
+
+def _words(name: str) -> list[str]:
+    import re
+
+    return re.findall(r"[a-z]+|[A-Z][a-z]*", name)
+
+
+def test_character_creator_numbered_names_map_to_every_arkit_shape():
+    # CC4 spells each shape as A<nn>_Word_Word_Side, e.g. A38_Mouth_Smile_Left; built here from the ARKit names
+    for i, name in enumerate(ARKIT_NAMES, start=1):
+        cc4 = f"A{i:02d}_" + "_".join(w.capitalize() for w in _words(name))
+        assert match_arkit_name(cc4) == name, cc4
+        assert match_arkit_name(f"CC_Base_Body.{cc4}") == name
+
+
+@pytest.mark.parametrize("raw,want", [
+    ("blendShape1.jawOpen", "jawOpen"), ("ARKit_mouthSmileLeft", "mouthSmileLeft"), ("JAWOPEN", "jawOpen"),
+    ("eye_blink_left", "eyeBlinkLeft"), ("mouthSmile_R", "mouthSmileRight"),
+    # not ARKit, or either side: left alone rather than guessed
+    ("Face.M_F00_000_00_Fcl_EYE_Close", None), ("Face.M_F00_000_00_Fcl_MTH_A", None), ("Eye_Blink", None),
+    ("Mouth_Smile", None), ("vrc.v_aa", None),
+])
+def test_prefixed_and_cased_names(raw, want):
+    assert match_arkit_name(raw) == want

@@ -18,17 +18,30 @@ def avatar():
 
 
 @pytest.fixture(scope="session")
-def gl_ctx():
+def _session_ctx():
     from studyapp.render.context import create_offscreen_context
 
     return create_offscreen_context()
 
 
+@pytest.fixture()
+def gl_ctx(_session_ctx):
+    # Made current for every test: tests of the CLI create contexts of their own, which become current and
+    # would leave later draws on the shared context pointing at another context's objects (a crash in Mesa).
+    with _session_ctx:
+        yield _session_ctx
+
+
 @pytest.fixture(scope="session")
-def renderer(gl_ctx):
+def _session_renderer(_session_ctx):
     from studyapp.render.renderer import Renderer
 
-    return Renderer(gl_ctx)
+    return Renderer(_session_ctx)
+
+
+@pytest.fixture()
+def renderer(gl_ctx, _session_renderer):
+    return _session_renderer
 
 
 def _free_display() -> int:

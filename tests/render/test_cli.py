@@ -54,3 +54,20 @@ def test_render_needs_time_for_png_and_checks_trial(tmp_path, capsys):
     assert main(["render", str(demo_design()), "--participant", "P01", "--trial", "999", "--time", "0",
                  "--out", str(tmp_path / "t.png")]) == 2
     assert "999" in capsys.readouterr().err
+
+
+def test_view_takes_an_avatar_bone_map(tmp_path, capsys):
+    robot = SAMPLES / "avatars" / "RobotExpressive.glb"
+    motion = str(SAMPLES / "beat75_diffsheg_output_excerpt.bvh")
+    assert main(["view", motion, "--fps", "15", "--avatar", str(robot), "--offscreen",
+                 "--out", str(tmp_path / "no.png")]) != 0
+    err = capsys.readouterr().err
+    assert "RobotExpressive.glb: not a humanoid avatar" in err and "Traceback" not in err
+    pairs = ("Abdomen=Spine,Torso=Chest,UpperArm.L=LeftUpperArm,LowerArm.L=LeftLowerArm,Palm2.L=LeftHand,"
+             "UpperArm.R=RightUpperArm,LowerArm.R=RightLowerArm,Palm2.R=RightHand,UpperLeg.L=LeftUpperLeg,"
+             "LowerLeg.L=LeftLowerLeg,Foot.L=LeftFoot,UpperLeg.R=RightUpperLeg,LowerLeg.R=RightLowerLeg,Foot.R=RightFoot")
+    out = tmp_path / "robot.png"
+    assert main(["view", motion, "--fps", "15", "--avatar", str(robot), "--avatar-bone-map", pairs,
+                 "--offscreen", "--out", str(out), "--size", "240x180"]) == 0
+    rgb = mpimg.imread(out)[..., :3]
+    assert np.abs(rgb[40:160, 80:160] - rgb[5, 5]).sum(-1).max() > 0.3  # the robot is drawn

@@ -191,10 +191,10 @@ def test_vrm_humanoid_bones_get_unity_names(tmp_path, version, expect):
     gltf, data = bar_gltf(vrm=version)
     av = load_gltf(write_gltf(tmp_path, gltf, data, "bar.vrm", "glb"))
     assert av.skeleton.names == expect
-    # VRM 0.x faces -Z and is turned around; VRM 1.0 already faces +Z
+    # facing is measured, not assumed from the VRM version: a bar has no left and right, so it stays as stored
     plain = load_gltf(write_gltf(tmp_path, *bar_gltf(), "plain.gltf"))
-    flip = np.array([-1, 1, -1]) if version == "0" else np.ones(3)
-    assert np.allclose(av.vertices, plain.vertices * flip, atol=1e-6)
+    assert np.allclose(av.vertices, plain.vertices, atol=1e-6)
+    assert any("facing not measured" in n for n in av.notes)
     assert np.allclose(skinning_palettes(av, Motion.rest(av.skeleton, 1)), np.eye(4), atol=1e-6)
 
 
@@ -220,12 +220,33 @@ def test_textured_gltf_renders_its_texture(tmp_path, renderer):
     assert red[0] - red[2] > 80 and red[0] > plain[0] - 10 and red[2] < plain[2] - 80
 
 
-@pytest.mark.parametrize("ext", ["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_texture_basisu"])
+@pytest.mark.parametrize("ext", ["KHR_draco_mesh_compression", "KHR_texture_basisu"])
 def test_compressed_files_are_refused_clearly(tmp_path, ext):
     gltf, data = bar_gltf(extra={"extensionsUsed": [ext]})
     with pytest.raises(InputError, match=ext) as err:
         load_gltf(write_gltf(tmp_path, gltf, data))
-    assert "bar.gltf" in str(err.value)
+    assert "bar.gltf" in str(err.value) and "re-export" in str(err.value)
+
+
+def test_unknown_required_extension_and_ktx2_images_are_named(tmp_path):
+    gltf, data = bar_gltf(extra={"extensionsRequired": ["EXT_unknown_thing"], "extensionsUsed": ["EXT_unknown_thing"]})
+    with pytest.raises(InputError, match=r"bar.gltf, key extensionsRequired: required extension EXT_unknown_thing"):
+        load_gltf(write_gltf(tmp_path, gltf, data))
+    gltf, data = bar_gltf(extra={"images": [{"uri": "skin.ktx2"}]})
+    with pytest.raises(InputError, match=r"bar.gltf, key images\[0\]: KTX2 textures are not supported"):
+        load_gltf(write_gltf(tmp_path, gltf, data))
+    # extensions that only change looks, or that are decoded, do not stop a file
+    gltf, data = bar_gltf(extra={"extensionsRequired": ["KHR_materials_unlit", "KHR_mesh_quantization"]})
+    assert load_gltf(write_gltf(tmp_path, gltf, data)).n_vertices == 12
+
+
+def test_web_page_saved_as_glb_is_named_as_such(tmp_path):
+    page = tmp_path / "Soldier.glb"
+    page.write_text("<!DOCTYPE html>\n<html><head><title>Soldier.glb - GitHub</title></head></html>")
+    with pytest.raises(InputError) as err:
+        load_gltf(page)
+    assert str(err.value).startswith(str(page) + ": not a GLB file (starts with '<!DOCTYPE'")
+    assert "JSON" not in str(err.value)
 
 
 def test_bad_json_and_missing_buffer(tmp_path):
@@ -274,3 +295,26 @@ def test_round_tripped_avatar_renders_the_same_pixels(tmp_path, avatar, renderer
         target.release()
     diff = np.abs(images[0].astype(int) - images[1].astype(int))
     assert diff.max() <= 1 and (diff > 0).mean() < 0.001
+
+
+@pytest.mark.parametrize("version", ["0", "1"])
+def test_vrm_perfect_sync_expressions_supply_arkit_shapes(tmp_path, version):
+    # the bar's target 1 ("wiggle", 0.01 on every vertex) is not ARKit; a VRM expression named as an ARKit
+    # shape binds it. An expression for a shape a target is already named after (jawOpen) changes nothing.
+    gltf, data = bar_gltf(vrm=version)
+    if version == "1":
+        gltf["extensions"]["VRMC_vrm"]["expressions"] = {"custom": {
+            "mouthSmileLeft": {"morphTargetBinds": [{"node": 3, "index": 1, "weight": 0.5}]},
+            "jawOpen": {"morphTargetBinds": [{"node": 3, "index": 1, "weight": 1.0}]},
+            "happy": {"morphTargetBinds": [{"node": 3, "index": 1, "weight": 1.0}]}}}
+    else:
+        gltf["extensions"]["VRM"]["blendShapeMaster"] = {"blendShapeGroups": [
+            {"name": "MouthSmileLeft", "presetName": "unknown", "binds": [{"mesh": 0, "index": 1, "weight": 50}]},
+            {"name": "JawOpen", "presetName": "unknown", "binds": [{"mesh": 0, "index": 1, "weight": 100}]},
+            {"name": "Joy", "presetName": "joy", "binds": [{"mesh": 0, "index": 1, "weight": 100}]}]}
+    av = load_gltf(write_gltf(tmp_path, gltf, data, "bar.vrm", "glb"))
+    smile = av.morph_deltas[av.morph_index("mouthSmileLeft")]
+    assert np.allclose(smile, 0.005)
+    jaw = av.morph_deltas[av.morph_index("jawOpen")]
+    assert np.allclose(jaw[10], [0, 0.05, 0]) and np.allclose(np.delete(jaw, 10, 0), 0)
+    assert not av.morph_deltas[av.morph_index("mouthSmileRight")].any()

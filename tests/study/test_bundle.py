@@ -455,3 +455,23 @@ def test_design_file_name_never_reaches_the_participant(lab, tmp_path: Path) -> 
     results_file = _remote_run(info.path, tmp_path, "R01")
     seen = [results_file.name, *(p.name for p in (tmp_path / "cache").rglob("*"))]
     assert not [n for n in seen if "synced" in n.lower() or "static" in n.lower()], seen
+
+
+def test_bundle_keeps_the_avatar_and_its_bone_map(tmp_path: Path) -> None:
+    import shutil
+
+    design_path = write_synthetic_study(tmp_path / "study", n_stimuli=4)
+    robot = Path(__file__).resolve().parents[1] / "data" / "samples" / "avatars" / "RobotExpressive.glb"
+    shutil.copy(robot, design_path.parent / "robot.glb")
+    bone_map = {"Abdomen": "Spine", "Torso": "Chest", "UpperArm.L": "LeftUpperArm", "LowerArm.L": "LeftLowerArm",
+                "Palm2.L": "LeftHand", "UpperArm.R": "RightUpperArm", "LowerArm.R": "RightLowerArm",
+                "Palm2.R": "RightHand", "UpperLeg.L": "LeftUpperLeg", "LowerLeg.L": "LeftLowerLeg",
+                "Foot.L": "LeftFoot", "UpperLeg.R": "RightUpperLeg", "LowerLeg.R": "RightLowerLeg",
+                "Foot.R": "RightFoot"}
+    table = "\n".join(f'"{k}" = "{v}"' for k, v in bone_map.items())
+    design_path.write_text(design_path.read_text() + f'\n[avatar]\nmodel = "robot.glb"\n\n[avatar.bone_map]\n{table}\n')
+    make_bundle(design_path, tmp_path / "out" / "study.zip")
+    opened = open_bundle(tmp_path / "out" / "study.zip", cache=tmp_path / "cache")
+    remote = load_design(opened.design_path)
+    assert remote.avatar_bone_map == bone_map
+    assert Path(remote.avatar_for(remote.stimuli[0])).read_bytes() == robot.read_bytes()

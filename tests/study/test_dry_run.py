@@ -50,23 +50,47 @@ def test_a_humanoid_vrm_validates(study: Path) -> None:
     assert validate_design(with_avatar(study, "person.vrm")) == []
 
 
-def test_a_non_humanoid_avatar_is_one_problem_naming_condition_stimulus_and_files(study: Path) -> None:
+def test_a_non_humanoid_avatar_is_one_problem_not_one_per_scene(study: Path) -> None:
     shutil.copy(AVATARS / "Fox.glb", study.parent / "Fox.glb")
     problems = validate_design(with_avatar(study, "Fox.glb"))
-    assert len(problems) == 1, [str(p) for p in problems]
-    p = problems[0]
-    assert p.key == "conditions[0]" and "Fox.glb" in p.message and "'synced'" in p.message
-    assert "stimulus 's1'" in p.message and str(study.parent / "motion" / "synced" / "s1.bvh") in p.message
-    assert "5 more condition x stimulus pairs" in p.message  # 3 conditions x 2 stimuli, said once
-    assert "cannot retarget" in p.message and "LeftUpperLeg" in p.message and "humanoid avatar" in p.fix
+    assert len(problems) == 1, [str(p) for p in problems]  # said once, not for each of the 6 scenes
+    assert problems[0].key.startswith("avatar") and "Fox.glb" in problems[0].message
 
 
 def test_an_avatar_with_a_singular_bind_matrix_is_a_problem_not_a_crash(study: Path, tmp_path: Path) -> None:
     singular_bind_copy(AVATARS / "cryptovoxels_vrm0.vrm", study.parent / "broken.vrm")
     problems = validate_design(with_avatar(study, "broken.vrm"))
-    assert [p.key for p in problems] == ["avatar"], [str(p) for p in problems]
+    assert [p.key for p in problems] == ["avatar.model"], [str(p) for p in problems]
     assert str(study.parent / "broken.vrm") in problems[0].message and "Singular matrix" in problems[0].message
-    assert "stimulus 's1', 's2'" in problems[0].message
+
+
+def test_a_slot_the_scene_builder_refuses_names_condition_stimulus_and_file(study: Path, monkeypatch) -> None:
+    """validate reports what the participant's scene builder itself refuses (whatever the cause: here it
+    refuses one motion file) as one problem line naming the condition, the stimulus and the file, and the
+    other slots of that scene are still checked."""
+    from studyapp.errors import InputError
+    from studyapp.render import scene as scene_mod
+
+    bad = study.parent / "motion" / "lagged" / "s2.bvh"
+    real = scene_mod.prepare_slot
+    built = []
+
+    def prepare(avatar, motion, face, name_map=None, **kw):
+        if motion.source == str(bad):
+            raise InputError(None, "name map", "cannot retarget: no joint for LeftUpperArm")
+        built.append(motion.source)
+        return real(avatar, motion, face, name_map=name_map, **kw)
+
+    monkeypatch.setattr(scene_mod, "prepare_slot", prepare)
+    problems = validate_design(study)
+    assert len(problems) == 1, [str(p) for p in problems]
+    p = problems[0]
+    assert p.key == "conditions[1]" and "'lagged'" in p.message and "stimulus 's2'" in p.message
+    assert str(bad) in p.message and "no joint for LeftUpperArm" in p.message and "name_map" in p.fix
+    # every other condition x stimulus was built once: 2 stimuli x 3 conditions, less the refused one
+    assert sorted(built) == sorted(str(study.parent / "motion" / c / f"{s}.bvh")
+                                   for c in ("synced", "lagged", "static") for s in ("s1", "s2")
+                                   if (c, s) != ("lagged", "s2"))
 
 
 def test_frame_rate_check_takes_duration_s_into_account(tmp_path: Path) -> None:

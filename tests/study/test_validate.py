@@ -520,3 +520,55 @@ def test_a_head_track_shorter_than_the_clip_is_a_duration_problem(study: Path) -
     text = text.replace('face = "face/s2.csv"', 'face = "face/s2.csv"\nhead = "head_s2.npy"')
     p = only(problems_for(study, text), "stimuli[1]")
     assert "head 1.000 s" in p.message and "head_s2.npy" in p.message
+
+
+_ROBOT_MAP = '''"Abdomen" = "Spine"
+"Torso" = "Chest"
+"Shoulder.L" = "LeftShoulder"
+"UpperArm.L" = "LeftUpperArm"
+"LowerArm.L" = "LeftLowerArm"
+"Palm2.L" = "LeftHand"
+"Shoulder.R" = "RightShoulder"
+"UpperArm.R" = "RightUpperArm"
+"LowerArm.R" = "RightLowerArm"
+"Palm2.R" = "RightHand"
+"UpperLeg.L" = "LeftUpperLeg"
+"LowerLeg.L" = "LeftLowerLeg"
+"Foot.L" = "LeftFoot"
+"UpperLeg.R" = "RightUpperLeg"
+"LowerLeg.R" = "RightLowerLeg"
+"Foot.R" = "RightFoot"
+'''
+
+
+def test_avatar_bone_map_is_checked_against_the_avatar_file(study: Path) -> None:
+    import shutil
+
+    from studyapp.study.stimuli import load_trial_media
+    from studyapp.study.schedule import participant_schedule
+
+    samples = Path(__file__).resolve().parents[1] / "data" / "samples" / "avatars"
+    (study / "avatar").mkdir()
+    shutil.copy(samples / "RobotExpressive.glb", study / "avatar" / "robot.glb")
+    shutil.copy(samples / "Fox.glb", study / "avatar" / "fox.glb")
+    good = GOOD + '\n[avatar]\nmodel = "avatar/robot.glb"\n\n[avatar.bone_map]\n' + _ROBOT_MAP
+    assert problems_for(study, good) == []
+    design = load_design(study / "design.toml")
+    assert design.avatar_bone_map["UpperArm.L"] == "LeftUpperArm"
+    plan = participant_schedule(design, "P01")[0]
+    assert load_trial_media(design, plan).avatar_bone_map == design.avatar_bone_map
+    # one problem per bad entry: a joint the file lacks, a bone that does not exist, a value that is no name
+    bad = good.replace('"Abdomen" = "Spine"', '"Abdomen" = 5').replace('"Torso" = "Chest"', '"Torso" = "Chestt"')
+    bad = bad.replace('"Palm2.L" = "LeftHand"\n', '')  # a hand no name rule finds
+    probs = problems_for(study, bad + '"Tail" = "UpperChest"\n')
+    assert "humanoid bone name (a string)" in only(probs, "avatar.bone_map.Abdomen").message
+    assert "'Chestt' is not a Unity humanoid bone" in only(probs, "avatar.bone_map.Torso").message
+    p = only(probs, "avatar.bone_map.Tail")
+    assert "joint 'Tail' is not in the avatar (robot.glb)" in p.message and "studyapp inspect" in p.fix
+    # the left hand lost its entry: the avatar is no longer humanoid, said once with the file's joints (the
+    # spine without its entry is still found: Abdomen sits between the hips and the neck)
+    p = only(probs, "avatar.model")
+    assert "robot.glb: not a humanoid avatar: no bones for LeftHand" in p.message and "Abdomen" in p.message
+    # a fox is refused for what it is
+    p = only(problems_for(study, GOOD + '\n[avatar]\nmodel = "avatar/fox.glb"\n'), "avatar.model")
+    assert "fox.glb: not a humanoid avatar: no bones for " in p.message

@@ -206,6 +206,8 @@ class Design:
     criteria: list[Criterion]
     avatar: str = "builtin"
     avatar_by_speaker: dict[str, str] = field(default_factory=dict)
+    #: ``[avatar.bone_map]``: avatar joint name -> Unity humanoid bone, for avatars with their own bone names.
+    avatar_bone_map: dict[str, str] = field(default_factory=dict)
     ordering: str = "balanced-latin-square"
     slot_assignment: str = "balanced"
     slot_labels: tuple[str, str, str] | None = None

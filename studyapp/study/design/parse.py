@@ -219,6 +219,24 @@ def _avatar(col: Collector, avatar: AvatarTable, stims: list[tuple[int, dict]]) 
     return avatar_default, by_speaker
 
 
+def _avatar_bone_map(col: Collector, avatar: AvatarTable) -> dict[str, str]:
+    """``[avatar.bone_map]`` entries naming humanoid bones (joint names are checked against the file by validate)."""
+    from studyapp.render.avatar_rig import canonical_bone
+
+    bone_map = {}
+    for k, v in avatar.bone_map.items():
+        if not isinstance(v, str):
+            col.add(f"avatar.bone_map.{k}", "must map an avatar joint name to a humanoid bone name (a string)",
+                    f'"{k}" = "LeftUpperArm"')
+        elif canonical_bone(v) is None:
+            col.add(f"avatar.bone_map.{k}", f"{v!r} is not a Unity humanoid bone name",
+                    "use Hips, Spine, Chest, UpperChest, Neck, Head, LeftShoulder, LeftUpperArm, LeftLowerArm, "
+                    "LeftHand, LeftUpperLeg, LeftLowerLeg, LeftFoot, LeftToes, LeftIndexProximal, ...")
+        else:
+            bone_map[k] = v
+    return bone_map
+
+
 def _ordering_and_slots(col: Collector, ordering: OrderingTable, slots: SlotsTable):
     if ordering.method not in ORDERINGS:
         col.add("ordering.method", f"unknown ordering {ordering.method!r}",
@@ -360,6 +378,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     # As for stimuli: a criterion with a problem of its own is still known by its id to attention checks.
     crit_ids = [e["id"] for _, e in crits if e.get("id")] if "criteria" in top else [c.id for c in criteria]
     avatar_default, by_speaker = _avatar(col, avatar, stims)
+    bone_map = _avatar_bone_map(col, avatar)
     labels = _ordering_and_slots(col, ordering, slots)
     practice = top.get("practice", key_default(DesignFile, "practice"))
     for j, sid in enumerate(practice):
@@ -373,7 +392,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     design = Design(
         path=path.resolve(), title=top.get("title", ""), instructions=top.get("instructions", "").strip(),
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
-        avatar_by_speaker=by_speaker, ordering=ordering.method, slot_assignment=slots.assignment,
+        avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=ordering.method, slot_assignment=slots.assignment,
         slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
         playback=Playback(**playback), questionnaire=items, max_attention_failures=maxfail,
         seed=int(ordering.seed), groups=groups,

@@ -83,6 +83,8 @@ class AvatarTable:
 
     model: str = key(STR, default="builtin")
     by_speaker: dict = key(TABLE, default_factory=dict)
+    #: avatar joint name -> Unity humanoid bone, for avatars with their own bone names
+    bone_map: dict = key(TABLE, default_factory=dict)
 
 
 @dataclass
