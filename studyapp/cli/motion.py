@@ -52,11 +52,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="convert motion between BVH and NPZ/NPY, rotation orders and frame rates",
         description=(
             "Convert a motion file. BVH -> BVH (--order, --fps), rotation arrays (.npz/.npy) -> BVH or NPZ "
-            "(--template, --representation, --in-fps), BVH -> NPZ."
+            "(--template, --representation, --in-fps), BVH -> NPZ. SMPL, SMPL-H and SMPL-X files need no "
+            "options (--body-model gives their rest skeleton); an SMPL-X file -> CSV writes its face (jawOpen "
+            "from the jaw, FLAME expressions with --flame-map) as an ARKit CSV for a stimulus's face."
         ),
     )
     c.add_argument("input", help="source file (.bvh, .npz, .npy)")
-    c.add_argument("output", help="destination file (.bvh or .npz)")
+    c.add_argument("output", help="destination file (.bvh or .npz; .csv for an SMPL-X file's face)")
     c.add_argument("--fps", type=float, default=None, help="frame rate of the output (the motion is resampled)")
     c.add_argument(
         "--in-fps", type=float, default=None,
@@ -79,7 +81,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--avatar", default=None,
                    help="write the motion as it plays on this avatar ('builtin' or a glTF/GLB/VRM file): retargeted "
                         "onto its skeleton, humanoid bone names, Y up, zero pose = the avatar's rest pose facing +Z")
+    c.add_argument("--body-model", default=None,
+                   help="your SMPL/SMPL-H/SMPL-X model .npz: the rest skeleton of an SMPL-family input")
+    c.add_argument("--flame-map", default=None,
+                   help="(E, 52) .npy mapping an SMPL-X file's FLAME expressions to ARKit shapes (CSV output)")
     c.set_defaults(func=cmd_convert)
+
+
+def smplx_face_of(path: str | Path, fps: float | None = None, flame_map: str | None = None) -> Any:
+    """The face an SMPL-X motion file carries (:func:`studyapp.face.smplx.smplx_face`), or ``None`` for any
+    other file (SMPL and SMPL-H have no jaw)."""
+    from studyapp.face.smplx import load_flame_map, smplx_face
+    from studyapp.motion.smpl import read_smpl, recognise_smpl
+
+    if Path(path).suffix.lower() not in (".npz", ".npy") or recognise_smpl(path) != "smplx":
+        if flame_map is not None:
+            raise InputError(str(path), None, "--flame-map applies to SMPL-X files only; this is not one")
+        return None
+    data = read_smpl(path, fps=fps)
+    mapping = None
+    if flame_map is not None:
+        if data.expressions is None:
+            raise InputError(str(path), "keys", "no FLAME expressions in this file for --flame-map to map")
+        mapping = load_flame_map(flame_map, data.expressions.shape[1])
+    return smplx_face(data.jaw, data.fps, data.expressions, mapping, source=str(path))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -258,8 +283,9 @@ def cmd_convert(args: argparse.Namespace) -> int:
     _check_fps(args.in_fps, "--in-fps")
     src, dst = Path(args.input), Path(args.output)
     out_ext = dst.suffix.lower()
-    if out_ext not in (".bvh", ".npz"):
-        raise InputError(str(dst), None, f"cannot write {out_ext or 'files without extension'}; use .bvh or .npz")
+    if out_ext not in (".bvh", ".npz", ".csv"):
+        raise InputError(str(dst), None, f"cannot write {out_ext or 'files without extension'}; use .bvh or .npz "
+                                         "(.csv for an SMPL-X file's face)")
     if args.order is not None and out_ext != ".bvh":
         raise InputError(str(dst), None, "--order only applies to BVH output")
     # tolerated oddities (a header frame count that disagrees, an unused root array) are reported as
@@ -296,6 +322,8 @@ def _convert(args: argparse.Namespace, src: Path, dst: Path, out_ext: str) -> in
     from studyapp.motion.io import load_motion
     from studyapp.motion.resample import resample
 
+    if out_ext == ".csv":
+        return _convert_face(args, src, dst)
     in_ext = src.suffix.lower()
     kw: dict[str, Any] = {}
     in_fps = args.in_fps
@@ -309,6 +337,8 @@ def _convert(args: argparse.Namespace, src: Path, dst: Path, out_ext: str) -> in
             root_key=args.root_key,
             degrees=not args.radians,
         )
+    if args.body_model is not None:
+        kw["body_model"] = args.body_model
     motion = load_motion(src, fps=in_fps, template=template, representation=args.representation, **kw)
     if args.fps is not None and float(args.fps) != float(motion.fps):
         motion = resample(motion, args.fps)
@@ -322,4 +352,20 @@ def _convert(args: argparse.Namespace, src: Path, dst: Path, out_ext: str) -> in
     else:
         save_motion_npz(motion, dst)
     print(f"wrote {dst} ({motion.n_frames} frames at {motion.fps:g} fps, {motion.skeleton.n_joints} joints)")
+    return 0
+
+
+def _convert_face(args: argparse.Namespace, src: Path, dst: Path) -> int:
+    """An SMPL-X file's face as an ARKit CSV (``time`` column and the 52 shapes) a stimulus can name as its face."""
+    from studyapp.face.io import save_face_csv
+
+    face = smplx_face_of(src, fps=args.in_fps, flame_map=args.flame_map)
+    if face is None:
+        raise InputError(str(src), None, "only an SMPL-X file's face can be written as CSV (its jaw drives jawOpen); "
+                                         "write motion to .bvh or .npz")
+    if args.fps is not None:
+        face = face.resample(args.fps)
+    save_face_csv(face, dst)
+    print(f"wrote {dst} ({face.n_frames} frames at {face.fps:g} fps, jawOpen up to "
+          f"{float(face.weight('jawOpen').max()):.2f})")
     return 0

@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import sys
+import warnings
 from pathlib import Path
 
 from studyapp.errors import InputError, StudyappError
@@ -45,7 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "in a design's [[conditions]]. Keys: space = pause, R = restart, Esc = close.",
     )
     v.add_argument("motion", help="motion file (BVH, NPZ, NPY)")
-    v.add_argument("--face", help="ARKit blendshape file (Live Link CSV, BEAT JSON, ...)")
+    v.add_argument("--face", help="ARKit blendshape file (Live Link CSV, BEAT JSON, ...); default for an SMPL-X "
+                   "motion: its jaw drives jawOpen")
+    v.add_argument("--flame-map", help="(E, 52) .npy mapping an SMPL-X file's FLAME expressions to ARKit shapes")
     v.add_argument("--audio", help="WAV file to play along (it sets how long one loop lasts)")
     v.add_argument("--avatar", help="glTF/GLB/VRM avatar (default: the built-in one)")
     c = v.add_argument_group("condition options (as in a design's [[conditions]])")
@@ -63,6 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     deg.add_argument("--degrees", dest="degrees", action="store_true", default=None,
                      help="Euler arrays are in degrees (the default)")
     deg.add_argument("--radians", dest="degrees", action="store_false", help="Euler arrays are in radians")
+    c.add_argument("--body-model", help="your SMPL/SMPL-H/SMPL-X model .npz: the rest skeleton of an SMPL-family file")
     v.add_argument("--avatar-bone-map", type=_bone_map, metavar="JOINT=BONE,...",
                    help="the avatar's [avatar.bone_map], e.g. UpperArm.L=LeftUpperArm,LowerArm.L=LeftLowerArm")
     v.add_argument("--offscreen", action="store_true", help="render one frame headless instead of opening a window")
@@ -96,13 +101,22 @@ def _single_scene(args: argparse.Namespace, aspect: float):
 
     cond = preview_condition(args.motion, fps=args.fps, name_map=parse_name_map(args.name_map),
                              template=args.template, representation=args.representation,
-                             rotation_order=args.rotation_order, joints=args.joints, degrees=args.degrees)
+                             rotation_order=args.rotation_order, joints=args.joints, degrees=args.degrees,
+                             body_model=args.body_model)
     motion = load_preview_motion(args.motion, cond)
     face = None
     if args.face:
         from studyapp.face.io import load_face
 
         face = load_face(args.face)
+    else:
+        from studyapp.cli.motion import smplx_face_of
+
+        with warnings.catch_warnings(record=True) as caught:  # one "warning:" line, as convert prints them
+            warnings.simplefilter("always", UserWarning)
+            face = smplx_face_of(args.motion, fps=args.fps, flame_map=args.flame_map)
+        for w in caught:
+            print(f"warning: {w.message}", file=sys.stderr)
     avatar = load_avatar(args.avatar, bone_map=args.avatar_bone_map)
     slot = prepare_slot(avatar, motion, face, name_map=cond.name_map or None)
     return make_scene([slot], avatar, labels=None, aspect=aspect)

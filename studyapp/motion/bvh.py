@@ -650,6 +650,7 @@ def format_bvh(skeleton: Skeleton, channels: np.ndarray, frame_time: float, prec
     if not np.isfinite(channels).all():
         raise ValueError("channel data contains NaN or infinite values")
     out = ["HIERARCHY"]
+    emitted: list[int] = []  # joints in the order the hierarchy lists them, which the MOTION columns follow
     children = [[] for _ in skeleton.names]
     for j, p in enumerate(skeleton.parents):
         if p >= 0:
@@ -661,6 +662,7 @@ def format_bvh(skeleton: Skeleton, channels: np.ndarray, frame_time: float, prec
     def emit(j: int, depth: int) -> None:
         ind = "\t" * depth
         kw = "ROOT" if skeleton.parents[j] < 0 else "JOINT"
+        emitted.append(j)
         out.append(f"{ind}{kw} {skeleton.names[j]}")
         out.append(f"{ind}{{")
         out.append(f"{ind}\tOFFSET {off(skeleton.offsets[j])}")
@@ -678,6 +680,11 @@ def format_bvh(skeleton: Skeleton, channels: np.ndarray, frame_time: float, prec
     for j, p in enumerate(skeleton.parents):
         if p < 0:
             emit(j, 0)
+    # Joints may be stored in any parent-first order (SMPL's puts both hips before either knee), but a BVH
+    # lists them depth-first and its channel values follow that listing: reorder the columns to match.
+    start = np.concatenate([[0], np.cumsum([len(c) for c in skeleton.channels])])
+    columns = np.concatenate([np.arange(start[j], start[j + 1]) for j in emitted]).astype(np.int64)
+    channels = channels[:, columns]
     out.append("MOTION")
     out.append(f"Frames: {channels.shape[0]}")
     out.append(f"Frame Time: {frame_time:.{max(precision, 10)}g}")

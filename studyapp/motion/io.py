@@ -1,7 +1,8 @@
 """One entry point for reading motion files, dispatching on the extension.
 
 ``.bvh`` -> :func:`~studyapp.motion.bvh.read_bvh`; ``.npz`` written by studyapp ->
-:func:`~studyapp.motion.arrays.load_motion_npz`; other ``.npz`` / ``.npy`` (model output arrays) ->
+:func:`~studyapp.motion.arrays.load_motion_npz`; SMPL, SMPL-H and SMPL-X files (recognised by their keys and
+shapes) -> :func:`~studyapp.motion.smpl.load_smpl_motion`; other ``.npz`` / ``.npy`` (model output arrays) ->
 :func:`~studyapp.motion.arrays.load_rotation_array`, which needs a template skeleton, a
 representation and the frame rate.
 
@@ -39,11 +40,13 @@ def load_motion(
     fps: float | None = None,
     template: Any = None,
     representation: str | None = None,
+    body_model: str | Path | None = None,
     **kw: Any,
 ) -> Motion:
     """Read a motion file of any supported format.
 
-    ``fps`` overrides a BVH's frame time and is required for raw arrays. ``template`` and
+    ``fps`` overrides a BVH's (or SMPL file's) frame rate and is required for raw arrays. ``body_model`` is a
+    user's SMPL-family model ``.npz`` giving an SMPL file its rest joints (else built-in proportions). ``template`` and
     ``representation`` (and ``joints=``, ``order=``, ``key=``, ``root_key=``) are for raw rotation
     arrays; see :func:`~studyapp.motion.arrays.load_rotation_array`.
     """
@@ -61,6 +64,15 @@ def load_motion(
         check_numpy_file(p)
         if ext == ".npz" and is_motion_npz(p) and template is None:
             return load_motion_npz(p, fps=fps)
+        from studyapp.motion.smpl import FAMILY_NAMES, load_smpl_motion, recognise_smpl
+
+        family = recognise_smpl(p)
+        if family is not None:
+            if template is not None or representation is not None:
+                # read as a raw array it would fail on a joint count ("55 joints ... 75 mapped"), hiding the cause
+                raise InputError(str(path), None, f"an {FAMILY_NAMES[family]} file carries its own skeleton, rotation "
+                                                  "layout and frame rate: drop the template and representation")
+            return load_smpl_motion(p, fps=fps, body_model=body_model)
         if template is None or representation is None:
             raise InputError(
                 str(path), None,
@@ -121,9 +133,20 @@ def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, An
             from studyapp.motion.arrays import check_numpy_file, is_motion_npz
 
             check_numpy_file(p)
+            from studyapp.motion.smpl import read_smpl, recognise_smpl, smpl_motion, summarize_smpl
+
             if ext == ".npz" and is_motion_npz(p):
                 motion = load_motion(p, fps=fps)
                 out["format"] = "npz (studyapp motion)"
+            elif recognise_smpl(p) is not None:
+                data = read_smpl(p, fps=fps)
+                motion = smpl_motion(data)
+                smpl = summarize_smpl(data)
+                out["format"] = f"{ext[1:]} ({smpl['family']}, {smpl.pop('layout')})"
+                out["rest_skeleton"] = "built-in average adult, unless the condition names a body_model"
+                for note in smpl.pop("notes"):
+                    warnings.warn(note)
+                out.update(smpl)
             else:
                 try:
                     loaded = np.load(str(p), allow_pickle=False)

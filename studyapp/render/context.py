@@ -66,6 +66,14 @@ def create_offscreen_context() -> moderngl.Context:
 _OSMESA_WINDOWS: list = []  # keep the hidden GLFW windows alive as long as their contexts
 
 
+def make_current(ctx: moderngl.Context) -> None:
+    """Make a headless context current again (EGL; an OSMesa context through GLFW stays current anyway)."""
+    try:
+        ctx.__enter__()
+    except Exception:  # a loader-made context (OSMesa) has no switch: it is the only one
+        pass
+
+
 def _osmesa_context() -> moderngl.Context:
     import glfw
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from studyapp.audio.clock import SilentClock
-from studyapp.render.context import create_offscreen_context
+from studyapp.render.context import create_offscreen_context, make_current
 from studyapp.render.loop import FrameLoop, OffscreenFrames, ScenePlayer, VirtualTimer
 from studyapp.render.renderer import Renderer
 
@@ -31,6 +31,9 @@ def _shared_context():
     global _CONTEXT
     if _CONTEXT is None:
         _CONTEXT = create_offscreen_context()
+    # Another context (a window, a test's own) may have become current since: objects made now must land
+    # in this one, or Mesa fails to create them ("cannot create program").
+    make_current(_CONTEXT)
     return _CONTEXT
 
 

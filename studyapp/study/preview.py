@@ -115,9 +115,10 @@ def load_preview_motion(motion: str | Path, condition: Condition) -> Motion:
     # resolves the template against the design's folder, so both are made absolute here.
     pattern = str(path).replace("{", "{{").replace("}", "}}")
     template = str(Path(condition.template).resolve()) if condition.template else None
+    body_model = str(Path(condition.body_model).resolve()) if condition.body_model else None
     cond = Condition(id=condition.id, motion=pattern, fps=condition.fps, representation=condition.representation,
                      template=template, rotation_order=condition.rotation_order, name_map=dict(condition.name_map),
-                     joints=condition.joints, degrees=condition.degrees)
+                     joints=condition.joints, degrees=condition.degrees, body_model=body_model)
     stim = Stimulus(id=path.stem, audio=path)
     design = Design(path=path.parent / "(view)", title="view", instructions="", conditions=[cond],
                     stimuli=[stim], criteria=[])

@@ -37,6 +37,7 @@ from studyapp.face.animation import FaceAnimation
 from studyapp.motion.skeleton import Motion
 from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
                                    motion_path, resolve)
+from studyapp.study.design.parse import is_smpl_file, missing_array_settings
 from studyapp.study.schedule import TrialPlan
 from studyapp.study.timeline import (DURATION_TOLERANCE_S, MOTION_END_CHOICES, cut_audio, fit_face, fit_motion,
                                      medium_end, trial_duration)
@@ -245,10 +246,12 @@ def load_condition_motion(design: Design, condition: Condition, stimulus: Stimul
         kwargs["order"] = condition.rotation_order
     if condition.is_array:
         kwargs.update(joints=list(condition.joints) if condition.joints else None, degrees=condition.degrees)
+    body_model = resolve(design, condition.body_model) if condition.body_model is not None else None
     key = ("motion", _file_id(path), condition.fps, condition.representation, condition.template,
-           condition.rotation_order, condition.joints, condition.degrees)
+           condition.rotation_order, condition.joints, condition.degrees, body_model)
     return _FILES.get(key, lambda: load_motion(path, fps=condition.fps, template=template,
-                                               representation=condition.representation, **kwargs))
+                                               representation=condition.representation, body_model=body_model,
+                                               **kwargs))
 
 
 def _live_motion(design: Design, condition: Condition, stimulus: Stimulus) -> Motion:
@@ -331,6 +334,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     unreadable: dict[tuple[int, str], list[tuple[str, Path]]] = {}  # (condition, problem) -> clips
     wrong_rate: dict[int, tuple[float, float, list[str]]] = {}      # condition -> (file fps, true fps, clips)
     skeletons_checked: set[tuple[int, tuple[str, ...]]] = set()
+    array_settings_missing: set[int] = set()  # conditions whose NPZ/NPY files are raw arrays lacking settings
     cond_index = {c.id: i for i, c in enumerate(design.conditions)}
 
     found, bad_avatars = _check_avatars(design)
@@ -381,13 +385,16 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
         audio_s = items.get("audio", (None, ""))[0]
         for cond in design.conditions:
             ci = cond_index[cond.id]
-            if cond.motion is None or not _array_settings_complete(cond):
-                continue  # live conditions are generated to the audio's length; incomplete settings are reported
+            if cond.motion is None:
+                continue  # live conditions are generated to the audio's length
             try:
                 path = motion_path(design, cond, stim)
             except KeyError:
                 continue  # the pattern names a tag this stimulus lacks: reported with the pattern
             if not path.is_file():
+                continue
+            if not _array_settings_complete(cond) and not is_smpl_file(path):
+                array_settings_missing.add(ci)  # reported once per condition below
                 continue
             try:
                 motion = load_condition_motion(design, cond, stim)
@@ -426,6 +433,9 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                     dry_failures.setdefault(key, []).extend(failure)
     for (avatar, text), where in dry_failures.items():
         problems.append(_dry_run_problem(design, avatar, text, where))
+    for ci in sorted(array_settings_missing):
+        c = design.conditions[ci]
+        problems += missing_array_settings(f"conditions[{ci}]", c.template, c.representation, c.fps)
     # One line per condition and cause, not one per clip: a setting of the condition is usually the cause.
     for (ci, text), where in unreadable.items():
         cond = design.conditions[ci]
@@ -455,7 +465,7 @@ def _scene_identity(design: Design, stim: Stimulus, conds: list[int]) -> tuple:
         c = design.conditions[ci]
         src = fid(model_path(design, c)) if c.model is not None else fid(motion_path(design, c, stim))
         motions.append((src, c.fps, c.representation, c.template, c.rotation_order, c.joints, c.degrees,
-                        tuple(sorted(c.name_map.items())), c.motion_end))
+                        tuple(sorted(c.name_map.items())), c.motion_end, c.body_model))
     return (tuple(motions), fid(stim.audio), fid(stim.face), fid(stim.head), design.avatar_for(stim), stim.duration_s)
 
 
@@ -571,7 +581,8 @@ def _array_settings_complete(cond: Condition) -> bool:
 def _unreadable_fix(cond: Condition) -> str:
     if cond.is_array:
         return ("check this condition's template, representation, joints and fps against how the model wrote "
-                "its arrays (`studyapp inspect FILE` shows their shape), or re-export the files")
+                "its arrays (`studyapp inspect FILE` shows their shape), or, for SMPL-family files, its "
+                "body_model; or re-export the files")
     return "fix or re-export the file (`studyapp inspect FILE` shows what is read)"
 
 

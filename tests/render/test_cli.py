@@ -71,3 +71,40 @@ def test_view_takes_an_avatar_bone_map(tmp_path, capsys):
                  "--offscreen", "--out", str(out), "--size", "240x180"]) == 0
     rgb = mpimg.imread(out)[..., :3]
     assert np.abs(rgb[40:160, 80:160] - rgb[5, 5]).sum(-1).max() > 0.3  # the robot is drawn
+
+
+def test_view_of_an_smplx_file_opens_the_mouth_by_its_jaw(tmp_path, capsys):
+    """No --face: an SMPL-X motion's jaw drives jawOpen. The same body with the jaw shut and opened 25 degrees
+    differs only around the face."""
+    images = []
+    for name, jaw_deg in (("shut", 0.0), ("open", 25.0)):
+        poses = np.zeros((2, 165))
+        poses[:, 22 * 3] = np.radians(jaw_deg)
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, poses=poses, trans=np.zeros((2, 3)), mocap_frame_rate=np.int32(30))
+        out = tmp_path / f"{name}.png"
+        assert main(["view", str(path), "--offscreen", "--out", str(out), "--size", "320x240"]) == 0
+        images.append(mpimg.imread(out)[..., :3])
+    diff = np.abs(images[0] - images[1]).sum(-1) > 0.05
+    assert diff.sum() > 10, "the mouth did not move"
+    rows, cols = np.nonzero(diff)
+    # the built-in avatar's face is in the upper part of the frame, in the middle
+    assert rows.max() < 240 * 0.45 and abs(cols.mean() - 160) < 30, (rows.min(), rows.max(), cols.mean())
+
+
+def test_view_takes_a_body_model_and_names_a_wrong_one(tmp_path, capsys):
+    from studyapp.motion.smpl import builtin_rest_joints
+
+    motion = tmp_path / "m.npz"
+    np.savez(motion, poses=np.zeros((2, 156)), trans=np.zeros((2, 3)), mocap_framerate=np.float64(30))
+    wrong = tmp_path / "SMPLX_TEST.npz"  # an SMPL-X model for an SMPL-H file
+    np.savez(wrong, J_regressor=np.eye(55), v_template=builtin_rest_joints("smplx"), shapedirs=np.zeros((55, 3, 4)))
+    out = tmp_path / "x.png"
+    assert main(["view", str(motion), "--body-model", str(wrong), "--offscreen", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "SMPLX_TEST.npz" in err and "J_regressor" in err and "SMPL-H" in err
+    right = tmp_path / "SMPLH_TEST.npz"
+    np.savez(right, J_regressor=np.eye(52), v_template=builtin_rest_joints("smplh"), shapedirs=np.zeros((52, 3, 4)))
+    assert main(["view", str(motion), "--body-model", str(right), "--offscreen", "--out", str(out),
+                 "--size", "160x120"]) == 0
+    assert out.is_file()

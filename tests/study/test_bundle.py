@@ -477,3 +477,47 @@ def test_bundle_keeps_the_avatar_and_its_bone_map(tmp_path: Path) -> None:
     remote = load_design(opened.design_path)
     assert remote.avatar_bone_map == bone_map
     assert Path(remote.avatar_for(remote.stimuli[0])).read_bytes() == robot.read_bytes()
+
+
+def test_smpl_motion_on_the_labs_body_model_is_bundled_without_the_model_file(tmp_path: Path) -> None:
+    """The SMPL-family licences do not allow passing the model file on: a condition that names one travels as
+    its motion on that model's skeleton (BVH), which plays as the lab plays it."""
+    from studyapp.motion.fk import joint_positions
+    from studyapp.motion.smpl import builtin_rest_joints, parents
+    from studyapp.resources import designs_dir
+    from studyapp.study.stimuli import load_condition_motion
+
+    # a synthetic SMPL-X model (the licensed one cannot be used in tests): one vertex per joint, a taller figure
+    rest = builtin_rest_joints("smplx") * 1.2
+    model = tmp_path / "models" / "SMPLX_TEST.npz"
+    model.parent.mkdir()
+    kin = np.stack([np.where(parents("smplx") < 0, 2**32 - 1, parents("smplx")), np.arange(55)]).astype(np.uint32)
+    np.savez(model, J_regressor=np.eye(55), v_template=rest, shapedirs=np.zeros((55, 3, 10)), kintree_table=kin)
+    text = (designs_dir() / "smplx_example.toml").read_text().replace('"demo/', f'"{designs_dir()}/demo/').replace(
+        '"smplx_example/', f'"{designs_dir()}/smplx_example/').replace(
+        '# body_model = "models/SMPLX_NEUTRAL.npz"', 'body_model = "models/SMPLX_TEST.npz"')
+    source = tmp_path / "smplx.toml"
+    source.write_text(text)
+    lab_design = load_design(source)
+    assert lab_design.conditions[0].body_model == "models/SMPLX_TEST.npz"
+    info = make_bundle(source, tmp_path / "smpl.zip", results=tmp_path / "smpl.sqlite")
+    with zipfile.ZipFile(info.path) as zf:
+        contents = [zf.read(n) for n in zf.namelist()]
+    assert model.read_bytes() not in contents
+    opened = open_bundle(info.path, cache=tmp_path / "cache")
+    assert "body_model" not in opened.design_path.read_text()
+    bundled = load_design(opened.design_path)
+    key = json.loads(info.key_path.read_text())
+    shipped_cond = next(c for c in bundled.conditions if key["conditions"][c.id] == "emage_like")
+    assert shipped_cond.motion.endswith(".bvh")
+    for s in bundled.stimuli:
+        lab_stim = next(x for x in lab_design.stimuli if x.id == key["stimuli"][s.id])
+        shipped = load_condition_motion(bundled, shipped_cond, s)
+        lab = load_condition_motion(lab_design, lab_design.conditions[0], lab_stim)
+        assert shipped.n_frames == lab.n_frames == 300
+        order = [shipped.skeleton.names.index(n) for n in lab.skeleton.names]  # a BVH lists joints depth-first
+        err = np.abs(joint_positions(shipped)[:, order] * shipped.skeleton.unit_scale - joint_positions(lab)).max()
+        assert err < 1e-3, err
+        # and it is the model's skeleton, not the built-in one: 1.2 times as tall
+        arm = np.linalg.norm(lab.skeleton.offsets[18])
+        assert abs(arm / np.linalg.norm(builtin_rest_joints("smplx")[18] - builtin_rest_joints("smplx")[16]) - 1.2) < 1e-9

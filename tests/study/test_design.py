@@ -35,7 +35,7 @@ def test_demo_design_is_what_the_demo_needs(demo) -> None:
     assert n_rows(demo) == 12
 
 
-@pytest.mark.parametrize("name", ["demo.toml", "example_beat.toml", "live_model_example.toml"])
+@pytest.mark.parametrize("name", ["demo.toml", "example_beat.toml", "live_model_example.toml", "smplx_example.toml"])
 def test_shipped_designs_validate(name: str) -> None:
     problems = validate_design(designs_dir() / name)
     assert problems == [], "\n".join(map(str, problems))

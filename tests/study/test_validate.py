@@ -572,3 +572,33 @@ def test_avatar_bone_map_is_checked_against_the_avatar_file(study: Path) -> None
     # a fox is refused for what it is
     p = only(problems_for(study, GOOD + '\n[avatar]\nmodel = "avatar/fox.glb"\n'), "avatar.model")
     assert "fox.glb: not a humanoid avatar: no bones for " in p.message
+
+
+def _write_smpl(study: Path) -> None:
+    """SMPL-X (BEAT2 keys) for condition a, AMASS-style SMPL-H for condition b: no template, layout or fps."""
+    f = int(SECONDS * FPS)
+    for sid in ("s1", "s2"):
+        np.savez(study / "motion" / "a" / f"{sid}.npz", poses=np.zeros((f, 165)), trans=np.zeros((f, 3)),
+                 betas=np.zeros(300), expressions=np.zeros((f, 100)), mocap_frame_rate=np.int32(30))
+        np.savez(study / "motion" / "b" / f"{sid}.npz", poses=np.zeros((2 * f, 156)), trans=np.zeros((2 * f, 3)),
+                 betas=np.zeros(16), mocap_framerate=np.float64(60))
+
+
+def test_smpl_family_conditions_need_no_template_representation_or_fps(study: Path) -> None:
+    _write_smpl(study)
+    text = (GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.npz"')
+            .replace('motion = "motion/b/{stimulus}.bvh"', 'motion = "motion/b/{stimulus}.npz"'))
+    assert problems_for(study, text) == []
+    # a body model is a referenced file like any other: missing, it is reported by key
+    with_model = text.replace('motion = "motion/a/{stimulus}.npz"',
+                              'motion = "motion/a/{stimulus}.npz"\nbody_model = "models/SMPLX_NEUTRAL.npz"')
+    p = only(problems_for(study, with_model), "conditions[0].body_model")
+    assert "SMPLX_NEUTRAL.npz" in str(p)
+    # on a BVH condition a body model would be silently ignored: refused instead
+    on_bvh = GOOD.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{stimulus}.bvh"\nbody_model = "m.npz"')
+    assert any("not one" in p.message for p in problems_for(study, on_bvh) if p.key == "conditions[2].body_model")
+    # a raw array in the same place still needs its settings, asked for once for the condition
+    _write_arrays(study, 75)
+    raw = GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.npy"')
+    probs = problems_for(study, raw)
+    assert {p.key for p in probs} == {"conditions[0].template", "conditions[0].representation", "conditions[0].fps"}

@@ -107,6 +107,8 @@ def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str
             files[f"conditions[{i}].model"] = model_path(design, c)
         if c.template is not None:
             files[f"conditions[{i}].template"] = resolve(design, c.template)
+        if c.body_model is not None:
+            files[f"conditions[{i}].body_model"] = resolve(design, c.body_model)
         if c.motion is not None and pattern_fields(c.motion):
             for s in design.stimuli:
                 try:

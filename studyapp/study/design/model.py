@@ -37,6 +37,10 @@ class Condition:
     motion_end: what the motion does when it ends before the trial (see :mod:`studyapp.study.timeline`):
         ``"hold"`` its last frame or ``"loop"`` from its first; None (default): ``validate`` refuses a motion
         shorter than the trial.
+    body_model: the user's own SMPL/SMPL-H/SMPL-X model ``.npz`` (``J_regressor``, ``v_template``,
+        ``shapedirs``) giving SMPL-family motion files their rest skeleton, shaped by each file's ``betas``;
+        without it a built-in skeleton of average proportions is used. SMPL-family files need no
+        ``template``, ``representation`` or ``fps``: they are recognised by their keys.
     """
 
     id: str = key(STR, required=True)
@@ -50,6 +54,7 @@ class Condition:
     joints: tuple[str, ...] | None = key(LIST, default=None)
     degrees: bool = key(BOOL, default=True)
     motion_end: str | None = key(STR, default=None)
+    body_model: str | None = key(STR, default=None)
 
     @property
     def is_live(self) -> bool:
@@ -58,7 +63,8 @@ class Condition:
 
     @property
     def is_array(self) -> bool:
-        """True when the motion files are NPZ/NPY rotation arrays (read with template, representation, fps)."""
+        """True when the motion files are NPZ/NPY: rotation arrays (read with template, representation, fps)
+        or SMPL-family files (recognised when read)."""
         return self.motion is not None and self.motion.lower().endswith((".npz", ".npy"))
 
 

@@ -101,18 +101,14 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
             col.add(f"{key}.motion", f"motion files must be {', '.join(MOTION_SUFFIXES)}, got {e['motion']!r}",
                     "convert them first (studyapp convert) or fix the pattern's extension")
         if e["motion"].lower().endswith((".npz", ".npy")):
-            # Arrays carry neither skeleton, nor rotation layout, nor frame rate: the condition must say.
-            if "template" not in e:
-                col.add(f"{key}.template", "NPZ/NPY motion needs a template BVH for its skeleton",
-                        'add template = "template.bvh" (a BVH of the skeleton the arrays drive)')
-            if "representation" not in e:
-                col.add(f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
-                        f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})')
-            if "fps" not in e:
-                col.add(f"{key}.fps", "NPZ/NPY motion carries no frame rate",
-                        "add the model's output rate, e.g. fps = 15")
+            # Raw arrays carry neither skeleton, nor rotation layout, nor frame rate; SMPL-family files carry all
+            # three. Only reading a file tells them apart: a design's pattern is checked file by file by
+            # stimuli.check_stimulus_files, one named file (`view`) here.
+            if not pattern and not is_smpl_file(Path(e["motion"])):
+                for problem in missing_array_settings(key, *(e.get(k) for k in ("template", "representation", "fps"))):
+                    col.add(*problem)
         else:
-            for k in ("joints", "degrees", "representation"):
+            for k in ("joints", "degrees", "representation", "body_model"):
                 if k in e:
                     col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
                             f"remove {k}")
@@ -122,7 +118,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
                 'e.g. joints = ["Spine", "Spine1", "Neck", ...]')
         joints = None
     if "model" in e and "motion" not in e:
-        for k in ("joints", "degrees", "representation", "rotation_order"):
+        for k in ("joints", "degrees", "representation", "rotation_order", "body_model"):
             if k in e:  # a live model declares its own output; a setting here would be silently ignored
                 col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays, not for a live model",
                         f"remove {k} (the model's output is read as its contract declares)")
@@ -137,8 +133,31 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
             name_map={k: v for k, v in nm.items() if isinstance(v, str)},
             joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
             motion_end=motion_end,
+            body_model=e.get("body_model"),
         )
     return None
+
+
+def is_smpl_file(path: Path) -> bool:
+    """Whether an NPZ/NPY motion file is an SMPL-family file, which carries its own skeleton, layout and rate."""
+    from studyapp.motion.smpl import recognise_smpl
+
+    return path.is_file() and recognise_smpl(path) is not None
+
+
+def missing_array_settings(key: str, template: Any, representation: Any, fps: Any) -> list[tuple[str, str, str]]:
+    """``(key, message, fix)`` for each setting a raw rotation array's condition lacks (``None``): arrays carry
+    no skeleton, rotation layout or frame rate."""
+    out = []
+    if template is None:
+        out.append((f"{key}.template", "NPZ/NPY motion that is not an SMPL/SMPL-H/SMPL-X file needs a template "
+                    "BVH for its skeleton", 'add template = "template.bvh" (a BVH of the skeleton the arrays drive)'))
+    if representation is None:
+        out.append((f"{key}.representation", "NPZ/NPY motion needs its rotation representation",
+                    f'add representation = "axis_angle" (one of {", ".join(REPRESENTATIONS)})'))
+    if fps is None:
+        out.append((f"{key}.fps", "NPZ/NPY motion carries no frame rate", "add the model's output rate, e.g. fps = 15"))
+    return out
 
 
 def condition_from_settings(settings: dict[str, Any], source: str | Path) -> tuple[Condition | None, list[Problem]]:
@@ -415,8 +434,12 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
                 raise
             found = [("", f"stimulus files not checked ({type(exc).__name__}: {exc})",
                       "fix the problems above and validate again")]
+        # An array setting the parser refused (representation = "6d") reaches the file check as missing; its
+        # parse problem already says what to write there.
+        refused = {p.key for p in col.problems if p.key.rsplit(".", 1)[-1] in ("template", "representation", "fps")}
         for key, message, fix in found:
-            col.add(key, message, fix)
+            if key not in refused:
+                col.add(key, message, fix)
     design.design_hash = design_hash(data, {k: p for k, p in files.items()})
     return design, col.problems
 
