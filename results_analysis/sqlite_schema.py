@@ -1,4 +1,4 @@
-"""Build the tidy results frame straight from a studyapp results database (schema version 1).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 and 2).
 
 Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
@@ -23,7 +23,7 @@ _QUERY = """
 WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.rowid AS _rowid, r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition,
        r.slot, r.rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
-       r.design_hash, r.app_version
+       {trial_duration} AS trial_duration_s, r.design_hash, r.app_version
 FROM responses r JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
 JOIN crit ON crit.criterion = r.criterion
 ORDER BY r.participant, r.trial_index, crit.pos, r.slot
@@ -39,7 +39,11 @@ def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFr
         have = {r[1] for r in con.execute(f"PRAGMA table_info({table})")}
         if cols - have:
             raise AnalysisInputError(path, f"table {table}", f"missing column(s) {', '.join(sorted(cols - have))}")
-    df = pd.read_sql_query(_QUERY, con)
+    # Version 2 records how long each trial played; a version 1 file (read as it is, never upgraded here)
+    # has no such column, and the frame gets it empty, as `studyapp export` writes it for such trials.
+    trial_cols = {r[1] for r in con.execute("PRAGMA table_info(trials)")}
+    duration = "t.trial_duration_s" if "trial_duration_s" in trial_cols else "NULL"
+    df = pd.read_sql_query(_QUERY.format(trial_duration=duration), con)
     df["_where"] = [f"responses row {r} (participant {p}, trial {t}, criterion {c})"
                     for r, p, t, c in zip(df["_rowid"], df["participant"], df["trial_index"], df["criterion"])]
     df = df.drop(columns=["_rowid"])

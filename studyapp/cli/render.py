@@ -177,7 +177,8 @@ def _view_window(args: argparse.Namespace, audio) -> int:
         def draw(fbo, size, now) -> None:
             aspect = size[0] / size[1]
             if abs(aspect - aspect_now[0]) > 1e-3:  # the window was resized: frame the figure anew
-                player.scene = make_scene(player.scene.slots, player.scene.avatars, None, aspect=aspect)
+                player.scene = make_scene(player.scene.slots, player.scene.avatars, None, aspect=aspect,
+                                          duration=player.scene.duration)
                 aspect_now[0] = aspect
             player.draw(fbo, size, now)
 

@@ -139,9 +139,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise StudyappError("--bot needs a mode: --offscreen (through the real UI, rendered offscreen) or "
                             "--no-render (session only, fast)")
     design = load_design_for_run(design_path, results)
+    new_db = not (results.exists() and results.stat().st_size > 0)
     db = ResultsDB(results, design)
     print(f"Results database: {results}", flush=True)
     finished_files: list[Path] = []
+    known = {p.id for p in db.participants()}
     try:
         row = args.row
         groups = parse_groups(args.group)
@@ -163,7 +165,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                   allow_rerun=args.allow_rerun)
         if rec.id != args.participant:
             print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
-        code = _run_mode(args, design, db, rec.id)
+        try:
+            code = _run_mode(args, design, db, rec.id)
+        except BaseException:
+            _forget_unstarted(db, results, rec.id, known, new_db)
+            raise
         final = db.participant(rec.id)
         checks = [t["attention_passed"] for t in db.trials(rec.id) if t["is_attention_check"]]
     finally:
@@ -180,6 +186,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for f in finished_files:
         print(f"Your results file: {f}\nPlease send this file to the experimenter.")
     return code
+
+
+def _forget_unstarted(db: Any, results: Path, pid: str, known: set[str], new_db: bool) -> None:
+    """A session that failed before its first answer leaves no trace: a participant registered by this run
+    is removed (they can start once the design is fixed), and a database this run created and left empty is
+    deleted (a fixed design has another hash, which that database would refuse)."""
+    if pid in known or not db.discard_unstarted(pid):
+        return
+    if new_db and not db.participants():
+        db.close()
+        for suffix in ("", "-wal", "-shm"):
+            Path(f"{results}{suffix}").unlink(missing_ok=True)
 
 
 def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:

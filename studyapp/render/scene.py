@@ -8,13 +8,20 @@
 >>> scene = make_scene([slot, slot, slot], av, labels=("A", "B", "C"))
 >>> scene.n_slots, scene.duration
 (3, 1.0)
+
+A study trial's scene lasts as long as its timeline (:mod:`studyapp.study.timeline`) says, whatever its
+motions: :func:`build_trial_scene` passes the trial's ``duration_s``.
+
+>>> make_scene([slot] * 3, av, duration=0.4).duration
+0.4
 """
 from __future__ import annotations
 
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -22,6 +29,10 @@ from studyapp.errors import InputError
 from studyapp.render.avatar import Avatar, build_default_avatar
 from studyapp.render.camera import DEFAULT_FRAMING, Camera, fit_box, follow_offsets, framing_box
 from studyapp.render.pose import SlotAnimation, prepare_slot
+
+if TYPE_CHECKING:
+    from studyapp.face.animation import FaceAnimation
+    from studyapp.motion.skeleton import Motion
 
 #: Aspect ratio (width / height) of one slot in the standard 1280x720 three-slot layout.
 THREE_SLOT_ASPECT = (1280 / 3) / 720
@@ -41,12 +52,15 @@ class TrialScene:
         Neutral slot labels (``("A", "B", "C")``, ``("Left", "Middle", "Right")``) or None. Never model names.
     camera:
         The one camera every slot uses (see :func:`frame_camera`).
+    duration:
+        Seconds the trial plays (its timeline's length); a slot whose motion ends earlier holds its last frame.
     """
 
     slots: tuple[SlotAnimation, ...]
     avatars: tuple[Avatar, ...]
     labels: tuple[str, ...] | None
     camera: Camera
+    duration: float
 
     def __post_init__(self) -> None:
         self.slots = tuple(self.slots)
@@ -59,15 +73,13 @@ class TrialScene:
             self.labels = tuple(str(x) for x in self.labels)
             if len(self.labels) != len(self.slots):
                 raise ValueError(f"{len(self.labels)} labels for {len(self.slots)} slots")
+        self.duration = float(self.duration)
+        if not (np.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(f"a trial lasts a positive number of seconds, got {self.duration}")
 
     @property
     def n_slots(self) -> int:
         return len(self.slots)
-
-    @property
-    def duration(self) -> float:
-        """Seconds until the longest slot's motion ends."""
-        return max(s.duration for s in self.slots)
 
 
 #: Fraction of the frame height kept free above the heads when slot labels are shown.
@@ -130,14 +142,30 @@ def follow_hips(slot: SlotAnimation, hips: int, rest_hips: np.ndarray) -> SlotAn
 _FOLLOWING: "weakref.WeakSet[SlotAnimation]" = weakref.WeakSet()
 
 
-def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar: Avatar, aspect: float,
-                 top_reserve: float = 0.0, framing: str = DEFAULT_FRAMING) -> Camera:
+def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar: Avatar | Sequence[Avatar],
+                 aspect: float, top_reserve: float = 0.0, framing: str = DEFAULT_FRAMING) -> Camera:
     """The shared camera for these slots (already following their hips): see
     :func:`~studyapp.render.camera.framing_box` for what each ``framing`` shows.
 
     The box is fitted to the skin, not the skeleton: each joint's part of the mesh (head top, fingertips)
-    is moved with its skinning matrix over the clip.
+    is moved with its skinning matrix over the clip. ``avatar`` is one avatar for every slot or one per slot
+    (rigs differ in joints, so each slot's box is found on its own avatar and the camera shows them all).
     """
+    avatars = tuple(avatar) if isinstance(avatar, (tuple, list)) else (avatar,) * len(slots)
+    boxes = []
+    groups: dict[int, list[SlotAnimation]] = {}
+    for s, av in zip(slots, avatars):
+        groups.setdefault(id(av), []).append(s)
+    by_id = {id(av): av for av in avatars}
+    for key, group in groups.items():
+        boxes.append(_skin_box(group, by_id[key], framing))
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    return fit_box((lo, hi), aspect, top_reserve=top_reserve)
+
+
+def _skin_box(slots: Sequence[SlotAnimation], avatar: Avatar, framing: str) -> tuple[np.ndarray, np.ndarray]:
+    """The framing box of slots that share one avatar."""
     legs, hands, hips = _joint_sets(avatar)
     corners = _skin_corners(avatar)
     head_only = not legs.any() and not hands.any()
@@ -150,17 +178,19 @@ def frame_camera(slots: list[SlotAnimation] | tuple[SlotAnimation, ...], avatar:
     if not pts:
         pts = [corners[None, :, :, :3]]
     rest_hips_y = float(np.linalg.inv(avatar.inverse_bind[hips].astype(np.float64))[1, 3])
-    box = framing_box(framing, np.concatenate(pts), legs, rest_hips_y, avatar.bounds(), head_only=head_only)
-    return fit_box(box, aspect, top_reserve=top_reserve)
+    return framing_box(framing, np.concatenate(pts), legs, rest_hips_y, avatar.bounds(), head_only=head_only)
 
 
 def make_scene(slots, avatar: Avatar | tuple[Avatar, ...], labels: tuple[str, ...] | None = None,
-               aspect: float | None = None, framing: str = DEFAULT_FRAMING) -> TrialScene:
+               aspect: float | None = None, framing: str = DEFAULT_FRAMING,
+               duration: float | None = None) -> TrialScene:
     """A scene from prepared slots; one avatar object for all slots (shared GPU buffers) or one per slot.
 
     Each slot is shown following its hips (:func:`follow_hips`) and the camera frames what ``framing``
     (``"upper-body"`` or ``"full-body"``) asks for. ``aspect`` is the slot's width / height the camera is
-    made for; it refits itself to the aspect it is drawn at.
+    made for; it refits itself to the aspect it is drawn at. ``duration``: how long the scene plays. A study
+    trial passes its timeline's length; without one (a single file in ``view``, the environment check) the
+    scene lasts as long as its longest slot.
     """
     slots = tuple(slots)
     avatars = tuple(avatar) if isinstance(avatar, (tuple, list)) else (avatar,) * len(slots)
@@ -173,8 +203,10 @@ def make_scene(slots, avatar: Avatar | tuple[Avatar, ...], labels: tuple[str, ..
             rest_hips = np.linalg.inv(av.inverse_bind[hips].astype(np.float64))[:3, 3]
             followed[id(s)] = follow_hips(s, hips, rest_hips)
     slots = tuple(followed[id(s)] for s in slots)
-    camera = frame_camera(slots, avatars[0], aspect, top_reserve=LABEL_SPACE if labels else 0.0, framing=framing)
-    return TrialScene(slots=slots, avatars=avatars, labels=labels, camera=camera)
+    camera = frame_camera(slots, avatars, aspect, top_reserve=LABEL_SPACE if labels else 0.0, framing=framing)
+    if duration is None:
+        duration = max(s.duration for s in slots)
+    return TrialScene(slots=slots, avatars=avatars, labels=labels, camera=camera, duration=duration)
 
 
 def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None) -> Avatar:
@@ -192,7 +224,14 @@ def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None)
     from studyapp.render.avatar_rig import BONE_MAP_FIX, bone_map_problems, missing_bones, not_humanoid_message
 
     key = tuple(sorted((bone_map or {}).items()))
-    avatar = _load_gltf_cached(str(path.resolve()), path.stat().st_mtime_ns, key)
+    try:
+        avatar = _load_gltf_cached(str(path.resolve()), path.stat().st_mtime_ns, key)
+    except InputError:
+        raise
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError, KeyError, IndexError) as exc:
+        # a damaged file (e.g. a singular inverse bind matrix) must read as a problem with this file, not a crash
+        raise InputError(path, "avatar", f"cannot load the avatar ({type(exc).__name__}: {exc}); export it "
+                         "again from the modelling tool, or use 'builtin'") from exc
     bad = bone_map_problems(avatar.skeleton.names, bone_map or {}, avatar.joint_aliases)
     if bad:
         joint, problem = bad[0]
@@ -203,37 +242,108 @@ def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None)
     return avatar
 
 
-_GLTF_CACHE: dict[tuple, Avatar] = {}
+#: Loaded glTF avatars by (path, mtime, bone map). A few, not one: a study may give each speaker (or slot) its
+#: own, and ``validate`` walks every stimulus; an avatar is loaded (and its inverse binds checked) once per file.
+_GLTF_CACHE: OrderedDict[tuple, Avatar] = OrderedDict()
+_GLTF_CACHE_SIZE = 4
 
 
 def _load_gltf_cached(path: str, mtime: int, bone_map: tuple = ()) -> Avatar:
     from studyapp.render.gltf import load_gltf
 
     key = (path, mtime, bone_map)
-    if key not in _GLTF_CACHE:
-        _GLTF_CACHE.clear()  # one custom avatar per study; do not hold old ones
+    if key in _GLTF_CACHE:
+        _GLTF_CACHE.move_to_end(key)
+    else:
         _GLTF_CACHE[key] = load_gltf(path, bone_map=dict(bone_map) or None)
+        while len(_GLTF_CACHE) > _GLTF_CACHE_SIZE:
+            _GLTF_CACHE.popitem(last=False)
     return _GLTF_CACHE[key]
 
 
-def build_trial_scene(ctx_or_renderer: Any, media: Any, labels: tuple[str, ...] | None = None) -> TrialScene:
-    """The scene for a study trial (``studyapp.study.stimuli.TrialMedia``): three slots, left to right.
+class TrialSource(Protocol):
+    """What :func:`build_trial_scene` reads from a trial (``studyapp.study.stimuli.TrialMedia`` is one).
 
-    ``media`` needs ``motions`` (3 Motions in slot order), ``face`` (FaceAnimation or None), ``avatar`` (or
-    ``avatar_spec``: ``"builtin"`` or a glTF path) and ``labels``. When given a
-    :class:`~studyapp.render.renderer.Renderer` the avatar is uploaded now, so the first frame does not
-    stall; a bare context (or None) is accepted for symmetry with the UI code.
+    ``motions``, ``name_maps`` and (when a tuple) ``avatar`` are in slot order, left to right; the media
+    are already fitted to the trial's timeline, which lasts ``duration_s``.
     """
-    spec = getattr(media, "avatar", None)
-    if spec is None:
-        spec = getattr(media, "avatar_spec", None)
-    avatar = load_avatar(spec, bone_map=getattr(media, "avatar_bone_map", None))
-    face = getattr(media, "face", None)
-    name_map = getattr(media, "name_map", None)
-    slots = [prepare_slot(avatar, m, face, name_map=name_map) for m in media.motions]
+
+    # read-only properties, so a dataclass whose fields are narrower (``avatar: str``) still conforms
+    @property
+    def motions(self) -> Sequence["Motion"]: ...
+    @property
+    def face(self) -> "FaceAnimation | None": ...
+    @property
+    def name_maps(self) -> Sequence[Mapping[str, str]]: ...
+    @property
+    def avatar(self) -> str | Sequence[str]: ...
+    @property
+    def labels(self) -> tuple[str, ...] | None: ...
+    @property
+    def duration_s(self) -> float: ...
+    @property
+    def avatar_bone_map(self) -> Mapping[str, str] | None: ...
+
+
+class AvatarUploader(Protocol):
+    """A renderer that can put an avatar on the GPU ahead of the first frame."""
+
+    def upload_avatar(self, avatar: Avatar) -> object: ...
+
+
+class SlotError(InputError):
+    """One slot's motion cannot be shown on its avatar; ``slot`` is its index (0 = left)."""
+
+    def __init__(self, slot: int, path: str | Path | None, where: str | None, problem: str) -> None:
+        self.slot = slot
+        super().__init__(path, where, problem)
+
+
+def slot_avatars(spec: str | Sequence[str] | None, n_slots: int,
+                 bone_map: Mapping[str, str] | None = None) -> tuple[Avatar, ...]:
+    """One avatar per slot from one spec (all slots) or one spec per slot; the same file gives the same object,
+    so slots that share an avatar share its GPU buffers. ``bone_map``: the design's ``[avatar.bone_map]``."""
+    specs = [spec] * n_slots if spec is None or isinstance(spec, (str, Path)) else list(spec)
+    if len(specs) != n_slots:
+        raise ValueError(f"{len(specs)} avatars for {n_slots} slots")
+    loaded: dict[str, Avatar] = {}
+    out = []
+    for sp in specs:
+        key = "builtin" if sp is None or str(sp).lower() in ("", "builtin", "default") else str(sp)
+        if key not in loaded:
+            loaded[key] = load_avatar(None if key == "builtin" else key, bone_map=dict(bone_map or {}) or None)
+        out.append(loaded[key])
+    return tuple(out)
+
+
+def build_trial_scene(renderer: AvatarUploader | None, media: TrialSource,
+                      labels: tuple[str, ...] | None = None) -> TrialScene:
+    """The scene for a study trial: up to three slots, left to right, lasting the trial's ``duration_s``.
+
+    Each slot is retargeted with its own condition's name map onto its own avatar. A slot that cannot be
+    built raises :class:`SlotError` naming the slot and the motion file. When given a renderer (anything
+    with ``upload_avatar``), the avatars are uploaded now, so the first frame does not stall; a bare
+    context or None is accepted too (``validate`` builds scenes with no GL at all).
+    """
+    motions = tuple(media.motions)
+    avatars = slot_avatars(media.avatar, len(motions), media.avatar_bone_map)
+    name_maps = tuple(media.name_maps)
+    if len(name_maps) != len(motions):
+        raise ValueError(f"{len(name_maps)} name maps for {len(motions)} slots")
+    slots = []
+    for i, (motion, avatar, name_map) in enumerate(zip(motions, avatars, name_maps)):
+        try:
+            slots.append(prepare_slot(avatar, motion, media.face, name_map=dict(name_map)))
+        except InputError as exc:
+            raise SlotError(i, motion.source or exc.path, exc.where, exc.problem) from exc
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            # a broken avatar (a singular bind matrix, NaN weights) surfaces here as a numeric error
+            raise SlotError(i, motion.source or None, "avatar", f"{type(exc).__name__}: {exc}") from exc
     if labels is None:
-        labels = getattr(media, "labels", None)
-    scene = make_scene(slots, avatar, labels=labels, framing=getattr(media, "framing", None) or DEFAULT_FRAMING)
-    if hasattr(ctx_or_renderer, "upload_avatar"):
-        ctx_or_renderer.upload_avatar(avatar)
+        labels = media.labels
+    scene = make_scene(slots, avatars, labels=labels, duration=media.duration_s,
+                       framing=getattr(media, "framing", None) or DEFAULT_FRAMING)
+    if renderer is not None and hasattr(renderer, "upload_avatar"):
+        for avatar in {id(a): a for a in avatars}.values():
+            renderer.upload_avatar(avatar)
     return scene

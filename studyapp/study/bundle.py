@@ -567,13 +567,13 @@ def _merge_one(db: Any, path: Path, extra_keys: dict[str, dict]) -> str:
             con.execute(
                 "INSERT INTO trials (participant, trial_index, session, stimulus, is_practice, is_attention_check, "
                 "slot_left, slot_middle, slot_right, shown_at, answered_at, response_time_s, plays, frames_shown, "
-                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version, "
+                "trial_duration_s) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (pid, t["trial_index"], session_ids.get(t["session"]), smap.get(t["stimulus"], t["stimulus"]),
                  t["is_practice"], t["is_attention_check"], cond(t["slot_left"]), cond(t["slot_middle"]),
                  cond(t["slot_right"]), t["shown_at"], t["answered_at"], t["response_time_s"], t["plays"],
                  t["frames_shown"], t["dropped_frames"], t["refresh_hz"], t["worst_av_offset_ms"],
-                 t["attention_passed"], dh, t["app_version"]))
+                 t["attention_passed"], dh, t["app_version"], t.get("trial_duration_s")))
         con.executemany(
             "INSERT INTO responses (participant, trial_index, criterion, condition, slot, rank, design_hash, app_version) "
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",

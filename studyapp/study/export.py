@@ -4,7 +4,8 @@ The long table has one row per participant x trial x criterion x condition, colu
 in that order, then one column per stimulus tag (e.g. ``speaker``) and per participant group (e.g.
 ``device``, ``ordering_version``), then ``design_hash`` and ``app_version``. ``slot`` is 0 (left),
 1 (middle), 2 (right); ``rank`` is 1 (best) to 3, average ranks for ties; ``attention_passed`` is empty for
-trials that are not attention checks. Practice trials are included and flagged (``is_practice``): the
+trials that are not attention checks; ``trial_duration_s`` is how long the trial played (empty for trials
+stored before studyapp recorded it). Practice trials are included and flagged (``is_practice``): the
 analysis drops them, and they show whether participants understood the task.
 
 Example
@@ -27,7 +28,7 @@ from studyapp.study.storage import ResultsDB
 
 CORE_COLUMNS = (
     "participant", "session", "trial_index", "stimulus", "criterion", "condition", "slot", "rank", "plays",
-    "response_time_s", "is_practice", "is_attention_check", "attention_passed",
+    "response_time_s", "is_practice", "is_attention_check", "attention_passed", "trial_duration_s",
 )
 TAIL_COLUMNS = ("design_hash", "app_version")
 
@@ -37,7 +38,7 @@ TAIL_COLUMNS = ("design_hash", "app_version")
 _QUERY = """
 WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition, r.slot, r.rank,
-       t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
+       t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed, t.trial_duration_s,
        r.design_hash, r.app_version, c.position AS _cond_pos
 FROM responses r
 JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index

@@ -171,6 +171,20 @@ def attention_passed(design: Any, plan: Any, ranks: Mapping[str, tuple[float, fl
         return None
 
 
+def trial_duration_s(design: Any, plan: Any) -> float | None:
+    """Seconds the trial of ``plan`` plays by its timeline (``studyapp.study.timeline``); None if unknown."""
+    from studyapp.study.stimuli import load_audio
+    from studyapp.study.timeline import trial_duration
+
+    try:
+        stim = design.stimulus(plan.stimulus_id)
+        if stim.duration_s is not None:
+            return float(stim.duration_s)
+        return round(trial_duration(None, load_audio(stim.audio).duration), 6)
+    except (AttributeError, KeyError, OSError, ValueError):
+        return None  # a stand-in design without stimulus files (tests) records no duration
+
+
 def prepare_participant(
     design: Any,
     db: ResultsDB,
@@ -311,6 +325,7 @@ class Session:
         self._dropped: int | None = None
         self._refresh: float | None = None
         self._worst_av: float | None = None
+        self._played_s: float | None = None
 
     def _expect(self, *states: State) -> None:
         if self.state not in states:
@@ -410,8 +425,12 @@ class Session:
             return False
         return bool(self.playback.allow_replay) or self._plays == 0
 
-    def record_play_started(self) -> int:
-        """The clip started playing (from the start). Returns the play's id."""
+    def record_play_started(self, duration_s: float | None = None) -> int:
+        """The clip started playing (from the start). Returns the play's id.
+
+        ``duration_s``: how long the player's scene lasts; stored with the answer as ``trial_duration_s``.
+        Without it (a pilot bot with no scene) the trial's timeline says (:func:`trial_duration_s`).
+        """
         self._expect(State.PRACTICE, State.TRIALS)
         if self._play_id is not None:
             raise SessionError("the clip is already playing")
@@ -420,6 +439,8 @@ class Session:
         plan = self.plans[self._pos]
         self._play_id = self.db.start_play(self.participant_id, plan.trial_index, self.session_id)
         self._plays += 1
+        if duration_s is not None:
+            self._played_s = float(duration_s)
         return self._play_id
 
     def record_play_finished(self, completed: bool, stats: PlayStats | Mapping[str, Any] | None = None) -> None:
@@ -488,6 +509,7 @@ class Session:
             worst_av_offset_ms=self._worst_av,
             attention_passed=passed,
             session=self.session_id,
+            trial_duration_s=self._played_s if self._played_s is not None else trial_duration_s(self.design, plan),
         )
         responses = [
             Response(criterion=crit, condition=plan.slots[slot], slot=slot, rank=r)

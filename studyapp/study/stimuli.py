@@ -39,9 +39,9 @@ from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, 
                                    motion_path, resolve)
 from studyapp.study.design.parse import is_smpl_file, missing_array_settings
 from studyapp.study.schedule import TrialPlan
+from studyapp.study.timeline import (DURATION_TOLERANCE_S, MOTION_END_CHOICES, cut_audio, fit_face, fit_motion,
+                                     medium_end, trial_duration)
 
-#: Largest allowed difference between the durations of a stimulus's audio, face and motions (seconds).
-DURATION_TOLERANCE_S = 0.2
 #: Frame rate of the neutral face used for stimuli without face data.
 NEUTRAL_FACE_FPS = 30.0
 
@@ -56,6 +56,8 @@ class TrialMedia:
     audio: the clip's speech.
     face: ARKit blendshapes shared by all three avatars (a neutral face when the stimulus has none).
     motions: body motion per slot, left, middle, right.
+    Audio, face and motions are already fitted to the trial's timeline (:mod:`studyapp.study.timeline`):
+    cut to ``duration_s``, a short motion held or looped as its condition's ``motion_end`` says.
     avatar: ``"builtin"`` or the absolute path of a glTF/VRM avatar.
     labels: slot labels shown to the participant (``("A", "B", "C")``) or None.
     duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
@@ -85,12 +87,6 @@ class TrialMedia:
     @property
     def slots(self) -> tuple[str, str, str]:
         return self.plan.slots
-
-    @property
-    def name_map(self) -> dict[str, str] | None:
-        """The one name map of all three slots when they agree (usual: all empty), else None: use ``name_maps``."""
-        first = self.name_maps[0]
-        return dict(first) if all(m == first for m in self.name_maps) else None
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -297,13 +293,16 @@ def load_trial_media(design: Design, plan: TrialPlan) -> TrialMedia:
 
 
 def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
+    # Every medium is fitted to the one timeline here, so whoever plays the media plays the same trial.
     stimulus = design.stimulus(plan.stimulus_id)
     audio = load_audio(stimulus.audio)
-    duration = stimulus.duration_s if stimulus.duration_s is not None else audio.duration
-    face = load_stimulus_face(stimulus, duration)
-    motions = tuple(slot_motion(design, cid, stimulus, duration) for cid in plan.slots)
-    maps = tuple(dict(design.condition(cid.removeprefix(FROZEN_PREFIX)).name_map) for cid in plan.slots)
-    return TrialMedia(plan=plan, audio=audio, face=face, motions=motions,  # type: ignore[arg-type]
+    duration = trial_duration(stimulus.duration_s, audio.duration)
+    face = fit_face(load_stimulus_face(stimulus, duration), duration)
+    conds = [design.condition(cid.removeprefix(FROZEN_PREFIX)) for cid in plan.slots]
+    motions = tuple(fit_motion(slot_motion(design, cid, stimulus, duration), duration, cond.motion_end)
+                    for cid, cond in zip(plan.slots, conds))
+    maps = tuple(dict(cond.name_map) for cond in conds)
+    return TrialMedia(plan=plan, audio=cut_audio(audio, duration), face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
                       criteria=tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
                       avatar_bone_map=dict(design.avatar_bone_map), framing=design.display.framing)
@@ -324,10 +323,12 @@ def _problem_text(exc: Exception, *, with_path: bool = True) -> str:
 def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     """Problems ``(key, message, fix)`` found by reading every file a design references.
 
-    Reads each audio, face, head and motion file (and runs each live model once per stimulus, cached on
-    disk), then checks that each stimulus's media last equally long and that each condition's skeleton can
-    be retargeted onto the avatar's humanoid bones. Missing files are reported by the design loader and
-    skipped here.
+    Reads each audio, face, head and motion file, checks each stimulus's media against its trial's
+    timeline (:mod:`studyapp.study.timeline`) and that each condition's skeleton has the humanoid bones,
+    then does a dry run: per stimulus it assembles the media and builds the scene a participant gets
+    (every condition's motion retargeted with its own ``name_map`` onto the stimulus's avatar, the face
+    mapped, all cut to the timeline; live models run once per stimulus, cached on disk), on the CPU with no
+    GL. Missing files are reported by the design loader and skipped here.
     """
     from studyapp.durations import duration_mismatches
 
@@ -338,7 +339,8 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     array_settings_missing: set[int] = set()  # conditions whose NPZ/NPY files are raw arrays lacking settings
     cond_index = {c.id: i for i, c in enumerate(design.conditions)}
 
-    problems += _check_avatars(design)
+    found, bad_avatars = _check_avatars(design)
+    problems += found
     for ci, cond in enumerate(design.conditions):
         if cond.template is not None and resolve(design, cond.template).is_file():
             try:
@@ -349,8 +351,16 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
         if cond.model is not None:
             problems += _check_model(design, ci, cond)
 
+    model_ok = {ci for ci, cond in enumerate(design.conditions)
+                if cond.model is not None and model_path(design, cond).is_file()
+                and not any(p[0].startswith(f"conditions[{ci}]") for p in problems)}
+    retarget_bad: set[int] = set()
+    built: set[tuple] = set()  # scenes the dry run built (see _scene_identity)
+    dry_failures: dict[tuple[str, str], list[tuple[int, str, str]]] = {}  # (avatar, problem) -> (ci, stim, file)
     for si, stim in enumerate(design.stimuli):
         items: dict[str, tuple[float, str]] = {}
+        n_before = len(problems)
+        ready: list[int] = sorted(model_ok)  # conditions whose media for this stimulus were read without a problem
         if stim.audio.is_file():
             try:
                 items["audio"] = (load_audio(stim.audio).duration, str(stim.audio))
@@ -393,7 +403,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             except (InputError, ValueError, OSError, KeyError) as exc:
                 unreadable.setdefault((ci, _problem_text(exc, with_path=False)), []).append((stim.id, path))
                 continue
-            rate = _likely_true_fps(cond, motion, audio_s)
+            rate = _likely_true_fps(cond, motion, audio_s, stim.duration_s)
             if rate is not None:
                 wrong_rate.setdefault(ci, (motion.fps, rate, []))[2].append(stim.id)
                 continue  # its length is explained; a "durations differ" line would point at the wrong fix
@@ -401,8 +411,30 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             sig = (ci, motion.skeleton.names)
             if sig not in skeletons_checked:
                 skeletons_checked.add(sig)
-                problems += _check_retarget(ci, cond, motion, path)
-        problems += _check_durations(si, stim, items, duration_mismatches)
+                found = _check_retarget(ci, cond, motion, path)
+                if found:
+                    retarget_bad.add(ci)
+                problems += found
+            ready.append(ci)
+        problems += _check_durations(si, stim, items, duration_mismatches,
+                                     {f"motion:{c.id}": (i, c) for i, c in enumerate(design.conditions)})
+        avatar = design.avatar_for(stim)
+        present = all(f is None or Path(f).is_file() for f in (stim.face, stim.head)) and (
+            avatar in ("builtin", "") or Path(avatar).is_file()) and avatar not in bad_avatars
+        # (missing files are the loader's to report, bad avatars _check_avatars's)
+        if "audio" in items and present and len(problems) == n_before:
+            # Only a stimulus whose files passed the checks above: a scene from bad files fails for reasons
+            # already reported, with a less helpful message.
+            good = [ci for ci in sorted(ready) if ci not in retarget_bad]
+            # A clip reused under another id (a practice copy, tag patterns) gives the very same scene: build it
+            # once, so no file's palettes are computed twice.
+            scene_id = _scene_identity(design, stim, good)
+            if scene_id not in built:
+                built.add(scene_id)
+                for key, failure in _dry_run(design, stim, good).items():
+                    dry_failures.setdefault(key, []).extend(failure)
+    for (avatar, text), where in dry_failures.items():
+        problems.append(_dry_run_problem(design, avatar, text, where))
     for ci in sorted(array_settings_missing):
         c = design.conditions[ci]
         problems += missing_array_settings(f"conditions[{ci}]", c.template, c.representation, c.fps)
@@ -425,16 +457,114 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     return problems
 
 
+def _scene_identity(design: Design, stim: Stimulus, conds: list[int]) -> tuple:
+    """What a stimulus's dry-run scene depends on: its files, their reading settings, avatar and length."""
+    def fid(path: Path | None):
+        return None if path is None else _file_id(path)
+
+    motions = []
+    for ci in conds:
+        c = design.conditions[ci]
+        src = fid(model_path(design, c)) if c.model is not None else fid(motion_path(design, c, stim))
+        motions.append((src, c.fps, c.representation, c.template, c.rotation_order, c.joints, c.degrees,
+                        tuple(sorted(c.name_map.items())), c.motion_end, c.body_model))
+    return (tuple(motions), fid(stim.audio), fid(stim.face), fid(stim.head), design.avatar_for(stim), stim.duration_s)
+
+
+def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str, str], list[tuple[int, str, str]]]:
+    """Build the scene of ``stim`` with conditions ``conds`` in its slots exactly as a trial does (the same
+    :func:`_assemble` and :func:`~studyapp.render.scene.build_trial_scene`, no GL); failures by
+    ``(avatar, problem)`` -> ``[(condition index, stimulus id, file)]``.
+
+    One scene holds up to three slots, so a design's three conditions cost one scene per stimulus: each
+    motion file is retargeted, and its palettes computed, once.
+    """
+    from studyapp.render.scene import SlotError, build_trial_scene, slot_avatars
+
+    avatar = design.avatar_for(stim)
+    out: dict[tuple[str, str], list[tuple[int, str, str]]] = {}
+    try:
+        slot_avatars(avatar, 1, design.avatar_bone_map)
+    except (InputError, OSError) as exc:
+        # The avatar itself: every condition fails the same way, one line says it (for every stimulus using it).
+        return {(avatar, f"cannot load the avatar: {_problem_text(exc, with_path=False)}"):
+                [(ci, stim.id, avatar) for ci in conds]}
+    for start in range(0, len(conds), 3):  # designs have 3 conditions; more are checked three at a time
+        chunk = conds[start:start + 3]
+        if not chunk:
+            continue
+        ids = tuple(design.conditions[ci].id for ci in chunk)
+        plan = TrialPlan(trial_index=-1, stimulus_id=stim.id, slots=ids,  # type: ignore[arg-type]
+                         is_practice=False, is_attention_check=False, row=0)
+        while chunk:
+            try:
+                media = _assemble(design, plan)
+                labels = media.labels[:len(chunk)] if media.labels else None  # fewer slots when a check failed
+                build_trial_scene(None, media, labels=labels)
+                break
+            except SlotError as exc:
+                ci = chunk[exc.slot]
+                out.setdefault((avatar, ", ".join(p for p in (exc.where, exc.problem) if p)), []).append(
+                    (ci, stim.id, str(exc.path or "")))
+            except (InputError, ValueError, OSError, KeyError, ArithmeticError) as exc:
+                # not one slot's fault (the face, the audio): every condition of this stimulus shares it
+                out.setdefault((avatar, _problem_text(exc)), []).extend((ci, stim.id, str(stim.audio)) for ci in chunk)
+                break
+            # slots left of the refused one were built; those right of it still need their check
+            chunk = chunk[chunk.index(ci) + 1:]
+            plan = TrialPlan(trial_index=-1, stimulus_id=stim.id,  # type: ignore[arg-type]
+                             slots=tuple(design.conditions[c].id for c in chunk), is_practice=False,
+                             is_attention_check=False, row=0)
+    return out
+
+
+def _dry_run_problem(design: Design, avatar: str, text: str, where: list[tuple[int, str, str]]) -> tuple[str, str, str]:
+    """One problem line for one cause found by the dry run, naming the first condition, stimulus and file."""
+    ci, sid, path = where[0]
+    name = "the built-in avatar" if avatar in ("builtin", "") else f"the avatar {avatar}"
+    more = f" (and {len(where) - 1} more condition x stimulus pairs)" if len(where) > 1 else ""
+    if text.startswith("cannot load the avatar"):
+        key = "avatar"
+        stims = sorted({s for _, s, _ in where})
+        msg = f"{name}, used by stimulus {', '.join(map(repr, stims))}: {text}"
+        fix = "fix or re-export the avatar file, or use the built-in one (avatar.model = \"builtin\")"
+    else:
+        key = f"conditions[{ci}]"
+        msg = (f"condition {design.conditions[ci].id!r}, stimulus {sid!r}: the motion {path} cannot be shown on "
+               f"{name}{more}: {text}")
+        if "avatar" in text or "target skeleton" in text:  # the avatar lacks humanoid bones, not the motion
+            fix = ("give a humanoid avatar (bones named like Hips, Spine, Head, LeftUpperArm, ..., or a VRM), or "
+                   "map its bones as the message says")
+        else:
+            fix = "add a [conditions.name_map] for this condition's joints, or re-export the motion"
+    return key, msg, fix
+
+
 #: Frame rates gesture pipelines write; a motion whose length matches the audio at one of these is mislabelled.
 COMMON_FPS = (15.0, 20.0, 24.0, 25.0, 30.0, 50.0, 60.0, 100.0, 120.0)
 
 
-def _likely_true_fps(cond: Condition, motion: Motion, audio_s: float | None) -> float | None:
+def _likely_true_fps(cond: Condition, motion: Motion, audio_s: float | None,
+                     duration_s: float | None = None) -> float | None:
     """The common frame rate at which ``motion`` lasts as long as the audio, when the rate it was read at
-    does not (DiffSHEG writes ``Frame Time: 0.008333`` over 15 fps data); ``None`` otherwise."""
+    does not (DiffSHEG writes ``Frame Time: 0.008333`` over 15 fps data); ``None`` otherwise.
+
+    With a ``duration_s`` the motion only has to cover the trial: one that does (a longer motion is cut)
+    has no frame-rate problem, whatever the audio's length, and a suggested rate must both cover the trial
+    and match the audio.
+
+    >>> from studyapp.motion.skeleton import Motion, Skeleton
+    >>> sk = Skeleton(["Hips"], np.array([-1]), np.zeros((1, 3)))
+    >>> m = Motion.rest(sk, n_frames=300, fps=30.0)            # a true 30 fps, 10 s file
+    >>> _likely_true_fps(Condition("c", motion="{stimulus}.bvh"), m, 4.9)       # 4.9 s of audio, no duration_s
+    60.0
+    >>> _likely_true_fps(Condition("c", motion="{stimulus}.bvh"), m, 4.9, 4.0)  # the trial plays 4 s of it
+    """
     if cond.fps is not None or not audio_s or motion.n_frames < 2:
         return None
     if abs(motion.duration - audio_s) <= DURATION_TOLERANCE_S:
+        return None
+    if duration_s is not None and motion.duration >= duration_s - DURATION_TOLERANCE_S:
         return None
     for rate in COMMON_FPS:
         # Only whole multiples of the stated rate (a header copied from a 120 fps data set over 15 fps
@@ -458,30 +588,64 @@ def _unreadable_fix(cond: Condition) -> str:
     return "fix or re-export the file (`studyapp inspect FILE` shows what is read)"
 
 
-def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]], mismatches) -> list:
+def _check_durations(si: int, stim: Stimulus, items: dict[str, tuple[float, str]], mismatches,
+                     conditions: dict[str, tuple[int, Condition]] | None = None) -> list:
+    """Each medium against the trial's timeline. A motion too short for it is its condition's problem unless
+    the condition has a ``motion_end``; other media too short are the stimulus's. Without ``duration_s``
+    the media must also not outlast the audio (they would be cut, but it usually means a wrong file or rate)."""
     key = f"stimuli[{si}]"
-    if stim.duration_s is None:
-        return [(key, f"stimulus {stim.id!r}: {m}",
-                 "re-export the files to the same length, or set duration_s to play only the common part")
-                for m in mismatches(items, DURATION_TOLERANCE_S)]
-    short = {k: v for k, v in items.items() if v[0] < stim.duration_s - DURATION_TOLERANCE_S}
-    return [(f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {k} is only "
-             f"{d:.3f} s long ({p})", "lower duration_s or give longer files") for k, (d, p) in short.items()]
+    conditions = conditions or {}
+    if stim.duration_s is None and "audio" not in items:
+        return []  # no timeline to compare with (the audio's problem is reported)
+    trial_s = trial_duration(stim.duration_s, items["audio"][0] if "audio" in items else 0.0)
+    where = "duration_s" if stim.duration_s is not None else "audio"
+    out, rest = [], {}
+    for label, (d, path) in items.items():
+        ci, cond = conditions.get(label, (-1, None))
+        if cond is None:
+            rest[label] = (d, path)
+            continue
+        end = medium_end(d, trial_s, cond.motion_end)
+        if end == "short":
+            out.append((f"conditions[{ci}]", f"condition {cond.id!r}, stimulus {stim.id!r}: the motion {path} "
+                        f"lasts {d:.3f} s but the trial plays {trial_s:.3f} s (its {where}); it would freeze for "
+                        "the rest of the trial",
+                        f'set motion_end = "hold" or "loop" on condition {cond.id!r}, '
+                        f"{'lower' if stim.duration_s is not None else 'set'} duration_s (stimulus {stim.id!r}) "
+                        f"to at most {d:.3f}, or give a motion at least {trial_s:.3f} s long"))
+        elif not (end in MOTION_END_CHOICES and d < trial_s - DURATION_TOLERANCE_S):
+            rest[label] = (d, path)  # a short motion its condition holds or loops is the timeline's business
+    if stim.duration_s is None:  # longer media are cut to the audio, but usually mean a wrong file or rate
+        return out + [(key, f"stimulus {stim.id!r}: {m}",
+                       "re-export the files to the same length, or set duration_s to play only the common part")
+                      for m in mismatches(rest, DURATION_TOLERANCE_S)]
+    return out + [(f"{key}.duration_s", f"stimulus {stim.id!r} plays {stim.duration_s:.3f} s but {k} is only "
+                   f"{d:.3f} s long ({p})", "lower duration_s or give longer files")
+                  for k, (d, p) in rest.items() if d < stim.duration_s - DURATION_TOLERANCE_S]
 
 
-def _check_avatars(design: Design) -> list[tuple[str, str, str]]:
+def _check_avatars(design: Design) -> tuple[list[tuple[str, str, str]], set[str]]:
     """Each avatar file loads, is humanoid with the design's ``[avatar.bone_map]``, and every entry of that
-    map names one of its joints (one problem per bad entry)."""
+    map names one of its joints (one problem per bad entry). Also returns the avatars with a problem (the dry
+    run skips them: a scene on them fails for the reason already given)."""
     from studyapp.render.avatar_rig import avatar_problems
 
-    out = []
+    out, bad = [], set()
     keys = [("avatar.model", design.avatar)]
     keys += [(f"avatar.by_speaker.{k}", v) for k, v in design.avatar_by_speaker.items()]
     for key, name in keys:
         path = resolve(design, name) if name != "builtin" else None
         if path is not None and path.is_file():
-            out += [(k or key, msg, fix) for k, msg, fix in avatar_problems(path, design.avatar_bone_map)]
-    return out
+            try:
+                found = [(k or key, msg, fix) for k, msg, fix in avatar_problems(path, design.avatar_bone_map)]
+            except (ValueError, ArithmeticError, KeyError, IndexError) as exc:
+                # numbers no skinning can use (a singular inverse bind matrix is a LinAlgError, a ValueError)
+                found = [(key, f"cannot load the avatar {path}: {type(exc).__name__}: {exc}",
+                          "export the avatar again from the modelling tool, or use the built-in one")]
+            out += found
+            if found:
+                bad.add(str(path))
+    return out, bad
 
 
 def _check_retarget(ci: int, cond: Condition, motion: Motion, path: Path) -> list[tuple[str, str, str]]:

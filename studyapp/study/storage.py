@@ -33,7 +33,10 @@ from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
 
 #: Bumped whenever the tables change; a database with another version is refused, never guessed at.
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: Older schema versions this version upgrades in place when it opens them (see ``_MIGRATIONS``).
+#: Version 2 added ``trials.trial_duration_s``; a version 1 trial keeps it NULL (not recorded).
+_MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",)}
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
@@ -97,6 +100,9 @@ CREATE TABLE trials (
     attention_passed INTEGER,
     design_hash TEXT NOT NULL,
     app_version TEXT NOT NULL,
+    -- seconds the trial played (its timeline: the stimulus's duration_s, else the audio's length), last
+    -- so a database upgraded from version 1 (ALTER TABLE ADD COLUMN) has the same column order
+    trial_duration_s REAL,
     PRIMARY KEY (participant, trial_index)
 );
 CREATE TABLE responses (
@@ -192,6 +198,7 @@ class TrialRecord:
     worst_av_offset_ms: float | None = None
     attention_passed: bool | None = None
     session: int | None = None
+    trial_duration_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -340,11 +347,24 @@ class ResultsDB:
             raise InputError(self.path, "schema", f"not a studyapp results database (missing tables: "
                              f"{', '.join(missing)})")
         row = self._con.execute("SELECT version FROM schema_version").fetchone()
+        if row is not None and row[0] in _MIGRATIONS:
+            self._migrate(int(row[0]))
+            row = self._con.execute("SELECT version FROM schema_version").fetchone()
         if row is None or row[0] != SCHEMA_VERSION:
             found = None if row is None else row[0]
             raise InputError(self.path, "schema_version", f"schema version {found} is not the version this "
                              f"studyapp {__version__} writes ({SCHEMA_VERSION}); use the studyapp version "
                              "that created the file")
+
+    def _migrate(self, version: int) -> None:
+        """Upgrade an older database in place, one version at a time, each step in one transaction (all of a
+        step or none of it), so old results stay readable and new answers can join them."""
+        while version in _MIGRATIONS:
+            with self.transaction() as con:
+                for stmt in _MIGRATIONS[version]:
+                    con.execute(stmt)
+                version += 1
+                con.execute("UPDATE schema_version SET version = ?", (version,))
 
     def _create_schema(self, design_hash: str, title: str) -> None:
         with self.transaction() as con:
@@ -464,6 +484,22 @@ class ResultsDB:
         assert rec is not None
         return rec
 
+    def discard_unstarted(self, participant_id: str) -> bool:
+        """Remove a participant who has no answered trial, with their sessions and plays; False (and nothing
+        removed) when they have answers.
+
+        For a session that could not start (an avatar that fails to load, a file gone missing): it must not
+        leave the participant registered with 0 trials on a row they never used, in a database whose design
+        is about to be fixed.
+        """
+        with self.transaction() as con:
+            if con.execute("SELECT 1 FROM trials WHERE participant = ? LIMIT 1", (participant_id,)).fetchone():
+                return False
+            for table in ("plays", "questionnaire", "sessions"):
+                con.execute(f"DELETE FROM {table} WHERE participant = ?", (participant_id,))
+            con.execute("DELETE FROM participants WHERE id = ?", (participant_id,))
+        return True
+
     def set_status(self, participant_id: str, status: str) -> None:
         if status not in PARTICIPANT_STATUSES:
             raise ValueError(f"unknown participant status {status!r}")
@@ -531,12 +567,12 @@ class ResultsDB:
             con.execute(
                 "INSERT INTO trials (participant, trial_index, session, stimulus, is_practice, is_attention_check, "
                 "slot_left, slot_middle, slot_right, shown_at, answered_at, response_time_s, plays, frames_shown, "
-                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version, "
+                "trial_duration_s) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (t.participant, t.trial_index, t.session, t.stimulus, int(t.is_practice), int(t.is_attention_check),
                  *t.slots, t.shown_at, t.answered_at, t.response_time_s, t.plays, t.frames_shown, t.dropped_frames,
                  t.refresh_hz, t.worst_av_offset_ms, None if t.attention_passed is None else int(t.attention_passed),
-                 self.design_hash, __version__),
+                 self.design_hash, __version__, t.trial_duration_s),
             )
             con.executemany(
                 "INSERT INTO responses (participant, trial_index, criterion, condition, slot, rank, design_hash, "

@@ -62,7 +62,7 @@ class TrialView:
         """Start (or replay) the clip from the beginning, with sound."""
         if not self.can_play():
             return
-        self.app.session.record_play_started()
+        self.app.session.record_play_started(self.duration_s)
         self.in_play = True
         self.recorder = PlayRecorder(refresh_hz=self.app.refresh_hz)
         self.clock.play(self.media.audio, 0.0, duration_s=self.duration_s)

@@ -269,7 +269,8 @@ def test_trial_scene_builder_passes_the_design_bone_map_to_the_avatar():
 
     m = beat_left_arm_up()
     media = SimpleNamespace(motions=(m, m, m), face=None, avatar=str(AVATARS / "RobotExpressive.glb"),
-                            avatar_bone_map=dict(ROBOT_MAP), labels=("A", "B", "C"))
+                            avatar_bone_map=dict(ROBOT_MAP), labels=("A", "B", "C"), name_maps=({}, {}, {}),
+                            duration_s=m.duration)  # what scene.TrialSource declares
     scene = build_trial_scene(None, media)
     av = scene.avatars[0]
     assert av.bone_map["Palm2.L"] == "LeftHand"

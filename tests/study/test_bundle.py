@@ -95,6 +95,8 @@ def test_remote_run_and_merge_maps_back_to_real_ids(lab, tmp_path: Path) -> None
     assert set(remote["stimulus"]) == {s.id for s in design.stimuli}
     assert (remote["design_hash"] == design.design_hash).all()
     assert (remote["remote"] == "yes").all()
+    # the duration each remote trial played travels back with it (the synthetic clips: 1 s of audio each)
+    assert remote["trial_duration_s"].tolist() == [1.0] * len(remote)
     # the ordered bot ranked bundle conditions in bundle order, which is the design's order: synced first
     assert (remote["rank"] == remote["condition"].map({"synced": 1.0, "lagged": 2.0, "static": 3.0})).all()
     assert ResultsDB(results, design).participant("R02").latin_row == info.roster["R02"]

@@ -1,6 +1,7 @@
 """The shipped designs: the demo study, the documented example and the live-model example."""
 from __future__ import annotations
 
+import math
 import re
 import tomllib
 
@@ -97,8 +98,11 @@ def test_example_media_carries_per_slot_name_maps() -> None:
     d = load_design(designs_dir() / "example_beat.toml")
     media = load_trial_media(d, TrialPlan(0, "clip04", ("model_c", "model_a", "frozen:model_c"), False, True, 0))
     assert media.name_maps == ({"Spine3": "UpperChest"}, {}, {"Spine3": "UpperChest"})
-    assert media.name_map is None
+    assert not hasattr(media, "name_map")  # one map for all slots was the trap: each slot has its own
     assert media.duration_s == 8.0  # the example's duration_s
+    # every medium is cut to the timeline: 8 s at each medium's own rate
+    assert [m.n_frames for m in media.motions] == [math.ceil(8.0 * m.fps) for m in media.motions]
+    assert len(media.audio.samples) == round(8.0 * media.audio.sample_rate)
     warm = [p for p in participant_schedule(d, "P1", 0) if p.is_practice]
     assert [p.stimulus_id for p in warm] == ["warmup"]
     assert "warmup" not in [p.stimulus_id for p in participant_schedule(d, "P1", 0) if not p.is_practice]

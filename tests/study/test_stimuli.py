@@ -94,7 +94,7 @@ def test_media_in_slot_order(design, study: Path) -> None:
     assert media.face.n_frames == int(SECONDS * FPS) and media.face.weights[-1].max() == pytest.approx(1.0)
     assert media.labels == ("L", "M", "R") and media.avatar == media.avatar_spec == "builtin"
     assert media.duration_s == pytest.approx(SECONDS) and media.criteria == ("realism", "synchronization", "diversity")
-    assert media.name_maps == ({}, {}, {}) and media.name_map == {}
+    assert media.name_maps == ({}, {}, {})
 
 
 def test_duration_and_missing_face(design) -> None:

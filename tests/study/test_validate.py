@@ -175,13 +175,29 @@ def test_each_missing_file_is_listed(study: Path) -> None:
 
 def test_duration_mismatch_names_every_file(study: Path) -> None:
     write_motion(study / "motion" / "c" / "s2.bvh", SECONDS - 0.5)
-    p = only(validate_design(study / "design.toml"), "stimuli[1]")
-    assert "0.500 s" in p.message and "s2.wav" in p.message and "motion:c" in p.message and "s2.csv" in p.message
+    # A motion shorter than the trial (here: the audio's length) is the condition's problem: it names the
+    # condition, the stimulus, the file, both durations and the fixes.
+    p = only(validate_design(study / "design.toml"), "conditions[2]")
+    assert "'c'" in p.message and "'s2'" in p.message and str(study / "motion" / "c" / "s2.bvh") in p.message
+    assert f"{SECONDS - 0.5:.3f} s" in p.message and f"{SECONDS:.3f} s" in p.message
+    assert 'motion_end = "hold" or "loop"' in p.fix and f"at most {SECONDS - 0.5:.3f}" in p.fix
     # A declared duration_s only needs every file to be long enough.
     text = GOOD.replace('face = "face/s2.csv"', 'face = "face/s2.csv"\nduration_s = 1.4')
     assert problems_for(study, text) == []
     text = GOOD.replace('face = "face/s2.csv"', 'face = "face/s2.csv"\nduration_s = 1.9')
-    assert "motion:c" in only(problems_for(study, text), "stimuli[1].duration_s").message
+    p = only(problems_for(study, text), "conditions[2]")
+    assert "1.900 s" in p.message and "its duration_s" in p.message and "lower duration_s" in p.fix
+    # ... unless the condition says what its motion does when it ends first.
+    for end in ("hold", "loop"):
+        held = text.replace('motion = "motion/c/{stimulus}.bvh"', f'motion = "motion/c/{{stimulus}}.bvh"\nmotion_end = "{end}"')
+        assert problems_for(study, held) == []
+    bad = text.replace('motion = "motion/c/{stimulus}.bvh"', 'motion = "motion/c/{stimulus}.bvh"\nmotion_end = "freeze"')
+    assert "hold" in only(problems_for(study, bad), "conditions[2].motion_end").fix
+    # A face too short stays the stimulus's problem: motion_end is about motion only.
+    write_motion(study / "motion" / "c" / "s2.bvh", SECONDS)
+    save_face_csv(FaceAnimation.neutral(int((SECONDS - 0.5) * FPS), FPS), study / "face" / "s2.csv")
+    p = only(problems_for(study, GOOD), "stimuli[1]")
+    assert "face" in p.message and "s2.csv" in p.message and f"{SECONDS - 0.5:.3f} s" in p.message
 
 
 def test_condition_counts(study: Path) -> None:

@@ -35,6 +35,9 @@ class Condition:
     joints: template joint names the columns of NPZ/NPY arrays drive, in order (default: all template
         joints, or BEAT's 47 upper-body joints for 47-joint arrays on a BEAT-like template).
     degrees: whether NPZ/NPY Euler angles are in degrees (default) or radians.
+    motion_end: what the motion does when it ends before the trial (see :mod:`studyapp.study.timeline`):
+        ``"hold"`` its last frame or ``"loop"`` from its first; None (default): ``validate`` refuses a motion
+        shorter than the trial.
     body_model: the user's own SMPL/SMPL-H/SMPL-X model ``.npz`` (``J_regressor``, ``v_template``,
         ``shapedirs``) giving SMPL-family motion files their rest skeleton, shaped by each file's ``betas``;
         without it a built-in skeleton of average proportions is used. SMPL-family files need no
@@ -51,6 +54,7 @@ class Condition:
     name_map: dict[str, str] = key(TABLE, default_factory=dict)
     joints: tuple[str, ...] | None = key(LIST, default=None)
     degrees: bool = key(BOOL, default=True)
+    motion_end: str | None = key(STR, default=None)
     body_model: str | None = key(STR, default=None)
 
     @property

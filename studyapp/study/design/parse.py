@@ -23,6 +23,7 @@ from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUIL
                                               SLOT_LABELS, AttentionCheckTable, AvatarTable,
                                               DesignFile, OrderingTable, ParticipantsTable, SlotsTable,
                                               key_default)
+from studyapp.study.timeline import MOTION_END_CHOICES
 
 #: Rotation representations of NPZ/NPY arrays (those :mod:`studyapp.motion.rotations` reads).
 REPRESENTATIONS = tuple(_REPRESENTATION_WIDTHS)
@@ -83,6 +84,11 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
     ro = e.get("rotation_order")
     if ro is not None and (not re.fullmatch(r"[XYZ]{3}", ro.upper()) or len(set(ro.upper())) != 3):
         col.add(f"{key}.rotation_order", f"{ro!r} is not an Euler order", 'use three different axes, e.g. "XYZ"')
+    motion_end = e.get("motion_end")
+    if motion_end is not None and motion_end not in MOTION_END_CHOICES:
+        col.add(f"{key}.motion_end", f"unknown motion_end {motion_end!r}",
+                'use "hold" (freeze on the last frame) or "loop" (start again from the first)')
+        motion_end = None
     nm = e.get("name_map", {})
     bad = [k for k, v in nm.items() if not isinstance(v, str)]
     for k in bad:
@@ -127,6 +133,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
             rotation_order=ro.upper() if ro else None,
             name_map={k: v for k, v in nm.items() if isinstance(v, str)},
             joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
+            motion_end=motion_end,
             body_model=e.get("body_model"),
         )
     return None
