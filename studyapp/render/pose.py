@@ -25,7 +25,7 @@ import numpy as np
 
 from studyapp.face.animation import FaceAnimation
 from studyapp.face.arkit import ARKIT_NAMES
-from studyapp.motion.fk import global_transforms
+from studyapp.motion.fk import global_transforms, rest_joint_positions
 from studyapp.motion.rotations import euler_to_quat, quat_multiply, quat_slerp
 from studyapp.motion.skeleton import Motion, Skeleton
 from studyapp.render.avatar import Avatar
@@ -119,7 +119,10 @@ def to_avatar_skeleton(avatar: Avatar, motion: Motion, name_map: dict[str, str] 
 
     Uses ``studyapp.motion.retarget.retarget`` (humanoid bone names; it scales the hips' travel by the ratio
     of hip heights, which converts centimetres to metres) unless the motion already is on the avatar's
-    skeleton. The first frame is centred horizontally on the avatar's rest hips.
+    skeleton. The first frame is centred horizontally on the avatar's rest hips, and the clip stands on the
+    avatar's floor: its lowest joint, in the frames where it is lowest (5th percentile), is as high as the
+    avatar's lowest joint at rest. Rigs disagree on where their feet are relative to their hips (CMU's stood
+    15 cm above the floor), and a floating or sunken figure looks wrong for reasons no model caused.
     """
     target = avatar.skeleton
     if _same_skeleton(motion.skeleton, target):
@@ -130,8 +133,12 @@ def to_avatar_skeleton(avatar: Avatar, motion: Motion, name_map: dict[str, str] 
     # Presentation, not retargeting: every slot starts centred on its own floor spot whatever the source's
     # position on the capture stage was, so no avatar stands off-centre in its third of the screen.
     trans = out.translations.copy()
-    for r in np.flatnonzero(target.parents < 0):
+    roots = np.flatnonzero(target.parents < 0)
+    for r in roots:
         trans[:, r, [0, 2]] -= trans[0, r, [0, 2]] - target.offsets[r, [0, 2]]
+    lowest = global_transforms(target, out.rotations, trans)[:, :, 1, 3].min(axis=1)
+    rest_lowest = float(rest_joint_positions(target)[:, 1].min())
+    trans[:, roots, 1] -= float(np.percentile(lowest, 5.0)) - rest_lowest
     return Motion(target, out.fps, out.rotations, trans, source=out.source or motion.source)
 
 

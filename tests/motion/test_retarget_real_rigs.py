@@ -186,3 +186,13 @@ def test_a_crab_is_refused_with_its_joints_listed():
     text = str(err.value)
     assert "truebones_crab_dance_excerpt.bvh" in text and "DEF_BN_Leg_L_11" in text and "Head" in text
     assert "\n" not in text
+
+
+@pytest.mark.parametrize("name", list(HUMAN_RIGS) + TOP)
+def test_every_rig_stands_on_the_avatars_floor(name):
+    """No figure floats or sinks: rigs disagree on where their feet are (CMU's stood 15 cm up)."""
+    src, avatar, out = _retargeted(name)
+    _, pos = fk(out)
+    _, rest = fk(type(out).rest(avatar.skeleton, 1, 30.0))
+    lowest = pos[:, :, 1].min(axis=1)
+    assert abs(np.median(lowest) - rest[0, :, 1].min()) < 0.03, f"{name}: feet at {np.median(lowest):.3f} m"
