@@ -169,13 +169,15 @@ def run_bot_session(
         session.record_env_check({"bot": policy, "bot_seed": int(seed)})
         cond_order = [c.id for c in design.conditions]
         ties = bool(getattr(design.playback, "allow_ties", False))
-        while (plan := session.current_trial()) is not None:
-            media = None
-            if policy == "careful":
-                from studyapp.study.stimuli import load_trial_media
+        from studyapp.render.scene import build_trial_scene
+        from studyapp.study.stimuli import load_trial_media
 
-                media = load_trial_media(design, plan)
-            session.record_play_started()
+        while (plan := session.current_trial()) is not None:
+            media = load_trial_media(design, plan)
+            # The scene a participant's window would build (retargeting, avatar, media cut to the timeline),
+            # on the CPU: a pilot without rendering fails where a participant would, and plays what they play.
+            scene = build_trial_scene(None, media)
+            session.record_play_started(duration_s=scene.duration)
             if pace_s > 0:
                 time.sleep(pace_s)
             session.record_play_finished(True, PlayStats())
