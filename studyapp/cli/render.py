@@ -52,6 +52,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     v.add_argument("--flame-map", help="(E, 52) .npy mapping an SMPL-X file's FLAME expressions to ARKit shapes")
     v.add_argument("--audio", help="WAV file to play along (it sets how long one loop lasts)")
     v.add_argument("--avatar", help="glTF/GLB/VRM avatar (default: the built-in one)")
+    v.add_argument("--framing", choices=("upper-body", "full-body"), default="upper-body",
+                   help="what the camera shows, as a design's [display] framing (default: upper-body)")
     c = v.add_argument_group("condition options (as in a design's [[conditions]])")
     c.add_argument("--fps", type=float, help="true frame rate of the motion (arrays have none; BVH headers can lie)")
     c.add_argument("--name-map", action="append", metavar="JOINT=BONE|FILE.toml",
@@ -119,7 +121,7 @@ def _single_scene(args: argparse.Namespace, aspect: float):
             print(f"warning: {w.message}", file=sys.stderr)
     avatar = load_avatar(args.avatar, bone_map=args.avatar_bone_map)
     slot = prepare_slot(avatar, motion, face, name_map=cond.name_map or None)
-    return make_scene([slot], avatar, labels=None, aspect=aspect)
+    return make_scene([slot], avatar, labels=None, aspect=aspect, framing=args.framing)
 
 
 def cmd_view(args: argparse.Namespace) -> int:
@@ -178,7 +180,7 @@ def _view_window(args: argparse.Namespace, audio) -> int:
             aspect = size[0] / size[1]
             if abs(aspect - aspect_now[0]) > 1e-3:  # the window was resized: frame the figure anew
                 player.scene = make_scene(player.scene.slots, player.scene.avatars, None, aspect=aspect,
-                                          duration=player.scene.duration)
+                                          duration=player.scene.duration, framing=args.framing)
                 aspect_now[0] = aspect
             player.draw(fbo, size, now)
 

@@ -307,7 +307,8 @@ class Renderer:
         for mesh in {id(m): m for m in meshes}.values():
             mesh.palette.upload()
         self.prog["u_view_proj"].write(vp_bytes)
-        self.prog["u_camera_pos"].value = tuple(float(v) for v in scene.camera.eye)
+        # the eye of the camera as refitted to this viewport, the one the picture is taken from
+        self.prog["u_camera_pos"].value = tuple(float(v) for v in scene.camera.for_aspect(aspect).eye)
         self.floor_prog["u_view_proj"].write(vp_bytes)
         self._aa_rects = []
         for i, vp in enumerate(vps):

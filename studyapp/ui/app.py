@@ -285,15 +285,17 @@ class StudyApp:
 
 
 def _clip_seconds(stim: Any) -> float:
+    """About how long a clip plays, for "about N minutes": the trial timeline's rule on the audio's length."""
+    from studyapp.study.timeline import trial_duration
+
     if stim is None:
         return 30.0
-    if getattr(stim, "duration_s", None):
-        return float(stim.duration_s)
     try:
         with wave.open(str(stim.audio), "rb") as w:
-            return w.getnframes() / float(w.getframerate())
+            audio_s = w.getnframes() / float(w.getframerate())
     except Exception:  # non-PCM WAV variants: an estimate is enough for "about N minutes"
-        return 30.0
+        audio_s = 30.0
+    return trial_duration(getattr(stim, "duration_s", None), audio_s)
 
 
 # -- the window -----------------------------------------------------------------------------------------
