@@ -277,3 +277,48 @@ def test_trial_scene_builder_passes_the_design_bone_map_to_the_avatar():
     hand, head = av.skeleton.index("Palm2.L"), av.skeleton.index("Head")
     for slot in scene.slots:
         assert slot.joint_positions[0, hand, 1] > slot.joint_positions[0, head, 1]
+
+
+def _mixamo_named(avatar, prefix: str = "mixamorig:"):
+    """The built-in avatar under Mixamo's bone names (an Xbot-like character), nothing else changed."""
+    from studyapp.motion.skeleton import Skeleton
+    from studyapp.render.avatar import Avatar
+
+    parts = {"Chest": "Spine1", "UpperChest": "Spine2", "UpperArm": "Arm", "LowerArm": "ForeArm",
+             "UpperLeg": "UpLeg", "LowerLeg": "Leg", "Toes": "ToeBase"}
+    fingers = {"Thumb": "Thumb", "Index": "Index", "Middle": "Middle", "Ring": "Ring", "Little": "Pinky"}
+
+    def rename(n: str) -> str:
+        for f, mf in fingers.items():
+            for k, ph in enumerate(("Proximal", "Intermediate", "Distal"), start=1):
+                for side in ("Left", "Right"):
+                    if n == f"{side}{f}{ph}":
+                        return f"{prefix}{side}Hand{mf}{k}"
+        for a, b in parts.items():
+            if n.endswith(a):
+                return prefix + n[: -len(a)] + b
+        return prefix + n
+
+    sk = avatar.skeleton
+    sk2 = Skeleton(tuple(rename(n) for n in sk.names), sk.parents, sk.offsets, unit_scale=1.0,
+                   rest_rotations=sk.rest_rotations)
+    return Avatar(skeleton=sk2, vertices=avatar.vertices, normals=avatar.normals, indices=avatar.indices,
+                  colors=avatar.colors, joints=avatar.joints, weights=avatar.weights, inverse_bind=avatar.inverse_bind,
+                  morph_deltas=avatar.morph_deltas, material=avatar.material, name="xbot-like")
+
+
+@pytest.mark.gl
+def test_mixamo_named_character_is_recognised_without_a_map_and_plays_as_the_builtin(renderer, avatar, tmp_path):
+    """An Xbot-like character (``mixamorig:`` bones, any prefix number) needs no [avatar.bone_map]."""
+    from studyapp.render.gltf import export_glb
+    from studyapp.render.scene import load_avatar
+
+    path = export_glb(_mixamo_named(avatar, "mixamorig7:"), tmp_path / "xbot_like.glb")
+    loaded = load_avatar(str(path))
+    assert "mixamorig7:LeftForeArm" in loaded.skeleton.names and not loaded.bone_map
+    motion = beat_left_arm_up()
+    want, _, scene = _render(renderer, avatar, motion)
+    got, _, _ = _render(renderer, loaded, motion, camera=scene.camera)
+    rest, _, _ = _render(renderer, loaded, Motion.rest(motion.skeleton, 2, 15.0), camera=scene.camera)
+    assert np.abs(got - want).mean() < 1.0                       # the same picture: every bone found
+    assert np.abs(rest - want).mean() > 3 * max(np.abs(got - want).mean(), 0.5)  # and the motion shows
