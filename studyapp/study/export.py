@@ -5,7 +5,9 @@ in that order, then one column per stimulus tag (e.g. ``speaker``) and per parti
 ``device``, ``ordering_version``), then ``design_hash`` and ``app_version``. ``slot`` is 0 (left),
 1 (middle), 2 (right); ``rank`` is 1 (best) to 3, average ranks for ties; ``attention_passed`` is empty for
 trials that are not attention checks; ``trial_duration_s`` is how long the trial played (empty for trials
-stored before studyapp recorded it). Practice trials are included and flagged (``is_practice``): the
+stored before studyapp recorded it); ``sample`` is the 1-based sample of the condition that slot showed (see
+``samples`` in :class:`~studyapp.study.design.Condition`; 1 for a condition with one motion per stimulus,
+empty for trials stored before studyapp recorded it). Practice trials are included and flagged (``is_practice``): the
 analysis drops them, and they show whether participants understood the task.
 
 Example
@@ -29,6 +31,7 @@ from studyapp.study.storage import ResultsDB
 CORE_COLUMNS = (
     "participant", "session", "trial_index", "stimulus", "criterion", "condition", "slot", "rank", "plays",
     "response_time_s", "is_practice", "is_attention_check", "attention_passed", "trial_duration_s",
+    "sample",
 )
 TAIL_COLUMNS = ("design_hash", "app_version")
 
@@ -39,6 +42,7 @@ _QUERY = """
 WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition, r.slot, r.rank,
        t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed, t.trial_duration_s,
+       CASE r.slot WHEN 0 THEN t.sample_left WHEN 1 THEN t.sample_middle ELSE t.sample_right END AS sample,
        r.design_hash, r.app_version, c.position AS _cond_pos
 FROM responses r
 JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
@@ -68,6 +72,7 @@ def export_dataframe(db: str | Path | ResultsDB, *, include_practice: bool = Tru
     df = df.drop(columns=["_cond_pos"])
     for col in ("is_practice", "is_attention_check"):
         df[col] = df[col].astype(bool)
+    df["sample"] = df["sample"].astype("Int64")  # whole numbers, empty where not recorded
     df["attention_passed"] = df["attention_passed"].map(lambda v: None if pd.isna(v) else bool(v)).astype(object)
     if not include_practice:
         df = df[~df["is_practice"]].reset_index(drop=True)
