@@ -404,11 +404,14 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                 try:
                     motion = load_condition_motion(design, cond, stim, k)
                 except (InputError, ValueError, OSError, KeyError) as exc:
-                    unreadable.setdefault((ci, _problem_text(exc, with_path=False)), []).append((stim.id, path))
+                    clip = stim.id if cond.samples == 1 else f"{stim.id} sample {k}"
+                    unreadable.setdefault((ci, _problem_text(exc, with_path=False)), []).append((clip, path))
                     continue
                 rate = _likely_true_fps(cond, motion, audio_s, stim.duration_s)
                 if rate is not None:
-                    wrong_rate.setdefault(ci, (motion.fps, rate, []))[2].append(stim.id)
+                    clips = wrong_rate.setdefault(ci, (motion.fps, rate, []))[2]
+                    if stim.id not in clips:  # one name per clip, however many of its samples say so
+                        clips.append(stim.id)
                     continue  # its length is explained; a "durations differ" line would point at the wrong fix
                 items[_motion_label(cond, k)] = (motion.duration, str(path))
                 sig = (ci, motion.skeleton.names)
@@ -451,8 +454,10 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     for (ci, text), where in unreadable.items():
         cond = design.conditions[ci]
         clips = ", ".join(sid for sid, _ in where)
-        what = (f"stimulus {where[0][0]!r}" if len(where) == 1
-                else f"{len(where)} stimuli ({clips})")
+        if cond.samples > 1:  # entries are "<stimulus> sample <k>"
+            what = f"stimulus {where[0][0]}" if len(where) == 1 else f"{len(where)} files ({clips})"
+        else:
+            what = f"stimulus {where[0][0]!r}" if len(where) == 1 else f"{len(where)} stimuli ({clips})"
         problems.append((f"conditions[{ci}].motion", f"cannot read the motion of {cond.id!r} for {what}, e.g. "
                          f"{where[0][1]}: {text}", _unreadable_fix(cond)))
     for ci, (file_fps, rate, clips) in wrong_rate.items():

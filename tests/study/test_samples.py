@@ -96,7 +96,8 @@ def test_an_unreadable_sample_file_is_reported(tmp_path: Path) -> None:
     bad = tmp_path / "motion" / "lagged" / "s1_2.bvh"
     bad.write_text("HIERARCHY\nROOT Hips\n{\n")
     problems = validate_design(path)
-    assert any(p.key == "conditions[1].motion" and "s1_2.bvh" in str(p) for p in problems), [str(p) for p in problems]
+    hits = [str(p) for p in problems if p.key == "conditions[1].motion"]
+    assert len(hits) == 1 and "stimulus s1 sample 2" in hits[0] and str(bad) in hits[0], [str(p) for p in problems]
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ import json
 from pathlib import Path
 
 from studyapp.study.design.blinding import conditions_named_in, visible_text_leaks
-from studyapp.study.design.files import (SAMPLE_FIELD, design_hash, fill_sample, model_path, motion_key, motion_path,
+from studyapp.study.design.files import (SAMPLE_FIELD, design_hash, fill_sample, has_sample_field, model_path, motion_key, motion_path,
                                          pattern_fields, referenced_files, resolve)
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
                                          DesignError, Display, Playback, Problem, QuestionItem, Stimulus)
@@ -40,7 +40,7 @@ from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUIL
                                           SLOT_LABELS)
 
 __all__ = [
-    "SAMPLE_FIELD", "fill_sample", "motion_key", "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
+    "SAMPLE_FIELD", "fill_sample", "has_sample_field", "motion_key", "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
     "MOTION_SUFFIXES", "ORDERINGS", "QUESTION_KINDS", "REPRESENTATIONS", "SLOT_ASSIGNMENTS", "SLOT_LABELS", "TABLES",
     "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Display", "Playback", "Problem", "QuestionItem",
     "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import string
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
@@ -47,8 +48,23 @@ def fill_sample(pattern: str, sample: int) -> str:
     'gen/{stimulus}/sample_3.npz'
     >>> fill_sample("media/m_{c_ab_s{sample}}.bvh", 2)
     'media/m_{c_ab_s2}.bvh'
+    >>> fill_sample("odd/{{sample}}/{stimulus}.bvh", 2)   # escaped braces: a folder literally named {sample}
+    'odd/{{sample}}/{stimulus}.bvh'
     """
-    return pattern.replace(SAMPLE_FIELD, str(int(sample)))
+    return _SAMPLE_RE.sub(lambda m: m.group(1) + str(int(sample)), pattern)
+
+
+# ``{sample}`` not inside escaped braces: preceded by an even number of ``{`` (``{{`` is a literal brace).
+_SAMPLE_RE = re.compile(r"(?<!\{)((?:\{\{)*)\{sample\}")
+
+
+def has_sample_field(pattern: str) -> bool:
+    """Whether a pattern uses ``{sample}`` (escaped ``{{sample}}`` is a literal name, not the placeholder).
+
+    >>> has_sample_field("a/{stimulus}_{sample}.bvh"), has_sample_field("a/{{sample}}/{stimulus}.bvh")
+    (True, False)
+    """
+    return _SAMPLE_RE.search(pattern) is not None
 
 
 def pattern_fields(pattern: str) -> list[str]:

@@ -15,7 +15,7 @@ from studyapp import tomlfile
 from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
 from studyapp.study.design.blinding import visible_text_leaks
 from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
-from studyapp.study.design.files import SAMPLE_FIELD, design_hash, pattern_fields, referenced_files, resolve
+from studyapp.study.design.files import design_hash, has_sample_field, pattern_fields, referenced_files, resolve
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design, Display,
                                              Playback, Problem, QuestionItem, Stimulus)
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
@@ -143,7 +143,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
 def _samples(col: Collector, key: str, e: dict) -> int:
     """The condition's ``samples`` (1 when absent or wrong), checked against its pattern's ``{sample}``."""
     samples = e.get("samples", key_default(Condition, "samples"))
-    has_field = "motion" in e and SAMPLE_FIELD in e["motion"]
+    has_field = "motion" in e and has_sample_field(e["motion"])
     if samples < 1:
         col.add(f"{key}.samples", f"must be 1 or more, got {samples}", "the number of motion files per stimulus, e.g. 5")
         return 1
