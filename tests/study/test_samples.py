@@ -272,3 +272,52 @@ def test_bundle_ships_every_sample_under_its_own_name_and_merge_keeps_the_sample
     for _, r in df.iterrows():
         plan = participant_schedule(design, "R01", row=row)[r.trial_index]
         assert (plan.slots[r.slot], plan.samples[r.slot]) == (r.condition, r["sample"])
+
+
+def test_samples_on_the_labs_smpl_body_model_are_each_bundled_as_their_own_motion(tmp_path: Path) -> None:
+    """A condition whose SMPL-X files need the lab's body model travels as generated BVH: one per sample."""
+    import json
+
+    from studyapp.motion.fk import joint_positions
+    from studyapp.motion.smpl import builtin_rest_joints, parents
+    from studyapp.resources import designs_dir
+    from studyapp.study.bundle import make_bundle, open_bundle
+    from studyapp.study.stimuli import load_condition_motion
+
+    model = tmp_path / "models" / "SMPLX_TEST.npz"  # synthetic: one vertex per joint (no licensed file in tests)
+    model.parent.mkdir()
+    kin = np.stack([np.where(parents("smplx") < 0, 2**32 - 1, parents("smplx")), np.arange(55)]).astype(np.uint32)
+    np.savez(model, J_regressor=np.eye(55), v_template=builtin_rest_joints("smplx"),
+             shapedirs=np.zeros((55, 3, 10)), kintree_table=kin)
+    (tmp_path / "smplx").mkdir()
+    for sid in ("clip01", "clip03"):
+        data = dict(np.load(designs_dir() / "smplx_example" / "smplx" / f"{sid}.npz"))
+        np.savez(tmp_path / "smplx" / f"{sid}_1.npz", **data)
+        data["poses"] = data["poses"].copy()
+        data["poses"][:, 16 * 3 + 2] += 0.8  # sample 2: the left shoulder raised 0.8 rad about z
+        np.savez(tmp_path / "smplx" / f"{sid}_2.npz", **data)
+    text = (designs_dir() / "smplx_example.toml").read_text().replace('"demo/', f'"{designs_dir()}/demo/').replace(
+        '"smplx_example/smplh/', f'"{designs_dir()}/smplx_example/smplh/').replace(
+        '"smplx_example/smplx/{stimulus}.npz"', '"smplx/{stimulus}_{sample}.npz"\nsamples = 2').replace(
+        '# body_model = "models/SMPLX_NEUTRAL.npz"', 'body_model = "models/SMPLX_TEST.npz"')
+    source = tmp_path / "smplx.toml"
+    source.write_text(text)
+    lab = load_design(source)
+    assert lab.conditions[0].samples == 2 and lab.conditions[0].body_model is not None
+    info = make_bundle(source, tmp_path / "smpl.zip", results=tmp_path / "smpl.sqlite")
+    opened = open_bundle(info.path, cache=tmp_path / "cache")
+    bundled = load_design(opened.design_path)
+    key = json.loads(info.key_path.read_text())
+    shipped = next(c for c in bundled.conditions if key["conditions"][c.id] == "emage_like")
+    assert shipped.samples == 2 and shipped.motion.endswith(".bvh")
+    for s in bundled.stimuli:
+        lab_stim = lab.stimulus(key["stimuli"][s.id])
+        positions = []
+        for k in (1, 2):
+            got = load_condition_motion(bundled, shipped, s, k)
+            want = load_condition_motion(lab, lab.conditions[0], lab_stim, k)
+            order = [got.skeleton.names.index(n) for n in want.skeleton.names]
+            pos = joint_positions(got)[:, order] * got.skeleton.unit_scale
+            assert np.abs(pos - joint_positions(want)).max() < 1e-3
+            positions.append(pos)
+        assert np.abs(positions[0] - positions[1]).max() > 0.05  # the two samples really differ
