@@ -113,7 +113,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
                 if k in e:
                     col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
                             f"remove {k}")
-    samples = _samples(col, key, e)
+    samples = _samples(col, key, e) if pattern else 1  # one named file (`view`) has no samples
     joints = e.get("joints")
     if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
         col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
