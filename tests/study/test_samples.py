@@ -125,8 +125,8 @@ def test_the_schedule_balances_samples_per_condition_and_stimulus(tmp_path: Path
     table = balance_counts(df)["sample_x_condition_stimulus"]
     assert table.loc[("lagged", "s2")].tolist() == [per, per, per]
     # the same design, seed and participant give the same schedule
-    pd_again = full_schedule(load_design(tmp_path / "tiny.toml"), n_participants)
-    assert pd_again.equals(df)
+    again = full_schedule(load_design(tmp_path / "tiny.toml"), n_participants)
+    assert again.equals(df)
 
 
 def test_schedule_csv_shows_the_sample_of_every_slot(tmp_path: Path) -> None:
