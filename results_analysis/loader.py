@@ -21,7 +21,7 @@ REQUIRED_COLUMNS = ("participant", "trial_index", "stimulus", "criterion", "cond
 FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
 #: Columns that are bookkeeping, never a stimulus tag or participant group.
 CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
-    "session", "slot", "plays", "response_time_s", "trial_duration_s", "design_hash", "app_version", "_where")
+    "session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "design_hash", "app_version", "_where")
 
 #: Columns the loader adds for its own use (``_where``: where a row came from, for messages); never shown
 #: to users as one of their columns.
@@ -86,7 +86,7 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if bad.any():
             raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
                                      "empty value")
-    for col in ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s"):
+    for col in ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample"):
         if col in df.columns:
             num = pd.to_numeric(df[col], errors="coerce")
             bad = num.isna() & df[col].notna()

@@ -1,4 +1,4 @@
-"""Build the tidy results frame straight from a studyapp results database (schema versions 1 and 2).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 3).
 
 Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
@@ -21,7 +21,7 @@ _NEEDED = {"responses": {"participant", "trial_index", "criterion", "condition",
 #: (sorted, a name never shadowing an earlier column), then :data:`TAIL_COLUMNS`.
 CORE_COLUMNS = (
     "participant", "session", "trial_index", "stimulus", "criterion", "condition", "slot", "rank", "plays",
-    "response_time_s", "is_practice", "is_attention_check", "attention_passed", "trial_duration_s",
+    "response_time_s", "is_practice", "is_attention_check", "attention_passed", "trial_duration_s", "sample",
 )
 TAIL_COLUMNS = ("design_hash", "app_version")
 
@@ -32,7 +32,7 @@ _QUERY = """
 WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.rowid AS _rowid, r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition,
        r.slot, r.rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
-       {trial_duration} AS trial_duration_s, r.design_hash, r.app_version
+       {trial_duration} AS trial_duration_s, {sample} AS sample, r.design_hash, r.app_version
 FROM responses r JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
 JOIN crit ON crit.criterion = r.criterion
 ORDER BY r.participant, r.trial_index, crit.pos, r.slot
@@ -59,10 +59,15 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
     # has no such column, and the table gets it empty.
     trial_cols = {r[1] for r in con.execute("PRAGMA table_info(trials)")}
     duration = "t.trial_duration_s" if "trial_duration_s" in trial_cols else "NULL"
-    df = pd.read_sql_query(_QUERY.format(trial_duration=duration), con)
+    # Version 3 records the sample each slot showed (a condition with several motions per stimulus); older
+    # files get it empty, as for trial_duration_s.
+    sample = ("CASE r.slot WHEN 0 THEN t.sample_left WHEN 1 THEN t.sample_middle ELSE t.sample_right END"
+              if {"sample_left", "sample_middle", "sample_right"} <= trial_cols else "NULL")
+    df = pd.read_sql_query(_QUERY.format(trial_duration=duration, sample=sample), con)
     for col in ("is_practice", "is_attention_check"):
         df[col] = df[col].astype(int).astype(bool)
     df["attention_passed"] = df["attention_passed"].map(lambda v: None if pd.isna(v) else bool(v)).astype(object)
+    df["sample"] = df["sample"].astype("Int64")  # whole numbers, empty where not recorded
     extra: list[str] = []
     for table, query, key in (("stimuli", "SELECT id, tags FROM stimuli", "stimulus"),
                               ("participants", "SELECT id, groups FROM participants", "participant")):

@@ -87,4 +87,7 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     print(counts["position_x_stimulus"].to_string())
     print("\nConditions (rows) x slots (columns):")
     print(counts["slot_x_condition"].to_string())
+    if any(c.samples > 1 for c in design.conditions):
+        print("\nSamples shown (columns) per condition x stimulus (rows), rated trials:")
+        print(counts["sample_x_condition_stimulus"].to_string())
     return 0

@@ -5,7 +5,9 @@ in that order, then one column per stimulus tag (e.g. ``speaker``) and per parti
 ``device``, ``ordering_version``), then ``design_hash`` and ``app_version``. ``slot`` is 0 (left),
 1 (middle), 2 (right); ``rank`` is 1 (best) to 3, average ranks for ties; ``attention_passed`` is empty for
 trials that are not attention checks; ``trial_duration_s`` is how long the trial played (empty for trials
-stored before studyapp recorded it). Practice trials are included and flagged (``is_practice``): the
+stored before studyapp recorded it); ``sample`` is the 1-based sample of the condition that slot showed (see
+``samples`` in :class:`~studyapp.study.design.Condition`; 1 for a condition with one motion per stimulus,
+empty for trials stored before studyapp recorded it). Practice trials are included and flagged (``is_practice``): the
 analysis drops them, and they show whether participants understood the task.
 
 Example

@@ -6,8 +6,15 @@ trials on any machine, so a session can be resumed or audited from the design fi
 Design rows. A participant's *row* (assigned by the results database, in order of arrival) picks both the
 clip order and the slot rotation: Latin-square row ``row mod L`` (``L`` rows of the Williams square, 1 for
 random or fixed order) and slot rotation ``row mod 6`` (balanced assignment). :func:`n_rows` is
-``lcm(L, 6)`` for balanced slots and ``L`` for random ones, so every block of ``n_rows`` consecutive
-participants is fully balanced in both respects.
+``lcm(L, 6)`` for balanced slots and ``L`` for random ones (times whatever the conditions' ``samples`` add to
+that least common multiple), so every block of ``n_rows`` consecutive participants is fully balanced in
+every respect.
+
+Samples. A condition with ``samples = N`` shows, in every trial of stimulus ``s``, sample
+``(row + s + c) mod N + 1`` (1-based; ``s`` the stimulus's position in the design, ``c`` the condition's):
+any ``N`` consecutive rows show each sample of each condition x stimulus once, and within one participant
+the samples differ across clips and conditions rather than all being sample 1. A frozen slot shows the
+first frame of the sample its condition would have shown.
 
 Trial sequence, in this order (``trial_index`` counts from 0 over all of them):
 
@@ -41,7 +48,7 @@ from studyapp.study.ordering import latin_row, n_latin_rows, participant_seed, s
 
 SLOT_NAMES = ("left", "middle", "right")
 SCHEDULE_COLUMNS = ["participant", "row", "trial_index", "stimulus", "is_practice", "is_attention_check",
-                    "slot_left", "slot_middle", "slot_right"]
+                    "slot_left", "slot_middle", "slot_right", "sample_left", "sample_middle", "sample_right"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +63,7 @@ class TrialPlan:
     is_practice: a practice trial (answers stored but marked, excluded from analysis by default).
     is_attention_check: an attention-check trial (see ``attention_check``).
     row: the participant's design row.
+    samples: per slot, the 1-based sample of the slot's condition shown (1 for a condition with one sample).
     """
 
     trial_index: int
@@ -64,6 +72,7 @@ class TrialPlan:
     is_practice: bool
     is_attention_check: bool
     row: int
+    samples: tuple[int, ...] = (1, 1, 1)
 
     @property
     def slot_of(self) -> dict[str, int]:
@@ -81,7 +90,26 @@ def latin_rows(design: Design) -> int:
 def n_rows(design: Design) -> int:
     """Number of distinct design rows: after this many participants clip order and slots are balanced."""
     rows = latin_rows(design)
-    return math.lcm(rows, 6) if design.slot_assignment == "balanced" else rows
+    rows = math.lcm(rows, 6) if design.slot_assignment == "balanced" else rows
+    return math.lcm(rows, *(max(1, c.samples) for c in design.conditions))
+
+
+def sample_for(design: Design, row: int, stimulus_id: str, condition_id: str) -> int:
+    """The 1-based sample of a condition shown to design row ``row`` for a stimulus (see the module notes).
+
+    >>> from dataclasses import replace
+    >>> from studyapp.resources import demo_design
+    >>> from studyapp.study.design import load_design
+    >>> d = load_design(demo_design())
+    >>> d.conditions[1] = replace(d.conditions[1], samples=3)
+    >>> [sample_for(d, row, "clip01", "lagged") for row in range(4)], sample_for(d, 0, "clip01", "synced")
+    ([2, 3, 1, 2], 1)
+    """
+    ids = design.condition_ids
+    cid = condition_id.removeprefix(FROZEN_PREFIX)
+    n = max(1, design.condition(cid).samples)
+    stim_pos = [s.id for s in design.stimuli].index(stimulus_id)
+    return (row + stim_pos + ids.index(cid)) % n + 1
 
 
 def default_row(design: Design, participant_id: str) -> int:
@@ -152,7 +180,8 @@ def participant_schedule(design: Design, participant_id: str, row: int | None = 
                     s = (row + i) % 3
                     slots[s] = FROZEN_PREFIX + slots[s]
                 entries.append((check.stimulus, (slots[0], slots[1], slots[2]), False, True))
-    return [TrialPlan(i, sid, slots, prac, att, row) for i, (sid, slots, prac, att) in enumerate(entries)]
+    return [TrialPlan(i, sid, slots, prac, att, row, tuple(sample_for(design, row, sid, c) for c in slots))
+            for i, (sid, slots, prac, att) in enumerate(entries)]
 
 
 def participant_ids(n_participants: int) -> list[str]:
@@ -164,7 +193,7 @@ def participant_ids(n_participants: int) -> list[str]:
 def schedule_frame(plans: dict[str, list[TrialPlan]]) -> pd.DataFrame:
     """One row per participant x trial, columns :data:`SCHEDULE_COLUMNS`."""
     records = [
-        (pid, p.row, p.trial_index, p.stimulus_id, p.is_practice, p.is_attention_check, *p.slots)
+        (pid, p.row, p.trial_index, p.stimulus_id, p.is_practice, p.is_attention_check, *p.slots, *p.samples)
         for pid, trials in plans.items() for p in trials
     ]
     return pd.DataFrame.from_records(records, columns=SCHEDULE_COLUMNS)
@@ -176,7 +205,7 @@ def full_schedule(design: Design, n_participants: int) -> pd.DataFrame:
     >>> from studyapp.resources import demo_design
     >>> from studyapp.study.design import load_design
     >>> full_schedule(load_design(demo_design()), 2).shape[1]
-    9
+    12
     """
     if n_participants < 1:
         raise ValueError(f"need at least one participant, got {n_participants}")
@@ -189,7 +218,8 @@ def balance_counts(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
     """Balance of a schedule's rated trials (practice and attention checks left out).
 
     Returns ``position_x_stimulus`` (rated-trial position, 1-based, x stimulus: how often each clip comes
-    at each position) and ``slot_x_condition`` (condition x slot: how often each condition sits in each slot).
+    at each position), ``slot_x_condition`` (condition x slot: how often each condition sits in each slot)
+    and ``sample_x_condition_stimulus`` ((condition, stimulus) x sample: how often each sample is shown).
     """
     rated = df[~df["is_practice"].astype(bool) & ~df["is_attention_check"].astype(bool)].copy()
     rated["position"] = rated.groupby("participant").cumcount() + 1
@@ -198,4 +228,10 @@ def balance_counts(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
                       var_name="slot", value_name="condition")
     long["slot"] = pd.Categorical(long["slot"].str.removeprefix("slot_"), categories=list(SLOT_NAMES))
     slots = pd.crosstab(long["condition"], long["slot"], dropna=False)
-    return {"position_x_stimulus": pos, "slot_x_condition": slots}
+    shown = pd.DataFrame({
+        "condition": pd.concat([rated[f"slot_{s}"] for s in SLOT_NAMES], ignore_index=True),
+        "stimulus": pd.concat([rated["stimulus"]] * len(SLOT_NAMES), ignore_index=True),
+        "sample": pd.concat([rated[f"sample_{s}"] for s in SLOT_NAMES], ignore_index=True),
+    })
+    samples = pd.crosstab([shown["condition"], shown["stimulus"]], shown["sample"])
+    return {"position_x_stimulus": pos, "slot_x_condition": slots, "sample_x_condition_stimulus": samples}

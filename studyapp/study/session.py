@@ -499,6 +499,7 @@ class Session:
             is_practice=bool(plan.is_practice),
             is_attention_check=bool(plan.is_attention_check),
             slots=tuple(plan.slots),
+            samples=tuple(plan.samples),
             shown_at=self._shown_wall,
             answered_at=now_iso(),
             response_time_s=None if self._shown_mono is None else round(time.monotonic() - self._shown_mono, 4),

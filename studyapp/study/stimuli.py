@@ -235,13 +235,14 @@ def _load_template(design: Design, condition: Condition) -> Motion | None:
     return _FILES.get(("template", _file_id(path)), lambda: load_motion(path))
 
 
-def load_condition_motion(design: Design, condition: Condition, stimulus: Stimulus) -> Motion:
-    """Body motion of one condition for one stimulus (file, or live model output)."""
+def load_condition_motion(design: Design, condition: Condition, stimulus: Stimulus, sample: int = 1) -> Motion:
+    """Body motion of one condition for one stimulus (file, or live model output); ``sample`` (1-based) picks
+    one of the files of a condition with ``samples > 1``."""
     if condition.model is not None:
         return _live_motion(design, condition, stimulus)
     from studyapp.motion.io import load_motion
 
-    path = motion_path(design, condition, stimulus)
+    path = motion_path(design, condition, stimulus, sample)
     template = _load_template(design, condition)
     kwargs: dict[str, Any] = {}
     if condition.rotation_order:
@@ -278,12 +279,12 @@ def frozen_motion(motion: Motion, duration_s: float) -> Motion:
     return Motion(motion.skeleton, motion.fps, rot, trans, source=f"frozen first frame of {motion.source}")
 
 
-def slot_motion(design: Design, slot_condition: str, stimulus: Stimulus, duration_s: float) -> Motion:
-    """Motion for one slot's condition id (``frozen:<id>`` gives the frozen first frame of ``<id>``)."""
+def slot_motion(design: Design, slot_condition: str, stimulus: Stimulus, duration_s: float, sample: int = 1) -> Motion:
+    """Motion for one slot's condition id and sample (``frozen:<id>`` gives the frozen first frame of ``<id>``)."""
     if slot_condition.startswith(FROZEN_PREFIX):
-        base = load_condition_motion(design, design.condition(slot_condition[len(FROZEN_PREFIX):]), stimulus)
+        base = load_condition_motion(design, design.condition(slot_condition[len(FROZEN_PREFIX):]), stimulus, sample)
         return frozen_motion(base, duration_s)
-    return load_condition_motion(design, design.condition(slot_condition), stimulus)
+    return load_condition_motion(design, design.condition(slot_condition), stimulus, sample)
 
 
 def load_trial_media(design: Design, plan: TrialPlan) -> TrialMedia:
@@ -299,8 +300,8 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     duration = trial_duration(stimulus.duration_s, audio.duration)
     face = fit_face(load_stimulus_face(stimulus, duration), duration)
     conds = [design.condition(cid.removeprefix(FROZEN_PREFIX)) for cid in plan.slots]
-    motions = tuple(fit_motion(slot_motion(design, cid, stimulus, duration), duration, cond.motion_end)
-                    for cid, cond in zip(plan.slots, conds))
+    motions = tuple(fit_motion(slot_motion(design, cid, stimulus, duration, k), duration, cond.motion_end)
+                    for cid, cond, k in zip(plan.slots, conds, plan.samples))
     maps = tuple(dict(cond.name_map) for cond in conds)
     return TrialMedia(plan=plan, audio=cut_audio(audio, duration), face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
@@ -389,35 +390,43 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             ci = cond_index[cond.id]
             if cond.motion is None:
                 continue  # live conditions are generated to the audio's length
-            try:
-                path = motion_path(design, cond, stim)
-            except KeyError:
-                continue  # the pattern names a tag this stimulus lacks: reported with the pattern
-            if not path.is_file():
-                continue
-            if not _array_settings_complete(cond) and not is_smpl_file(path):
-                array_settings_missing.add(ci)  # reported once per condition below
-                continue
-            try:
-                motion = load_condition_motion(design, cond, stim)
-            except (InputError, ValueError, OSError, KeyError) as exc:
-                unreadable.setdefault((ci, _problem_text(exc, with_path=False)), []).append((stim.id, path))
-                continue
-            rate = _likely_true_fps(cond, motion, audio_s, stim.duration_s)
-            if rate is not None:
-                wrong_rate.setdefault(ci, (motion.fps, rate, []))[2].append(stim.id)
-                continue  # its length is explained; a "durations differ" line would point at the wrong fix
-            items[f"motion:{cond.id}"] = (motion.duration, str(path))
-            sig = (ci, motion.skeleton.names)
-            if sig not in skeletons_checked:
-                skeletons_checked.add(sig)
-                found = _check_retarget(ci, cond, motion, path)
-                if found:
-                    retarget_bad.add(ci)
-                problems += found
-            ready.append(ci)
+            good_samples = 0
+            for k in range(1, cond.samples + 1):  # every sample is a file a participant may be shown
+                try:
+                    path = motion_path(design, cond, stim, k)
+                except KeyError:
+                    break  # the pattern names a tag this stimulus lacks: reported with the pattern
+                if not path.is_file():
+                    continue
+                if not _array_settings_complete(cond) and not is_smpl_file(path):
+                    array_settings_missing.add(ci)  # reported once per condition below
+                    break
+                try:
+                    motion = load_condition_motion(design, cond, stim, k)
+                except (InputError, ValueError, OSError, KeyError) as exc:
+                    clip = stim.id if cond.samples == 1 else f"{stim.id} sample {k}"
+                    unreadable.setdefault((ci, _problem_text(exc, with_path=False)), []).append((clip, path))
+                    continue
+                rate = _likely_true_fps(cond, motion, audio_s, stim.duration_s)
+                if rate is not None:
+                    clips = wrong_rate.setdefault(ci, (motion.fps, rate, []))[2]
+                    if stim.id not in clips:  # one name per clip, however many of its samples say so
+                        clips.append(stim.id)
+                    continue  # its length is explained; a "durations differ" line would point at the wrong fix
+                items[_motion_label(cond, k)] = (motion.duration, str(path))
+                sig = (ci, motion.skeleton.names)
+                if sig not in skeletons_checked:
+                    skeletons_checked.add(sig)
+                    found = _check_retarget(ci, cond, motion, path)
+                    if found:
+                        retarget_bad.add(ci)
+                    problems += found
+                good_samples += 1
+            if good_samples == cond.samples:
+                ready.append(ci)
         problems += _check_durations(si, stim, items, duration_mismatches,
-                                     {f"motion:{c.id}": (i, c) for i, c in enumerate(design.conditions)})
+                                     {_motion_label(c, k): (i, c) for i, c in enumerate(design.conditions)
+                                      for k in range(1, c.samples + 1)})
         avatar = design.avatar_for(stim)
         present = all(f is None or Path(f).is_file() for f in (stim.face, stim.head)) and (
             avatar in ("builtin", "") or Path(avatar).is_file()) and avatar not in bad_avatars
@@ -426,13 +435,16 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
             # Only a stimulus whose files passed the checks above: a scene from bad files fails for reasons
             # already reported, with a less helpful message.
             good = [ci for ci in sorted(ready) if ci not in retarget_bad]
-            # A clip reused under another id (a practice copy, tag patterns) gives the very same scene: build it
-            # once, so no file's palettes are computed twice.
-            scene_id = _scene_identity(design, stim, good)
-            if scene_id not in built:
-                built.add(scene_id)
-                for key, failure in _dry_run(design, stim, good).items():
-                    dry_failures.setdefault(key, []).extend(failure)
+            # One scene per sample number: scene k shows sample k of every condition that has one.
+            for k in range(1, max((design.conditions[ci].samples for ci in good), default=1) + 1):
+                shown = [ci for ci in good if design.conditions[ci].samples >= k]
+                # A clip reused under another id (a practice copy, tag patterns) gives the very same scene:
+                # build it once, so no file's palettes are computed twice.
+                scene_id = _scene_identity(design, stim, shown, k)
+                if scene_id not in built:
+                    built.add(scene_id)
+                    for key, failure in _dry_run(design, stim, shown, k).items():
+                        dry_failures.setdefault(key, []).extend(failure)
     for (avatar, text), where in dry_failures.items():
         problems.append(_dry_run_problem(design, avatar, text, where))
     for ci in sorted(array_settings_missing):
@@ -442,8 +454,10 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     for (ci, text), where in unreadable.items():
         cond = design.conditions[ci]
         clips = ", ".join(sid for sid, _ in where)
-        what = (f"stimulus {where[0][0]!r}" if len(where) == 1
-                else f"{len(where)} stimuli ({clips})")
+        if cond.samples > 1:  # entries are "<stimulus> sample <k>"
+            what = f"stimulus {where[0][0]}" if len(where) == 1 else f"{len(where)} files ({clips})"
+        else:
+            what = f"stimulus {where[0][0]!r}" if len(where) == 1 else f"{len(where)} stimuli ({clips})"
         problems.append((f"conditions[{ci}].motion", f"cannot read the motion of {cond.id!r} for {what}, e.g. "
                          f"{where[0][1]}: {text}", _unreadable_fix(cond)))
     for ci, (file_fps, rate, clips) in wrong_rate.items():
@@ -457,7 +471,12 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     return problems
 
 
-def _scene_identity(design: Design, stim: Stimulus, conds: list[int]) -> tuple:
+def _motion_label(cond: Condition, sample: int) -> str:
+    """A condition's motion among a stimulus's media in the duration checks (one per sample)."""
+    return f"motion:{cond.id}" + (f":{sample}" if sample > 1 else "")
+
+
+def _scene_identity(design: Design, stim: Stimulus, conds: list[int], sample: int = 1) -> tuple:
     """What a stimulus's dry-run scene depends on: its files, their reading settings, avatar and length."""
     def fid(path: Path | None):
         return None if path is None else _file_id(path)
@@ -465,14 +484,16 @@ def _scene_identity(design: Design, stim: Stimulus, conds: list[int]) -> tuple:
     motions = []
     for ci in conds:
         c = design.conditions[ci]
-        src = fid(model_path(design, c)) if c.model is not None else fid(motion_path(design, c, stim))
+        src = fid(model_path(design, c)) if c.model is not None else fid(motion_path(design, c, stim, sample))
         motions.append((src, c.fps, c.representation, c.template, c.rotation_order, c.joints, c.degrees,
                         tuple(sorted(c.name_map.items())), c.motion_end, c.body_model))
     return (tuple(motions), fid(stim.audio), fid(stim.face), fid(stim.head), design.avatar_for(stim), stim.duration_s)
 
 
-def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str, str], list[tuple[int, str, str]]]:
-    """Build the scene of ``stim`` with conditions ``conds`` in its slots exactly as a trial does (the same
+def _dry_run(design: Design, stim: Stimulus, conds: list[int],
+             sample: int = 1) -> dict[tuple[str, str], list[tuple[int, str, str]]]:
+    """Build the scene of ``stim`` with conditions ``conds`` (showing their ``sample``) in its slots exactly as a
+    trial does (the same
     :func:`_assemble` and :func:`~studyapp.render.scene.build_trial_scene`, no GL); failures by
     ``(avatar, problem)`` -> ``[(condition index, stimulus id, file)]``.
 
@@ -495,7 +516,7 @@ def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str
             continue
         ids = tuple(design.conditions[ci].id for ci in chunk)
         plan = TrialPlan(trial_index=-1, stimulus_id=stim.id, slots=ids,  # type: ignore[arg-type]
-                         is_practice=False, is_attention_check=False, row=0)
+                         is_practice=False, is_attention_check=False, row=0, samples=(sample,) * len(ids))
         while chunk:
             try:
                 media = _assemble(design, plan)
@@ -514,7 +535,7 @@ def _dry_run(design: Design, stim: Stimulus, conds: list[int]) -> dict[tuple[str
             chunk = chunk[chunk.index(ci) + 1:]
             plan = TrialPlan(trial_index=-1, stimulus_id=stim.id,  # type: ignore[arg-type]
                              slots=tuple(design.conditions[c].id for c in chunk), is_practice=False,
-                             is_attention_check=False, row=0)
+                             is_attention_check=False, row=0, samples=(sample,) * len(chunk))
     return out
 
 

@@ -33,10 +33,15 @@ from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
 
 #: Bumped whenever the tables change; a database with another version is refused, never guessed at.
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: Older schema versions this version upgrades in place when it opens them (see ``_MIGRATIONS``).
 #: Version 2 added ``trials.trial_duration_s``; a version 1 trial keeps it NULL (not recorded).
-_MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",)}
+#: Version 3 added ``trials.sample_left/middle/right`` (the sample each slot showed, see ``samples`` in
+#: :class:`~studyapp.study.design.Condition`); an older trial keeps them NULL (not recorded).
+_MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",),
+               2: ("ALTER TABLE trials ADD COLUMN sample_left INTEGER",
+                   "ALTER TABLE trials ADD COLUMN sample_middle INTEGER",
+                   "ALTER TABLE trials ADD COLUMN sample_right INTEGER")}
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
@@ -103,6 +108,11 @@ CREATE TABLE trials (
     -- seconds the trial played (its timeline: the stimulus's duration_s, else the audio's length), last
     -- so a database upgraded from version 1 (ALTER TABLE ADD COLUMN) has the same column order
     trial_duration_s REAL,
+    -- the 1-based sample of its condition each slot showed (1 for a condition with one motion per stimulus),
+    -- after trial_duration_s for the same reason
+    sample_left INTEGER,
+    sample_middle INTEGER,
+    sample_right INTEGER,
     PRIMARY KEY (participant, trial_index)
 );
 CREATE TABLE responses (
@@ -178,8 +188,8 @@ class ParticipantRecord:
 class TrialRecord:
     """Everything stored about one answered trial besides the ranks themselves.
 
-    ``slots`` are condition ids in left, middle, right order; ``attention_passed`` is ``None`` for a
-    trial that is not an attention check.
+    ``slots`` are condition ids in left, middle, right order, ``samples`` the 1-based sample each slot
+    showed; ``attention_passed`` is ``None`` for a trial that is not an attention check.
     """
 
     participant: str
@@ -199,6 +209,7 @@ class TrialRecord:
     attention_passed: bool | None = None
     session: int | None = None
     trial_duration_s: float | None = None
+    samples: tuple[int | None, ...] = (1, 1, 1)
 
 
 @dataclass(frozen=True)
@@ -228,7 +239,7 @@ _WRITTEN: dict[str, tuple[str, ...]] = {
     "trials": ("participant", "trial_index", "session", "stimulus", "is_practice", "is_attention_check", "slot_left",
                "slot_middle", "slot_right", "shown_at", "answered_at", "response_time_s", "plays", "frames_shown",
                "dropped_frames", "refresh_hz", "worst_av_offset_ms", "attention_passed", "app_version",
-               "trial_duration_s"),
+               "trial_duration_s", "sample_left", "sample_middle", "sample_right"),
     "responses": ("participant", "trial_index", "criterion", "condition", "slot", "rank", "app_version"),
     "plays": ("participant", "trial_index", "session", "started", "ended", "completed", "app_version"),
     "questionnaire": ("participant", "item", "kind", "scale", "value", "app_version"),
@@ -582,7 +593,8 @@ class ResultsDB:
                "frames_shown": t.frames_shown, "dropped_frames": t.dropped_frames, "refresh_hz": t.refresh_hz,
                "worst_av_offset_ms": t.worst_av_offset_ms,
                "attention_passed": None if t.attention_passed is None else int(t.attention_passed),
-               "app_version": __version__, "trial_duration_s": t.trial_duration_s}
+               "app_version": __version__, "trial_duration_s": t.trial_duration_s,
+               "sample_left": t.samples[0], "sample_middle": t.samples[1], "sample_right": t.samples[2]}
         answers = [{"participant": t.participant, "trial_index": t.trial_index, "criterion": r.criterion,
                     "condition": r.condition, "slot": r.slot, "rank": float(r.rank), "app_version": __version__}
                    for r in responses]

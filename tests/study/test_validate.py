@@ -326,7 +326,10 @@ def test_cli_schedule_writes_plan_and_balance(study: Path, tmp_path: Path, capsy
     assert code == 0
     df = pd.read_csv(out)
     assert list(df.columns) == ["participant", "row", "trial_index", "stimulus", "is_practice",
-                                "is_attention_check", "slot_left", "slot_middle", "slot_right"]
+                                "is_attention_check", "slot_left", "slot_middle", "slot_right", "sample_left",
+                                "sample_middle", "sample_right"]
+    assert (df[["sample_left", "sample_middle", "sample_right"]] == 1).all().all()  # one motion per stimulus
+    assert "Samples shown" not in stdout
     assert len(df) == 6 * 4 and df.participant.nunique() == 6  # practice + 2 rated + 1 check each
     assert "Conditions (rows) x slots" in stdout and "left" in stdout
     from studyapp.study.schedule import balance_counts

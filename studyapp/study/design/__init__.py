@@ -7,7 +7,8 @@ problems becomes a :class:`Design` (:func:`load_design`).
 
 The format is documented by example in ``study_designs/example_beat.toml``. Paths in a design are relative
 to the design file. A condition's ``motion`` is a pattern: ``{stimulus}`` is replaced by the stimulus id and
-``{<tag>}`` by the stimulus's tag of that name (e.g. ``{speaker}``).
+``{<tag>}`` by the stimulus's tag of that name (e.g. ``{speaker}``). A condition with ``samples = N`` gives N
+files per stimulus, told apart by ``{sample}`` (1..N); the schedule picks one per participant and trial.
 
 The package, one job a module: :mod:`.schema` declares every key once (a dataclass field with the types it
 accepts and its default), :mod:`.model` holds the validated classes, :mod:`.parse` reads a file into them,
@@ -29,8 +30,8 @@ import json
 from pathlib import Path
 
 from studyapp.study.design.blinding import conditions_named_in, visible_text_leaks
-from studyapp.study.design.files import (design_hash, model_path, motion_path, pattern_fields, referenced_files,
-                                         resolve)
+from studyapp.study.design.files import (SAMPLE_FIELD, design_hash, fill_sample, has_sample_field, model_path, motion_key, motion_path,
+                                         pattern_fields, referenced_files, resolve)
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
                                          DesignError, Display, Playback, Problem, QuestionItem, Stimulus)
 from studyapp.study.design.parse import REPRESENTATIONS, TABLES, condition_from_settings, parse_design
@@ -39,7 +40,7 @@ from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUIL
                                           SLOT_LABELS)
 
 __all__ = [
-    "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
+    "SAMPLE_FIELD", "fill_sample", "has_sample_field", "motion_key", "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
     "MOTION_SUFFIXES", "ORDERINGS", "QUESTION_KINDS", "REPRESENTATIONS", "SLOT_ASSIGNMENTS", "SLOT_LABELS", "TABLES",
     "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Display", "Playback", "Problem", "QuestionItem",
     "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",

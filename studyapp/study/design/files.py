@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import string
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
@@ -33,21 +34,73 @@ def resolve(design: Design | Path | str, relpath: str | Path) -> Path:
     return p if p.is_absolute() else (base / p).resolve()
 
 
+#: The placeholder of a condition's sample number (``samples = N``: 1..N).
+SAMPLE_FIELD = "{sample}"
+
+
+def fill_sample(pattern: str, sample: int) -> str:
+    """``pattern`` with ``{sample}`` replaced by the sample number, before any other placeholder is filled.
+
+    Filling it first lets ``{sample}`` also be part of a tag's name: a bundle names each sample's file by
+    its own opaque tag, ``{c_1f2e3d_s{sample}}`` (see :mod:`studyapp.study.bundle`).
+
+    >>> fill_sample("gen/{stimulus}/sample_{sample}.npz", 3)
+    'gen/{stimulus}/sample_3.npz'
+    >>> fill_sample("media/m_{c_ab_s{sample}}.bvh", 2)
+    'media/m_{c_ab_s2}.bvh'
+    >>> fill_sample("odd/{{sample}}/{stimulus}.bvh", 2)   # escaped braces: a folder literally named {sample}
+    'odd/{{sample}}/{stimulus}.bvh'
+    """
+    return _SAMPLE_RE.sub(lambda m: m.group(1) + str(int(sample)), pattern)
+
+
+# ``{sample}`` not inside escaped braces: preceded by an even number of ``{`` (``{{`` is a literal brace).
+_SAMPLE_RE = re.compile(r"(?<!\{)((?:\{\{)*)\{sample\}")
+
+
+def has_sample_field(pattern: str) -> bool:
+    """Whether a pattern uses ``{sample}`` (escaped ``{{sample}}`` is a literal name, not the placeholder).
+
+    >>> has_sample_field("a/{stimulus}_{sample}.bvh"), has_sample_field("a/{{sample}}/{stimulus}.bvh")
+    (True, False)
+    """
+    return _SAMPLE_RE.search(pattern) is not None
+
+
 def pattern_fields(pattern: str) -> list[str]:
-    """Placeholder names used in a motion pattern (``{stimulus}``, ``{speaker}``, ...)."""
+    """Placeholder names used in a motion pattern (``{stimulus}``, ``{speaker}``, ...), ``{sample}`` aside.
+
+    >>> pattern_fields("gen/{speaker}/{stimulus}_{sample}.bvh")
+    ['speaker', 'stimulus']
+    """
     try:
-        return [f for _, f, _, _ in string.Formatter().parse(pattern) if f is not None]
+        return [f for _, f, _, _ in string.Formatter().parse(fill_sample(pattern, 1)) if f is not None]
     except ValueError:
         return ["<unbalanced braces>"]
 
 
-def motion_path(design: Design, condition: Condition | str, stimulus: Stimulus | str) -> Path:
-    """The motion file of one condition for one stimulus (the condition's pattern filled in)."""
+def motion_path(design: Design, condition: Condition | str, stimulus: Stimulus | str, sample: int = 1) -> Path:
+    """The motion file of one condition for one stimulus and sample (the condition's pattern filled in).
+
+    ``sample`` is 1-based (``1..condition.samples``); a condition with one sample ignores it.
+    """
     cond = design.condition(condition) if isinstance(condition, str) else condition
     stim = design.stimulus(stimulus) if isinstance(stimulus, str) else stimulus
     if cond.motion is None:
         raise ValueError(f"condition {cond.id!r} is a live model ({cond.model}); it has no motion files")
-    return resolve(design, cond.motion.format(**{**stim.tags, "stimulus": stim.id}))
+    if not 1 <= sample <= max(1, cond.samples):
+        raise ValueError(f"condition {cond.id!r} has samples 1..{cond.samples}, not {sample}")
+    return resolve(design, fill_sample(cond.motion, sample).format(**{**stim.tags, "stimulus": stim.id}))
+
+
+def motion_key(ci: int, stimulus_id: str, sample: int, samples: int) -> str:
+    """Key of a motion file in :func:`referenced_files`: ``conditions[i].motion[<stimulus>]``, with
+    ``:<sample>`` after the stimulus id when the condition has several samples.
+
+    >>> motion_key(0, "clip01", 1, 1), motion_key(2, "clip01", 3, 5)
+    ('conditions[0].motion[clip01]', 'conditions[2].motion[clip01:3]')
+    """
+    return f"conditions[{ci}].motion[{stimulus_id}{f':{sample}' if samples > 1 else ''}]"
 
 
 def model_path(design: Design, condition: Condition) -> Path:
@@ -92,8 +145,8 @@ def design_hash(design_bytes: bytes, files: dict[str, Path]) -> str:
 def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str, Path]:
     """Every file a design refers to, keyed by the design key it comes from (``stimuli[0].audio``, ...).
 
-    Motion files are keyed ``conditions[i].motion[<stimulus id>]``. With ``col`` given, missing files are
-    reported there, one problem per file.
+    Motion files are keyed by :func:`motion_key` (every sample of a condition with ``samples > 1``). With
+    ``col`` given, missing files are reported there, one problem per file.
     """
     files: dict[str, Path] = {}
     for i, s in enumerate(design.stimuli):
@@ -112,7 +165,8 @@ def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str
         if c.motion is not None and pattern_fields(c.motion):
             for s in design.stimuli:
                 try:
-                    files[f"conditions[{i}].motion[{s.id}]"] = motion_path(design, c, s)
+                    for k in range(1, max(1, c.samples) + 1):
+                        files[motion_key(i, s.id, k, c.samples)] = motion_path(design, c, s, k)
                 except (KeyError, IndexError, ValueError) as exc:
                     if col is not None:
                         col.add(f"conditions[{i}].motion", f"pattern {c.motion!r} uses {exc} but stimulus "
@@ -128,8 +182,10 @@ def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str
                 what = key.split(".")[-1].split("[")[0]
                 if ".motion[" in key:
                     ckey, stim = key[:-1].split(".motion[")
+                    stim, _, sample = stim.partition(":")
                     cond = design.conditions[int(ckey.split("[")[1].rstrip("]"))].id
-                    col.add(f"{ckey}.motion", f"motion file of condition {cond!r} for stimulus {stim!r} not "
+                    which = f", sample {sample}," if sample else ""
+                    col.add(f"{ckey}.motion", f"motion file of condition {cond!r} for stimulus {stim!r}{which} not "
                             f"found: {p}", "generate or copy it there, or fix the pattern")
                 else:
                     col.add(key, f"{what} file not found: {p}", "fix the path (relative to the design file)")

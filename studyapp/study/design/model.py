@@ -38,6 +38,10 @@ class Condition:
     motion_end: what the motion does when it ends before the trial (see :mod:`studyapp.study.timeline`):
         ``"hold"`` its last frame or ``"loop"`` from its first; None (default): ``validate`` refuses a motion
         shorter than the trial.
+    samples: how many motion files the condition gives per stimulus (stochastic models; the GENEA
+        Leaderboard asks for 5). With ``samples = N > 1`` the ``motion`` pattern must hold ``{sample}``, which
+        takes the values ``1..N`` (1-based, as GENEA names its files ``sample_1`` .. ``sample_5``); the schedule
+        picks one per participant and trial, balanced over participants, and every answer records it.
     body_model: the user's own SMPL/SMPL-H/SMPL-X model ``.npz`` (``J_regressor``, ``v_template``,
         ``shapedirs``) giving SMPL-family motion files their rest skeleton, shaped by each file's ``betas``;
         without it a built-in skeleton of average proportions is used. SMPL-family files need no
@@ -56,6 +60,7 @@ class Condition:
     degrees: bool = key(BOOL, default=True)
     motion_end: str | None = key(STR, default=None)
     body_model: str | None = key(STR, default=None)
+    samples: int = key(INT, default=1)
 
     @property
     def is_live(self) -> bool:

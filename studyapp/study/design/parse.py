@@ -15,7 +15,7 @@ from studyapp import tomlfile
 from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
 from studyapp.study.design.blinding import visible_text_leaks
 from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
-from studyapp.study.design.files import design_hash, pattern_fields, referenced_files, resolve
+from studyapp.study.design.files import design_hash, has_sample_field, pattern_fields, referenced_files, resolve
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design, Display,
                                              Playback, Problem, QuestionItem, Stimulus)
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
@@ -113,6 +113,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
                 if k in e:
                     col.add(f"{key}.{k}", f"`{k}` is for NPZ/NPY motion arrays; {e['motion']!r} is not one",
                             f"remove {k}")
+    samples = _samples(col, key, e) if pattern else 1  # one named file (`view`) has no samples
     joints = e.get("joints")
     if joints is not None and (not joints or not all(isinstance(j, str) for j in joints)):
         col.add(f"{key}.joints", "must list template joint names (strings), one per array joint, in order",
@@ -134,9 +135,30 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
             name_map={k: v for k, v in nm.items() if isinstance(v, str)},
             joints=tuple(joints) if joints else None, degrees=bool(e.get("degrees", key_default(Condition, "degrees"))),
             motion_end=motion_end,
-            body_model=e.get("body_model"),
+            body_model=e.get("body_model"), samples=samples,
         )
     return None
+
+
+def _samples(col: Collector, key: str, e: dict) -> int:
+    """The condition's ``samples`` (1 when absent or wrong), checked against its pattern's ``{sample}``."""
+    samples = e.get("samples", key_default(Condition, "samples"))
+    has_field = "motion" in e and has_sample_field(e["motion"])
+    if samples < 1:
+        col.add(f"{key}.samples", f"must be 1 or more, got {samples}", "the number of motion files per stimulus, e.g. 5")
+        return 1
+    if "model" in e and "samples" in e and "motion" not in e:
+        col.add(f"{key}.samples", "a live model gives one motion per stimulus; `samples` is for motion files",
+                "remove samples")
+        return 1
+    if samples > 1 and "motion" in e and not has_field:
+        col.add(f"{key}.samples", f"samples = {samples} but the pattern {e['motion']!r} has no {{sample}} "
+                "placeholder, so every sample would be the same file",
+                'put {sample} (1..samples) in the pattern, e.g. motion = "gen/{stimulus}/sample_{sample}.npz"')
+    if has_field and "samples" not in e:
+        col.add(f"{key}.motion", f"pattern {e['motion']!r} has a {{sample}} placeholder but the condition gives no "
+                "`samples`", "add samples = N (how many files per stimulus; {sample} takes 1..N)")
+    return samples
 
 
 def is_smpl_file(path: Path) -> bool:
