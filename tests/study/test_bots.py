@@ -13,7 +13,7 @@ from studyapp.study.design import load_design
 from studyapp.study.schedule import TrialPlan
 from studyapp.study.session import normalise_ranks
 from studyapp.study.storage import ResultsDB
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 PLAN = TrialPlan(0, "s1", ("b", "c", "a"), False, False, 0)
 CRITS = ["realism", "synchronization"]

@@ -15,7 +15,7 @@ from studyapp.study.bundle import make_bundle, merge_results, open_bundle, remot
 from studyapp.study.design import load_design
 from studyapp.study.export import export_dataframe
 from studyapp.study.storage import ResultsDB
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 REAL_CONDITIONS = ("synced", "lagged", "static")
 

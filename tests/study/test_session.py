@@ -13,7 +13,7 @@ from studyapp.study.session import (
     ENDED_EARLY_MESSAGE, ParticipantFinishedError, RankingError, Session, SessionError, State,
 )
 from studyapp.study.storage import ResultsDB
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 PERM = {0: 1, 1: 2, 2: 3}
 

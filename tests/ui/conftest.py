@@ -27,7 +27,7 @@ def tiny_study(tmp_path):
     """A complete 1-second-clip study (practice + 2 clips + questionnaire) and its results database."""
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "study", n_stimuli=2, seconds=3.0, questionnaire=True)
     design = load_design(_model_named_conditions(path))
@@ -51,7 +51,7 @@ def tied_study(tmp_path):
     """A 2-clip study (practice + 2 clips) whose design allows ties (``[playback] allow_ties = true``)."""
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "tied", n_stimuli=2, seconds=2.0, allow_ties=True)
     design = load_design(_model_named_conditions(path))

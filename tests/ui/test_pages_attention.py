@@ -99,7 +99,7 @@ def attention_study(tmp_path):
     """Practice, two clips and one attention check; one failed check ends the session."""
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "att", n_stimuli=2, seconds=1.0, attention_check=True,
                                  questionnaire=True, max_attention_failures=0)
