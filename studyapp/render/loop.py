@@ -8,7 +8,7 @@ sound device, a virtual clock offscreen that the :class:`VirtualTimer` moves by 
 (no real time passes while drawing, so a 10 s clip renders in as many frames as it has, however slow).
 
 The participant window (:class:`studyapp.ui.app.WindowRunner`), the offscreen scripted participant
-(:mod:`studyapp.ui.bot`), ``studyapp view`` and video/still export (:mod:`studyapp.render.video`) all
+(:mod:`studyapp.bots.ui_driver`), ``studyapp view`` and video/still export (:mod:`studyapp.render.video`) all
 run through it. :class:`ScenePlayer` is the drawing function of the last two: one scene played on a
 media clock with the same A/V bookkeeping as a trial (:mod:`studyapp.render.frames`).
 

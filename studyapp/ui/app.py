@@ -3,7 +3,7 @@
 :class:`StudyApp` is the whole UI for one GL context and is driven one frame at a time by the frame
 loop (:class:`studyapp.render.loop.FrameLoop`), so the same code runs in a GLFW window (:func:`run_window`,
 :class:`WindowRunner`, on the audio or wall clock) and offscreen for the scripted participant
-(:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`, on a virtual clock). Each frame:
+(:mod:`studyapp.bots.ui_driver`, on a virtual clock). Each frame:
 
 1. queued input (:mod:`studyapp.ui.input`) goes to ImGui;
 2. the screen for the session's state builds the UI and, on a trial, asks for the 3D view at the media
@@ -394,22 +394,3 @@ def run_window(design: Any, db: Any, participant_id: str, fullscreen: bool = Fal
     print(f"The window was closed before the end; run the same command again to continue "
           f"(participant {session.participant_id}).", flush=True)
     return 1
-
-
-def run_offscreen_bot(design: Any, db: Any, participant_id: str, policy: str, seed: int,
-                      out_dir: Path | str | None = None, max_frames_per_trial: int = 400,
-                      size: tuple[int, int] = (1280, 720)) -> int:
-    """A scripted participant through the real session and UI code, without a display.
-
-    Frames are rendered offscreen (EGL); a virtual silent clock jumps ahead so a 10 s clip takes a few
-    frames; clicks, drags and key presses are synthesized through :mod:`studyapp.ui.input`. With
-    ``out_dir`` a PNG of every screen is written there. Returns 0 when the session finished.
-    """
-    from studyapp.ui.bot import UIBot
-
-    bot = UIBot(design, db, participant_id, policy, seed, size=size, out_dir=out_dir,
-                max_frames_per_trial=max_frames_per_trial)
-    try:
-        return bot.run()
-    finally:
-        bot.close()

@@ -10,7 +10,7 @@ import pytest
 
 from studyapp.resources import demo_design, designs_dir
 from studyapp.study import design as D
-from studyapp.study.careful import careful_scores
+from studyapp.bots.careful import careful_scores
 from studyapp.study.design import load_design, validate_design
 from studyapp.study.schedule import n_rows, participant_schedule
 from studyapp.study.stimuli import load_trial_media

@@ -7,7 +7,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from studyapp.study.bots import run_bot_session
+from studyapp.bots.session_driver import run_bot_session
 from studyapp.study.design import load_design
 from studyapp.study.export import CORE_COLUMNS, export_dataframe, questionnaire_dataframe
 from studyapp.study.storage import ResultsDB

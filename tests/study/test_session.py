@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from studyapp.errors import InputError
-from studyapp.study.bots import run_bot_session
+from studyapp.bots.session_driver import run_bot_session
 from studyapp.study.design import load_design
 from studyapp.study.schedule import participant_schedule
 from studyapp.study.session import (

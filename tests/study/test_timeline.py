@@ -102,7 +102,7 @@ def _downgrade_to_v1(path: Path) -> None:
 
 def test_every_trial_stores_its_duration_and_old_databases_stay_readable(tmp_path: Path) -> None:
     from results_analysis.sqlite_schema import tidy_from_connection
-    from studyapp.study.bots import run_bot_session
+    from studyapp.bots.session_driver import run_bot_session
     from studyapp.study.design import load_design
     from studyapp.study.export import export_dataframe
     from studyapp.study.storage import SCHEMA_VERSION, ResultsDB

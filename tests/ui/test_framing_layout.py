@@ -1,6 +1,6 @@
 """Figures large enough to judge gestures, and text that fits, in the real participant screens.
 
-The scripted participant (:class:`~studyapp.ui.bot.UIBot`) drives the real UI offscreen; the checks look at
+The scripted participant (:class:`~studyapp.bots.ui_driver.UIBot`) drives the real UI offscreen; the checks look at
 what it drew: where the 3D view is, the hand's pixels in it, and every string's rectangle.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from studyapp.ui.bot import UIBot
+from studyapp.bots.ui_driver import UIBot
 
 pytestmark = pytest.mark.gl
 

@@ -6,9 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from studyapp.study.bots import (
-    WEAK_RANKINGS, _ranks_from_scores, choose_ranking, run_bot_session, trial_rng,
-)
+from studyapp.bots.policies import WEAK_RANKINGS, _ranks_from_scores, choose_ranking, trial_rng
+from studyapp.bots.session_driver import run_bot_session
 from studyapp.study.design import load_design
 from studyapp.study.schedule import TrialPlan
 from studyapp.study.session import normalise_ranks
