@@ -15,15 +15,20 @@ calls :func:`run_bot` only.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 from studyapp.bots.policies import POLICIES
+
+if TYPE_CHECKING:
+    from studyapp.study.design import Design
+    from studyapp.study.schedule import TrialPlan
+    from studyapp.study.storage import ResultsDB
 
 __all__ = ["POLICIES", "run_bot"]
 
 
-def run_bot(design: Any, db: Any, participant_id: str, policy: str, seed: int = 0, *, render: bool,
-            out_dir: Path | str | None = None, on_trial: Callable[[Any], None] | None = None,
+def run_bot(design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int = 0, *, render: bool,
+            out_dir: Path | str | None = None, on_trial: Callable[[TrialPlan], None] | None = None,
             pace_s: float = 0.0) -> int:
     """Run (or resume) one scripted participant; 0 when the session finished.
 

@@ -7,26 +7,31 @@ policy as the offscreen participant's (:mod:`studyapp.bots.policies`).
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from studyapp.bots.policies import POLICIES, choose_ranking, questionnaire_answers, trial_rng
 from studyapp.errors import StudyappError
 from studyapp.study.session import PlayStats, Session, State
 
+if TYPE_CHECKING:
+    from studyapp.study.design import Design
+    from studyapp.study.schedule import TrialPlan
+    from studyapp.study.storage import ResultsDB
+
 
 def run_bot_session(
-    design: Any,
-    db: Any,
+    design: Design,
+    db: ResultsDB,
     participant: str,
     policy: str,
     seed: int = 0,
-    on_trial: Callable[[Any], None] | None = None,
+    on_trial: Callable[[TrialPlan], None] | None = None,
     *,
     row: int | None = None,
     groups: dict[str, str] | None = None,
     allow_rerun: bool = False,
     pace_s: float = 0.0,
-    plans: Sequence[Any] | None = None,
+    plans: Sequence[TrialPlan] | None = None,
     n_rows: int | None = None,
 ) -> Session:
     """Run (or resume) one participant with a scripted policy; returns the finished :class:`Session`.

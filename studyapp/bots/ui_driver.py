@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,13 @@ from studyapp.bots import policies
 from studyapp.errors import StudyappError
 from studyapp.ui.app import StudyApp
 from studyapp.ui.input import digit_key
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from studyapp.study.design import Design
+    from studyapp.study.storage import ResultsDB
+    from studyapp.ui.seams import ParticipantSession
 
 #: Rendered frames per clip play (virtual time jumps duration / this per frame).
 FRAMES_PER_PLAY = 8
@@ -47,9 +54,9 @@ def save_png(rgb: np.ndarray, path: Path) -> None:
 class UIBot:
     """Drives a :class:`StudyApp` offscreen, one rendered frame per step."""
 
-    def __init__(self, design: Any, db: Any, participant_id: str, policy: str, seed: int, *,
+    def __init__(self, design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int, *,
                  size: tuple[int, int] = (1280, 720), out_dir: Path | str | None = None,
-                 max_frames_per_trial: int = 400, session: Any = None, fps: float = 60.0,
+                 max_frames_per_trial: int = 400, session: ParticipantSession | None = None, fps: float = 60.0,
                  frames_per_play: int | None = FRAMES_PER_PLAY) -> None:
         from studyapp.render.context import create_offscreen_context
         from studyapp.render.loop import FrameLoop, OffscreenFrames, VirtualTimer
@@ -93,7 +100,7 @@ class UIBot:
     def frames(self) -> int:
         return self.loop.frames
 
-    def _draw(self, fbo: Any, size: tuple[int, int], now: float) -> None:
+    def _draw(self, fbo: moderngl.Framebuffer, size: tuple[int, int], now: float) -> None:
         # Fast mode: the clip advances first by a fraction of its length, then the frame is drawn and
         # "flipped" at that same instant (virtual time does not pass while drawing).
         view = self.app._view
@@ -311,7 +318,7 @@ class UIBot:
         self.click("submit")
 
 
-def run_offscreen_bot(design: Any, db: Any, participant_id: str, policy: str, seed: int,
+def run_offscreen_bot(design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int,
                       out_dir: Path | str | None = None, max_frames_per_trial: int = 400,
                       size: tuple[int, int] = (1280, 720)) -> int:
     """A scripted participant through the real session and UI code, without a display.

@@ -35,6 +35,9 @@ from studyapp.audio.clock import MediaClock, SilentClock
 from studyapp.render.frames import FlipPredictor, PlayRecorder, clock_media_time
 
 if TYPE_CHECKING:
+    import moderngl
+
+    from studyapp.render.context import Window
     from studyapp.render.renderer import Renderer
     from studyapp.render.scene import TrialScene
 
@@ -57,7 +60,7 @@ class FrameTarget(Protocol):
 class WindowTarget:
     """A :class:`~studyapp.render.context.Window`: events are polled before each frame, presenting swaps."""
 
-    def __init__(self, window: Any) -> None:
+    def __init__(self, window: Window) -> None:
         self.window = window
 
     @property
@@ -85,7 +88,7 @@ class WindowTarget:
 class OffscreenFrames:
     """An offscreen framebuffer (:class:`~studyapp.render.context.OffscreenTarget`) of a fixed size."""
 
-    def __init__(self, ctx: Any, size: tuple[int, int]) -> None:
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
         from studyapp.render.context import OffscreenTarget
 
         self.target = OffscreenTarget(ctx, size)

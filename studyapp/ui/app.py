@@ -111,7 +111,7 @@ class StudyApp:
     @property
     def results_file(self) -> Path | None:
         """The results file a remote (bundle) run wrote at the end (set by the session), else None."""
-        return getattr(self.session, "results_file", None)
+        return self.session.results_file
 
     # -- resources ---------------------------------------------------------------------------------
     @property
