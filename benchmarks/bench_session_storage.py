@@ -34,9 +34,9 @@ def commit_ms(folder: Path, sync: str, n: int = 200) -> float:
 
 
 def main() -> int:
+    from fixtures.synthetic import write_synthetic_study
     from studyapp.bots.session_driver import run_bot_session
     from studyapp.study.design import load_design
-    from fixtures.synthetic import write_synthetic_study
     from studyapp.study.export import export_dataframe
 
     with tempfile.TemporaryDirectory() as tmp:
