@@ -17,8 +17,17 @@ from results_analysis.errors import AnalysisInputError
 _NEEDED = {"responses": {"participant", "trial_index", "criterion", "condition", "rank"},
            "trials": {"participant", "trial_index", "stimulus"}}
 
+#: The tidy table's first columns, in order; one column per stimulus tag and per participant group follows
+#: (sorted, a name never shadowing an earlier column), then :data:`TAIL_COLUMNS`.
+CORE_COLUMNS = (
+    "participant", "session", "trial_index", "stimulus", "criterion", "condition", "slot", "rank", "plays",
+    "response_time_s", "is_practice", "is_attention_check", "attention_passed", "trial_duration_s",
+)
+TAIL_COLUMNS = ("design_hash", "app_version")
+
 # Criteria in the order the study asked them (answers are stored in that order, so the first stored row of
-# each criterion tells it), as `studyapp export` writes them: the report's sections follow this order.
+# each criterion tells it): the analysis tables and figures follow the row order, and a reader expects
+# "realism, synchronization, diversity" as the participants saw them, not the alphabet.
 _QUERY = """
 WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.rowid AS _rowid, r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition,
@@ -30,8 +39,15 @@ ORDER BY r.participant, r.trial_index, crit.pos, r.slot
 """
 
 
-def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:
-    """The tidy frame (one row per participant x trial x criterion x condition) of an open database."""
+def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: bool = True,
+               rowid: bool = False) -> pd.DataFrame:
+    """The tidy table of a results database, exactly as ``studyapp export`` writes it: one row per
+    participant x trial x criterion x condition, :data:`CORE_COLUMNS`, the tag and group columns, then
+    :data:`TAIL_COLUMNS`. ``attention_passed`` is empty (None) for trials that are not attention checks.
+
+    This is the one place the query lives: ``studyapp export`` and :func:`tidy_from_connection` both call it.
+    ``rowid``: keep each answer's row id in the database as a first column ``_rowid`` (for messages).
+    """
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type IN ('table','view')")}
     for table, cols in _NEEDED.items():
         if table not in tables:
@@ -40,23 +56,38 @@ def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFr
         if cols - have:
             raise AnalysisInputError(path, f"table {table}", f"missing column(s) {', '.join(sorted(cols - have))}")
     # Version 2 records how long each trial played; a version 1 file (read as it is, never upgraded here)
-    # has no such column, and the frame gets it empty, as `studyapp export` writes it for such trials.
+    # has no such column, and the table gets it empty.
     trial_cols = {r[1] for r in con.execute("PRAGMA table_info(trials)")}
     duration = "t.trial_duration_s" if "trial_duration_s" in trial_cols else "NULL"
     df = pd.read_sql_query(_QUERY.format(trial_duration=duration), con)
+    for col in ("is_practice", "is_attention_check"):
+        df[col] = df[col].astype(int).astype(bool)
+    df["attention_passed"] = df["attention_passed"].map(lambda v: None if pd.isna(v) else bool(v)).astype(object)
+    extra: list[str] = []
+    for table, query, key in (("stimuli", "SELECT id, tags FROM stimuli", "stimulus"),
+                              ("participants", "SELECT id, groups FROM participants", "participant")):
+        if table not in tables:
+            continue
+        mapping = _json_columns(con, query, path, f"{table}.{query.split()[2]}")
+        for name in sorted({k for d in mapping.values() for k in d}):
+            if name in df.columns or name in extra:
+                continue  # never shadow a core column (or a tag) with a group of the same name
+            df[name] = df[key].map(lambda v, n=name: mapping.get(str(v), {}).get(n))
+            extra.append(name)
+    df = df[(["_rowid"] if rowid else []) + list(CORE_COLUMNS) + extra + list(TAIL_COLUMNS)]
+    if not include_practice:
+        df = df[~df["is_practice"]].reset_index(drop=True)
+    return df
+
+
+def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:
+    """The tidy frame the analysis reads: :func:`tidy_table`, each row's place in the database in ``_where``
+    (for messages), and ``attention_passed`` true where there was nothing to fail."""
+    df = tidy_table(con, path, rowid=True)
     df["_where"] = [f"responses row {r} (participant {p}, trial {t}, criterion {c})"
-                    for r, p, t, c in zip(df["_rowid"], df["participant"], df["trial_index"], df["criterion"])]
-    df = df.drop(columns=["_rowid"])
+                    for r, p, t, c in zip(df.pop("_rowid"), df["participant"], df["trial_index"], df["criterion"])]
     # A trial that is not an attention check has attention_passed NULL: nothing to fail.
-    df["attention_passed"] = df["attention_passed"].fillna(1).astype(int).astype(bool)
-    df["is_practice"] = df["is_practice"].astype(int).astype(bool)
-    df["is_attention_check"] = df["is_attention_check"].astype(int).astype(bool)
-    if "stimuli" in tables:
-        tags = _json_columns(con, "SELECT id, tags FROM stimuli", path, "stimuli.tags")
-        df = _spread(df, "stimulus", tags)
-    if "participants" in tables:
-        groups = _json_columns(con, "SELECT id, groups FROM participants", path, "participants.groups")
-        df = _spread(df, "participant", groups)
+    df["attention_passed"] = df["attention_passed"].map(lambda v: True if v is None else bool(v)).astype(bool)
     return df
 
 
@@ -103,12 +134,3 @@ def _json_columns(con: sqlite3.Connection, query: str, path, where: str) -> dict
             raise AnalysisInputError(path, f"{where} of {key}", f"not valid JSON ({exc})") from exc
         out[str(key)] = {str(k): str(v) for k, v in (value or {}).items()}
     return out
-
-
-def _spread(df: pd.DataFrame, key: str, mapping: dict[str, dict[str, str]]) -> pd.DataFrame:
-    names = sorted({k for d in mapping.values() for k in d})
-    for name in names:
-        if name in df.columns:
-            continue  # never shadow a core column with a tag of the same name
-        df[name] = df[key].map(lambda v, n=name: mapping.get(str(v), {}).get(n))
-    return df

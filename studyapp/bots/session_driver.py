@@ -1,8 +1,9 @@
 """A scripted participant at the session level: the real :class:`~studyapp.study.session.Session`, no rendering.
 
-What ``studyapp run --no-render --bot P`` and the demo's simulated panel use: fast (no frames), yet every
-answer goes through the same session methods and storage as a participant's, and is chosen by the same
-policy as the offscreen participant's (:mod:`studyapp.bots.policies`).
+What ``studyapp run --no-render --bot P`` and the demo's simulated panel use: fast (no frames), yet each
+trial's scene is built by the participant's own scene builder (on the CPU), every answer goes through the
+same session methods and storage as a participant's, and is chosen by the same policy as the offscreen
+participant's (:mod:`studyapp.bots.policies`).
 """
 from __future__ import annotations
 
@@ -49,13 +50,15 @@ def run_bot_session(
         session.record_env_check({"bot": policy, "bot_seed": int(seed)})
         cond_order = [c.id for c in design.conditions]
         ties = bool(getattr(design.playback, "allow_ties", False))
-        while (plan := session.current_trial()) is not None:
-            media = None
-            if policy == "careful":
-                from studyapp.study.stimuli import load_trial_media
+        from studyapp.render.scene import build_trial_scene
+        from studyapp.study.stimuli import load_trial_media
 
-                media = load_trial_media(design, plan)
-            session.record_play_started()
+        while (plan := session.current_trial()) is not None:
+            media = load_trial_media(design, plan)
+            # The scene a participant's window would build (retargeting, avatar, media cut to the timeline),
+            # on the CPU: a pilot without rendering fails where a participant would, and plays what they play.
+            scene = build_trial_scene(None, media)
+            session.record_play_started(duration_s=scene.duration)
             if pace_s > 0:
                 time.sleep(pace_s)
             session.record_play_finished(True, PlayStats())

@@ -544,49 +544,21 @@ def _merge_one(db: Any, path: Path, extra_keys: dict[str, dict]) -> str:
         raise StudyappError(f"expected one participant in the file, found {len(parts)}")
     p = parts[0]
     pid = p["id"]
-    if db.participant(pid) is not None:
-        raise StudyappError(f"participant {pid!r} is already in {db.path} (duplicate: this file was merged "
-                            "before, or two participants used the same id)")
-    dh = db.design_hash
     groups = json.loads(p["groups"])
-    if key.get("bundle_hash") != dh:
+    if key.get("bundle_hash") != db.design_hash:
         groups.setdefault("remote", "yes")
         groups["bundle"] = h[:12]
-    with db.transaction() as con:
-        con.execute("INSERT INTO participants (id, latin_row, groups, status, created, completed, design_hash, "
-                    "app_version) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                    (pid, p["latin_row"], json.dumps(groups, sort_keys=True), p["status"], p["created"],
-                     p.get("completed"), dh, p["app_version"]))
-        session_ids: dict[int, int] = {}
-        for s in payload["sessions"]:
-            cur = con.execute("INSERT INTO sessions (participant, started, ended, app_version, design_hash, machine) "
-                              "VALUES (?, ?, ?, ?, ?, ?)",
-                              (pid, s["started"], s["ended"], s["app_version"], dh, s["machine"]))
-            session_ids[s["id"]] = int(cur.lastrowid)
-        for t in payload["trials"]:
-            con.execute(
-                "INSERT INTO trials (participant, trial_index, session, stimulus, is_practice, is_attention_check, "
-                "slot_left, slot_middle, slot_right, shown_at, answered_at, response_time_s, plays, frames_shown, "
-                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version, "
-                "trial_duration_s) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (pid, t["trial_index"], session_ids.get(t["session"]), smap.get(t["stimulus"], t["stimulus"]),
-                 t["is_practice"], t["is_attention_check"], cond(t["slot_left"]), cond(t["slot_middle"]),
-                 cond(t["slot_right"]), t["shown_at"], t["answered_at"], t["response_time_s"], t["plays"],
-                 t["frames_shown"], t["dropped_frames"], t["refresh_hz"], t["worst_av_offset_ms"],
-                 t["attention_passed"], dh, t["app_version"], t.get("trial_duration_s")))
-        con.executemany(
-            "INSERT INTO responses (participant, trial_index, criterion, condition, slot, rank, design_hash, app_version) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-            [(pid, r["trial_index"], r["criterion"], cond(r["condition"]), r["slot"], r["rank"], dh, r["app_version"])
-             for r in payload["responses"]])
-        con.executemany(
-            "INSERT INTO plays (participant, trial_index, session, started, ended, completed, design_hash, app_version) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-            [(pid, r["trial_index"], session_ids.get(r["session"]), r["started"], r["ended"], r["completed"], dh,
-              r["app_version"]) for r in payload["plays"]])
-        con.executemany(
-            "INSERT INTO questionnaire (participant, item, kind, scale, value, design_hash, app_version) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?)",
-            [(pid, q["item"], q.get("kind", "likert"), q.get("scale"), q["value"], dh, q["app_version"])
-             for q in payload["questionnaire"]])
+    from studyapp.study.storage import DuplicateAnswerError
+
+    slots = ("slot_left", "slot_middle", "slot_right")
+    try:
+        db.import_participant(
+            {**p, "groups": json.dumps(groups, sort_keys=True)},
+            payload["sessions"],
+            [{**t, "stimulus": smap.get(t["stimulus"], t["stimulus"]), **{k: cond(t[k]) for k in slots}}
+             for t in payload["trials"]],
+            [{**r, "condition": cond(r["condition"])} for r in payload["responses"]],
+            payload["plays"], payload["questionnaire"])
+    except DuplicateAnswerError as exc:  # merged before, or two participants used the same id
+        raise StudyappError(str(exc)) from None
     return pid

@@ -24,28 +24,12 @@ from pathlib import Path
 
 import pandas as pd
 
+from results_analysis import sqlite_schema
 from studyapp.study.storage import ResultsDB
 
-CORE_COLUMNS = (
-    "participant", "session", "trial_index", "stimulus", "criterion", "condition", "slot", "rank", "plays",
-    "response_time_s", "is_practice", "is_attention_check", "attention_passed", "trial_duration_s",
-)
-TAIL_COLUMNS = ("design_hash", "app_version")
-
-# Criteria keep the design's order (the order a trial's answers are stored in, so the first stored row of
-# each criterion tells it): the analysis tables and figures follow the row order, and a reader expects
-# "realism, synchronization, diversity" as the participants saw them, not the alphabet.
-_QUERY = """
-WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
-SELECT r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition, r.slot, r.rank,
-       t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed, t.trial_duration_s,
-       r.design_hash, r.app_version, c.position AS _cond_pos
-FROM responses r
-JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
-JOIN crit ON crit.criterion = r.criterion
-LEFT JOIN conditions c ON c.id = r.condition
-ORDER BY r.participant, r.trial_index, crit.pos, r.slot
-"""
+# The tidy table has one owner, results_analysis (which reads databases itself): export calls its query.
+CORE_COLUMNS = sqlite_schema.CORE_COLUMNS
+TAIL_COLUMNS = sqlite_schema.TAIL_COLUMNS
 
 
 def _open(db: str | Path | ResultsDB) -> tuple[ResultsDB, bool]:
@@ -58,28 +42,11 @@ def export_dataframe(db: str | Path | ResultsDB, *, include_practice: bool = Tru
     """The tidy long table of a results database (path or open :class:`ResultsDB`)."""
     rdb, owned = _open(db)
     try:
-        con = rdb.connection
-        df = pd.read_sql_query(_QUERY, con)
-        tags = rdb.stimulus_tags()
-        groups = {p.id: p.groups for p in rdb.participants()}
+        df = sqlite_schema.tidy_table(rdb.connection, rdb.path, include_practice=include_practice)
     finally:
         if owned:
             rdb.close()
-    df = df.drop(columns=["_cond_pos"])
-    for col in ("is_practice", "is_attention_check"):
-        df[col] = df[col].astype(bool)
-    df["attention_passed"] = df["attention_passed"].map(lambda v: None if pd.isna(v) else bool(v)).astype(object)
-    if not include_practice:
-        df = df[~df["is_practice"]].reset_index(drop=True)
-    extra: list[str] = []
-    for mapping, key in ((tags, "stimulus"), (groups, "participant")):
-        names = sorted({k for d in mapping.values() for k in d})
-        for name in names:
-            if name in df.columns or name in extra:
-                continue  # never shadow a core column (or a tag) with a group of the same name
-            df[name] = df[key].map(lambda v, n=name: mapping.get(v, {}).get(n))
-            extra.append(name)
-    return df[list(CORE_COLUMNS) + extra + list(TAIL_COLUMNS)]
+    return df
 
 
 def questionnaire_dataframe(db: str | Path | ResultsDB) -> pd.DataFrame:

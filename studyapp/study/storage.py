@@ -220,6 +220,21 @@ def machine_basics() -> dict[str, str]:
     }  # no host name: on a participant's own PC it can identify them
 
 
+#: The columns each writer fills, per table (design_hash is added to every row): the one list of what a
+#: results row holds, shared by the participant's session (``save_trial``) and merging (``import_participant``).
+_WRITTEN: dict[str, tuple[str, ...]] = {
+    "participants": ("id", "latin_row", "groups", "status", "created", "completed", "app_version"),
+    "sessions": ("participant", "started", "ended", "app_version", "machine"),
+    "trials": ("participant", "trial_index", "session", "stimulus", "is_practice", "is_attention_check", "slot_left",
+               "slot_middle", "slot_right", "shown_at", "answered_at", "response_time_s", "plays", "frames_shown",
+               "dropped_frames", "refresh_hz", "worst_av_offset_ms", "attention_passed", "app_version",
+               "trial_duration_s"),
+    "responses": ("participant", "trial_index", "criterion", "condition", "slot", "rank", "app_version"),
+    "plays": ("participant", "trial_index", "session", "started", "ended", "completed", "app_version"),
+    "questionnaire": ("participant", "item", "kind", "scale", "value", "app_version"),
+}
+
+
 class ResultsDB:
     """The results database of one study.
 
@@ -560,26 +575,57 @@ class ResultsDB:
         overwritten, so a double submit (or a resumed session racing an old one) cannot change data.
         """
         t = trial
+        row = {"participant": t.participant, "trial_index": t.trial_index, "session": t.session,
+               "stimulus": t.stimulus, "is_practice": int(t.is_practice), "is_attention_check": int(t.is_attention_check),
+               "slot_left": t.slots[0], "slot_middle": t.slots[1], "slot_right": t.slots[2], "shown_at": t.shown_at,
+               "answered_at": t.answered_at, "response_time_s": t.response_time_s, "plays": t.plays,
+               "frames_shown": t.frames_shown, "dropped_frames": t.dropped_frames, "refresh_hz": t.refresh_hz,
+               "worst_av_offset_ms": t.worst_av_offset_ms,
+               "attention_passed": None if t.attention_passed is None else int(t.attention_passed),
+               "app_version": __version__, "trial_duration_s": t.trial_duration_s}
+        answers = [{"participant": t.participant, "trial_index": t.trial_index, "criterion": r.criterion,
+                    "condition": r.condition, "slot": r.slot, "rank": float(r.rank), "app_version": __version__}
+                   for r in responses]
         with self.transaction() as con:
             if con.execute("SELECT 1 FROM trials WHERE participant = ? AND trial_index = ?",
                            (t.participant, t.trial_index)).fetchone():
                 raise DuplicateAnswerError(f"trial {t.trial_index} of participant {t.participant!r} is already answered")
-            con.execute(
-                "INSERT INTO trials (participant, trial_index, session, stimulus, is_practice, is_attention_check, "
-                "slot_left, slot_middle, slot_right, shown_at, answered_at, response_time_s, plays, frames_shown, "
-                "dropped_frames, refresh_hz, worst_av_offset_ms, attention_passed, design_hash, app_version, "
-                "trial_duration_s) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (t.participant, t.trial_index, t.session, t.stimulus, int(t.is_practice), int(t.is_attention_check),
-                 *t.slots, t.shown_at, t.answered_at, t.response_time_s, t.plays, t.frames_shown, t.dropped_frames,
-                 t.refresh_hz, t.worst_av_offset_ms, None if t.attention_passed is None else int(t.attention_passed),
-                 self.design_hash, __version__, t.trial_duration_s),
-            )
-            con.executemany(
-                "INSERT INTO responses (participant, trial_index, criterion, condition, slot, rank, design_hash, "
-                "app_version) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                [(t.participant, t.trial_index, r.criterion, r.condition, r.slot, float(r.rank), self.design_hash,
-                  __version__) for r in responses],
-            )
+            self._insert(con, "trials", [row])
+            self._insert(con, "responses", answers)
+
+    def _insert(self, con: sqlite3.Connection, table: str, rows: list[dict[str, Any]]) -> list[int]:
+        """Insert rows of one table, every row stamped with this database's design hash; the row ids."""
+        cols = _WRITTEN[table]
+        sql = f"INSERT INTO {table} ({', '.join(cols)}, design_hash) VALUES ({', '.join('?' * (len(cols) + 1))})"
+        ids = []
+        for r in rows:
+            ids.append(int(con.execute(sql, (*(r.get(c) for c in cols), self.design_hash)).lastrowid))
+        return ids
+
+    def import_participant(self, participant: dict[str, Any], sessions: list[dict[str, Any]],
+                           trials: list[dict[str, Any]], responses: list[dict[str, Any]], plays: list[dict[str, Any]],
+                           questionnaire: list[dict[str, Any]]) -> None:
+        """Add one participant recorded elsewhere (a remote participant's results file), in one transaction.
+
+        Rows are plain dicts keyed by column name, already in this study's condition and stimulus ids; session
+        ids in ``trials`` and ``plays`` are the file's own and are renumbered here. Every row gets this
+        database's design hash; each keeps the app version it was recorded with.
+        """
+        pid = participant["id"]
+        if self.participant(pid) is not None:
+            raise DuplicateAnswerError(f"participant {pid!r} is already in {self.path} (duplicate: this file was "
+                                       "merged before, or two participants used the same id)")
+        with self.transaction() as con:
+            self._insert(con, "participants", [participant])
+            new_ids = self._insert(con, "sessions", [{**s, "participant": pid} for s in sessions])
+            session_ids = {s["id"]: i for s, i in zip(sessions, new_ids)}
+            self._insert(con, "trials", [{**t, "participant": pid, "session": session_ids.get(t["session"])}
+                                         for t in trials])
+            self._insert(con, "responses", [{**r, "participant": pid} for r in responses])
+            self._insert(con, "plays", [{**r, "participant": pid, "session": session_ids.get(r["session"])}
+                                        for r in plays])
+            self._insert(con, "questionnaire", [{**q, "participant": pid, "kind": q.get("kind", "likert")}
+                                                for q in questionnaire])
 
     def attention_failures(self, participant_id: str) -> int:
         row = self._con.execute("SELECT COUNT(*) FROM trials WHERE participant = ? AND attention_passed = 0",

@@ -117,3 +117,31 @@ def test_bot_session_stores_tied_ranks_when_the_design_allows_them(tmp_path: Pat
     run_bot_session(design, db, "P1", "random", 4)
     assert all(sorted(v.values()) == [1.0, 2.0, 3.0] for trial in _stored(db, "P1").values() for v in trial.values())
     db.close()
+
+
+def test_pilot_without_rendering_builds_each_participants_scene(tmp_path: Path, monkeypatch) -> None:
+    """A `run --no-render` pilot walks the participant's path: the same scene builder, the same duration stored,
+    and a scene that cannot be built stops the pilot as it would stop the participant's window."""
+    import studyapp.render.scene as scene_mod
+
+    design, db = _study(tmp_path, allow_ties=False)
+    built = []
+    real = scene_mod.build_trial_scene
+
+    def spy(renderer, media, labels=None):
+        scene = real(renderer, media, labels)
+        built.append((media.plan.trial_index, scene.duration))
+        return scene
+
+    monkeypatch.setattr(scene_mod, "build_trial_scene", spy)
+    run_bot_session(design, db, "P1", "random", seed=1)
+    stored = {t["trial_index"]: t["trial_duration_s"] for t in db.trials("P1")}
+    assert sorted(built) == sorted(stored.items()) and len(built) == len(stored) > 0
+
+    def broken(renderer, media, labels=None):
+        raise scene_mod.SlotError(1, "m.bvh", "skeleton", "cannot retarget")
+
+    monkeypatch.setattr(scene_mod, "build_trial_scene", broken)
+    with pytest.raises(scene_mod.SlotError):
+        run_bot_session(design, db, "P2", "random", seed=1)
+    assert db.trials("P2") == []

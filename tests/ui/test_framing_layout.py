@@ -133,7 +133,7 @@ def test_hands_are_large_enough_to_judge_in_the_ranking_layout(tmp_path):
                 hidden = replace(slot, palettes=pal[None], face_weights=weights[None],
                                  joint_positions=slot.joints_at(t)[None].astype(np.float32))
                 scene_h = type(scene)(slots=(scene.slots[0], hidden, scene.slots[2]), avatars=scene.avatars,
-                                      labels=scene.labels, camera=scene.camera)
+                                      labels=scene.labels, camera=scene.camera, duration=scene.duration)
                 renderer.draw_trial(scene_h, t, target.fbo, gl_view)
                 diff = np.abs(full.astype(int) - target.read_rgb().astype(int)).sum(-1) > 24
                 # the hand is the largest changed blob (forearm vertices with a little wrist weight move
