@@ -27,11 +27,15 @@ Example
 from __future__ import annotations
 
 import zlib
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
 from studyapp.errors import StudyappError
+
+if TYPE_CHECKING:
+    from studyapp.study.schedule import TrialPlan
+    from studyapp.study.stimuli import TrialMedia
 
 POLICIES = ("random", "ordered", "careful")
 
@@ -88,8 +92,8 @@ def _perceived(scores: Sequence[float], rng: np.random.Generator) -> np.ndarray:
 
 def choose_ranking(
     policy: str,
-    plan: Any,
-    media: Any | None,
+    plan: TrialPlan,
+    media: TrialMedia | None,
     criteria: Sequence[Any],
     rng: np.random.Generator,
     *,
