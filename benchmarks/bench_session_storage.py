@@ -13,6 +13,9 @@ from pathlib import Path
 
 from studyapp.study.storage import Response, ResultsDB, TrialRecord, now_iso
 
+# The synthetic study generator is a test fixture (tests/fixtures), not part of the installed package.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
 
 def commit_ms(folder: Path, sync: str, n: int = 200) -> float:
     db = ResultsDB(folder / f"bench-{sync}.sqlite", design_hash="bench", title="bench")
@@ -31,10 +34,10 @@ def commit_ms(folder: Path, sync: str, n: int = 200) -> float:
 
 
 def main() -> int:
-    from studyapp.study.bots import run_bot_session
+    from fixtures.synthetic import write_synthetic_study
+    from studyapp.bots.session_driver import run_bot_session
     from studyapp.study.design import load_design
     from studyapp.study.export import export_dataframe
-    from studyapp.study.synthetic import write_synthetic_study
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import time
 
+from studyapp.bots.careful import careful_scores
 from studyapp.resources import demo_design
 from studyapp.study import stimuli
-from studyapp.study.careful import careful_scores
 from studyapp.study.design import load_design
 from studyapp.study.design.files import _HASH_CACHE
 from studyapp.study.schedule import full_schedule, participant_schedule

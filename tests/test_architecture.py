@@ -28,6 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("studyapp.render",),                                     # draws media; knows nothing of studies
     ("studyapp.study",),                                      # designs, sessions, storage; no screens
     ("studyapp.ui",),                                         # the participant's screens
+    ("studyapp.bots",),                                       # scripted participants: drive the session or the UI
     ("studyapp.cli",),                                        # the application shell: commands only
 )
 

@@ -1,4 +1,5 @@
 """The docstring examples of both packages run as tests: they are the API's documentation and must stay true.
+So do those of the tests' shared generators (``tests/fixtures``), which the tests and benchmarks rely on.
 
 Run here (not with ``--doctest-modules``) so the test folders' several ``conftest.py`` files are never
 collected as modules of the same name.
@@ -14,6 +15,8 @@ import pytest
 import results_analysis
 import studyapp
 
+import fixtures  # tests/fixtures, on sys.path through tests/conftest.py
+
 
 def _modules() -> list[str]:
     """Every module of both packages that has docstring examples (a module without any has nothing to test)."""
@@ -22,6 +25,7 @@ def _modules() -> list[str]:
         names += [i.name for i in pkgutil.walk_packages(pkg.__path__, prefix=pkg.__name__ + ".")
                   if not i.name.endswith("__main__")]
     finder = doctest.DocTestFinder()
+    names += [f"fixtures.{i.name}" for i in pkgutil.iter_modules(fixtures.__path__)]  # the tests' own generators
     return sorted(n for n in names if any(t.examples for t in finder.find(importlib.import_module(n))))
 
 

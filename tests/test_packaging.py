@@ -47,6 +47,13 @@ def test_wheel_contains_shaders_designs_and_demo_data(wheel: Path) -> None:
         assert f"studyapp/_data/shaders/{src.name}" in names, f"{src.name} missing from the wheel"
 
 
+def test_wheel_leaves_out_the_test_fixtures(wheel: Path) -> None:
+    # The synthetic study generator lives in tests/fixtures: a participant's installation never needs it.
+    names = zipfile.ZipFile(wheel).namelist()
+    assert any(n.startswith("studyapp/study/") for n in names), "the wheel has no study package at all"
+    assert not [n for n in names if "synthetic" in n or n.startswith(("tests/", "fixtures/"))], names
+
+
 def test_installed_wheel_runs_outside_checkout(wheel: Path, tmp_path: Path) -> None:
     env_dir = tmp_path / "venv"
     # with the venv's own pip (ensurepip, offline), so the console scripts are written for this venv's python

@@ -79,11 +79,10 @@ def run_window_demo(design_path: Path, out: Path) -> int:
 
 
 def run_offscreen_demo(design_path: Path, out: Path, *, panel: int, seed: int, video: bool = True) -> int:
-    from studyapp.study.bots import run_bot_session
+    from studyapp.bots import run_bot
     from studyapp.study.design import load_design
     from studyapp.study.schedule import participant_schedule
     from studyapp.study.storage import ResultsDB
-    from studyapp.ui.app import run_offscreen_bot
 
     out.mkdir(parents=True, exist_ok=True)
     design = load_design(design_path)
@@ -98,13 +97,13 @@ def run_offscreen_demo(design_path: Path, out: Path, *, panel: int, seed: int, v
     # 2. The demo participant, through the real session and UI code, with screenshots of each screen.
     db = ResultsDB(db_path, design)
     shots = out / "screens"
-    code = run_offscreen_bot(design, db, "demo", "careful", seed, out_dir=shots)
+    code = run_bot(design, db, "demo", "careful", seed, render=True, out_dir=shots)
     if code != 0:
         print(f"error: the scripted participant stopped with code {code}", file=sys.stderr)
         return code
     # 3. A panel of further careful viewers (session level, no rendering) so the statistics have blocks.
     for i in range(panel):
-        run_bot_session(design, db, f"sim{i + 1:02d}", "careful", seed + 1000 + i)
+        run_bot(design, db, f"sim{i + 1:02d}", "careful", seed + 1000 + i, render=False)
     db.close()
 
     report = _analyse(db_path, out / "analysis", design)

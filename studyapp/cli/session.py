@@ -2,13 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
+from studyapp.bots import POLICIES, run_bot
 from studyapp.errors import InputError, StudyappError
-
-BOTS = ("random", "ordered", "careful")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--audio-device", metavar="INDEX|NAME",
                    help="audio output for the window (index or part of the name; `studyapp doctor` lists them)")
     p.add_argument("--offscreen", action="store_true", help="no window: a scripted participant through the real UI")
-    p.add_argument("--bot", choices=BOTS, help="scripted participant policy (with --offscreen or --no-render)")
+    p.add_argument("--bot", choices=POLICIES, help="scripted participant policy (with --offscreen or --no-render)")
     p.add_argument("--seed", type=int, default=0, help="seed of the scripted participant")
     p.add_argument("--no-render", action="store_true", help="bot at the session level, no rendering (fast)")
     p.add_argument("--bot-pace", type=float, default=0.0, metavar="SECONDS",
@@ -201,15 +199,10 @@ def _forget_unstarted(db: Any, results: Path, pid: str, known: set[str], new_db:
 
 
 def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:
-    if args.no_render:
-        from studyapp.study.bots import run_bot_session
-
-        run_bot_session(design, db, pid, args.bot, args.seed, on_trial=_print_saved, pace_s=args.bot_pace)
-        return 0
-    if args.offscreen:
-        from studyapp.ui.app import run_offscreen_bot
-
-        return int(run_offscreen_bot(design, db, pid, args.bot, args.seed) or 0)
+    if args.no_render or args.offscreen:
+        # the offscreen participant shows its progress on screen (its PNGs), not as "saved trial" lines
+        return run_bot(design, db, pid, args.bot, args.seed, render=args.offscreen,
+                       on_trial=None if args.offscreen else _print_saved, pace_s=args.bot_pace)
     from studyapp.cli.demo import display_available
 
     if not display_available():

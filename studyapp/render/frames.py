@@ -14,9 +14,12 @@ audio clock read at the flip: that difference is the audio/video offset the part
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from studyapp.audio.clock import MediaClock
 
 
 def media_time_for_flip(audio_pos_s: float, now: float, predicted_flip: float | None) -> float:
@@ -26,7 +29,7 @@ def media_time_for_flip(audio_pos_s: float, now: float, predicted_flip: float | 
     return audio_pos_s + max(0.0, predicted_flip - now)
 
 
-def clock_media_time(clock: Any, now: float, predictor: "FlipPredictor | None", duration_s: float) -> float:
+def clock_media_time(clock: MediaClock, now: float, predictor: FlipPredictor | None, duration_s: float) -> float:
     """The clip time a frame drawn at ``now`` shows, for a clip playing on ``clock`` (a media clock).
 
     Paused: the clock's position (nothing moves). Playing: where the clock will be at the predicted flip,

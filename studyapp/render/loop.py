@@ -8,7 +8,7 @@ sound device, a virtual clock offscreen that the :class:`VirtualTimer` moves by 
 (no real time passes while drawing, so a 10 s clip renders in as many frames as it has, however slow).
 
 The participant window (:class:`studyapp.ui.app.WindowRunner`), the offscreen scripted participant
-(:mod:`studyapp.ui.bot`), ``studyapp view`` and video/still export (:mod:`studyapp.render.video`) all
+(:mod:`studyapp.bots.ui_driver`), ``studyapp view`` and video/still export (:mod:`studyapp.render.video`) all
 run through it. :class:`ScenePlayer` is the drawing function of the last two: one scene played on a
 media clock with the same A/V bookkeeping as a trial (:mod:`studyapp.render.frames`).
 
@@ -27,12 +27,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from studyapp.audio.clock import MediaClock
+from studyapp.audio.clock import MediaClock, SilentClock
 from studyapp.render.frames import FlipPredictor, PlayRecorder, clock_media_time
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from studyapp.render.context import Window
+    from studyapp.render.renderer import Renderer
+    from studyapp.render.scene import TrialScene
 
 
 # -- targets: where a frame goes -------------------------------------------------------------------------
@@ -53,7 +60,7 @@ class FrameTarget(Protocol):
 class WindowTarget:
     """A :class:`~studyapp.render.context.Window`: events are polled before each frame, presenting swaps."""
 
-    def __init__(self, window: Any) -> None:
+    def __init__(self, window: Window) -> None:
         self.window = window
 
     @property
@@ -81,7 +88,7 @@ class WindowTarget:
 class OffscreenFrames:
     """An offscreen framebuffer (:class:`~studyapp.render.context.OffscreenTarget`) of a fixed size."""
 
-    def __init__(self, ctx: Any, size: tuple[int, int]) -> None:
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
         from studyapp.render.context import OffscreenTarget
 
         self.target = OffscreenTarget(ctx, size)
@@ -128,6 +135,17 @@ class NullTarget:
 
 # -- timers: when a frame happens -------------------------------------------------------------------------
 
+class FrameTimer(Protocol):
+    """When frames happen and are flipped (:class:`WallTimer`, :class:`VirtualTimer`)."""
+
+    virtual: bool   # True: time moves only frame by frame (nothing passes while drawing)
+
+    def now(self) -> float: ...         # the time of the frame about to be drawn
+    def flip_time(self) -> float: ...   # when the frame just presented was flipped
+    def tick(self) -> None: ...         # after a frame
+    def idle(self) -> None: ...         # instead of a frame (a minimised window)
+
+
 class WallTimer:
     """Real time (``time.perf_counter``): frames happen when they happen, flips are stamped after the swap."""
 
@@ -153,7 +171,7 @@ class VirtualTimer:
 
     virtual = True
 
-    def __init__(self, fps: float, clocks: Iterable[Any] = ()) -> None:
+    def __init__(self, fps: float, clocks: Iterable[SilentClock] = ()) -> None:
         if not fps > 0:
             raise ValueError(f"fps must be positive, got {fps}")
         self.fps = float(fps)
@@ -199,7 +217,7 @@ class FrameLoop:
         Read every frame back into :attr:`last_rgb` (before presenting, while the back buffer holds it).
     """
 
-    def __init__(self, target: FrameTarget, timer: Any, draw: DrawFn,
+    def __init__(self, target: FrameTarget, timer: FrameTimer, draw: DrawFn,
                  after_flip: Callable[[float], None] | None = None, *,
                  running: Callable[[], bool] | None = None, capture: bool = False) -> None:
         self.target = target
@@ -266,7 +284,7 @@ class ScenePlayer:
         Flip prediction of a real display (windows); None offscreen.
     """
 
-    def __init__(self, renderer: Any, scene: Any, clock: MediaClock, *, audio: Any = None,
+    def __init__(self, renderer: Renderer, scene: TrialScene, clock: MediaClock, *, audio: Any = None,
                  duration_s: float | None = None, loop: bool = False,
                  predictor: FlipPredictor | None = None) -> None:
         self.renderer = renderer

@@ -3,7 +3,7 @@
 :class:`StudyApp` is the whole UI for one GL context and is driven one frame at a time by the frame
 loop (:class:`studyapp.render.loop.FrameLoop`), so the same code runs in a GLFW window (:func:`run_window`,
 :class:`WindowRunner`, on the audio or wall clock) and offscreen for the scripted participant
-(:func:`run_offscreen_bot`, see :mod:`studyapp.ui.bot`, on a virtual clock). Each frame:
+(:mod:`studyapp.bots.ui_driver`, on a virtual clock). Each frame:
 
 1. queued input (:mod:`studyapp.ui.input`) goes to ImGui;
 2. the screen for the session's state builds the UI and, on a trial, asks for the 3D view at the media
@@ -18,7 +18,7 @@ import logging
 import os
 import wave
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from studyapp.errors import StudyappError
 from studyapp.render.frames import FlipPredictor
@@ -27,6 +27,18 @@ from studyapp.ui.layer import ImGuiLayer
 from studyapp.ui.trial import TrialView
 from studyapp.ui.widgets import Painter
 
+if TYPE_CHECKING:
+    import moderngl
+    import numpy as np
+
+    from studyapp.audio.clock import MediaClock
+    from studyapp.render.loop import FrameTimer
+    from studyapp.render.renderer import Renderer
+    from studyapp.render.scene import TrialScene
+    from studyapp.study.design import Design, Stimulus
+    from studyapp.study.storage import ResultsDB
+    from studyapp.ui.seams import ParticipantSession
+
 log = logging.getLogger(__name__)
 
 BACKGROUND = (0.11, 0.12, 0.14)
@@ -34,7 +46,8 @@ DEFAULT_SLOT_NAMES = ("Left", "Middle", "Right")
 
 
 class StudyApp:
-    """All screens of one participant session, for one GL context.
+    """All screens of one participant session, for one GL context (what the screens use of it:
+    :class:`~studyapp.ui.seams.ScreenApp`).
 
     Parameters
     ----------
@@ -53,7 +66,8 @@ class StudyApp:
         Frames of the render benchmark in the environment check.
     """
 
-    def __init__(self, design: Any, session: Any, ctx: Any, clock: Any, *, queue: InputQueue | None = None,
+    def __init__(self, design: Design, session: ParticipantSession, ctx: moderngl.Context, clock: MediaClock, *,
+                 queue: InputQueue | None = None,
                  refresh_hz: float | None = None, display: tuple | None = None, bench_frames: int = 20,
                  db_path: Path | str | None = None) -> None:
         self.design = design
@@ -92,15 +106,16 @@ class StudyApp:
         self.quit = False
         self.fullscreen_toggle = False
         self.error: str | None = None
+        self.page_pad_x: float | None = None   # set by each page for its bottom row
 
     @property
     def results_file(self) -> Path | None:
         """The results file a remote (bundle) run wrote at the end (set by the session), else None."""
-        return getattr(self.session, "results_file", None)
+        return self.session.results_file
 
     # -- resources ---------------------------------------------------------------------------------
     @property
-    def renderer(self) -> Any:
+    def renderer(self) -> Renderer:
         if self._renderer is None:
             from studyapp.render.renderer import Renderer
 
@@ -117,7 +132,7 @@ class StudyApp:
         return self._view
 
     # -- requests from screens ------------------------------------------------------------------
-    def request_scene(self, scene: Any, t: float, rect: tuple[float, float, float, float]) -> None:
+    def request_scene(self, scene: TrialScene, t: float, rect: tuple[float, float, float, float]) -> None:
         self._scene_req = (scene, t, rect)
 
     def request_trial_load(self) -> None:
@@ -202,7 +217,7 @@ class StudyApp:
             view.pause()
 
     # -- the frame ---------------------------------------------------------------------------------
-    def frame(self, fbo: Any, fb_size: tuple[int, int], now: float, content_scale: float = 1.0) -> None:
+    def frame(self, fbo: moderngl.Framebuffer, fb_size: tuple[int, int], now: float, content_scale: float = 1.0) -> None:
         """Build and draw one frame into ``fbo`` (``fb_size`` pixels) for time ``now`` (seconds)."""
         from imgui_bundle import imgui
 
@@ -284,7 +299,7 @@ class StudyApp:
         self.layer.shutdown()
 
 
-def _clip_seconds(stim: Any) -> float:
+def _clip_seconds(stim: Stimulus | None) -> float:
     """About how long a clip plays, for "about N minutes": the trial timeline's rule on the audio's length."""
     from studyapp.study.timeline import trial_duration
 
@@ -295,7 +310,7 @@ def _clip_seconds(stim: Any) -> float:
             audio_s = w.getnframes() / float(w.getframerate())
     except Exception:  # non-PCM WAV variants: an estimate is enough for "about N minutes"
         audio_s = 30.0
-    return trial_duration(getattr(stim, "duration_s", None), audio_s)
+    return trial_duration(stim.duration_s, audio_s)
 
 
 # -- the window -----------------------------------------------------------------------------------------
@@ -310,8 +325,8 @@ class WindowRunner:
     offscreen path plays, for comparing the two).
     """
 
-    def __init__(self, design: Any, session: Any, clock: Any, *, fullscreen: bool = False,
-                 size: tuple[int, int] = (1280, 720), vsync: bool = True, timer: Any = None,
+    def __init__(self, design: Design, session: ParticipantSession, clock: MediaClock, *, fullscreen: bool = False,
+                 size: tuple[int, int] = (1280, 720), vsync: bool = True, timer: FrameTimer | None = None,
                  maximized: bool = False) -> None:
         import glfw
 
@@ -341,10 +356,10 @@ class WindowRunner:
         self.loop.capture = bool(on)
 
     @property
-    def last_rgb(self) -> Any:
+    def last_rgb(self) -> np.ndarray | None:
         return self.loop.last_rgb
 
-    def _draw(self, fbo: Any, size: tuple[int, int], now: float) -> None:
+    def _draw(self, fbo: moderngl.Framebuffer, size: tuple[int, int], now: float) -> None:
         self.app.frame(fbo, size, now, self.window.content_scale[0])
 
     def _after_flip(self, flip_time: float) -> None:
@@ -365,7 +380,7 @@ class WindowRunner:
         self.window.close()
 
 
-def run_window(design: Any, db: Any, participant_id: str, fullscreen: bool = False,
+def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: bool = False,
                audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720)) -> int:
     """Run the participant's session in a window. Returns 0 when the study was completed (or ended
     early by the attention rule), 1 when the window was closed before the end (run again to resume).
@@ -396,22 +411,3 @@ def run_window(design: Any, db: Any, participant_id: str, fullscreen: bool = Fal
     print(f"The window was closed before the end; run the same command again to continue "
           f"(participant {session.participant_id}).", flush=True)
     return 1
-
-
-def run_offscreen_bot(design: Any, db: Any, participant_id: str, policy: str, seed: int,
-                      out_dir: Path | str | None = None, max_frames_per_trial: int = 400,
-                      size: tuple[int, int] = (1280, 720)) -> int:
-    """A scripted participant through the real session and UI code, without a display.
-
-    Frames are rendered offscreen (EGL); a virtual silent clock jumps ahead so a 10 s clip takes a few
-    frames; clicks, drags and key presses are synthesized through :mod:`studyapp.ui.input`. With
-    ``out_dir`` a PNG of every screen is written there. Returns 0 when the session finished.
-    """
-    from studyapp.ui.bot import UIBot
-
-    bot = UIBot(design, db, participant_id, policy, seed, size=size, out_dir=out_dir,
-                max_frames_per_trial=max_frames_per_trial)
-    try:
-        return bot.run()
-    finally:
-        bot.close()

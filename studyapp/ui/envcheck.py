@@ -14,9 +14,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from studyapp.audio.clock import MediaClock
+    from studyapp.render.scene import TrialScene
 
 #: Below this many frames per second the clips stutter visibly (the study shows 15-30 fps motion).
 MIN_RENDER_FPS = 24.0
@@ -140,7 +146,7 @@ def display_facts() -> tuple[str | None, tuple[int, int] | None, float | None, f
         return name, None, None, None
 
 
-def audio_facts(report: EnvReport, device: int | str | None = None, clock: Any = None,
+def audio_facts(report: EnvReport, device: int | str | None = None, clock: MediaClock | None = None,
                 measure_s: float = 2.5) -> None:
     """Fill the audio fields: devices, the chosen output and its measured latency.
 
@@ -171,7 +177,7 @@ def audio_facts(report: EnvReport, device: int | str | None = None, clock: Any =
         player.close()
 
 
-def gl_facts(report: EnvReport, ctx: Any) -> None:
+def gl_facts(report: EnvReport, ctx: moderngl.Context) -> None:
     info = ctx.info
     report.gl_renderer = str(info.get("GL_RENDERER"))
     report.gl_vendor = str(info.get("GL_VENDOR"))
@@ -179,7 +185,7 @@ def gl_facts(report: EnvReport, ctx: Any) -> None:
     report.gl_version_code = int(ctx.version_code)
 
 
-def benchmark_scene(n_frames: int = 60, fps: float = 30.0) -> Any:
+def benchmark_scene(n_frames: int = 60, fps: float = 30.0) -> TrialScene:
     """Three built-in avatars waving their arms (different phases), independent of any design."""
     from scipy.spatial.transform import Rotation
 
@@ -205,7 +211,7 @@ def benchmark_scene(n_frames: int = 60, fps: float = 30.0) -> Any:
     return make_scene(slots, avatar, labels=("A", "B", "C"))
 
 
-def render_benchmark(ctx: Any, n_frames: int = 30, size: tuple[int, int] = (1280, 720)) -> float:
+def render_benchmark(ctx: moderngl.Context, n_frames: int = 30, size: tuple[int, int] = (1280, 720)) -> float:
     """Frames per second drawing three animated built-in avatars at ``size``, with a full read-back."""
     from studyapp.render.context import OffscreenTarget
     from studyapp.render.renderer import Renderer
@@ -228,7 +234,8 @@ def render_benchmark(ctx: Any, n_frames: int = 30, size: tuple[int, int] = (1280
         renderer.release()
 
 
-def gather(ctx: Any = None, *, audio_device: int | str | None = None, clock: Any = None,
+def gather(ctx: moderngl.Context | None = None, *, audio_device: int | str | None = None,
+           clock: MediaClock | None = None,
            bench_frames: int = 30, bench_size: tuple[int, int] = (1280, 720),
            display: tuple | None = None) -> EnvReport:
     """Measure everything the study needs. ``ctx``: an existing GL context (else an offscreen one).

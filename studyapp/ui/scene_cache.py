@@ -6,10 +6,14 @@ GPU busy for nothing (and slow the offscreen bot tenfold on a software renderer)
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
+
+if TYPE_CHECKING:
+    from studyapp.render.renderer import Renderer
+    from studyapp.render.scene import TrialScene
 
 _VERT = """
 #version 330
@@ -53,7 +57,7 @@ class SceneCache:
         self.fbo = self.ctx.framebuffer([self.tex])
         self.key = None
 
-    def draw(self, renderer: Any, scene: Any, t: float, target: moderngl.Framebuffer,
+    def draw(self, renderer: Renderer, scene: TrialScene, t: float, target: moderngl.Framebuffer,
              viewport: tuple[int, int, int, int], target_size: tuple[int, int]) -> None:
         """Draw the scene at ``t`` into ``viewport`` (GL pixels, origin bottom-left) of ``target``."""
         x, y, w, h = (int(v) for v in viewport)

@@ -5,20 +5,27 @@ frames and talks to the :class:`~studyapp.study.session.Session` (plays, stats, 
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from studyapp.render.frames import PlayRecorder, clock_media_time
 from studyapp.ui.ranking import RankingState
+
+if TYPE_CHECKING:
+    from studyapp.audio.clock import MediaClock
+    from studyapp.render.scene import TrialScene
+    from studyapp.study.schedule import TrialPlan
+    from studyapp.study.stimuli import TrialMedia
+    from studyapp.ui.seams import ScreenApp
 
 
 class TrialView:
     """State of the trial on screen. ``scene`` is built by the app's renderer when the trial loads."""
 
-    def __init__(self, app: Any, plan: Any) -> None:
+    def __init__(self, app: ScreenApp, plan: TrialPlan) -> None:
         self.app = app
         self.plan = plan
-        self.media: Any = None
-        self.scene: Any = None
+        self.media: TrialMedia | None = None
+        self.scene: TrialScene | None = None
         self.ranking = RankingState([c.id for c in app.design.criteria],
                                     allow_ties=bool(getattr(app.design.playback, "allow_ties", False)))
         self.recorder: PlayRecorder | None = None
@@ -45,7 +52,7 @@ class TrialView:
 
     # -- transport ---------------------------------------------------------------------------------
     @property
-    def clock(self) -> Any:
+    def clock(self) -> MediaClock:
         return self.app.clock
 
     @property

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from studyapp.errors import InputError
-from studyapp.study.bots import run_bot_session
+from studyapp.bots.session_driver import run_bot_session
 from studyapp.study.bundle import make_bundle, merge_results, open_bundle, remote_row, write_results_file
 from studyapp.study.design import load_design
 from studyapp.study.export import export_dataframe
 from studyapp.study.storage import ResultsDB
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 REAL_CONDITIONS = ("synced", "lagged", "static")
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 CLI = [sys.executable, "-m", "studyapp.cli"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from studyapp.study.design import Display, load_design, validate_design
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 
 @pytest.fixture

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from studyapp.study.design import validate_design
-from studyapp.study.synthetic import bvh_text, write_synthetic_study
+from fixtures.synthetic import bvh_text, write_synthetic_study
 
 AVATARS = Path(__file__).parents[1] / "data" / "samples" / "avatars"
 CLI = [sys.executable, "-m", "studyapp.cli"]

@@ -7,11 +7,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from studyapp.study.bots import run_bot_session
+from studyapp.bots.session_driver import run_bot_session
 from studyapp.study.design import load_design
 from studyapp.study.export import CORE_COLUMNS, export_dataframe, questionnaire_dataframe
 from studyapp.study.storage import ResultsDB
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 
 @pytest.fixture(scope="module")

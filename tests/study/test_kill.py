@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="SIGKILL is POSIX")
 

@@ -20,7 +20,7 @@ import pytest
 
 from studyapp.motion.io import load_motion
 from studyapp.study.design import load_design, motion_path, validate_design
-from studyapp.study.synthetic import bvh_text, write_synthetic_study
+from fixtures.synthetic import bvh_text, write_synthetic_study
 
 N = 3
 #: arm angle (degrees) held by each sample's file, sample 1..3
@@ -202,7 +202,7 @@ def test_offscreen_bot_stores_and_exports_the_sample_shown(tmp_path: Path) -> No
 
 
 def test_a_schema_2_database_is_upgraded_and_its_trials_keep_no_sample(tmp_path: Path) -> None:
-    from studyapp.study.bots import run_bot_session
+    from studyapp.bots.session_driver import run_bot_session
     from studyapp.study.export import export_dataframe
     from studyapp.study.storage import SCHEMA_VERSION, ResultsDB
 
@@ -233,7 +233,7 @@ def _grams(text: str, n: int = 4) -> set[str]:
 def test_bundle_ships_every_sample_under_its_own_name_and_merge_keeps_the_sample(tmp_path: Path) -> None:
     import json
 
-    from studyapp.study.bots import run_bot_session
+    from studyapp.bots.session_driver import run_bot_session
     from studyapp.study.bundle import make_bundle, merge_results, open_bundle, remote_row, write_results_file
     from studyapp.study.export import export_dataframe
     from studyapp.study.schedule import participant_schedule

@@ -6,14 +6,14 @@ from pathlib import Path
 import pytest
 
 from studyapp.errors import InputError
-from studyapp.study.bots import run_bot_session
+from studyapp.bots.session_driver import run_bot_session
 from studyapp.study.design import load_design
 from studyapp.study.schedule import participant_schedule
 from studyapp.study.session import (
     ENDED_EARLY_MESSAGE, ParticipantFinishedError, RankingError, Session, SessionError, State,
 )
 from studyapp.study.storage import ResultsDB
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 PERM = {0: 1, 1: 2, 2: 3}
 

@@ -17,7 +17,7 @@ from studyapp.motion.beat import beat_skeleton
 from studyapp.motion.bvh import write_bvh
 from studyapp.motion.skeleton import Motion
 from studyapp.study import stimuli
-from studyapp.study.careful import careful_scores, motion_measures, scores_from_measures
+from studyapp.bots.careful import careful_scores, motion_measures, scores_from_measures
 from studyapp.study.design import load_design
 from studyapp.study.schedule import TrialPlan, participant_schedule
 from studyapp.study.stimuli import TrialMedia, frozen_motion, load_head, load_trial_media

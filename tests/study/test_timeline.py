@@ -70,7 +70,7 @@ def test_the_window_path_takes_its_length_from_the_timeline(tmp_path: Path) -> N
     from studyapp.study.design import load_design
     from studyapp.study.schedule import participant_schedule
     from studyapp.study.stimuli import load_trial_media
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
     from studyapp.ui.trial import TrialView
 
     design_path = write_synthetic_study(tmp_path / "s", n_stimuli=2, seconds=3.0, practice=False)
@@ -103,11 +103,11 @@ def _downgrade_to_v1(path: Path) -> None:
 
 def test_every_trial_stores_its_duration_and_old_databases_stay_readable(tmp_path: Path) -> None:
     from results_analysis.sqlite_schema import tidy_from_connection
-    from studyapp.study.bots import run_bot_session
+    from studyapp.bots.session_driver import run_bot_session
     from studyapp.study.design import load_design
     from studyapp.study.export import export_dataframe
     from studyapp.study.storage import SCHEMA_VERSION, ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "s", n_stimuli=2, seconds=1.5, practice=False)
     path.write_text(path.read_text().replace('audio = "audio/s2.wav"', 'audio = "audio/s2.wav"\nduration_s = 0.9'))

@@ -6,10 +6,11 @@ import shutil
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
+# the tiny studies are shared with the scripted participant's tests (tests/bots)
+from fixtures.studies import secrets_of, tied_study, tiny_study  # noqa: F401
 
 
 @pytest.fixture(scope="session")
@@ -20,61 +21,6 @@ def gl_ctx():
         return create_offscreen_context()
     except Exception as exc:  # no EGL/OSMesa: the GL tests cannot run here
         pytest.skip(f"no headless OpenGL context: {exc}")
-
-
-@pytest.fixture
-def tiny_study(tmp_path):
-    """A complete 1-second-clip study (practice + 2 clips + questionnaire) and its results database."""
-    from studyapp.study.design import load_design
-    from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
-
-    path = write_synthetic_study(tmp_path / "study", n_stimuli=2, seconds=3.0, questionnaire=True)
-    design = load_design(_model_named_conditions(path))
-    db = ResultsDB(tmp_path / "results.sqlite", design)
-    yield design, db
-    db.close()
-
-
-def _model_named_conditions(path: Path) -> Path:
-    # Condition ids named like the published models, so the leak checks look for realistic secrets (and
-    # the design's blinding check never trips over a plain word such as "static" in a participant text).
-    text = path.read_text()
-    for old, new in (("synced", "FaceCapGes"), ("lagged", "DiffSHEG"), ("static", "CaMN")):
-        text = text.replace(f'id = "{old}"', f'id = "{new}"')
-    path.write_text(text)
-    return path
-
-
-@pytest.fixture
-def tied_study(tmp_path):
-    """A 2-clip study (practice + 2 clips) whose design allows ties (``[playback] allow_ties = true``)."""
-    from studyapp.study.design import load_design
-    from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
-
-    path = write_synthetic_study(tmp_path / "tied", n_stimuli=2, seconds=2.0, allow_ties=True)
-    design = load_design(_model_named_conditions(path))
-    assert design.playback.allow_ties
-    db = ResultsDB(tmp_path / "tied.sqlite", design)
-    yield design, db
-    db.close()
-
-
-@pytest.fixture
-def secrets_of():
-    """Function: the strings of a design a participant must never see."""
-    return _secrets_of
-
-
-def _secrets_of(design) -> list[str]:
-    # Condition ids, live-model file names, and the published models' names.
-    out = {"FaceCapGes", "DiffSHEG", "CaMN"}
-    for c in design.conditions:
-        out.add(c.id)
-        if c.model:
-            out.add(Path(c.model).stem)
-    return sorted(out)
 
 
 @pytest.fixture(scope="module")

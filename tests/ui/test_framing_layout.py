@@ -1,6 +1,6 @@
 """Figures large enough to judge gestures, and text that fits, in the real participant screens.
 
-The scripted participant (:class:`~studyapp.ui.bot.UIBot`) drives the real UI offscreen; the checks look at
+The scripted participant (:class:`~studyapp.bots.ui_driver.UIBot`) drives the real UI offscreen; the checks look at
 what it drew: where the 3D view is, the hand's pixels in it, and every string's rectangle.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from studyapp.ui.bot import UIBot
+from studyapp.bots.ui_driver import UIBot
 
 pytestmark = pytest.mark.gl
 
@@ -25,7 +25,7 @@ def _gesture_study(tmp_path: Path, framing: str | None = None):
     """The synthetic tiny study with every motion file replaced by a real co-speech gesture clip (ZEGGS)."""
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "study", n_stimuli=1, seconds=10.0, practice=False)
     motions = sorted(path.parent.rglob("*.bvh"))
@@ -162,7 +162,7 @@ def _screens_run(tmp_path: Path, size: tuple[int, int], *, allow_ties: bool = Fa
     """A scripted participant through every screen at ``size``; returns (screens seen, cut-off strings)."""
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "s", n_stimuli=1, seconds=1.0, practice=False, questionnaire=True,
                                  allow_ties=allow_ties)
@@ -242,7 +242,7 @@ def test_the_cut_off_check_finds_text_that_does_not_fit(tmp_path, monkeypatch):
     monkeypatch.setattr(welcome, "draw", draw)
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     design = load_design(write_synthetic_study(tmp_path / "s", n_stimuli=1, seconds=1.0))
     db = ResultsDB(tmp_path / "r.sqlite", design)
@@ -264,7 +264,7 @@ def test_seven_questions_scroll_instead_of_being_cut_off(tmp_path):
     (the scripted one uses the mouse wheel) answers them all."""
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "s", n_stimuli=1, seconds=1.0, practice=False)
     path.write_text(path.read_text() + "".join(

@@ -104,7 +104,7 @@ def _play_in_window(design, db, tmp_path):
 
 
 def _play_offscreen(design, db):
-    from studyapp.ui.bot import UIBot
+    from studyapp.bots.ui_driver import UIBot
 
     bot = UIBot(design, db, "C1", "ordered", 1, size=SIZE, fps=FPS, frames_per_play=None)
     try:

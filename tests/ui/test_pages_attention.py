@@ -1,12 +1,12 @@
 """Full-page screens read completely at 1280x720, and a failed attention check ends the study politely.
 
-Both run the real session and UI code offscreen through :class:`studyapp.ui.bot.UIBot`.
+Both run the real session and UI code offscreen through :class:`studyapp.bots.ui_driver.UIBot`.
 """
 from __future__ import annotations
 
 import pytest
 
-from studyapp.ui.bot import UIBot
+from studyapp.bots.ui_driver import UIBot
 
 pytestmark = pytest.mark.gl
 
@@ -99,7 +99,7 @@ def attention_study(tmp_path):
     """Practice, two clips and one attention check; one failed check ends the session."""
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
-    from studyapp.study.synthetic import write_synthetic_study
+    from fixtures.synthetic import write_synthetic_study
 
     path = write_synthetic_study(tmp_path / "att", n_stimuli=2, seconds=1.0, attention_check=True,
                                  questionnaire=True, max_attention_failures=0)
@@ -113,7 +113,7 @@ def test_failed_attention_check_is_recorded_and_ends_politely(attention_study, m
     """The scripted participant ranks the check's frozen figure best (the wrong answer) through the real
     panel; the check looked like any other clip, the failure is stored, the remaining clips and the
     questionnaire are skipped, and the final screen shows the polite end message."""
-    import studyapp.study.bots as bots
+    import studyapp.bots.policies as bots
     from studyapp.study.session import ENDED_EARLY_MESSAGE
 
     design, db = attention_study

@@ -3,7 +3,7 @@ import itertools
 
 import pytest
 
-from studyapp.study.bots import WEAK_RANKINGS
+from studyapp.bots.policies import WEAK_RANKINGS
 from studyapp.study.session import RankingError, normalise_ranks
 from studyapp.ui.ranking import RankingState, order_and_ties
 

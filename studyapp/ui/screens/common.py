@@ -8,9 +8,12 @@ on every page, the arrow keys on pages that do not use them for something else.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
+
+if TYPE_CHECKING:
+    from studyapp.ui.seams import ScreenApp
 
 PAGE_FLAGS = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_move
               | imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_bring_to_front_on_focus)
@@ -26,7 +29,7 @@ _more_below = False
 MORE_BELOW_HINT = "More text below: scroll down (mouse wheel or Page Down)."
 
 
-def page_begin(app: Any, name: str, *, arrow_scroll: bool = True) -> float:
+def page_begin(app: ScreenApp, name: str, *, arrow_scroll: bool = True) -> float:
     """Open a full-window page and its scrolling body; returns the column width in pixels.
 
     ``arrow_scroll``: Up/Down scroll the body (False where the page uses the arrows itself).
@@ -51,7 +54,7 @@ def page_begin(app: Any, name: str, *, arrow_scroll: bool = True) -> float:
     return col
 
 
-def _scroll_keys(app: Any) -> None:
+def _scroll_keys(app: ScreenApp) -> None:
     """Keyboard scrolling of the open page body (keyboard-only participants must reach all the text)."""
     line = imgui.get_text_line_height_with_spacing()
     page = max(line, imgui.get_window_height() - 3 * line)
@@ -68,7 +71,7 @@ def _scroll_keys(app: Any) -> None:
         imgui.set_scroll_y(min(max(0.0, imgui.get_scroll_y() + step), imgui.get_scroll_max_y()))
 
 
-def _end_body(app: Any = None) -> None:
+def _end_body(app: ScreenApp | None = None) -> None:
     global _body_open, _more_below
     if _body_open:
         if app is not None:
@@ -83,7 +86,7 @@ def page_end() -> None:
     imgui.end()
 
 
-def primary_row(app: Any, label: str, key: str, *, enabled: bool = True, hint: str = "") -> bool:
+def primary_row(app: ScreenApp, label: str, key: str, *, enabled: bool = True, hint: str = "") -> bool:
     """The page's main button (green) in the fixed footer, with an optional hint next to it.
 
     Enter presses it too, so every page works from the keyboard alone.
@@ -91,7 +94,7 @@ def primary_row(app: Any, label: str, key: str, *, enabled: bool = True, hint: s
     s = app.scale
     _end_body(app)
     imgui.separator()
-    pad_x = getattr(app, "page_pad_x", 24 * s)
+    pad_x = app.page_pad_x if app.page_pad_x is not None else 24 * s
     imgui.set_cursor_pos(imgui.ImVec2(pad_x, imgui.get_cursor_pos_y() + 14 * s))
     pressed = app.ui.button(label, key=key, enabled=enabled, size=(260 * s, 48 * s), primary=True)
     if _more_below:

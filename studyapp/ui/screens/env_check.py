@@ -5,18 +5,21 @@ app's own GL context and audio clock, shows the results, and stores them with th
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
 from studyapp.ui.envcheck import evaluate, verdict
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
+if TYPE_CHECKING:
+    from studyapp.ui.seams import ScreenApp
+
 _STATUS_COLOR = {"pass": (0.45, 0.85, 0.55, 1.0), "warn": (1.0, 0.80, 0.35, 1.0), "fail": (1.0, 0.45, 0.42, 1.0)}
 _STATUS_WORD = {"pass": "OK", "warn": "Check", "fail": "Problem"}
 
 
-def draw(app: Any) -> None:
+def draw(app: ScreenApp) -> None:
     ui = app.ui
     page_begin(app, "env_check")
     ui.heading("Checking your computer", 2.0)

@@ -1,12 +1,15 @@
 """The last screen: thanks, where the results are, what to do next (also for an early end)."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
+if TYPE_CHECKING:
+    from studyapp.ui.seams import ScreenApp
 
-def draw(app: Any) -> None:
+
+def draw(app: ScreenApp) -> None:
     ui = app.ui
     session = app.session
     page_begin(app, "final")

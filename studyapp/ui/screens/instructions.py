@@ -1,11 +1,14 @@
 """Instructions from the design, the criteria explained, and how to rank."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
+
+if TYPE_CHECKING:
+    from studyapp.ui.seams import ScreenApp
 
 HOW_TO_RANK = (
     "After a clip has played to the end, a panel opens below the figures. For each question, put the three "
@@ -20,7 +23,7 @@ HOW_TO_TIE = (
 )
 
 
-def draw(app: Any) -> None:
+def draw(app: ScreenApp) -> None:
     ui = app.ui
     page_begin(app, "instructions")
     ui.heading("Instructions", 2.0)

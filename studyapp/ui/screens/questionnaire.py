@@ -5,19 +5,23 @@ Likert item is answered (text items are optional).
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from imgui_bundle import imgui
 
 from studyapp.ui.input import digit_key
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
+if TYPE_CHECKING:
+    from studyapp.study.design import QuestionItem
+    from studyapp.ui.seams import ScreenApp
 
-def complete(items: list[Any], answers: dict[str, Any]) -> bool:
+
+def complete(items: list[QuestionItem], answers: dict[str, Any]) -> bool:
     return all(answers.get(q.id) is not None for q in items if q.kind == "likert")
 
 
-def draw(app: Any) -> None:
+def draw(app: ScreenApp) -> None:
     ui = app.ui
     s = app.scale
     items = app.session.questionnaire_items
@@ -78,7 +82,7 @@ def draw(app: Any) -> None:
     page_end()
 
 
-def _keys(app: Any, items: list[Any]) -> None:
+def _keys(app: ScreenApp, items: list[QuestionItem]) -> None:
     if not items or app.typing:
         app.typing = False
         return

@@ -15,12 +15,17 @@ the next figure placed with the one above it (``1 = 2 3``). Without ties the pan
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
 from studyapp.ui.input import digit_key
-from studyapp.ui.ranking import ORDINALS
+from studyapp.ui.ranking import ORDINALS, RankingState
+
+if TYPE_CHECKING:
+    from studyapp.study.design import Criterion
+    from studyapp.ui.seams import ScreenApp
+    from studyapp.ui.trial import TrialView
 
 #: Smallest height of a question's row (at scale 1); a row grows when its text needs more lines.
 ROW_PX = 74.0
@@ -39,14 +44,14 @@ PLACE_PX = 132.0
 CHIP_PX = 60.0
 
 
-def _text_width(app: Any, avail_w: float) -> float:
+def _text_width(app: ScreenApp, avail_w: float) -> float:
     """Width of the question column in a row ``avail_w`` pixels wide (inside the panel's padding)."""
     s = app.scale
     inner = avail_w - 2 * ROW_PAD_PX[0] * s
     return max(240 * s, inner - 3 * PLACE_PX * s - 3 * CHIP_PX * s - 126 * s)
 
 
-def _text_height(app: Any, crit: Any, text_w: float) -> float:
+def _text_height(app: ScreenApp, crit: Criterion, text_w: float) -> float:
     """Pixels the label, question and explanation of ``crit`` take, wrapped at ``text_w``."""
     base = imgui.get_style().font_size_base
     spacing = imgui.get_style().item_spacing
@@ -63,7 +68,7 @@ def _text_height(app: Any, crit: Any, text_w: float) -> float:
     return h
 
 
-def row_heights(app: Any, avail_w: float | None = None) -> list[float]:
+def row_heights(app: ScreenApp, avail_w: float | None = None) -> list[float]:
     """Pixel height of each question's row: at least ``ROW_PX``, more when its text wraps to more lines."""
     s = app.scale
     if avail_w is None:
@@ -74,12 +79,12 @@ def row_heights(app: Any, avail_w: float | None = None) -> list[float]:
             for c in app.design.criteria]
 
 
-def height(app: Any) -> float:
+def height(app: ScreenApp) -> float:
     """Pixels the ranking rows need below the transport row."""
     return sum(row_heights(app)) + GAP_PX * len(app.design.criteria) * app.scale + 8 * app.scale
 
 
-def _box_text(app: Any, caption: str, value: str, filled: bool) -> None:
+def _box_text(app: ScreenApp, caption: str, value: str, filled: bool) -> None:
     """Two centred lines in the last item: a small caption and the figure placed there (bold)."""
     ui = app.ui
     ui.record(caption)
@@ -105,13 +110,14 @@ def _box_text(app: Any, caption: str, value: str, filled: bool) -> None:
     dl.add_text(bold, val_size, imgui.ImVec2(cx - vw / 2, top + cap_size + 2), white, value)
 
 
-def _caption(r: Any, crit_id: str, place: int) -> str:
+def _caption(r: RankingState, crit_id: str, place: int) -> str:
     if not r.is_tied(crit_id, place):
         return PLACE_NAMES[place]
     return f"{ORDINALS[r.place_rank(crit_id, place) - 1]} (tied)"
 
 
-def _tie_link(app: Any, r: Any, ci: int, crit_id: str, link: int, size: tuple[float, float]) -> None:
+def _tie_link(app: ScreenApp, r: RankingState, ci: int, crit_id: str, link: int,
+              size: tuple[float, float]) -> None:
     """The ``>`` / ``=`` button between places ``link`` and ``link + 1``."""
     ui = app.ui
     tied = r.ties[crit_id][link]
@@ -128,7 +134,7 @@ def _tie_link(app: Any, r: Any, ci: int, crit_id: str, link: int, size: tuple[fl
     ui.tooltip("Equal. Click to make them different again." if tied else "Click to make these two equal.")
 
 
-def _keys(app: Any, view: Any) -> None:
+def _keys(app: ScreenApp, view: TrialView) -> None:
     r = view.ranking
     typed = app.typed_text()
     if r.allow_ties and "=" in typed and any(c in "123" for c in typed):
@@ -156,7 +162,7 @@ def _keys(app: Any, view: Any) -> None:
         view.submit()
 
 
-def draw(app: Any, view: Any) -> None:
+def draw(app: ScreenApp, view: TrialView) -> None:
     ui = app.ui
     s = app.scale
     r = view.ranking
@@ -245,7 +251,7 @@ def draw(app: Any, view: Any) -> None:
     _keys(app, view)
 
 
-def next_button(app: Any, view: Any) -> None:
+def next_button(app: ScreenApp, view: TrialView) -> None:
     """The "Next clip" button (right end of the transport row) and why it is disabled, if it is."""
     ui = app.ui
     s = app.scale

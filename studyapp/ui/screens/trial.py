@@ -8,12 +8,16 @@ Attention-check trials look exactly like the others.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
 from studyapp.ui.screens import ranking_panel
 from studyapp.ui.screens.common import PAGE_FLAGS
+
+if TYPE_CHECKING:
+    from studyapp.ui.seams import ScreenApp
+    from studyapp.ui.trial import TrialView
 
 CONTROLS_PX = 68.0
 PRACTICE_COLOR = (1.0, 0.80, 0.35, 1.0)
@@ -25,7 +29,7 @@ def _fmt(t: float) -> str:
     return f"{int(t // 60)}:{int(t % 60):02d}"
 
 
-def layout(app: Any, view: Any) -> dict[str, tuple[float, float, float, float]]:
+def layout(app: ScreenApp, view: TrialView) -> dict[str, tuple[float, float, float, float]]:
     """Pixel rectangles (x, y, w, h; y down) of the 3D view and the panel below it."""
     w, h = app.fb_size
     s = app.scale
@@ -36,7 +40,7 @@ def layout(app: Any, view: Any) -> dict[str, tuple[float, float, float, float]]:
     return {"scene": (0, 0, w, h - panel), "panel": (0, h - panel, w, panel)}
 
 
-def draw(app: Any) -> None:
+def draw(app: ScreenApp) -> None:
     s = app.scale
     view = app.trial_view()
     if view is None or not view.loaded:
@@ -69,7 +73,7 @@ def draw(app: Any) -> None:
     imgui.end()
 
 
-def _progress(app: Any, view: Any) -> None:
+def _progress(app: ScreenApp, view: TrialView) -> None:
     """Where the participant is ("Clip 3 of 8"), at the start of the transport row; amber for practice."""
     s = app.scale
     row = imgui.get_cursor_pos()
@@ -85,7 +89,7 @@ def _progress(app: Any, view: Any) -> None:
     imgui.set_cursor_pos(imgui.ImVec2(end_x + 24 * s, row.y))
 
 
-def _loading(app: Any) -> None:
+def _loading(app: ScreenApp) -> None:
     from studyapp.ui.screens.common import page_begin, page_end
 
     page_begin(app, "loading")
@@ -95,7 +99,7 @@ def _loading(app: Any) -> None:
     app.request_trial_load()
 
 
-def _transport(app: Any, view: Any, t: float) -> None:
+def _transport(app: ScreenApp, view: TrialView, t: float) -> None:
     ui = app.ui
     s = app.scale
     state = view.state
@@ -130,7 +134,7 @@ def _transport(app: Any, view: Any, t: float) -> None:
         ui.muted(f"{PRACTICE_NOTE} {status}" if view.plan.is_practice and state == "ready" else status)
 
 
-def _status_text(app: Any, view: Any, state: str) -> str:
+def _status_text(app: ScreenApp, view: TrialView, state: str) -> str:
     if state == "ready":
         return "Press Play (or Space) to watch the clip with sound."
     if state == "paused":
@@ -144,7 +148,7 @@ def _status_text(app: Any, view: Any, state: str) -> str:
     return "Rank the three figures below. You may replay the clip as often as you like."
 
 
-def _keys(app: Any, view: Any) -> None:
+def _keys(app: ScreenApp, view: TrialView) -> None:
     if app.key_pressed("space"):
         if view.state == "ready":
             view.play()

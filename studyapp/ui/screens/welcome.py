@@ -1,9 +1,12 @@
 """Welcome and consent: what the study is, what is recorded, and the participant's agreement."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
+
+if TYPE_CHECKING:
+    from studyapp.ui.seams import ScreenApp
 
 CONSENT_TEXT = (
     "In this study you will watch short clips of three animated figures talking and rank them on a few "
@@ -15,7 +18,7 @@ KEYS_TIP = ("Tip: everything works with the keyboard too (Enter continues on eve
             "full screen on and off.")
 
 
-def draw(app: Any) -> None:
+def draw(app: ScreenApp) -> None:
     ui = app.ui
     page_begin(app, "welcome")
     ui.heading("Welcome", 2.0)

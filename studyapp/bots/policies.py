@@ -1,13 +1,14 @@
-"""Scripted participants: they go through the real :class:`~studyapp.study.session.Session`, without rendering.
+"""How a scripted participant answers: the ranking policies and their per-trial random generator.
 
-Policies:
+The drivers (:mod:`studyapp.bots.session_driver`, :mod:`studyapp.bots.ui_driver`) take every answer from
+here, so a pilot without rendering and one through the real UI answer a trial alike. Policies:
 
 * ``random``: a uniformly random ranking per criterion. The generator is seeded per trial from
   ``(seed, participant, trial index)``, so a session killed and resumed answers every trial exactly as an
   uninterrupted one would (the kill tests rely on this).
 * ``ordered``: ranks conditions in the order the design lists them, on every criterion (the condition listed
   first gets rank 1). A frozen attention-check slot ranks after every real condition.
-* ``careful``: ranks by :func:`studyapp.study.careful.careful_scores` (higher score = better rank), i.e. what a
+* ``careful``: ranks by :func:`studyapp.bots.careful.careful_scores` (higher score = better rank), i.e. what a
   careful viewer would perceive in the actual motion and audio; criteria without a score fall back to random.
 
 With ``allow_ties`` (the design's ``[playback] allow_ties``) ``random`` draws uniformly from all 13 ways to
@@ -25,14 +26,16 @@ Example
 """
 from __future__ import annotations
 
-import time
 import zlib
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
 from studyapp.errors import StudyappError
-from studyapp.study.session import PlayStats, Session, State
+
+if TYPE_CHECKING:
+    from studyapp.study.schedule import TrialPlan
+    from studyapp.study.stimuli import TrialMedia
 
 POLICIES = ("random", "ordered", "careful")
 
@@ -89,8 +92,8 @@ def _perceived(scores: Sequence[float], rng: np.random.Generator) -> np.ndarray:
 
 def choose_ranking(
     policy: str,
-    plan: Any,
-    media: Any | None,
+    plan: TrialPlan,
+    media: TrialMedia | None,
     criteria: Sequence[Any],
     rng: np.random.Generator,
     *,
@@ -115,7 +118,7 @@ def choose_ranking(
     if policy == "careful":
         if media is None:
             raise ValueError("the careful bot needs the trial's media (load_trial_media)")
-        from studyapp.study.careful import careful_scores
+        from studyapp.bots.careful import careful_scores  # scipy's signal tools, only for this policy
 
         scores = careful_scores(media)
         out = {}
@@ -137,56 +140,3 @@ def questionnaire_answers(items: Sequence[Any], rng: np.random.Generator) -> dic
     """Bot answers: a random point on each Likert item, a fixed note on text items."""
     return {q.id: int(rng.integers(1, int(q.points) + 1)) if q.kind == "likert" else "(scripted participant)"
             for q in items}
-
-
-def run_bot_session(
-    design: Any,
-    db: Any,
-    participant: str,
-    policy: str,
-    seed: int = 0,
-    on_trial: Callable[[Any], None] | None = None,
-    *,
-    row: int | None = None,
-    groups: dict[str, str] | None = None,
-    allow_rerun: bool = False,
-    pace_s: float = 0.0,
-    plans: Sequence[Any] | None = None,
-    n_rows: int | None = None,
-) -> Session:
-    """Run (or resume) one participant with a scripted policy; returns the finished :class:`Session`.
-
-    ``on_trial(plan)`` is called after each answer is committed. ``pace_s`` waits that long per clip as
-    if watching it (kill tests use it to land kills between commits).
-    """
-    if policy not in POLICIES:
-        raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(POLICIES)}")
-    session = Session(design, db, participant, row=row, groups=groups, allow_rerun=allow_rerun, plans=plans,
-                      n_rows=n_rows, on_saved=on_trial)
-    try:
-        session.accept_consent()
-        session.finish_instructions()
-        session.record_env_check({"bot": policy, "bot_seed": int(seed)})
-        cond_order = [c.id for c in design.conditions]
-        ties = bool(getattr(design.playback, "allow_ties", False))
-        from studyapp.render.scene import build_trial_scene
-        from studyapp.study.stimuli import load_trial_media
-
-        while (plan := session.current_trial()) is not None:
-            media = load_trial_media(design, plan)
-            # The scene a participant's window would build (retargeting, avatar, media cut to the timeline),
-            # on the CPU: a pilot without rendering fails where a participant would, and plays what they play.
-            scene = build_trial_scene(None, media)
-            session.record_play_started(duration_s=scene.duration)
-            if pace_s > 0:
-                time.sleep(pace_s)
-            session.record_play_finished(True, PlayStats())
-            rng = trial_rng(seed, session.participant_id, plan.trial_index)
-            session.submit_ranking(choose_ranking(policy, plan, media, design.criteria, rng,
-                                                  condition_order=cond_order, allow_ties=ties))
-        if session.state is State.QUESTIONNAIRE:
-            rng = trial_rng(seed, session.participant_id, -1 & 0xFFFFFFFF)
-            session.submit_questionnaire(questionnaire_answers(session.questionnaire_items, rng))
-    finally:
-        session.close()
-    return session

@@ -2,7 +2,7 @@
 
 It renders every frame into an EGL framebuffer and acts only through :class:`~studyapp.ui.input.InputQueue`
 events at the rectangles the screens drew their buttons at -- the same path a participant's mouse and
-keyboard take. Its choices come from :func:`studyapp.study.bots.choose_ranking` (random / ordered /
+keyboard take. Its choices come from :func:`studyapp.bots.policies.choose_ranking` (random / ordered /
 careful). To exercise every ranking method it drags the chips for the first question, clicks them for
 the second and uses the number keys for the rest. When the design allows ties and the policy chose some,
 it enters them the same way: a click on the ``>`` between two places for the mouse questions, ``=`` typed
@@ -15,14 +15,22 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from studyapp.audio.clock import SilentClock
+from studyapp.bots import policies
 from studyapp.errors import StudyappError
 from studyapp.ui.app import StudyApp
 from studyapp.ui.input import digit_key
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from studyapp.study.design import Design
+    from studyapp.study.storage import ResultsDB
+    from studyapp.ui.seams import ParticipantSession
 
 #: Rendered frames per clip play (virtual time jumps duration / this per frame).
 FRAMES_PER_PLAY = 8
@@ -46,17 +54,16 @@ def save_png(rgb: np.ndarray, path: Path) -> None:
 class UIBot:
     """Drives a :class:`StudyApp` offscreen, one rendered frame per step."""
 
-    def __init__(self, design: Any, db: Any, participant_id: str, policy: str, seed: int, *,
+    def __init__(self, design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int, *,
                  size: tuple[int, int] = (1280, 720), out_dir: Path | str | None = None,
-                 max_frames_per_trial: int = 400, session: Any = None, fps: float = 60.0,
+                 max_frames_per_trial: int = 400, session: ParticipantSession | None = None, fps: float = 60.0,
                  frames_per_play: int | None = FRAMES_PER_PLAY) -> None:
         from studyapp.render.context import create_offscreen_context
         from studyapp.render.loop import FrameLoop, OffscreenFrames, VirtualTimer
-        from studyapp.study.bots import POLICIES
         from studyapp.study.session import Session
 
-        if policy not in POLICIES:
-            raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(POLICIES)}")
+        if policy not in policies.POLICIES:
+            raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(policies.POLICIES)}")
         self.design = design
         self.policy = policy
         self.seed = int(seed)
@@ -93,7 +100,7 @@ class UIBot:
     def frames(self) -> int:
         return self.loop.frames
 
-    def _draw(self, fbo: Any, size: tuple[int, int], now: float) -> None:
+    def _draw(self, fbo: moderngl.Framebuffer, size: tuple[int, int], now: float) -> None:
         # Fast mode: the clip advances first by a fraction of its length, then the frame is drawn and
         # "flipped" at that same instant (virtual time does not pass while drawing).
         view = self.app._view
@@ -246,7 +253,6 @@ class UIBot:
             self.wait()
 
     def _plan_trial(self, key: str) -> None:
-        from studyapp.study.bots import choose_ranking, trial_rng
         from studyapp.ui.ranking import order_and_ties
 
         view = self.app.trial_view()
@@ -260,8 +266,8 @@ class UIBot:
         if sub == "ranking" and self._planned_for != view.plan.trial_index:
             self._planned_for = view.plan.trial_index
             plan = view.plan
-            rng = trial_rng(self.seed, self.session.participant_id, plan.trial_index)
-            ranks = choose_ranking(self.policy, plan, view.media, self.design.criteria, rng,
+            rng = policies.trial_rng(self.seed, self.session.participant_id, plan.trial_index)
+            ranks = policies.choose_ranking(self.policy, plan, view.media, self.design.criteria, rng,
                                    condition_order=[c.id for c in self.design.conditions],
                                    allow_ties=view.ranking.allow_ties)
             for ci, crit in enumerate(self.design.criteria):
@@ -291,14 +297,13 @@ class UIBot:
         self.wait()
 
     def _plan_questionnaire(self) -> None:
-        from studyapp.study.bots import questionnaire_answers, trial_rng
-
         if self._q_planned:
             self.wait()
             return
         self._q_planned = True
         items = self.session.questionnaire_items
-        answers = questionnaire_answers(items, trial_rng(self.seed, self.session.participant_id, 10**6))
+        rng = policies.trial_rng(self.seed, self.session.participant_id, 10**6)
+        answers = policies.questionnaire_answers(items, rng)
         for q in items:
             if q.kind == "likert":
                 self.click(("likert", q.id, int(answers[q.id])))
@@ -311,3 +316,20 @@ class UIBot:
                 self.click(("question", q.id))  # click elsewhere: the text box lets go of the keyboard
         self.wait(2)
         self.click("submit")
+
+
+def run_offscreen_bot(design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int,
+                      out_dir: Path | str | None = None, max_frames_per_trial: int = 400,
+                      size: tuple[int, int] = (1280, 720)) -> int:
+    """A scripted participant through the real session and UI code, without a display.
+
+    Frames are rendered offscreen (EGL); a virtual silent clock jumps ahead so a 10 s clip takes a few
+    frames; clicks, drags and key presses are synthesized through :mod:`studyapp.ui.input`. With
+    ``out_dir`` a PNG of every screen is written there. Returns 0 when the session finished.
+    """
+    bot = UIBot(design, db, participant_id, policy, seed, size=size, out_dir=out_dir,
+                max_frames_per_trial=max_frames_per_trial)
+    try:
+        return bot.run()
+    finally:
+        bot.close()

@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 
-from studyapp.ui.bot import UIBot
+from studyapp.bots.ui_driver import UIBot
 
 pytestmark = pytest.mark.gl
 
 
 def _expected_ranks(design, db, pid, policy, seed):
     """What the policy chooses for each trial, computed without the UI."""
-    from studyapp.study.bots import choose_ranking, trial_rng
+    from studyapp.bots.policies import choose_ranking, trial_rng
     from studyapp.study.stimuli import load_trial_media
 
     out = {}
@@ -220,7 +220,7 @@ def _stored_ranks(db, pid):
 
 def test_bot_enters_ties_through_ui_and_they_are_stored(tied_study, tmp_path, secrets_of):
     """Ties chosen by the policy go in by drag + link click, click + link click and "=" on the keyboard."""
-    from studyapp.study.bots import choose_ranking, trial_rng
+    from studyapp.bots.policies import choose_ranking, trial_rng
     from studyapp.study.session import normalise_ranks
     from studyapp.ui.screens.instructions import HOW_TO_TIE
     from studyapp.ui.screens.ranking_panel import TIE_HINT

@@ -6,14 +6,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from studyapp.study.bots import (
-    WEAK_RANKINGS, _ranks_from_scores, choose_ranking, run_bot_session, trial_rng,
-)
+from studyapp.bots.policies import WEAK_RANKINGS, _ranks_from_scores, choose_ranking, trial_rng
+from studyapp.bots.session_driver import run_bot_session
 from studyapp.study.design import load_design
 from studyapp.study.schedule import TrialPlan
 from studyapp.study.session import normalise_ranks
 from studyapp.study.storage import ResultsDB
-from studyapp.study.synthetic import write_synthetic_study
+from fixtures.synthetic import write_synthetic_study
 
 PLAN = TrialPlan(0, "s1", ("b", "c", "a"), False, False, 0)
 CRITS = ["realism", "synchronization"]

@@ -1,0 +1,73 @@
+"""A scripted participant at the session level: the real :class:`~studyapp.study.session.Session`, no rendering.
+
+What ``studyapp run --no-render --bot P`` and the demo's simulated panel use: fast (no frames), yet each
+trial's scene is built by the participant's own scene builder (on the CPU), every answer goes through the
+same session methods and storage as a participant's, and is chosen by the same policy as the offscreen
+participant's (:mod:`studyapp.bots.policies`).
+"""
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Callable, Sequence
+
+from studyapp.bots.policies import POLICIES, choose_ranking, questionnaire_answers, trial_rng
+from studyapp.errors import StudyappError
+from studyapp.study.session import PlayStats, Session, State
+
+if TYPE_CHECKING:
+    from studyapp.study.design import Design
+    from studyapp.study.schedule import TrialPlan
+    from studyapp.study.storage import ResultsDB
+
+
+def run_bot_session(
+    design: Design,
+    db: ResultsDB,
+    participant: str,
+    policy: str,
+    seed: int = 0,
+    on_trial: Callable[[TrialPlan], None] | None = None,
+    *,
+    row: int | None = None,
+    groups: dict[str, str] | None = None,
+    allow_rerun: bool = False,
+    pace_s: float = 0.0,
+    plans: Sequence[TrialPlan] | None = None,
+    n_rows: int | None = None,
+) -> Session:
+    """Run (or resume) one participant with a scripted policy; returns the finished :class:`Session`.
+
+    ``on_trial(plan)`` is called after each answer is committed. ``pace_s`` waits that long per clip as
+    if watching it (kill tests use it to land kills between commits).
+    """
+    if policy not in POLICIES:
+        raise StudyappError(f"unknown bot policy {policy!r}; choose one of {', '.join(POLICIES)}")
+    session = Session(design, db, participant, row=row, groups=groups, allow_rerun=allow_rerun, plans=plans,
+                      n_rows=n_rows, on_saved=on_trial)
+    try:
+        session.accept_consent()
+        session.finish_instructions()
+        session.record_env_check({"bot": policy, "bot_seed": int(seed)})
+        cond_order = [c.id for c in design.conditions]
+        ties = bool(getattr(design.playback, "allow_ties", False))
+        from studyapp.render.scene import build_trial_scene
+        from studyapp.study.stimuli import load_trial_media
+
+        while (plan := session.current_trial()) is not None:
+            media = load_trial_media(design, plan)
+            # The scene a participant's window would build (retargeting, avatar, media cut to the timeline),
+            # on the CPU: a pilot without rendering fails where a participant would, and plays what they play.
+            scene = build_trial_scene(None, media)
+            session.record_play_started(duration_s=scene.duration)
+            if pace_s > 0:
+                time.sleep(pace_s)
+            session.record_play_finished(True, PlayStats())
+            rng = trial_rng(seed, session.participant_id, plan.trial_index)
+            session.submit_ranking(choose_ranking(policy, plan, media, design.criteria, rng,
+                                                  condition_order=cond_order, allow_ties=ties))
+        if session.state is State.QUESTIONNAIRE:
+            rng = trial_rng(seed, session.participant_id, -1 & 0xFFFFFFFF)
+            session.submit_questionnaire(questionnaire_answers(session.questionnaire_items, rng))
+    finally:
+        session.close()
+    return session
