@@ -36,3 +36,24 @@ def write(tmp_path: Path, text: str, name: str = "m.bvh") -> Path:
     p = tmp_path / name
     p.write_text(text)
     return p
+
+
+def scipy_fk(motion):
+    """World rotations ``(F, J, 3, 3)`` and positions ``(F, J, 3)`` of a Motion, joint by joint with scipy:
+    forward kinematics written apart from ``studyapp.motion.fk``, for tests to check it against."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    sk = motion.skeleton
+    f, j = motion.rotations.shape[:2]
+    rot = np.empty((f, j, 3, 3))
+    pos = np.empty((f, j, 3))
+    for k in range(j):
+        local = Rotation.from_quat(motion.rotations[:, k].reshape(-1, 4)).as_matrix()
+        p = int(sk.parents[k])
+        if p < 0:
+            rot[:, k], pos[:, k] = local, motion.translations[:, k]
+        else:
+            rot[:, k] = rot[:, p] @ local
+            pos[:, k] = pos[:, p] + np.einsum("fij,fj->fi", rot[:, p], motion.translations[:, k])
+    return rot, pos

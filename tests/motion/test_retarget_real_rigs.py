@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from motion_helpers import scipy_fk
 from studyapp.errors import InputError
 from studyapp.motion.io import load_motion
 from studyapp.render.avatar import build_default_avatar
@@ -44,21 +45,7 @@ AVATAR_LIMBS = [("LeftUpperArm", "LeftLowerArm"), ("LeftLowerArm", "LeftHand"), 
                 ("RightUpperLeg", "RightLowerLeg"), ("RightLowerLeg", "RightFoot"), ("Hips", "Head")]
 
 
-def fk(motion) -> tuple[np.ndarray, np.ndarray]:
-    """World rotations ``(F, J, 3, 3)`` and positions ``(F, J, 3)``, joint by joint with scipy."""
-    sk = motion.skeleton
-    f, j = motion.rotations.shape[:2]
-    rot = np.empty((f, j, 3, 3))
-    pos = np.empty((f, j, 3))
-    for k in range(j):
-        local = Rotation.from_quat(motion.rotations[:, k].reshape(-1, 4)).as_matrix()
-        p = int(sk.parents[k])
-        if p < 0:
-            rot[:, k], pos[:, k] = local, motion.translations[:, k]
-        else:
-            rot[:, k] = rot[:, p] @ local
-            pos[:, k] = pos[:, p] + np.einsum("fij,fj->fi", rot[:, p], motion.translations[:, k])
-    return rot, pos
+fk = scipy_fk
 
 
 def _unit(v):

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from motion_helpers import scipy_fk
 from studyapp.cli import main
 from studyapp.errors import InputError
 from studyapp.motion.bvh import read_bvh
@@ -26,21 +27,7 @@ SMPL_PARENTS_22 = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16,
 L_SHOULDER, L_ELBOW, L_WRIST, R_SHOULDER, R_ELBOW, R_WRIST = 16, 18, 20, 17, 19, 21
 
 
-def world(motion):
-    """World rotations and positions of a studyapp Motion, joint by joint (scipy)."""
-    sk = motion.skeleton
-    f, j = motion.rotations.shape[:2]
-    rot = np.empty((f, j, 3, 3))
-    pos = np.empty((f, j, 3))
-    for k in range(j):
-        local = Rotation.from_quat(motion.rotations[:, k]).as_matrix()
-        p = int(sk.parents[k])
-        if p < 0:
-            rot[:, k], pos[:, k] = local, motion.translations[:, k]
-        else:
-            rot[:, k] = rot[:, p] @ local
-            pos[:, k] = pos[:, p] + np.einsum("fij,fj->fi", rot[:, p], motion.translations[:, k])
-    return rot, pos
+world = scipy_fk  # forward kinematics written apart from studyapp.motion.fk
 
 
 def smpl_world_rotations(poses: np.ndarray) -> np.ndarray:
