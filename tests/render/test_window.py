@@ -90,8 +90,9 @@ def test_view_command_opens_a_window_and_closes_on_escape(xvfb_display):
         deadline = time.time() + 60
         while not win_id and time.time() < deadline and proc.poll() is None:
             time.sleep(0.3)
-            win_id = subprocess.run(["xdotool", "search", "--name", "^studyapp$"], capture_output=True,
-                                    text=True).stdout.split()
+            # this process's window: a window of an earlier test on the same display may still be listed
+            win_id = subprocess.run(["xdotool", "search", "--pid", str(proc.pid), "--name", "^studyapp$"],
+                                    capture_output=True, text=True).stdout.split()
             win_id = win_id[0] if win_id else ""
         assert win_id, f"no window appeared: {proc.stderr.read() if proc.poll() is not None else ''}"
         # the window opens before the motion is loaded: wait for the first drawn frame
