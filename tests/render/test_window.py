@@ -103,6 +103,7 @@ def test_view_command_opens_a_window_and_closes_on_escape(xvfb_display):
             spread = np.ptp(shot.astype(int).sum(-1))
             time.sleep(0.3)
         assert spread > 100  # a figure on the backdrop, not a flat colour
+        assert proc.poll() is None, f"view closed by itself ({proc.returncode}): {proc.stderr.read()[-2000:]}"
         subprocess.run(["xdotool", "key", "--window", win_id, "Escape"], check=True)
         assert proc.wait(20) == 0
     finally:
