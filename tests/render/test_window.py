@@ -104,8 +104,19 @@ def test_view_command_opens_a_window_and_closes_on_escape(xvfb_display):
             time.sleep(0.3)
         assert spread > 100  # a figure on the backdrop, not a flat colour
         assert proc.poll() is None, f"view closed by itself ({proc.returncode}): {proc.stderr.read()[-2000:]}"
-        subprocess.run(["xdotool", "key", "--window", win_id, "Escape"], check=True)
-        assert proc.wait(20) == 0
+        # Escape to whatever window the process shows now (found again: the id read before can be stale on a
+        # loaded X server), until it closes
+        for _ in range(40):
+            ids = subprocess.run(["xdotool", "search", "--pid", str(proc.pid), "--name", "^studyapp$"],
+                                 capture_output=True, text=True).stdout.split()
+            for w in ids:
+                subprocess.run(["xdotool", "key", "--window", w, "Escape"], capture_output=True)
+            try:
+                proc.wait(0.5)
+                break
+            except subprocess.TimeoutExpired:
+                continue
+        assert proc.wait(20) == 0, proc.stderr.read()[-2000:]
     finally:
         if proc.poll() is None:
             proc.kill()
