@@ -79,16 +79,7 @@ def _play_in_window(design, db, tmp_path):
         app = d.app
         runner.capture = True
         watch = PlayWatcher(app, runner.loop)
-        d.until(lambda: "consent" in app.ui.rects)
-        d.frames(2)
-        d.click("consent")
-        d.until(lambda: app.screen_key() == "instructions")
-        d.frames(3)
-        d.key("Return")
-        d.until(lambda: app.screen_key() == "env_check")
-        d.frames(3)
-        d.click("continue")
-        d.until(lambda: app.screen_key() == "practice:ready")
+        d.to_practice()
         d.frames(3)
         d.click("play")                             # an X click starts the play
         def step():

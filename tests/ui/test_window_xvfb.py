@@ -49,6 +49,20 @@ class Driver:
             assert self.runner.step()
             time.sleep(0.01)  # let the X server deliver queued events before the next poll
 
+    def to_practice(self) -> None:
+        """From the welcome page to the first practice clip, as a participant clicks and types through."""
+        app = self.app
+        self.until(lambda: "consent" in app.ui.rects)
+        self.frames(2)
+        self.click("consent")
+        self.until(lambda: app.screen_key() == "instructions")
+        self.frames(3)
+        self.key("Return")
+        self.until(lambda: app.screen_key() == "env_check")
+        self.frames(3)
+        self.click("continue")
+        self.until(lambda: app.screen_key() == "practice:ready")
+
     def until(self, pred, limit_s: float = 30.0) -> None:
         t_end = time.monotonic() + limit_s
         while not pred():
@@ -221,16 +235,7 @@ def test_real_window_ties_with_mouse_and_equals_key(xvfb_display, tied_study, tm
     design, db = tied_study
     with window_driver(design, db, "W2", tmp_path, size=(1280, 720)) as (d, runner):
         app = d.app
-        d.until(lambda: "consent" in app.ui.rects)
-        d.frames(2)
-        d.click("consent")
-        d.until(lambda: app.screen_key() == "instructions")
-        d.frames(3)
-        d.key("Return")
-        d.until(lambda: app.screen_key() == "env_check")
-        d.frames(3)
-        d.click("continue")
-        d.until(lambda: app.screen_key() == "practice:ready")
+        d.to_practice()
         d.frames(3)
         d.click("play")
         d.until(lambda: app.screen_key() == "practice:ranking", 30)
