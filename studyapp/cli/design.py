@@ -6,8 +6,6 @@ import sys
 import warnings
 from pathlib import Path
 
-import pandas as pd
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     v = sub.add_parser(
@@ -76,6 +74,8 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
         df.to_csv(args.csv, index=False)
         print(f"Wrote {len(df)} trials of {args.participants} participants to {args.csv}")
     else:
+        import pandas as pd  # only `schedule` prints a table; `--help` must not pay for pandas
+
         with pd.option_context("display.max_rows", None, "display.width", 200):
             print(df.to_string(index=False))
     rows = n_rows(design)
