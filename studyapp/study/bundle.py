@@ -51,7 +51,7 @@ import zlib
 import platformdirs
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 from studyapp import __version__
 from studyapp import tomlfile
@@ -597,7 +597,7 @@ def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file:
     return reports
 
 
-def _guarded(f: Path, step: Any) -> Any:
+def _guarded(f: Path, step: Callable[[], Any]) -> Any:
     """``step()``, or a refusal report for the errors a malformed file raises (nothing of it is kept)."""
     try:
         return step()
