@@ -22,6 +22,8 @@ opaque ids back to the real condition and stimulus ids):
   the design requires watching (``must_watch_fully``) each answer came at least the clip's length after
   the clip was shown, after a completed play that lasted the clip's length (give or take
   :data:`WATCH_SLACK_S` of timer resolution);
+* **recorded fields**: play counts, frame counts, refresh rates and durations are of the kind the session
+  writes, and each trial's play count is the number of its plays in the file;
 * **copies**: no trial has the same clip and the same shown and answered times, to the millisecond, as a
   trial of another participant (in the database, or in another file of the same merge): the same
   answers under a new id.
@@ -302,6 +304,52 @@ def check_questionnaire(rows: Sequence[Row], design: Design, status: Any) -> lis
     return out
 
 
+# ------------------------------------------------------------------------------------------ recorded fields
+def _count(v: Any) -> bool:
+    return _is_int(v) and v >= 0
+
+
+def _measure(v: Any) -> bool:
+    return _is_number(v) and v >= 0
+
+
+#: What the session writes in each field the other checks do not cover (None allowed where it may be
+#: unmeasured): a value of another kind was put there by hand.
+_FIELDS: dict[str, dict[str, tuple[Callable[[Any], bool], bool, str]]] = {
+    "trials": {"plays": (_count, False, "a count"), "frames_shown": (_count, True, "a count"),
+               "dropped_frames": (_count, True, "a count"), "refresh_hz": (_measure, True, "a rate in Hz"),
+               "worst_av_offset_ms": (_measure, True, "milliseconds"),
+               "trial_duration_s": (_measure, True, "seconds"), "app_version": (lambda v: isinstance(v, str), False,
+                                                                                "a version")},
+    "plays": {"completed": (lambda v: v in (0, 1) and not isinstance(v, float), False, "0 or 1")},
+}
+
+
+def check_fields(payload: Mapping[str, Any]) -> list[Finding]:
+    """Recorded measurements are of the kind the session writes, and each trial's play count is its plays.
+
+    One finding per field, naming the first rows where it is wrong.
+    """
+    out = []
+    for table, fields in _FIELDS.items():
+        for name, (ok, optional, kind) in fields.items():
+            bad = [_trial_name(r) for r in payload[table]
+                   if not ((optional and r.get(name) is None) or ok(r.get(name)))]
+            if bad:
+                out.append(Finding(", ".join(bad[:3]) + (" ..." if len(bad) > 3 else ""),
+                                   f"{table}.{name} is not {kind}"))
+    counted: dict[Any, int] = {}
+    for p in payload["plays"]:
+        i = p.get("trial_index")
+        counted[i] = counted.get(i, 0) + 1 if _is_int(i) else 0
+    wrong = [t.get("trial_index") for t in payload["trials"]
+             if _count(t.get("plays")) and t.get("plays") != counted.get(t.get("trial_index"), 0)]
+    if wrong:
+        out.append(Finding("trials " + ", ".join(map(str, wrong[:6])), "the play count is not the number of plays "
+                                                                     "the file records for the trial"))
+    return out
+
+
 # ------------------------------------------------------------------------------------------ timings
 def check_timings(trials: Sequence[Row], plays: Sequence[Row], durations: Mapping[int, float | None],
                   must_watch: bool) -> list[Finding]:
@@ -421,6 +469,7 @@ def check_returned(payload: Mapping[str, Any], design: Design, *, roster: Mappin
     out += check_questionnaire(payload["questionnaire"], design, status)
     durations = {t["trial_index"]: duration_of(plans[t["trial_index"]]) for t in trials
                  if _is_int(t.get("trial_index")) and 0 <= t["trial_index"] < len(plans)}
+    out += check_fields(payload)
     out += check_timings(trials, payload["plays"], durations, bool(design.playback.must_watch_fully))
     out += check_copies(pid, trials, others)
     return out

@@ -284,3 +284,41 @@ def test_validate_counts_one_problem_in_the_singular(tmp_path: Path, capsys) -> 
     assert main(["validate", str(design), "--quick"]) == 1
     err = capsys.readouterr().err
     assert "1 problem: the design cannot run until it is fixed." in err, err
+
+
+def test_random_edits_never_crash_merge_and_nothing_invalid_reaches_export(returned, tmp_path: Path) -> None:
+    """Seeded random edits of one field each (checksum recomputed): every file is either refused with a
+    message or imported, and whatever is imported exports as valid rankings of the real conditions."""
+    import random
+
+    from studyapp.study.export import export_dataframe
+
+    db = _fresh_db(returned, tmp_path)
+    pristine = db.read_bytes()
+    with zipfile.ZipFile(returned["zip"]) as zf:
+        base = json.loads(zf.read("results.json"))
+    fields = [(table, i, name) for table in ("participants", "trials", "responses", "plays", "questionnaire")
+              for i, row in enumerate(base[table]) for name in row]
+    values = [None, -1, 0, 99, 2.5, "abc", True, [], {}, "2026-13-45T00:00:00", "synced", "R02"]
+    rng = random.Random(16)
+    outcomes = []
+    for k in range(60):
+        table, i, name = rng.choice(fields)
+        value = rng.choice(values)
+
+        def edit(payload: dict[str, Any], table=table, i=i, name=name, value=value) -> None:
+            payload[table][i][name] = value
+
+        f = _edited(returned["zip"], tmp_path / f"results-m{k}.zip", edit)
+        for suffix in ("-wal", "-shm"):
+            Path(f"{db}{suffix}").unlink(missing_ok=True)
+        db.write_bytes(pristine)
+        [report] = merge_results(db, [f])
+        assert report.message and "\n" not in report.message, (table, name, value, report.message)
+        outcomes.append(report.ok)
+        if report.ok:
+            df = export_dataframe(db)
+            assert set(df["condition"]) <= {"synced", "lagged", "static"}, (table, name, value)
+            assert df["rank"].isin([1.0, 2.0, 3.0]).all(), (table, name, value)
+            assert (df.groupby(["trial_index", "criterion"])["rank"].apply(sorted).map(tuple) == (1.0, 2.0, 3.0)).all()
+    assert 0 < sum(outcomes) < len(outcomes)  # some edits touch fields that prove nothing (e.g. a version), most are caught
