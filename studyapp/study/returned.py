@@ -403,8 +403,7 @@ def check_timings(trials: Sequence[Row], plays: Sequence[Row], durations: Mappin
     if unreadable:
         out.append(Finding(", ".join(unreadable[:5]), "a time is not an ISO 8601 timestamp with a time zone"))
     if backwards:
-        out.append(Finding(f"trial {backwards[0]}", "answered no later than the trial before it (answers are "
-                           f"given in order); also trials {backwards[1:6]}" if len(backwards) > 1 else
+        out.append(Finding(("trial " if len(backwards) == 1 else "trials ") + ", ".join(map(str, backwards[:6])),
                            "answered no later than the trial before it (answers are given in order)"))
     if too_soon:
         out.append(Finding("trials " + ", ".join(too_soon[:6]) + (" ..." if len(too_soon) > 6 else ""),
