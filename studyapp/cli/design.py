@@ -54,7 +54,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
             print(f"note: {n}")
         if problems:
             n = len(problems)
-            print(f"{n} problem{'s' if n != 1 else ''}: the design cannot run until they are fixed.", file=sys.stderr)
+            print("1 problem: the design cannot run until it is fixed." if n == 1 else
+                  f"{n} problems: the design cannot run until they are fixed.", file=sys.stderr)
         else:
             print(f"{args.design}: OK, the design can run.")
     return 1 if problems else 0

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="export a results database as a tidy CSV (one row per rank)",
         description="Export a results database (.sqlite) as CSV for analysis: --csv writes one row per "
         "participant x trial x criterion x condition with its rank, --questionnaire-csv one row per participant "
-        "x questionnaire item. Practice trials are kept and flagged unless --exclude-practice.",
+        "x questionnaire item; with neither, the long table is printed to stdout. Practice trials are kept and flagged "
+        "unless --exclude-practice.",
     )
     e.add_argument("db", type=Path, help="results database (.sqlite)")
     e.add_argument("--csv", type=Path, help="long table: participant x trial x criterion x condition")
@@ -71,13 +73,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         "merge",
         help="import remote participants' results files into the experimenter's database",
         description="Import the results files (results-*.zip) that remote participants send back into the "
-        "experimenter's results database, mapping the bundle's opaque ids back to the real ones. Damaged files, "
-        "results of another design and participants already present are refused with one line each; the exit "
-        "status is 1 when any file was refused.",
+        "experimenter's results database, mapping the bundle's opaque ids back to the real ones. Before anything "
+        "is imported, every answer is checked against the roster, the schedule recomputed from the design, the "
+        "ranking rules, plausible timings and every other participant's answers (copies); a file with any problem "
+        "imports nothing and each problem is one line. Damaged files and results of another design are refused "
+        "too; a file merged before is reported as already merged. The exit status is 1 when any file was refused.",
     )
     m.add_argument("db", type=Path, help="the experimenter's results database")
     m.add_argument("files", type=Path, nargs="+", help="results-*.zip files sent back by participants")
     m.add_argument("--key", type=Path, help="a bundle key file (STUDY.key.json) when the database does not hold it")
+    m.add_argument("--design", type=Path, help="the study design the database was made for (default: NAME.toml "
+                   "next to NAME.results.sqlite); every answer is checked against its schedule")
+    m.add_argument("--allow-unlisted", action="store_true",
+                   help="accept participant ids that are not on the bundle's roster (participants chose their own)")
     m.set_defaults(func=_cmd_merge)
 
 
@@ -220,7 +228,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from studyapp.study.export import export_dataframe, questionnaire_dataframe
 
     if not args.csv and not args.questionnaire_csv:
-        raise StudyappError("nothing to export: give --csv OUT and/or --questionnaire-csv OUT")
+        # no output named: the long table goes to stdout (for a pipe or a quick look); nothing else is printed
+        export_dataframe(args.db, include_practice=not args.exclude_practice).to_csv(sys.stdout, index=False)
+        return 0
     if args.csv:
         df = export_dataframe(args.db, include_practice=not args.exclude_practice)
         args.csv.parent.mkdir(parents=True, exist_ok=True)
@@ -252,10 +262,15 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
 def _cmd_merge(args: argparse.Namespace) -> int:
     from studyapp.study.bundle import merge_results
 
-    reports = merge_results(args.db, args.files, key_file=args.key)
-    bad = 0
+    reports = merge_results(args.db, args.files, key_file=args.key, design=args.design,
+                            allow_unlisted=args.allow_unlisted)
     for r in reports:
-        print(("imported: " if r.ok else "REFUSED: ") + f"{r.file}: {r.message}")
-        bad += not r.ok
-    print(f"{len(reports) - bad} of {len(reports)} file(s) imported into {args.db}")
+        print(("already merged: " if r.already else "imported: " if r.ok else "REFUSED: ") + f"{r.file}: {r.message}")
+        for problem in r.problems:  # one line per problem: the file, the place in it, what is wrong
+            print(f"  {r.file}: {problem}")
+    bad = sum(not r.ok for r in reports)
+    already = sum(r.already for r in reports)
+    imported = len(reports) - bad - already
+    print(f"{imported} of {len(reports)} file(s) imported into {args.db}"
+          + (f", {already} already merged" if already else "") + (f", {bad} refused" if bad else ""))
     return 1 if bad else 0

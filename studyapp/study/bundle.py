@@ -29,7 +29,11 @@ checksum), stores results in the per-user data folder and, when the participant 
 with its sha256) into ``~/studyapp-results`` (a visible folder in the participant's home) and says where.
 
 ``merge_results`` imports such files into the experimenter's database, refusing -- with one clear message
-per file -- damaged files (checksum), results of another design, and participants already present.
+per file -- damaged files (checksum), results of another design, and participants already present with other
+answers (a file merged before is reported as already merged). The sha256 proves only that a file arrived
+intact, since anyone can recompute it: before anything is imported, every answer is checked against the
+roster, the schedule recomputed from the design, the ranking rules, plausible timings and the answers of
+every other participant (:mod:`studyapp.study.returned`), and a file with any problem imports nothing.
 """
 from __future__ import annotations
 
@@ -47,7 +51,7 @@ import zlib
 import platformdirs
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 from studyapp import __version__
 from studyapp import tomlfile
@@ -470,17 +474,34 @@ def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened
 # ------------------------------------------------------------------------------------------ merging
 @dataclass
 class MergeReport:
+    """What merging one file did: imported (``ok``), merged before (``ok`` and ``already``), or refused."""
+
     file: Path
     ok: bool
     message: str
     participant: str | None = None
+    #: a refused file's problems, one line each (``where: what``); nothing of the file was imported
+    problems: list[str] = field(default_factory=list)
+    #: the file's answers are in the database already (merged before): nothing to do, not an error
+    already: bool = False
+
+
+class _Refused(StudyappError):
+    """A returned file failed the checks of :mod:`studyapp.study.returned`."""
+
+    def __init__(self, problems: list[str]) -> None:
+        self.problems = problems
+        n = len(problems)
+        super().__init__(f"{n} problem{'s' if n != 1 else ''} in the answers; nothing of this file was imported")
 
 
 def _read_results_file(path: Path) -> dict[str, Any]:
+    is_bundle = False
     try:
         with zipfile.ZipFile(path) as zf:
             manifest = json.loads(zf.read("manifest.json"))
-            data = zf.read("results.json")
+            is_bundle = isinstance(manifest, dict) and manifest.get("format") == BUNDLE_FORMAT
+            data = b"" if is_bundle else zf.read("results.json")
     except FileNotFoundError:
         raise InputError(path, None, "file not found") from None
     # Flipped bytes inside a compressed member surface as zlib.error or EOFError, a zip CRC failure as
@@ -488,6 +509,9 @@ def _read_results_file(path: Path) -> dict[str, Any]:
     except (zipfile.BadZipFile, zlib.error, EOFError, RuntimeError, NotImplementedError, KeyError, ValueError,
             OSError) as exc:
         raise InputError(path, None, f"not a readable results file ({exc}); ask the participant to send it again") from None
+    if is_bundle:
+        raise InputError(path, None, "this is a study bundle (the file participants run), not a results file; "
+                         "merge the results-*.zip files that participants send back")
     if not isinstance(manifest, dict) or manifest.get("format") != RESULTS_FORMAT:
         raise InputError(path, "manifest.json", "not a studyapp results file")
     files = manifest.get("files")
@@ -503,8 +527,46 @@ def _read_results_file(path: Path) -> dict[str, Any]:
     return payload
 
 
-def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file: str | Path | None = None) -> list[MergeReport]:
-    """Import results files into the experimenter's database; one :class:`MergeReport` per file."""
+def _merge_design(db: Any, db_path: Path, design_path: str | Path | None) -> Any:
+    """The study design the database was made for, to recompute every returned participant's schedule:
+    ``design_path``, else ``<name>.toml`` next to ``<name>.results.sqlite`` (where ``run`` and ``bundle`` put it)."""
+    from studyapp.study.design import load_design
+
+    if design_path is None:
+        name = db_path.name
+        guess = db_path.with_name(name[: -len(".results.sqlite")] + ".toml") if name.endswith(".results.sqlite") else None
+        if guess is None or not guess.is_file():
+            raise InputError(db_path, None, "merge checks every returned answer against the study's schedule and "
+                             "needs the design: give it with --design STUDY.toml" +
+                             (f" (it is not at {guess})" if guess is not None else ""))
+        design_path = guess
+    design = load_design(design_path, check_files=False)
+    if design.design_hash != db.design_hash:
+        raise InputError(design_path, None, f"not the design this results database was made for (design hash "
+                         f"{design.design_hash[:12]}…, the database's {db.design_hash[:12]}…); give the study's "
+                         "own design with --design")
+    return design
+
+
+@dataclass
+class _Returned:
+    """A readable results file with the real ids in it, ready for the checks."""
+
+    payload: dict[str, Any]
+    pid: Any
+    roster: dict[str, int] | None  # None: the lab's own design, no roster
+    id_findings: list[Any]
+    remote: bool
+
+
+def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file: str | Path | None = None,
+                  design: str | Path | None = None, allow_unlisted: bool = False) -> list[MergeReport]:
+    """Import results files into the experimenter's database; one :class:`MergeReport` per file.
+
+    Every file is checked first (:mod:`studyapp.study.returned`: roster, schedule, rankings, timings,
+    copies of another participant's answers, here or in another file of ``files``); a file with any problem
+    imports nothing. ``design``: the study's design (default: next to the database, see :func:`_merge_design`).
+    """
     from studyapp.study.storage import ResultsDB
 
     extra_keys: dict[str, dict] = {}
@@ -517,62 +579,110 @@ def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file:
     db = ResultsDB(db_path, create=False)
     reports = []
     try:
-        for f in files:
-            f = Path(f)
-            try:
-                pid = _merge_one(db, f, extra_keys)
-                reports.append(MergeReport(f, True, f"participant {pid}", pid))
-            except StudyappError as exc:
-                reports.append(MergeReport(f, False, getattr(exc, "problem", str(exc))))
-            except (KeyError, TypeError, ValueError, AttributeError, sqlite3.Error) as exc:
-                # A file whose checksum matches but whose tables lack fields was not written by studyapp
-                # (or by an incompatible version); the transaction rolled back, so nothing of it was kept.
-                reports.append(MergeReport(f, False, f"results.json is not in the studyapp results layout "
-                                           f"({type(exc).__name__}: {exc}); it was not imported"))
+        lab = _merge_design(db, Path(db_path), design)
+        read: list[tuple[Path, _Returned | MergeReport]] = []
+        for f in map(Path, files):
+            read.append((f, _guarded(f, lambda: _prepare(db, f, extra_keys))))
+        batch: dict[str, list[dict[str, Any]]] = {}
+        for _, got in read:
+            if isinstance(got, _Returned) and isinstance(got.pid, str):
+                batch.setdefault(got.pid, got.payload["trials"])
+        for f, got in read:
+            if isinstance(got, MergeReport):
+                reports.append(got)
+                continue
+            reports.append(_guarded(f, lambda: _merge_one(db, lab, f, got, batch, allow_unlisted)))
     finally:
         db.close()
     return reports
 
 
-def _merge_one(db: Any, path: Path, extra_keys: dict[str, dict]) -> str:
+def _guarded(f: Path, step: Callable[[], Any]) -> Any:
+    """``step()``, or a refusal report for the errors a malformed file raises (nothing of it is kept)."""
+    try:
+        return step()
+    except _Refused as exc:
+        return MergeReport(f, False, str(exc), problems=exc.problems)
+    except StudyappError as exc:
+        return MergeReport(f, False, getattr(exc, "problem", str(exc)))
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, sqlite3.Error) as exc:
+        # A file whose checksum matches but whose tables lack fields was not written by studyapp
+        # (or by an incompatible version); the transaction rolled back, so nothing of it was kept.
+        return MergeReport(f, False, f"results.json is not in the studyapp results layout "
+                           f"({type(exc).__name__}: {exc}); it was not imported")
+
+
+def _prepare(db: Any, path: Path, extra_keys: dict[str, dict]) -> _Returned:
+    from studyapp.study.returned import map_ids
+
     payload = _read_results_file(path)
     h = payload["design_hash"]
     if h == db.design_hash:
-        key = {"conditions": {}, "stimuli": {}, "bundle_hash": h}
+        key: dict[str, Any] = {"conditions": {}, "stimuli": {}, "bundle_hash": h}
     else:
         key = db.bundle_key(h) or extra_keys.get(h)
         if key is None or key.get("design_hash") != db.design_hash:
             raise StudyappError(f"results of another design (hash {h[:12]}…): this database is for {db.title!r} "
                                 f"(hash {db.design_hash[:12]}…) and knows no bundle with that hash. Merge it into the "
                                 "database of its own study, or pass that bundle's --key file")
-    cmap: dict[str, str] = key["conditions"]
-    smap: dict[str, str] = key["stimuli"]
-
-    def cond(c: str) -> str:
-        if c.startswith("frozen:"):
-            return "frozen:" + cmap.get(c[7:], c[7:])
-        return cmap.get(c, c)
-
+    remote = key.get("bundle_hash") != db.design_hash
+    mapped, findings = map_ids(payload, key["conditions"], key["stimuli"], strict=remote)
     parts = payload["participants"]
     if len(parts) != 1:
         raise StudyappError(f"expected one participant in the file, found {len(parts)}")
-    p = parts[0]
-    pid = p["id"]
+    roster = {str(k): int(v) for k, v in key.get("roster", {}).items()} if remote else None
+    return _Returned(mapped, parts[0]["id"], roster, findings, remote)
+
+
+def _same_as_stored(db: Any, pid: str, payload: dict[str, Any]) -> bool:
+    """The file's answers are exactly those stored for ``pid`` (the file was merged before)."""
+    def trials(rows: Iterable[dict[str, Any]]) -> set[tuple[Any, ...]]:
+        return {(t["trial_index"], t["stimulus"], t["answered_at"]) for t in rows}
+
+    def ranks(rows: Iterable[dict[str, Any]]) -> set[tuple[Any, ...]]:
+        return {(r["trial_index"], r["criterion"], r["slot"], r["condition"], float(r["rank"])) for r in rows}
+
+    return (trials(db.trials(pid)) == trials(payload["trials"])
+            and ranks(db.responses(pid)) == ranks(payload["responses"]))
+
+
+def _merge_one(db: Any, design: Any, path: Path, got: _Returned, batch: dict[str, list[dict[str, Any]]],
+               allow_unlisted: bool) -> MergeReport:
+    from studyapp.study.returned import check_returned
+    from studyapp.study.session import trial_duration_s
+
+    payload, pid = got.payload, got.pid
+    if isinstance(pid, str) and db.participant(pid) is not None:
+        if _same_as_stored(db, pid, payload):
+            return MergeReport(path, True, f"participant {pid}: already merged, nothing to do", pid, already=True)
+        raise StudyappError(f"participant {pid!r} is already in the database with other answers (two participants "
+                            "used the same id, or the file changed since it was merged); it was not imported")
+    others: dict[str, list[dict[str, Any]]] = {}
+    for t in db.trials():
+        others.setdefault(t["participant"], []).append(t)
+    for other, rows in batch.items():
+        others.setdefault(other, rows)
+    durations: dict[str, float | None] = {}
+
+    def duration_of(plan: Any) -> float | None:
+        if plan.stimulus_id not in durations:
+            durations[plan.stimulus_id] = trial_duration_s(design, plan)
+        return durations[plan.stimulus_id]
+
+    findings = got.id_findings + check_returned(payload, design, roster=got.roster, allow_unlisted=allow_unlisted,
+                                                others=others, duration_of=duration_of)
+    if findings:
+        raise _Refused([str(f) for f in findings])
+    p = payload["participants"][0]
     groups = json.loads(p["groups"])
-    if key.get("bundle_hash") != db.design_hash:
+    if got.remote:
         groups.setdefault("remote", "yes")
-        groups["bundle"] = h[:12]
+        groups["bundle"] = payload["design_hash"][:12]
     from studyapp.study.storage import DuplicateAnswerError
 
-    slots = ("slot_left", "slot_middle", "slot_right")
     try:
-        db.import_participant(
-            {**p, "groups": json.dumps(groups, sort_keys=True)},
-            payload["sessions"],
-            [{**t, "stimulus": smap.get(t["stimulus"], t["stimulus"]), **{k: cond(t[k]) for k in slots}}
-             for t in payload["trials"]],
-            [{**r, "condition": cond(r["condition"])} for r in payload["responses"]],
-            payload["plays"], payload["questionnaire"])
-    except DuplicateAnswerError as exc:  # merged before, or two participants used the same id
+        db.import_participant({**p, "groups": json.dumps(groups, sort_keys=True)}, payload["sessions"],
+                              payload["trials"], payload["responses"], payload["plays"], payload["questionnaire"])
+    except DuplicateAnswerError as exc:  # two processes merging at once
         raise StudyappError(str(exc)) from None
-    return pid
+    return MergeReport(path, True, f"participant {pid}", pid)

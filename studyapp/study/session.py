@@ -153,6 +153,23 @@ def normalise_ranks(
     return out
 
 
+def is_stored_ranking(values: Sequence[float], allow_ties: bool) -> bool:
+    """True when ``values`` (one criterion, slots left to right) is what :func:`normalise_ranks` stores:
+    1, 2 and 3 each once, or, with ``allow_ties``, the average ranks of a tied ranking (1.5, 1.5, 3).
+
+    >>> is_stored_ranking((3.0, 1.0, 2.0), False), is_stored_ranking((2.0, 2.0, 2.0), True)
+    (True, True)
+    >>> is_stored_ranking((1.0, 1.0, 3.0), True), is_stored_ranking((2.0, 2.0, 2.0), False)
+    (False, False)
+    """
+    if len(values) != 3 or any(v not in (1.0, 1.5, 2.0, 2.5, 3.0) for v in values):
+        return False
+    # average ranks are their own average ranks: (1, 1, 3) is not, (1.5, 1.5, 3) is
+    if tuple(values) != _average_ranks(values):
+        return False
+    return allow_ties or len(set(values)) == 3
+
+
 def attention_passed(design: Any, plan: Any, ranks: Mapping[str, tuple[float, float, float]]) -> bool | None:
     """Score an attention-check trial; ``None`` when the trial is not one (or no check names its stimulus).
 

@@ -18,12 +18,16 @@ from studyapp.study.storage import ResultsDB
 from fixtures.synthetic import write_synthetic_study
 
 REAL_CONDITIONS = ("synced", "lagged", "static")
+#: Seconds per clip of the lab study. Merging refuses answers given sooner than a clip lasts (the design
+#: requires watching it), so every bot whose results are merged watches each clip this long.
+CLIP_S = 0.3
 
 
 @pytest.fixture()
 def lab(tmp_path: Path):
     """A study with two lab participants already in the experimenter's database."""
-    design_path = write_synthetic_study(tmp_path / "study", n_stimuli=4, attention_check=True, questionnaire=True)
+    design_path = write_synthetic_study(tmp_path / "study", n_stimuli=4, seconds=CLIP_S, attention_check=True,
+                                        questionnaire=True)
     design = load_design(design_path)
     results = tmp_path / "study" / "tiny.results.sqlite"
     db = ResultsDB(results, design)
@@ -39,7 +43,7 @@ def _remote_run(zip_path: Path, tmp_path: Path, pid: str) -> Path:
     design = load_design(opened.design_path)
     db = ResultsDB(tmp_path / "remote.sqlite", design)
     db.on_participant_finished = lambda p: write_results_file(db, p, tmp_path / "outbox", opened)
-    session = run_bot_session(design, db, pid, "ordered", 3, row=remote_row(design, opened, pid))
+    session = run_bot_session(design, db, pid, "ordered", 3, row=remote_row(design, opened, pid), pace_s=CLIP_S)
     db.close()
     assert session.results_file is not None
     return session.results_file
@@ -95,15 +99,15 @@ def test_remote_run_and_merge_maps_back_to_real_ids(lab, tmp_path: Path) -> None
     assert set(remote["stimulus"]) == {s.id for s in design.stimuli}
     assert (remote["design_hash"] == design.design_hash).all()
     assert (remote["remote"] == "yes").all()
-    # the duration each remote trial played travels back with it (the synthetic clips: 1 s of audio each)
-    assert remote["trial_duration_s"].tolist() == [1.0] * len(remote)
+    # the duration each remote trial played travels back with it (the synthetic clips' length of audio each)
+    assert remote["trial_duration_s"].tolist() == [CLIP_S] * len(remote)
     # the ordered bot ranked bundle conditions in bundle order, which is the design's order: synced first
     assert (remote["rank"] == remote["condition"].map({"synced": 1.0, "lagged": 2.0, "static": 3.0})).all()
     assert ResultsDB(results, design).participant("R02").latin_row == info.roster["R02"]
 
-    # merging the same file again is refused as a duplicate, and nothing changes
+    # merging the same file again is reported as already merged (not an error), and nothing changes
     again = merge_results(results, [results_zip])
-    assert not again[0].ok and "already" in again[0].message
+    assert again[0].ok and again[0].already and "already merged" in again[0].message
     assert len(export_dataframe(results)) == len(df)
 
 
@@ -126,7 +130,8 @@ def test_merge_refuses_damaged_foreign_and_non_results_files(lab, tmp_path: Path
     junk = tmp_path / "results-junk.zip"
     junk.write_bytes(b"not a zip at all")
 
-    reports = merge_results(results, [damaged, foreign, junk, good])
+    # a bundle with no roster: participants chose their ids, which the experimenter allows explicitly
+    reports = merge_results(results, [damaged, foreign, junk, good], allow_unlisted=True)
     ok = {r.file.name: (r.ok, r.message) for r in reports}
     assert ok[damaged.name][0] is False and "checksum" in ok[damaged.name][1]
     assert ok[foreign.name][0] is False and "another design" in ok[foreign.name][1]
@@ -143,7 +148,7 @@ def test_results_files_of_ids_that_sanitize_alike_never_collide(lab, tmp_path: P
     ids = ["p/1", "p-1", "A", "a"]
     files = {}
     for pid in ids:
-        run_bot_session(design, remote, pid, "ordered", 1)
+        run_bot_session(design, remote, pid, "ordered", 1, pace_s=CLIP_S)
         files[pid] = write_results_file(remote, pid, tmp_path / "outbox")
     remote.close()
     names = [f.name for f in files.values()]
@@ -167,7 +172,7 @@ def test_results_file_never_overwrites_another_participants_file(lab, tmp_path: 
     design_path, design, results = lab
     remote = ResultsDB(tmp_path / "remote.sqlite", design)
     for pid in ("X1", "X2"):
-        run_bot_session(design, remote, pid, "ordered", 1)
+        run_bot_session(design, remote, pid, "ordered", 1, pace_s=CLIP_S)
     first = write_results_file(remote, "X1", tmp_path / "outbox")
     # whatever sits where X2's file would go -- another participant's results, or any other file -- is kept
     target = write_results_file(remote, "X2", tmp_path / "scratch")
@@ -431,7 +436,8 @@ def test_merge_refuses_byte_damaged_truncated_and_malformed_files_one_line_each(
         zf.writestr("results.json", body2)
         zf.writestr("manifest.json", json.dumps(manifest2))
 
-    reports = {r.file.name: r for r in merge_results(results, [flipped, truncated, forged, listy, good])}
+    reports = {r.file.name: r for r in merge_results(results, [flipped, truncated, forged, listy, good],
+                                                     allow_unlisted=True)}
     for bad in (flipped, truncated, forged, listy):
         assert reports[bad.name].ok is False and reports[bad.name].message, bad.name
     assert "not a readable results file" in reports[truncated.name].message

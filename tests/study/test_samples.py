@@ -264,9 +264,10 @@ def test_bundle_ships_every_sample_under_its_own_name_and_merge_keeps_the_sample
     # a remote participant's answers come back with the sample each slot showed
     db = ResultsDB(tmp_path / "remote.sqlite", bundled)
     db.on_participant_finished = lambda p: write_results_file(db, p, tmp_path / "outbox", opened)
-    session = run_bot_session(bundled, db, "R01", "ordered", 3, row=remote_row(bundled, opened, "R01"))
+    # watching each 1-second clip as long as it lasts: merge refuses answers given sooner
+    session = run_bot_session(bundled, db, "R01", "ordered", 3, row=remote_row(bundled, opened, "R01"), pace_s=1.0)
     db.close()
-    assert merge_results(results, [session.results_file])[0].ok
+    assert merge_results(results, [session.results_file], design=path)[0].ok
     df = export_dataframe(results)
     row = info.roster["R01"]
     for _, r in df.iterrows():
