@@ -75,6 +75,9 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
     """
     if block not in BLOCKS:
         raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
+    if block == "participant" and not complete_only:
+        # an incomplete trial's ranks run over fewer places: they cannot be averaged with complete ones
+        raise ValueError("incomplete blocks are kept for trial blocks only (the Skillings-Mack test)")
     sub = df[df["criterion"] == criterion]
     if conditions is None:
         conditions = sorted(df["condition"].unique())
