@@ -9,7 +9,8 @@ Functions take DataFrames / arrays and return DataFrames, in the manner of pingo
 4.5
 """
 from results_analysis.analysis import Analysis, analyze_criterion, group_breakdown, run_analysis
-from results_analysis.bradley_terry import bradley_terry, fit_bradley_terry, pairwise_wins
+from results_analysis.bradley_terry import (ConvergenceWarning, bradley_terry, estimability, fit_bradley_terry,
+                                            pairwise_wins)
 from results_analysis.descriptives import condition_summary
 from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions
@@ -18,16 +19,17 @@ from results_analysis.loader import load_questionnaire, load_results, load_study
 from results_analysis.posthoc import (conover, critical_difference, holm, nemenyi, nemenyi_q_alpha, posthoc_table,
                                       wilcoxon_holm)
 from results_analysis.questionnaire import cronbach_alpha, item_summary, scale_reliability
-from results_analysis.ranks import RankBlocks, as_blocks, rank_blocks, within_block_ranks
+from results_analysis.ranks import RankBlocks, as_blocks, place_shares, rank_blocks, within_block_ranks
 from results_analysis.report import analyze
 from results_analysis.simulate import simulate_results
 from results_analysis.validate import MixedDesignWarning, validate_results
 
 __all__ = [
-    "Analysis", "AnalysisInputError", "FriedmanResult", "MixedDesignWarning", "RankBlocks", "analyze", "as_blocks",
-    "analyze_criterion", "apply_exclusions", "bradley_terry", "condition_summary", "conover", "critical_difference",
-    "cronbach_alpha", "fit_bradley_terry", "friedman", "friedman_ranks", "group_breakdown", "holm", "item_summary",
-    "kendall_w", "load_questionnaire", "load_results", "load_study_title", "nemenyi", "nemenyi_q_alpha", "normalize_results",
-    "pairwise_wins", "posthoc_table", "rank_blocks", "run_analysis", "scale_reliability", "simulate_results",
-    "validate_results", "within_block_ranks", "wilcoxon_holm",
+    "Analysis", "AnalysisInputError", "ConvergenceWarning", "FriedmanResult", "MixedDesignWarning",
+    "RankBlocks", "analyze", "as_blocks", "analyze_criterion", "apply_exclusions", "bradley_terry",
+    "condition_summary", "conover", "critical_difference", "cronbach_alpha", "estimability",
+    "fit_bradley_terry", "friedman", "friedman_ranks", "group_breakdown", "holm", "item_summary", "kendall_w",
+    "load_questionnaire", "load_results", "load_study_title", "nemenyi", "nemenyi_q_alpha", "normalize_results",
+    "pairwise_wins", "place_shares", "posthoc_table", "rank_blocks", "run_analysis", "scale_reliability",
+    "simulate_results", "validate_results", "within_block_ranks", "wilcoxon_holm",
 ]

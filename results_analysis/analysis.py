@@ -1,9 +1,16 @@
 """The whole rank analysis of a results frame, as data (no files): what ``report`` writes out.
 
-Per criterion: the Friedman test on the chosen blocks (trials by default) and the other block type as a
-sensitivity check, Nemenyi and Holm-adjusted Wilcoxon post-hoc tests (Conover optional), the critical
-difference, per-condition descriptives over all answered trials and Bradley-Terry strengths. Optionally
-the same per level of stimulus tags / participant groups, and questionnaire summaries.
+Per criterion: the Friedman test on the chosen blocks and the other block type as a secondary analysis,
+Nemenyi and Holm-adjusted Wilcoxon post-hoc tests (Conover optional), the critical difference,
+per-condition descriptives over all answered trials and Bradley-Terry strengths. Optionally the same per
+level of stimulus tags / participant groups, and questionnaire summaries.
+
+The primary analysis uses participants as blocks (each participant's mean within-trial rank per
+condition): a participant's trials are repeated measures of one person, so counting them as independent
+blocks (``block='trial'``, the analysis many published studies report) overstates the evidence
+(pseudo-replication). The trial-level test stays as the secondary analysis, and as the primary one with
+``block='trial'`` to replicate a published analysis. Every test runs on within-block ranks, so how ties
+were written (1,1,3 or 1.5,1.5,3) cannot change a result.
 """
 from __future__ import annotations
 
@@ -23,7 +30,7 @@ from results_analysis.loader import CORE_COLUMNS, normalize_results
 from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary, scale_reliability
-from results_analysis.ranks import RankBlocks, rank_blocks
+from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.validate import check_complete, validate_structure
 
@@ -78,7 +85,7 @@ def group_columns(df: pd.DataFrame) -> list[str]:
     return [c for c in df.columns if c not in CORE_COLUMNS]
 
 
-def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "trial",
+def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "participant",
                       alpha: float = 0.05, conover: bool = False, n_boot: int = 2000, ci: float = 0.95,
                       seed: int = 0, skillings_mack_test: bool = False, sm_permutations: int = 2000,
                       ) -> CriterionAnalysis:
@@ -88,7 +95,7 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     >>> df = simulate_results(12, 4, seed=3, n_practice=0, n_attention=0)
     >>> a = analyze_criterion(df, "realism", conditions=["FaceCapGes", "DiffSHEG", "CaMN"], n_boot=100)
     >>> a.friedman.n_blocks, a.sensitivity.n_blocks
-    (48, 12)
+    (12, 48)
     """
     sm = None
     if skillings_mack_test:
@@ -103,6 +110,7 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     sens = friedman_ranks(other_blocks.ranks) if other_blocks.n >= 2 else None
     trial_blocks = blocks if block == "trial" else other_blocks
     fr = friedman_ranks(blocks.ranks)
+    # Wilcoxon pairs the blocks' within-trial ranks (a participant's mean of them): never the raw answers.
     post = {"nemenyi": nemenyi(blocks.ranks, conditions, alpha=alpha),
             "wilcoxon_holm": wilcoxon_holm(blocks.values, conditions)}
     if conover:
@@ -115,7 +123,7 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
 
 
 def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], criteria: Sequence[str],
-                    block: str = "trial") -> pd.DataFrame:
+                    block: str = "participant") -> pd.DataFrame:
     """The Friedman table per level of ``column`` (a stimulus tag or participant group) and criterion.
 
     Columns: group, level, criterion, n_blocks, n_participants, chi2, df, p, kendall_w, mean_rank_<condition>...
@@ -140,18 +148,21 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
                             for i, c in enumerate(conditions)})
             if b.n:
                 tb = b if block == "trial" else rank_blocks(sub, crit, block="trial", conditions=conditions)
-                row.update({f"share_rank_1_{c}": float(np.isclose(tb.values[:, i], 1).mean())
-                            for i, c in enumerate(conditions)})
+                first = place_shares(tb.ranks)[:, 0]  # a tie for first counts half (or a third ...)
+                row.update({f"share_rank_1_{c}": float(first[i]) for i, c in enumerate(conditions)})
             rows.append(row)
     return pd.DataFrame(rows)
 
 
-def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str] = (),
+def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterable[str] = (),
                  questionnaire: pd.DataFrame | None = None, exclude_failed_attention: bool = False,
                  exclude: Iterable[str] = (), alpha: float = 0.05, conover: bool = False, n_boot: int = 2000,
                  ci: float = 0.95, seed: int = 0, incomplete: str = "error", sm_permutations: int = 2000,
                  ) -> Analysis:
     """Validate, apply exclusions and analyse every criterion (see module docstring).
+
+    ``block='participant'`` (default) is the primary analysis over participants; ``block='trial'`` makes the
+    trial-level Friedman test the headline, as published analyses that count trials as blocks do.
 
     ``incomplete='drop'`` deletes trials that do not rank every condition (listwise deletion) instead of
     stopping with an error; ``incomplete='skillings-mack'`` adds the Skillings-Mack test over all trials
@@ -178,9 +189,14 @@ def run_analysis(df: pd.DataFrame, *, block: str = "trial", groups: Iterable[str
         raise AnalysisInputError(df.attrs.get("source"), "column 'condition'", "fewer than 2 conditions")
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
-    results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
-                                    n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm,
-                                    sm_permutations=sm_permutations) for c in criteria}
+    with warnings.catch_warnings(record=True) as caught:  # e.g. a Bradley-Terry fit that did not converge
+        warnings.simplefilter("always")
+        results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
+                                        n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm,
+                                        sm_permutations=sm_permutations) for c in criteria}
+    for w in caught:
+        notes.append(str(w.message))
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block) for g in groups}
     items = reliability = None
     if questionnaire is not None and len(questionnaire):

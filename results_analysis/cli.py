@@ -19,8 +19,10 @@ def build_parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("results", type=Path, help="tidy results CSV (studyapp export) or results .sqlite database")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--block", choices=("trial", "participant"), default="trial",
-                   help="Friedman blocks: trials (default) or participants (mean rank per participant)")
+    p.add_argument("--block", choices=("participant", "trial"), default="participant",
+                   help="blocks of the headline Friedman test: participants (default; each participant's mean "
+                   "within-trial rank per condition, valid under repeated measures) or trials (every trial an "
+                   "independent block, as many published studies report; then the secondary analysis)")
     p.add_argument("--group", action="append", default=[], metavar="COL",
                    help="also break the analysis down by this stimulus tag or participant group (repeatable)")
     p.add_argument("--questionnaire", type=Path, help="questionnaire CSV (participant,item,scale,value); "
@@ -74,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"warning: {w}", file=sys.stderr)
     for crit, c in a.criteria.items():
         fr = c.friedman
-        print(f"{crit}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}, n = {fr.n_blocks}")
+        print(f"{crit}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}, n = {fr.n_blocks} "
+              f"{a.block}s")
     if len(a.exclusions):
         print("excluded: " + "; ".join(f"{r.participant} ({r.reason})" for r in a.exclusions.itertuples()))
     print(f"report: {args.out / 'report.html'}")

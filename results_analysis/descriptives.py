@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from results_analysis.ranks import RankBlocks, as_blocks
+from results_analysis.ranks import RankBlocks, as_blocks, place_shares
 
 
 def bootstrap_weights(n_participants: int, n_boot: int, seed: int) -> np.ndarray:
@@ -31,7 +31,8 @@ def per_participant_sums(blocks: RankBlocks, values: np.ndarray | None = None) -
 def condition_summary(blocks: RankBlocks | pd.DataFrame, criterion: str | None = None, *, n_boot: int = 2000,
                       ci: float = 0.95, seed: int = 0) -> pd.DataFrame:
     """Per condition: n blocks, n participants, mean rank with a percentile bootstrap CI over participants,
-    median rank and the share of blocks that put the condition at each rank (``share_rank_1`` ...).
+    median rank and the share of blocks that put the condition at each place (``share_rank_1`` ...; a tied
+    answer is shared between the places it spans, so each condition's shares sum to 1).
 
     ``blocks``: a :class:`RankBlocks`, or a tidy results DataFrame with the ``criterion`` to describe
     (trials as blocks; practice and attention-check trials left out).
@@ -52,9 +53,9 @@ def condition_summary(blocks: RankBlocks | pd.DataFrame, criterion: str | None =
     lo, hi = bootstrap_mean_rank_ci(blocks, n_boot=n_boot, ci=ci, seed=seed)
     out["ci_low"], out["ci_high"] = lo, hi
     out["median_rank"] = np.median(ranks, axis=0) if n else np.nan
-    # Shares from the ranks as given; an answer that tied two conditions for first counts for both.
+    shares = place_shares(ranks)
     for r in range(1, k + 1):
-        out[f"share_rank_{r}"] = (np.isclose(blocks.values, r).mean(axis=0) if n else np.nan)
+        out[f"share_rank_{r}"] = shares[:, r - 1]
     out.attrs.update(ci=ci, n_boot=n_boot, seed=seed)
     return out
 

@@ -59,7 +59,8 @@ def _order(summary: pd.DataFrame, conditions: list[str] | None) -> list[str]:
 
 
 def rank_share_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] | None = None):
-    """One panel per criterion; per condition a 100% bar split into the shares of rank 1..k.
+    """One panel per criterion; per condition a 100% bar split into the shares of rank 1..k (a tied answer
+    is shared between the places it spans, so every bar is 100%).
 
     ``summaries``: criterion -> :func:`results_analysis.descriptives.condition_summary` table.
     """
@@ -231,7 +232,11 @@ def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] |
 
 
 def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = None, *, ci: float = 0.95):
-    """Bradley-Terry strengths (sum to 1) with bootstrap intervals, one panel per criterion."""
+    """Bradley-Terry strengths (sum to 1) with bootstrap intervals, one panel per criterion.
+
+    A strength the data cannot estimate (``estimable`` False, e.g. a condition that never won) gets no bar
+    but the words "not estimable" and the table's ``note``, never a bar at 0.
+    """
     with matplotlib.rc_context(_STYLE):
         crits = list(tables)
         conds = _order(tables[crits[0]], conditions)
@@ -239,12 +244,18 @@ def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = No
         fig = _figure((2.3 * len(crits) + 0.6, 0.42 * k + 1.3))
         axes = fig.subplots(1, len(crits), sharey=True, squeeze=False)
         y = np.arange(k)[::-1]
-        top = max(float(t["ci_high"].max()) if t["ci_high"].notna().any() else float(t["strength"].max())
-                  for t in tables.values())
+        top = max((float(t["ci_high"].max()) if t["ci_high"].notna().any() else float(t["strength"].max())
+                   for t in tables.values() if t["strength"].notna().any()), default=1.0)
+        flagged = False
         for ax, crit in zip(axes[0], crits):
             t = tables[crit].set_index("condition").reindex(conds)
             for i, c in enumerate(conds):
                 color = condition_color(i)
+                if "estimable" in t.columns and not bool(t.loc[c, "estimable"]):
+                    flagged = True
+                    ax.text(0.01 * top, y[i], f"not estimable ({t.loc[c, 'note']})", ha="left", va="center",
+                            fontsize=7, color="#b00020", style="italic")
+                    continue
                 ax.barh(y[i], t.loc[c, "strength"], color=color, height=0.6, alpha=0.85)
                 if np.isfinite(t.loc[c, "ci_low"]):
                     ax.plot([t.loc[c, "ci_low"], t.loc[c, "ci_high"]], [y[i], y[i]], color="black", lw=1.2)
@@ -257,6 +268,8 @@ def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = No
             ax.set_title(crit.capitalize())
             ax.set_xlabel("Bradley-Terry strength")
         fig.text(0.5, 0.0, f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap interval over participants. "
-                 "Dotted line: equal strengths.", ha="center", va="bottom", fontsize=7.5, color="#444444")
+                 "Dotted line: equal strengths." + (" Red: no finite strength (the condition never won or never "
+                                                    "lost)." if flagged else ""),
+                 ha="center", va="bottom", fontsize=7.5, color="#444444")
         fig.tight_layout(rect=(0, 0.05, 1, 1))
         return fig

@@ -4,7 +4,8 @@
   studentized-range tail P(Q_{k,inf} > z sqrt(2)), and the critical difference is
   CD = q_alpha / sqrt(2) * sqrt(k(k+1)/(6n)), q_alpha the studentized-range quantile. This is the test the
   critical-difference diagram draws.
-* Pairwise Wilcoxon signed-rank tests on the block values, Holm-adjusted, with R's ``wilcox.test``
+* Pairwise Wilcoxon signed-rank tests on the within-block ranks (a trial's average ranks, or a
+  participant's mean of them), so the tie coding cannot matter, Holm-adjusted, with R's ``wilcox.test``
   defaults: zero differences are dropped (Wilcoxon's method); the exact null distribution is used only
   when fewer than 50 non-zero differences remain and there were neither ties nor zeros, otherwise the
   normal approximation with tie correction and continuity correction (scipy's default differs: it keeps
@@ -113,14 +114,21 @@ def nemenyi(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = Non
 
 
 def wilcoxon_holm(values: np.ndarray | pd.DataFrame, conditions: list[str] | None = None) -> pd.DataFrame:
-    """Pairwise Wilcoxon signed-rank tests on paired block values (array + names, or a wide DataFrame),
-    Holm-adjusted.
+    """Pairwise Wilcoxon signed-rank tests on paired block values, Holm-adjusted.
+
+    An array (with the condition names) is tested as given: pass within-block ranks for a rank analysis,
+    or any paired measurements. A wide DataFrame of block values is ranked within each row first (average
+    ranks), as :func:`nemenyi` and :func:`conover` do, so answers with ties written 1,1,3 or 1.5,1.5,3 give
+    the same result.
 
     Columns: a, b, statistic (V: sum of the ranks of positive differences a - b, as R reports),
     n_nonzero, zeros_dropped, method ('exact' or 'normal approximation'), continuity_correction,
     rank_biserial (matched-pairs effect size, positive when a has the larger values), p, p_adjusted.
     """
+    frame = isinstance(values, pd.DataFrame)
     values, conditions = _matrix(values, conditions)
+    if frame:
+        values = within_block_ranks(values)
     k = values.shape[1]
     rows = []
     for i, j in combinations(range(k), 2):
@@ -196,7 +204,7 @@ def posthoc_table(data: pd.DataFrame, method: str = "nemenyi", **kwargs) -> pd.D
     if method == "nemenyi":
         return nemenyi(within_block_ranks(values), names, **kwargs)
     if method == "wilcoxon_holm":
-        return wilcoxon_holm(values, names)
+        return wilcoxon_holm(within_block_ranks(values), names)
     if method == "conover":
         return conover(within_block_ranks(values), names)
     raise ValueError(f"unknown post-hoc method {method!r}: nemenyi, wilcoxon_holm or conover")

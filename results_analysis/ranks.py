@@ -1,8 +1,16 @@
 """From tidy answers to a blocks x conditions matrix of within-block ranks.
 
-A block is whatever ranks every condition once. By default that is one trial (participant x stimulus);
-with ``block='participant'`` the block is a participant and the values are that participant's mean rank
-per condition (re-ranked within the participant by the Friedman test), the usual sensitivity check.
+A trial (participant x stimulus) ranks every condition once. Its answers are first turned into average
+ranks within the trial, so a tie written 1, 1, 3 or 1.5, 1.5, 3 becomes 1.5, 1.5, 3 before anything is
+computed: no statistic depends on how ties were written.
+
+* ``block='participant'`` (the primary analysis): one block per participant, valued by that participant's
+  mean within-trial rank per condition (re-ranked within the participant by the Friedman test). A
+  participant's trials are not independent, so only participants are independent blocks.
+* ``block='trial'``: one block per trial, the analysis of published studies that treat every trial as an
+  independent block (pseudo-replication when a participant ranks several stimuli).
+
+:func:`place_shares` splits a tied answer over the places it spans (half each for a two-way tie).
 """
 from __future__ import annotations
 
@@ -15,15 +23,17 @@ from scipy.stats import rankdata
 from results_analysis.errors import AnalysisInputError
 from results_analysis.validate import rated_mask, trial_key
 
-BLOCKS = ("trial", "participant")
+BLOCKS = ("participant", "trial")
 
 
 @dataclass(frozen=True)
 class RankBlocks:
     """Within-block values of one criterion.
 
-    values: (n, k) what each block gave each condition (ranks, or mean ranks per participant).
-    ranks: (n, k) ``values`` re-ranked within each block with average ranks for ties (1 = best).
+    values: (n, k) each block's score per condition on the within-trial rank scale: a trial's average ranks,
+        or a participant's mean of them (NaN where an incomplete trial lacks a condition).
+    ranks: (n, k) ``values`` re-ranked within each block with average ranks for ties (1 = best); equal to
+        ``values`` for trial blocks.
     conditions: the k condition names, column order of both matrices.
     participants: (n,) the participant each block belongs to (for bootstraps over participants).
     block: 'trial' or 'participant'.
@@ -53,36 +63,44 @@ def within_block_ranks(values: np.ndarray) -> np.ndarray:
     return rankdata(np.asarray(values, dtype=float), axis=1, method="average")
 
 
-def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "trial",
+def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
                 conditions: list[str] | None = None, complete_only: bool = True) -> RankBlocks:
     """Build the blocks x conditions rank matrix of one criterion from a validated tidy frame.
 
     >>> import pandas as pd
     >>> df = pd.DataFrame({"participant": ["P1"] * 3 + ["P2"] * 3, "trial_index": 0, "stimulus": "c1",
     ...                    "criterion": "realism", "condition": list("ABC") * 2, "rank": [1, 2, 3, 2, 1, 3]})
-    >>> rank_blocks(df, "realism").ranks.tolist()
+    >>> rank_blocks(df, "realism", block="trial").ranks.tolist()
     [[1.0, 2.0, 3.0], [2.0, 1.0, 3.0]]
     """
     if block not in BLOCKS:
         raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
+    if block == "participant" and not complete_only:
+        # an incomplete trial's ranks run over fewer places: they cannot be averaged with complete ones
+        raise ValueError("incomplete blocks are kept for trial blocks only (the Skillings-Mack test)")
     sub = df[df["criterion"] == criterion]
     if conditions is None:
         conditions = sorted(df["condition"].unique())
-    if block == "trial":
-        key = trial_key(sub)
-        wide = sub.pivot_table(index=key, columns="condition", values="rank", aggfunc="first", observed=True)
-    else:
-        key = ["participant"]
-        wide = sub.pivot_table(index=key, columns="condition", values="rank", aggfunc="mean", observed=True)
+    key = trial_key(sub)
+    wide = sub.pivot_table(index=key, columns="condition", values="rank", aggfunc="first", observed=True)
     wide = wide.reindex(columns=conditions)
     # Blocks that lack a condition are dropped (listwise deletion) unless ``complete_only`` is false, for
     # the Skillings-Mack test, which reads the NaNs; validation decides whether incomplete blocks may exist.
     if complete_only:
         wide = wide.dropna(axis=0, how="any")
-    values = wide.to_numpy(dtype=float)
-    participants = wide.index.get_level_values("participant").astype(str).to_numpy()
+    # Within-trial average ranks first: the tie coding (1,1,3 or 1.5,1.5,3) is gone from here on.
+    raw = wide.to_numpy(dtype=float)
+    missing = np.isnan(raw)
+    trial_ranks = np.where(missing, np.nan, rankdata(np.where(missing, np.inf, raw), axis=1, method="average")) \
+        if raw.size else raw
+    trial_ranks = pd.DataFrame(trial_ranks, index=wide.index, columns=wide.columns)
+    if block == "participant":
+        trial_ranks = trial_ranks.groupby(level="participant", sort=True).mean()
+        trial_ranks = trial_ranks.set_index(pd.Index(trial_ranks.index, name="participant"))
+    values = trial_ranks.to_numpy(dtype=float)
+    participants = trial_ranks.index.get_level_values("participant").astype(str).to_numpy()
     ranks = values
-    if len(values):
+    if len(values) and block == "participant":
         ranks = within_block_ranks(values) if complete_only else np.where(
             np.isnan(values), np.nan, rankdata(np.where(np.isnan(values), np.inf, values), axis=1, method="average"))
     return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants,
@@ -113,3 +131,25 @@ def as_blocks(data: RankBlocks | pd.DataFrame, criterion: str | None = None, *, 
             raise ValueError(f"the frame has criteria {found}: pass criterion=")
         criterion = found[0]
     return rank_blocks(rated, criterion, block=block, conditions=sorted(rated["condition"].unique()))
+
+
+def place_shares(ranks: np.ndarray) -> np.ndarray:
+    """(k conditions, k places): the share of blocks that put each condition at each place (1 = best).
+
+    ``ranks`` are within-block average ranks. A tied answer is shared between the places it spans: a two-way
+    tie for first gives half a block to place 1 and half to place 2, a three-way tie a third to each of its
+    three places. Every row and every column sums to 1, whatever the ties.
+
+    >>> place_shares(np.array([[1.5, 1.5, 3.0], [1.0, 2.0, 3.0]])).tolist()
+    [[0.75, 0.25, 0.0], [0.25, 0.75, 0.0], [0.0, 0.0, 1.0]]
+    """
+    r = np.asarray(ranks, dtype=float)
+    n, k = r.shape
+    if n == 0:
+        return np.full((k, k), np.nan)
+    tie_size = np.isclose(r[:, :, None], r[:, None, :]).sum(axis=2)       # (n, k): size of each cell's tie
+    first = r - (tie_size - 1) / 2.0                                       # the first place a cell spans
+    places = np.arange(1, k + 1, dtype=float)
+    spans = (places[None, None, :] >= first[:, :, None] - 1e-9) & \
+            (places[None, None, :] <= first[:, :, None] + tie_size[:, :, None] - 1 + 1e-9)
+    return (spans / tie_size[:, :, None]).mean(axis=0)

@@ -20,6 +20,7 @@ import scipy
 
 from results_analysis import figures
 from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
+from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, nemenyi_q_alpha
 
@@ -80,7 +81,9 @@ def stats_dict(a: Analysis) -> dict:
                                        "n_permutations": sm.n_permutations}
         out[crit] = entry
     out["_meta"] = {
-        "source": a.source, "block": a.block, "conditions": a.conditions, "criteria": list(a.criteria),
+        "source": a.source, "block": a.block, "primary": f"Friedman test over {a.block}s",
+        "ties": "answers turned into within-trial average ranks before every test; place shares split ties",
+        "conditions": a.conditions, "criteria": list(a.criteria),
         "n_participants": a.n_participants, "n_trials": a.n_trials, "alpha": a.alpha,
         "excluded": a.exclusions.to_dict("records"), "incomplete_blocks": a.incomplete,
         "dropped_incomplete": a.dropped_incomplete, "incomplete_kept_for_skillings_mack": a.incomplete_blocks,
@@ -245,21 +248,27 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
     ci = f"{a.ci:.0%}"
     ranks = ", ".join(f"{x} {_num(s.loc[x, 'mean_rank'])} ({ci} CI {_num(s.loc[x, 'ci_low'])}–"
                       f"{_num(s.loc[x, 'ci_high'])}; ranked first in {s.loc[x, 'share_rank_1']:.0%})" for x in order)
-    blocks = (f"{fr.n_blocks} trials (blocks) from {n_part} participants" if a.block == "trial"
-              else f"{fr.n_blocks} participants (blocks: mean rank per participant)")
+    headline = (f"The primary, participant-level Friedman test (each of the {fr.n_blocks} participants a block, "
+                f"valued by their mean within-trial rank per condition)" if a.block == "participant" else
+                f"The trial-level Friedman test (each of the {fr.n_blocks} trials from {n_part} participants a "
+                f"block, as published analyses count them)")
     sig = fr.p < a.alpha
     verdict = "showed a significant difference between" if sig else "did not show a significant difference between"
-    text = [f"**{c.criterion.capitalize()}.** Mean ranks (1 = best) were {ranks}. A Friedman test over {blocks} "
+    text = [f"**{c.criterion.capitalize()}.** Mean ranks (1 = best) were {ranks}. {headline} "
             f"{verdict} the {k} conditions, χ²({fr.df}) = {_num(fr.chi2)}, {fmt_p(fr.p)}, Kendall's W = "
             f"{_num(fr.kendall_w)} (Iman–Davenport F({fr.iman_davenport_df1}, {fr.iman_davenport_df2}) = "
             f"{_num(fr.iman_davenport_f)}, {fmt_p(fr.iman_davenport_p)})."]
     if c.sensitivity is not None:
         sv = c.sensitivity
-        agree = (sv.p < a.alpha) == sig
-        what = ("participants as blocks (each participant's mean rank per condition)" if c.sensitivity_block ==
-                "participant" else "single trials as blocks")
-        text[0] += (f" With {what} the test {'agreed' if agree else 'disagreed'}: χ²({sv.df}) = {_num(sv.chi2)}, "
-                    f"{fmt_p(sv.p)}, W = {_num(sv.kendall_w)}, n = {sv.n_blocks}.")
+        agree = "agreed" if (sv.p < a.alpha) == sig else "disagreed"
+        stat = f"χ²({sv.df}) = {_num(sv.chi2)}, {fmt_p(sv.p)}, W = {_num(sv.kendall_w)}, n = {sv.n_blocks}"
+        if c.sensitivity_block == "trial":
+            text[0] += (f" The secondary, trial-level test (every trial a block) {agree}: {stat}; it counts a "
+                        "participant's trials as independent blocks (pseudo-replication), so its p-value "
+                        "overstates the evidence.")
+        else:
+            text[0] += (f" The participant-level test (each participant's mean within-trial rank per condition a "
+                        f"block), which respects the repeated measures, {agree}: {stat}.")
     if c.skillings_mack is not None:
         sm = c.skillings_mack
         text[0] += (f" Including the incomplete trials ({sm.n_missing} missing rank(s) over {sm.n_blocks} trials), the "
@@ -300,9 +309,17 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
     text.append(post)
     bt = c.bradley_terry.set_index("condition")
     text.append("Bradley–Terry strengths from the pairwise preferences implied by the rankings: " + ", ".join(
-        f"{x} {_num(bt.loc[x, 'strength'])} ({ci} CI {_num(bt.loc[x, 'ci_low'])}–{_num(bt.loc[x, 'ci_high'])})"
-        for x in order) + ".")
+        f"{x} {_bt_cell(bt.loc[x], ci)}" for x in order) + ".")
     return text
+
+
+def _bt_cell(row: pd.Series, ci: str | None = None) -> str:
+    """A Bradley-Terry strength with its interval, or why it has none (never a made-up 0.00)."""
+    if "estimable" in row.index and not bool(row["estimable"]):
+        return f"not estimable ({row['note']})"
+    ci = f"{ci} CI " if ci else ""
+    interval = (f" ({ci}{_num(row['ci_low'])}–{_num(row['ci_high'])})" if np.isfinite(row["ci_low"]) else "")
+    return f"{_num(row['strength'])}{interval}"
 
 
 def methods_paragraph(a: Analysis) -> str:
@@ -310,12 +327,18 @@ def methods_paragraph(a: Analysis) -> str:
     excl = ("No participant was excluded." if a.exclusions.empty else
             f"{len(a.exclusions)} participant(s) were excluded: " +
             "; ".join(f"{r.participant} ({r.reason})" for r in a.exclusions.itertuples()) + ".")
-    block = ("each trial (one participant ranking the conditions for one stimulus) as a block"
+    block = ("each trial (one participant ranking the conditions for one stimulus) as a block, as the published "
+             "analyses this replicates did"
              if a.block == "trial" else
-             "each participant as a block, using the participant's mean rank per condition over their trials")
-    sens = ("As a sensitivity check the test was repeated with participants as blocks (mean rank per "
-            "participant and condition, re-ranked within participant)." if a.block == "trial" else
-            "As a sensitivity check the test was repeated with single trials as blocks.")
+             "each participant as a block, using the participant's mean within-trial rank per condition over their "
+             "trials (the primary analysis: a participant's trials are repeated measures of one person, so only "
+             "participants are independent blocks)")
+    sens = ("As a check that respects the repeated measures, the test was repeated with participants as blocks "
+            "(mean within-trial rank per participant and condition, re-ranked within participant)."
+            if a.block == "trial" else
+            "As a secondary analysis the test was repeated with single trials as blocks; it treats a "
+            "participant's trials as independent observations (pseudo-replication), so its p-values are too "
+            "small and it is reported only for comparison with published trial-level analyses.")
     if a.incomplete == "error":
         incomplete = "Every analysed trial ranked every condition (incomplete trials would have stopped the analysis)."
     elif a.incomplete == "drop":
@@ -332,22 +355,29 @@ def methods_paragraph(a: Analysis) -> str:
     return (
         f"Practice trials and attention-check (catch) trials were not analysed. {excl} The analysis covers "
         f"{a.n_participants} participants and {a.n_trials} trials. For each criterion, the {k} conditions were "
-        f"compared with a Friedman test with {block}; tied ranks received average ranks and the statistic was "
-        f"corrected for ties. Effect size is Kendall's W = χ²/(n(k−1)); the Iman–Davenport statistic "
+        f"compared with a Friedman test with {block}. Every answer was first turned into average ranks within "
+        f"its trial (a tie for first of two conditions becomes 1.5, 1.5), so every test and effect size is "
+        f"the same however ties were written; the Friedman statistic was corrected for ties. Effect size is "
+        f"Kendall's W = χ²/(n(k−1)); the Iman–Davenport statistic "
         f"F = (n−1)χ²/(n(k−1)−χ²) with ({k - 1}, {k - 1}(n−1)) degrees of freedom is also reported. {sens} "
         f"Post-hoc, mean ranks were compared with the Nemenyi single-step test (studentized range with infinite "
         f"degrees of freedom; critical difference CD = q_α/√2 · √(k(k+1)/(6n)), q_α/√2 = "
         f"{nemenyi_q_alpha(k, a.alpha):.3f} for k = {k} at α = {_alpha(a.alpha)}), and with two-sided Wilcoxon "
-        f"signed-rank tests on the paired block values, Holm-adjusted over the {k * (k - 1) // 2} pairs; zero "
+        f"signed-rank tests on the paired block values (within-trial ranks, or a participant's mean of them), "
+        f"Holm-adjusted over the {k * (k - 1) // 2} pairs; zero "
         f"differences were discarded (Wilcoxon's method) and, as in R's wilcox.test, the exact null "
         f"distribution was used only when fewer than {WILCOXON_EXACT_BELOW_N} non-zero differences remained and "
         f"there were neither ties nor zero differences, otherwise the normal approximation with tie and "
         f"continuity correction. Effect size of a pair is the matched-pairs rank-biserial correlation "
         f"r_rb (positive: the first condition received larger, i.e. worse, ranks). Mean ranks come with "
         f"{a.ci:.0%} percentile bootstrap intervals ({a.n_boot} resamples of participants, seed {a.seed}), which "
-        f"keeps each participant's trials together. Bradley–Terry strengths were fitted by maximum likelihood "
-        f"(MM algorithm) to the pairwise wins implied by each ranking (ties: half a win each), with "
-        f"{a.n_boot // 2} participant bootstrap resamples. {incomplete} Computed with results_analysis "
+        f"keeps each participant's trials together. The share of answers at each place splits a tied answer "
+        f"between the places it spans (half to each place of a two-way tie, a third each for a three-way tie), "
+        f"so each condition's shares sum to 100 %. Bradley–Terry strengths were fitted by maximum likelihood "
+        f"(Newton's method to convergence) to the pairwise wins implied by each ranking (ties: half a win each), "
+        f"with {a.n_boot // 2} participant bootstrap resamples (a pseudo-count of {BOOT_PRIOR:g} wins per pair "
+        f"keeps a resample finite); a condition that never won or never lost has no finite strength and is "
+        f"reported as not estimable. {incomplete} Computed with results_analysis "
         f"(scipy {scipy.__version__}).")
 
 
@@ -371,7 +401,8 @@ def build_document(a: Analysis, title: str) -> Document:
     show["p (F_ID)"] = [_p_cell(p) for p in show["p (F_ID)"]]
     for col in ("χ²", "W", "F_ID", "CD"):
         show[col] = [_num(v) for v in show[col]]
-    doc.table(show, f"Table 1. Friedman tests per criterion (blocks: {a.block}s).")
+    doc.table(show, "Table 1. Friedman tests per criterion (" + (
+        "primary analysis, blocks: participants" if a.block == "participant" else "blocks: trials") + ").")
     rows = []
     for crit, c in a.criteria.items():
         for r in c.summary.itertuples():
@@ -379,7 +410,8 @@ def build_document(a: Analysis, title: str) -> Document:
                          f"{a.ci:.0%} CI": f"{_num(r.ci_low)}–{_num(r.ci_high)}", "median": f"{r.median_rank:g}",
                          **{f"rank {i}": f"{getattr(r, f'share_rank_{i}'):.0%}" for i in range(1, len(a.conditions) + 1)}})
     doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
-              "interval, median, and share of answers at each rank.")
+              "interval, median, and share of answers at each rank (a tied answer shared between the places it "
+              "spans, so each row sums to 100 %).")
     prow = []
     for crit, c in a.criteria.items():
         nem = c.posthoc["nemenyi"].set_index(["a", "b"])
@@ -397,7 +429,13 @@ def build_document(a: Analysis, title: str) -> Document:
         ptab[col] = [_p_cell(p) for p in ptab[col]]
     doc.table(ptab, "Table 3. Post-hoc comparisons (Δ: difference of mean ranks; r_rb: matched-pairs rank-biserial "
               "correlation of the Wilcoxon test).")
-    doc.figure("rank_shares", "Figure 1. Share of answers at each rank, per condition and criterion.")
+    btrows = [{"criterion": crit, "condition": r["condition"], "strength": _bt_cell(r),
+               "win rate": f"{r['win_rate']:.0%}"} for crit, c in a.criteria.items()
+              for _, r in c.bradley_terry.iterrows()]
+    doc.table(pd.DataFrame(btrows), f"Table 4. Bradley–Terry strengths (sum to 1) with {a.ci:.0%} participant-"
+              "bootstrap interval; a condition that never won or never lost has no finite strength.")
+    doc.figure("rank_shares", "Figure 1. Share of answers at each rank, per condition and criterion (ties shared "
+               "between the places they span).")
     doc.figure("critical_difference", f"Figure 2. Critical-difference diagrams (Nemenyi, α = {_alpha(a.alpha)}): "
                "conditions joined by a bar are not significantly different.")
     doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")

@@ -15,9 +15,20 @@ where co-speech gesture lives, and normalised by the figure's height so units (c
   chest, in figure heights, from their 10-90 % range, so the moments spent lifting the hands from rest do
   not count as variety) times how varied their movement is in time (0.5 + 0.5 x normalised
   spectral entropy of hand speed: one repeated rhythm scores low, varied strokes high).
-* **realism**: the activity factor (a frozen or near-frozen figure looks dead) times smoothness
-  ``(1 - h)^2``, with ``h`` the fraction of hand velocity power above 6 Hz: gestures live below a few Hz,
-  frame-to-frame jitter spreads its power up to the Nyquist rate.
+* **realism**: could a real person move like this? Three things give a figure away: it is dead (a
+  frozen pose; but a person standing quietly, breathing and swaying, is alive: the *alive* factor
+  ``1 - exp(-a / 0.005)`` saturates already at idle sway), it jitters (smoothness ``(1 - h)^2``, with ``h``
+  the fraction of hand velocity power above 6 Hz: gestures live below a few Hz, frame-to-frame jitter
+  spreads its power up to the Nyquist rate), and its visible gestures are mistimed: real speakers' strokes
+  land on the stressed syllables, so strokes that consistently come late or early look dubbed. The
+  evidence is ``gap = r_best - r_0``: how much better hand speed would correlate with the speech accents
+  if the motion were shifted (by up to +-0.5 s) than it does as played; ``mistimed = min(1, gap / 0.2)``,
+  weighted by the activity factor (a still figure has no strokes to mistime), by ``MISTIMING_WEIGHT`` and
+  by how long the viewer could watch: it takes several strokes to notice a consistent offset (in 3 s the
+  quasi-periodic syllable rhythm makes a shift by one beat fit as well by chance), so the evidence counts
+  not at all up to 3 s and fully from 5 s on. So realism and diversity disagree where they should: a
+  figure that stands quietly is plausible but not diverse, one that gestures richly but off the beat is
+  diverse but not plausible.
 
 The activity factor is ``1 - exp(-a / 0.05)`` with ``a`` the mean world-space hand speed in figure heights
 per second (gesturing hands move ~0.1-0.3 heights/s; idle sway well under 0.01).
@@ -48,6 +59,16 @@ if TYPE_CHECKING:
 ACTIVITY_REF = 0.05
 #: Frequency (Hz) above which hand movement reads as jitter rather than gesture.
 JITTER_HZ = 6.0
+#: Mean hand speed (figure heights per second) at which a figure looks alive: idle breathing and sway.
+ALIVE_REF = 0.005
+#: Largest gesture-speech shift (s) looked for, and the correlation gain from shifting at which strokes
+#: look plainly mistimed.
+MAX_LAG_S = 0.5
+TIMING_GAP_REF = 0.2
+#: How much clearly mistimed, clearly visible gesturing takes off realism (0: none, 1: all of it).
+MISTIMING_WEIGHT = 0.8
+#: Clip length (s) below which timing is not judged, and from which it is judged fully.
+TIMING_MIN_S, TIMING_FULL_S = 3.0, 5.0
 
 _HAND_BONES = ("LeftHand", "RightHand")
 _FALLBACK_BONES = ("LeftLowerArm", "RightLowerArm")
@@ -92,7 +113,8 @@ def motion_measures(motion: Motion, energy: np.ndarray | None, duration_s: float
     fps = float(motion.fps)
     n = max(1, min(motion.n_frames, int(round(duration_s * fps))))
     if n < 4:
-        return {"activity": 0.0, "correlation": 0.0, "spread": 0.0, "entropy": 0.0, "high_freq": 0.0}
+        return {"activity": 0.0, "correlation": 0.0, "lag": 0.0, "timing_gap": 0.0, "seconds": n / fps,
+                "spread": 0.0, "entropy": 0.0, "high_freq": 0.0}
     clipped = Motion(motion.skeleton, fps, motion.rotations[:n], motion.translations[:n])
     hands, chest = body_indices(motion)
     pos = joint_positions(clipped) / (figure_height(clipped) or 1.0)
@@ -103,12 +125,14 @@ def motion_measures(motion: Motion, energy: np.ndarray | None, duration_s: float
     activity = float(speed.mean())
     rel_speed = np.linalg.norm(np.gradient(rel, 1.0 / fps, axis=0), axis=-1).sum(axis=1)
 
-    corr = 0.0
+    corr = lag = gap = 0.0
     if energy is not None:
         m = min(n, len(energy))
         a, b = rel_speed[:m], speech_accents(np.asarray(energy[:m], dtype=np.float64), fps)
         if m > 2 and a.std() > 1e-12 and b.std() > 1e-12:
             corr = float(np.corrcoef(a, b)[0, 1])
+            lag, best_r = best_lag(a, b, fps)
+            gap = max(0.0, best_r - corr)
 
     power = (np.abs(np.fft.rfft(vel, axis=0)) ** 2).sum(axis=(1, 2))
     freqs = np.fft.rfftfreq(n, 1.0 / fps)
@@ -124,17 +148,44 @@ def motion_measures(motion: Motion, energy: np.ndarray | None, duration_s: float
     if spec.sum() > 1e-18 and len(spec) > 1:
         p = spec / spec.sum()
         entropy = float(-(p[p > 0] * np.log(p[p > 0])).sum() / np.log(len(p)))
-    return {"activity": activity, "correlation": corr, "spread": spread, "entropy": entropy, "high_freq": high}
+    return {"activity": activity, "correlation": corr, "lag": lag, "timing_gap": gap, "seconds": n / fps,
+            "spread": spread, "entropy": entropy, "high_freq": high}
+
+
+def best_lag(motion_speed: np.ndarray, accents: np.ndarray, fps: float) -> tuple[float, float]:
+    """The lag (s; positive: the motion comes late) within +-``MAX_LAG_S`` at which ``motion_speed`` correlates
+    best with ``accents`` (both frame-aligned), and that correlation.
+
+    >>> t = np.arange(300) / 30.0
+    >>> accents = np.exp(-0.5 * ((t[:, None] - np.arange(0.5, 10, 0.9)) / 0.05) ** 2).sum(axis=1)
+    >>> lag, r = best_lag(np.roll(accents, 9), accents, 30.0)
+    >>> round(lag, 3), r > 0.9
+    (0.3, True)
+    """
+    n = min(len(motion_speed), len(accents))
+    most = min(int(round(MAX_LAG_S * fps)), n - 3)
+    best, best_r = 0, -np.inf
+    for shift in range(-most, most + 1):
+        a = motion_speed[shift:n] if shift >= 0 else motion_speed[:n + shift]
+        b = accents[:n - shift] if shift >= 0 else accents[-shift:n]
+        if a.std() > 1e-12 and b.std() > 1e-12:
+            r = float(np.corrcoef(a, b)[0, 1])
+            if r > best_r + 1e-12 or (abs(r - best_r) <= 1e-12 and abs(shift) < abs(best)):
+                best, best_r = shift, r
+    return best / fps, float(best_r if np.isfinite(best_r) else 0.0)
 
 
 def scores_from_measures(m: dict[str, float]) -> dict[str, float]:
     """Per-criterion scores (higher = better) from :func:`motion_measures`."""
     active = 1.0 - np.exp(-m["activity"] / ACTIVITY_REF)
+    alive = 1.0 - np.exp(-m["activity"] / ALIVE_REF)
     smooth = (1.0 - m["high_freq"]) ** 2
+    watched = float(np.clip((m.get("seconds", 0.0) - TIMING_MIN_S) / (TIMING_FULL_S - TIMING_MIN_S), 0.0, 1.0))
+    mistimed = watched * min(1.0, m.get("timing_gap", 0.0) / TIMING_GAP_REF)
     return {
         "synchronization": float(active * (1.0 + m["correlation"]) / 2.0),
         "diversity": float(m["spread"] * (0.5 + 0.5 * m["entropy"])),
-        "realism": float(active * smooth),
+        "realism": float(alive * smooth * (1.0 - MISTIMING_WEIGHT * active * mistimed)),
     }
 
 

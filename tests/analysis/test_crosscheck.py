@@ -291,7 +291,7 @@ def test_dataframe_api_gives_the_numbers_of_the_full_analysis() -> None:
     from results_analysis import run_analysis
 
     df = simulate_results(12, 4, seed=14)
-    full = run_analysis(df, n_boot=300, seed=2).criteria["synchronization"]
+    full = run_analysis(df, block="trial", n_boot=300, seed=2).criteria["synchronization"]
     pd.testing.assert_frame_equal(condition_summary(df, "synchronization", n_boot=300, seed=2), full.summary)
     pd.testing.assert_frame_equal(bradley_terry(df, "synchronization", n_boot=150, seed=2), full.bradley_terry)
     rated = df[~df.is_practice & ~df.is_attention_check & (df.criterion == "synchronization")]

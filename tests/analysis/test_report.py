@@ -28,7 +28,7 @@ def study() -> pd.DataFrame:
 @pytest.fixture(scope="module")
 def written(study: pd.DataFrame, tmp_path_factory) -> tuple[Path, object]:
     out = tmp_path_factory.mktemp("analysis")
-    a = analyze(study, out, title="Test study", groups=["speaker", "device"], exclude_failed_attention=True,
+    a = analyze(study, out, title="Test study", block="trial", groups=["speaker", "device"], exclude_failed_attention=True,
                 conover=True, n_boot=400, seed=1)
     return out, a
 
@@ -163,7 +163,7 @@ def test_console_script_is_installed(tmp_path: Path) -> None:
 
 def test_edge_cases_two_conditions_and_complete_ties(tmp_path: Path) -> None:
     two = simulate_results(8, 3, conditions=["A", "B"], strengths=[3.0, 1.0], seed=2)
-    a = analyze(two, tmp_path / "two", n_boot=100)
+    a = analyze(two, tmp_path / "two", block="trial", n_boot=100)
     rated = two[~two.is_practice & ~two.is_attention_check & (two.criterion == "realism")]
     wide = rated.pivot(index=["participant", "trial_index"], columns="condition", values="rank")
     # k = 2: Friedman's chi2 equals the squared sign-test z (no ties possible within a block)
@@ -236,7 +236,7 @@ def test_prose_and_tables_print_the_same_numbers(tmp_path: Path) -> None:
     d = d[d != 0]
     v_ours_six = stats.rankdata(np.abs(d))[d > 0].sum()  # R's V: sum of the ranks of positive differences
     assert v_ours_six == 31.5 and min(v_ours_six, len(d) * (len(d) + 1) / 2 - v_ours_six) == v_ref
-    a = analyze(df, tmp_path, title="Half ranks", n_boot=50, seed=0)
+    a = analyze(df, tmp_path, title="Half ranks", block="trial", n_boot=50, seed=0)
     md = (tmp_path / "report.md").read_text()
     html = (tmp_path / "report.html").read_text()
     c = a.criteria["realism"]
@@ -309,7 +309,7 @@ def test_disagreeing_post_hoc_tests_are_named_in_words(tmp_path: Path) -> None:
     """On the half-V data the Wilcoxon test separates ours from sixdnet while Nemenyi does not: the report
     must say so in the exact words a reader sees, not only when the tests agree."""
     df = _half_v_study()
-    a = analyze(df, tmp_path, title="Half ranks", n_boot=50, seed=0)
+    a = analyze(df, tmp_path, title="Half ranks", block="trial", n_boot=50, seed=0)
     c = a.criteria["realism"]
     nem = c.posthoc["nemenyi"].set_index(["a", "b"])["significant"]
     wil = c.posthoc["wilcoxon_holm"].set_index(["a", "b"])["p_adjusted"] < 0.05

@@ -74,7 +74,7 @@ def test_trial_not_ranking_every_condition(tmp_path: Path, clean: pd.DataFrame) 
     kept = validate_results(df, incomplete="drop")
     assert kept.attrs["dropped_incomplete"] == 1
     assert len(kept) == len(clean) - 3
-    a = run_analysis(df, incomplete="drop", n_boot=50)
+    a = run_analysis(df, incomplete="drop", block="trial", n_boot=50)
     assert a.criteria[row["criterion"]].friedman.n_blocks == 4 * 3 - 1
     assert a.dropped_incomplete == 1
 
@@ -164,7 +164,8 @@ def test_sqlite_database_gives_the_same_frame_as_the_schema_says(tmp_path: Path)
     a = run_analysis(df, exclude_failed_attention=True, groups=["speaker"], n_boot=50,
                      questionnaire=load_questionnaire(tmp_path / "r.sqlite"))
     assert list(a.exclusions["participant"]) == ["P3"]
-    assert a.criteria["realism"].friedman.n_blocks == 4  # 2 rated trials x 2 kept participants
+    assert a.criteria["realism"].friedman.n_blocks == 2  # the 2 kept participants (primary: participant blocks)
+    assert a.criteria["realism"].sensitivity.n_blocks == 4  # 2 rated trials x 2 kept participants
     assert a.questionnaire_reliability.to_dict("records") == [
         {"scale": "ease", "n_items": 2, "n_participants": 2, "alpha": pytest.approx(2 * (1 - 2 / 4))}]
     # the text item is not summarised
@@ -202,7 +203,7 @@ def test_sqlite_loader_agrees_with_studyapp_export(tmp_path: Path) -> None:
 
 def test_skillings_mack_mode_keeps_incomplete_trials(clean: pd.DataFrame) -> None:
     bad = clean.drop(index=[4, 13])  # two trials lose one condition each (criteria may differ)
-    a = run_analysis(bad, incomplete="skillings-mack", n_boot=50)
+    a = run_analysis(bad, incomplete="skillings-mack", block="trial", n_boot=50)
     n_incomplete = sum(c.friedman.n_blocks < 12 for c in a.criteria.values())
     assert a.incomplete_blocks == 2 and n_incomplete >= 1
     for c in a.criteria.values():

@@ -187,7 +187,12 @@ def test_careful_scores_rank_the_synthetic_conditions(design) -> None:
         assert set(s) == {"realism", "synchronization", "diversity"}
         assert rank_order(s["synchronization"], media.slots) == ["synced", "lagged", "static"]
         assert rank_order(s["diversity"], media.slots)[-1] == "static"
-        assert rank_order(s["realism"], media.slots)[-1] == "static"
+        # a quiet figure is plausible, gestures 300 ms late are not: realism disagrees with diversity on the
+        # 10 s clip a; the 3 s clip b is too short to notice the lag, so there static is simply least real
+        if sid == "a":
+            assert rank_order(s["realism"], media.slots) == ["synced", "static", "lagged"]
+        else:
+            assert rank_order(s["realism"], media.slots)[-1] == "static"
         frozen = careful_scores(load_trial_media(design, plan(("static", "frozen:synced", "lagged"), sid)))
         assert int(np.argmin(frozen["realism"])) == 1
 
