@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from results_analysis.adjust import ADJUSTMENT_NAMES, adjust_pvalues
 from results_analysis.ranks import within_block_ranks
 
 #: The exact Wilcoxon distribution is used for fewer than this many non-zero differences (R: ``n < 50``).
@@ -32,20 +33,27 @@ WILCOXON_EXACT_BELOW_N = 50
 
 
 def holm(p: np.ndarray | list[float]) -> np.ndarray:
-    """Holm's step-down adjustment (family-wise error), in the input order.
+    """Holm's step-down adjustment (family-wise error), in the input order (see :mod:`results_analysis.adjust`).
 
     >>> holm([0.01, 0.04, 0.03]).round(3).tolist()
     [0.03, 0.06, 0.06]
     """
-    p = np.asarray(p, dtype=float)
-    m = p.size
-    if m == 0:
-        return p.copy()
-    order = np.argsort(p, kind="stable")
-    adj = np.minimum(1.0, np.maximum.accumulate(p[order] * (m - np.arange(m))))
-    out = np.empty(m)
-    out[order] = adj
-    return out
+    return adjust_pvalues(p, "holm")
+
+
+def pairs(conditions: list[str], control: str | None = None) -> list[tuple[int, int]]:
+    """Column index pairs to compare: all k(k-1)/2 pairs, or the k-1 pairs (control, other) when a control
+    condition is named ("ours vs each baseline"), control first.
+
+    >>> pairs(["A", "B", "C"]), pairs(["A", "B", "C"], control="B")
+    ([(0, 1), (0, 2), (1, 2)], [(1, 0), (1, 2)])
+    """
+    if control is None:
+        return list(combinations(range(len(conditions)), 2))
+    if control not in conditions:
+        raise KeyError(f"control condition {control!r} is not one of {list(conditions)}")
+    c = conditions.index(control)
+    return [(c, j) for j in range(len(conditions)) if j != c]
 
 
 def nemenyi_q_alpha(k: int, alpha: float = 0.05) -> float:
@@ -113,8 +121,11 @@ def nemenyi(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = Non
     return out
 
 
-def wilcoxon_holm(values: np.ndarray | pd.DataFrame, conditions: list[str] | None = None) -> pd.DataFrame:
-    """Pairwise Wilcoxon signed-rank tests on paired block values, Holm-adjusted.
+def wilcoxon_holm(values: np.ndarray | pd.DataFrame, conditions: list[str] | None = None, *,
+                  adjust: str = "holm", control: str | None = None) -> pd.DataFrame:
+    """Pairwise Wilcoxon signed-rank tests on paired block values, Holm-adjusted (or ``adjust='bh'`` /
+    ``'bonferroni'``, see :mod:`results_analysis.adjust`) over the pairs tested: all pairs, or with
+    ``control`` only the k-1 pairs (control, other), adjusted over k-1.
 
     An array (with the condition names) is tested as given: pass within-block ranks for a rank analysis,
     or any paired measurements. A wide DataFrame of block values is ranked within each row first (average
@@ -123,15 +134,15 @@ def wilcoxon_holm(values: np.ndarray | pd.DataFrame, conditions: list[str] | Non
 
     Columns: a, b, statistic (V: sum of the ranks of positive differences a - b, as R reports),
     n_nonzero, zeros_dropped, method ('exact' or 'normal approximation'), continuity_correction,
-    rank_biserial (matched-pairs effect size, positive when a has the larger values), p, p_adjusted.
+    rank_biserial (matched-pairs effect size, positive when a has the larger values), p, p_adjusted,
+    adjustment (the adjustment's name).
     """
     frame = isinstance(values, pd.DataFrame)
     values, conditions = _matrix(values, conditions)
     if frame:
         values = within_block_ranks(values)
-    k = values.shape[1]
     rows = []
-    for i, j in combinations(range(k), 2):
+    for i, j in pairs(conditions, control):
         d = values[:, i] - values[:, j]
         nz = d[~np.isclose(d, 0.0)]
         n_nz = nz.size
@@ -153,15 +164,19 @@ def wilcoxon_holm(values: np.ndarray | pd.DataFrame, conditions: list[str] | Non
                        p=float(res.pvalue))
         rows.append(row)
     out = pd.DataFrame(rows)
-    out["p_adjusted"] = holm(out["p"].to_numpy())
+    out["p_adjusted"] = adjust_pvalues(out["p"].to_numpy(), adjust)
+    out["adjustment"] = ADJUSTMENT_NAMES[adjust]
     out = out[["a", "b", "statistic", "n_nonzero", "zeros_dropped", "method", "continuity_correction",
-               "rank_biserial", "p", "p_adjusted"]]
-    out.attrs.update(method="wilcoxon_holm", zero_method="wilcox (zero differences dropped)")
+               "rank_biserial", "p", "p_adjusted", "adjustment"]]
+    out.attrs.update(method="wilcoxon_holm", zero_method="wilcox (zero differences dropped)", adjust=adjust,
+                     control=control)
     return out
 
 
-def conover(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = None) -> pd.DataFrame:
-    """Conover's all-pairs post-hoc for the Friedman test (t distribution), Holm-adjusted.
+def conover(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = None, *, adjust: str = "holm",
+            control: str | None = None) -> pd.DataFrame:
+    """Conover's all-pairs post-hoc for the Friedman test (t distribution), Holm-adjusted (or ``adjust``; with
+    ``control`` only the k-1 pairs against it, adjusted over k-1).
 
     ``ranks`` are within-block average ranks, or a wide DataFrame of block values (ranked within each row
     first). Columns: a, b, statistic (t), df, p, p_adjusted.
@@ -176,7 +191,7 @@ def conover(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = Non
     dfree = (n - 1) * (k - 1)
     var = 2.0 * (n * a1 - float(np.sum(rank_sums ** 2))) / dfree if dfree > 0 else 0.0
     rows = []
-    for i, j in combinations(range(k), 2):
+    for i, j in pairs(conditions, control):
         diff = abs(rank_sums[i] - rank_sums[j])
         if var <= 1e-12:
             t, p = (float("inf"), 0.0) if diff > 0 else (0.0, 1.0)
@@ -185,8 +200,9 @@ def conover(ranks: np.ndarray | pd.DataFrame, conditions: list[str] | None = Non
             p = float(2 * stats.t.sf(t, dfree))
         rows.append({"a": conditions[i], "b": conditions[j], "statistic": float(t), "df": dfree, "p": p})
     out = pd.DataFrame(rows)
-    out["p_adjusted"] = holm(out["p"].to_numpy())
-    out.attrs.update(method="conover")
+    out["p_adjusted"] = adjust_pvalues(out["p"].to_numpy(), adjust)
+    out["adjustment"] = ADJUSTMENT_NAMES[adjust]
+    out.attrs.update(method="conover", adjust=adjust, control=control)
     return out
 
 
