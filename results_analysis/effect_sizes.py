@@ -1,0 +1,274 @@
+"""Effect sizes of a rank analysis with intervals: Kendall's W, the matched-pairs rank-biserial r_rb and the
+Hodges-Lehmann estimate of a pair's difference of ranks.
+
+* Kendall's W = chi2_F / (n (k-1)), the tie-corrected Friedman statistic over the blocks (as
+  :func:`results_analysis.friedman.friedman_ranks`), with a cluster-bootstrap interval.
+* r_rb of a pair (a, b): (2 V - T) / T on the non-zero differences d = a - b of the paired block values
+  (within-trial ranks, or a participant's mean of them), V the sum of the ranks of |d| belonging to
+  positive d, T = n(n+1)/2 (Kerby 2014; the Wilcoxon test's own effect size, positive when a received
+  larger, i.e. worse, ranks). Cluster-bootstrap interval.
+* Hodges-Lehmann (Hollander & Wolfe 1999, 3.2): the median of the Walsh averages (d_i + d_j)/2, i <= j, of
+  the non-zero differences (zeros dropped, as the Wilcoxon test beside it and R's ``wilcox.test`` drop
+  them). Its distribution-free interval inverts that Wilcoxon test, as R's ``wilcox.test(conf.int=TRUE)``
+  does: with fewer than 50 non-zero differences, no ties and no zeros, the exact interval [W_(C), W_(M+1-C)]
+  of the ordered Walsh averages, C the lower alpha/2 quantile of the signed-rank distribution (the achieved
+  level is reported); otherwise the shifts d whose normal-approximation test (tie and continuity
+  correction, zeros of the shifted differences dropped) is not rejected, whose ends are Walsh averages
+  (R's uniroot finds the same points within its 1e-4 tolerance). This interval assumes independent
+  blocks, so it is used with participant blocks; with trial blocks (several per participant) the
+  Hodges-Lehmann interval is a participant-cluster bootstrap like the others.
+
+Bootstrap intervals resample participants (:mod:`results_analysis.bootstrap`), BCa by default.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from results_analysis.bootstrap import cluster_bootstrap
+from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, pairs
+from results_analysis.ranks import RankBlocks
+
+#: Differences closer than this to zero are zero differences; |d| equal to this many decimals are ties.
+_DECIMALS = 10
+
+#: Walsh averages held at once per chunk of bootstrap resamples (bounds memory).
+_WALSH_CELLS = 20_000_000
+
+
+@dataclass(frozen=True)
+class HodgesLehmann:
+    """The Hodges-Lehmann estimate of a location shift and its distribution-free interval."""
+
+    estimate: float
+    ci_low: float
+    ci_high: float
+    method: str          # 'exact', 'normal approximation' or 'none'
+    conf_level: float    # the level achieved (exact intervals are conservative)
+    n_nonzero: int
+
+
+@dataclass(frozen=True)
+class EffectSizes:
+    """The effect sizes of one criterion: ``kendall_w`` (one row) and ``pairs`` (one row per comparison)."""
+
+    kendall_w: pd.DataFrame
+    pairs: pd.DataFrame
+    interval: str        # 'bca' or 'percentile'
+    n_boot: int
+    ci: float
+    seed: int
+
+
+def _nonzero(d: np.ndarray) -> np.ndarray:
+    d = np.asarray(d, dtype=float)
+    return d[np.round(d, _DECIMALS) != 0]
+
+
+def walsh_averages(d: np.ndarray) -> np.ndarray:
+    """The n(n+1)/2 Walsh averages (d_i + d_j)/2, i <= j, sorted.
+
+    >>> walsh_averages(np.array([1.0, 3.0])).tolist()
+    [1.0, 2.0, 3.0]
+    """
+    d = np.asarray(d, dtype=float)
+    i, j = np.triu_indices(d.size)
+    return np.sort(np.round((d[i] + d[j]) / 2.0, _DECIMALS))  # rounded: equal averages stay equal
+
+
+def signed_rank_cdf(n: int) -> np.ndarray:
+    """P(T+ <= t) for t = 0 .. n(n+1)/2 under the null (exact distribution of the signed-rank statistic)."""
+    counts = np.zeros(n * (n + 1) // 2 + 1)
+    counts[0] = 1.0
+    for r in range(1, n + 1):  # subsets of {1..n} by their sum
+        counts[r:] = counts[r:] + counts[:-r].copy()
+    return np.cumsum(counts) / 2.0 ** n
+
+
+def _z_shifted(x: np.ndarray, shift: float) -> float:
+    """R's wdiff: the continuity- and tie-corrected signed-rank z of x - shift (zeros dropped)."""
+    xd = np.round(x - shift, _DECIMALS)
+    xd = xd[xd != 0]
+    n = xd.size
+    if n == 0:
+        return 0.0
+    r = stats.rankdata(np.abs(xd))
+    z = r[xd > 0].sum() - n * (n + 1) / 4.0
+    _, t = np.unique(r, return_counts=True)
+    sigma = np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0 - np.sum(t ** 3 - t) / 48.0)
+    return float((z - np.sign(z) * 0.5) / sigma) if sigma > 0 else 0.0
+
+
+def _first_below(walsh: np.ndarray, x: np.ndarray, level: float) -> float:
+    """The Walsh average at which z(x - d) first falls below ``level`` as d grows (z is non-increasing in d
+    and constant between Walsh averages): binary search over the gaps between them."""
+    walsh = np.unique(walsh)
+    mids = np.r_[walsh[0] - 1.0, (walsh[:-1] + walsh[1:]) / 2.0, walsh[-1] + 1.0]
+    lo, hi = 0, mids.size - 1   # z(mids[lo]) >= level > z(mids[hi])
+    while hi - lo > 1:
+        m = (lo + hi) // 2
+        if _z_shifted(x, mids[m]) >= level:
+            lo = m
+        else:
+            hi = m
+    return float(walsh[hi - 1])
+
+
+def hodges_lehmann(d: np.ndarray, *, ci: float = 0.95) -> HodgesLehmann:
+    """Hodges-Lehmann estimate of the paired differences ``d`` with R's distribution-free interval.
+
+    Hollander & Wolfe (1999), Hamilton depression scale factor IV, x - y of 9 patients (R's ``wilcox.test``
+    example): the estimate is 0.46; the exact interval is the 6th and 40th of the 45 Walsh averages
+    (qsignrank(0.025, 9) = 6), at the achieved level 1 - 2 P(T+ <= 5) = 1 - 20/512 = 96.1 %.
+
+    >>> x = np.array([1.83, 0.50, 1.62, 2.48, 1.68, 1.88, 1.55, 3.06, 1.30])
+    >>> y = np.array([0.878, 0.647, 0.598, 2.05, 1.06, 1.29, 1.06, 3.14, 1.29])
+    >>> h = hodges_lehmann(x - y)
+    >>> round(h.estimate, 3), round(h.ci_low, 4), round(h.ci_high, 4), h.method, round(h.conf_level, 3)
+    (0.46, 0.01, 0.786, 'exact', 0.961)
+    """
+    nz = _nonzero(d)
+    n = nz.size
+    zeros = np.asarray(d).size - n
+    if n == 0:
+        return HodgesLehmann(0.0, np.nan, np.nan, "none", np.nan, 0)
+    walsh = walsh_averages(nz)
+    est = float(np.median(walsh))
+    alpha = 1.0 - ci
+    ties = np.unique(np.round(np.abs(nz), _DECIMALS)).size < n
+    if n < WILCOXON_EXACT_BELOW_N and not ties and zeros == 0:
+        cdf = signed_rank_cdf(n)
+        qu = int(np.searchsorted(cdf, alpha / 2.0 * (1 - 64 * np.finfo(float).eps)))  # R's qsignrank
+        qu = max(qu, 1)
+        ql = n * (n + 1) // 2 - qu
+        achieved = 2.0 * cdf[qu - 1]
+        return HodgesLehmann(est, float(walsh[qu - 1]), float(walsh[ql]), "exact", float(1.0 - achieved), n)
+    # R widens the level until the ends lie inside [min d, max d] (possible only with very few blocks).
+    while alpha < 1.0:
+        zq = float(stats.norm.isf(alpha / 2.0))
+        if _z_shifted(nz, nz.min()) >= zq and _z_shifted(nz, nz.max()) <= -zq:
+            break
+        alpha *= 2.0
+    if alpha >= 1.0:
+        return HodgesLehmann(est, np.nan, np.nan, "normal approximation", np.nan, n)
+    return HodgesLehmann(est, _first_below(walsh, nz, zq), _first_below(walsh, nz, -zq), "normal approximation",
+                         1.0 - alpha, n)
+
+
+# --- statistics as functions of participant weights (for the cluster bootstrap) --------------------
+
+
+def _row_weights(blocks: RankBlocks) -> tuple[int, np.ndarray]:
+    """Number of clusters (participants) and each block's cluster index."""
+    _, inverse = np.unique(blocks.participants, return_inverse=True)
+    return int(inverse.max()) + 1 if inverse.size else 0, inverse
+
+
+def _kendall_w_stat(blocks: RankBlocks, cluster: np.ndarray):
+    r = blocks.ranks
+    n, k = r.shape
+    s = np.sort(r, axis=1)
+    tie = np.zeros(n)
+    for row in range(n):  # sum of t^3 - t over the tied groups of each block
+        _, t = np.unique(np.round(s[row], _DECIMALS), return_counts=True)
+        tie[row] = float(np.sum(t ** 3 - t))
+
+    def stat(w: np.ndarray) -> np.ndarray:
+        m = w[:, cluster]                                  # (R, n) multiplicity of each block
+        nb = m.sum(axis=1)
+        sums = m @ r
+        chi2 = 12.0 / (nb * k * (k + 1)) * (sums ** 2).sum(axis=1) - 3.0 * nb * (k + 1)
+        c = 1.0 - (m @ tie) / (nb * k * (k * k - 1))
+        safe = c > 1e-12
+        chi2 = np.where(safe, np.maximum(chi2 / np.where(safe, c, 1.0), 0.0), 0.0)
+        return chi2 / (nb * (k - 1))
+    return stat
+
+
+def _rank_biserial_stat(d: np.ndarray, cluster: np.ndarray):
+    keep = np.round(d, _DECIMALS) != 0
+    d, cluster = d[keep], cluster[keep]
+    u, which = np.unique(np.round(np.abs(d), _DECIMALS), return_inverse=True)
+    onehot = np.zeros((d.size, u.size))
+    onehot[np.arange(d.size), which] = 1.0
+    pos = onehot * (d > 0)[:, None]
+
+    def stat(w: np.ndarray) -> np.ndarray:
+        m = w[:, cluster]
+        cnt = m @ onehot                                    # (R, U) resampled count of each |d|
+        avg_rank = np.cumsum(cnt, axis=1) - cnt + (cnt + 1.0) / 2.0
+        v = ((m @ pos) * avg_rank).sum(axis=1)
+        nn = cnt.sum(axis=1)
+        total = nn * (nn + 1.0) / 2.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(nn > 0, (2.0 * v - total) / np.where(nn > 0, total, 1.0), 0.0)
+    return stat
+
+
+def _hodges_lehmann_stat(d: np.ndarray, cluster: np.ndarray):
+    keep = np.round(d, _DECIMALS) != 0
+    d, cluster = d[keep], cluster[keep]
+    i, j = np.triu_indices(d.size)
+    averages = np.round((d[i] + d[j]) / 2.0, _DECIMALS)
+    order = np.argsort(averages, kind="stable")
+    walsh = averages[order]
+    i, j = i[order], j[order]
+    diag = i == j
+    step = max(1, _WALSH_CELLS // max(walsh.size, 1))
+
+    def stat(w: np.ndarray) -> np.ndarray:
+        out = np.empty(len(w))
+        for start in range(0, len(w), step):
+            m = w[start:start + step][:, cluster]           # (R, n)
+            pw = np.where(diag, m[:, i] * (m[:, i] + 1.0) / 2.0, m[:, i] * m[:, j])  # Walsh multiplicities
+            cum = np.cumsum(pw, axis=1)
+            total = cum[:, -1] if walsh.size else np.zeros(len(m))
+            lo = np.floor((total + 1.0) / 2.0)              # the middle one or two positions (1-based)
+            hi = np.ceil((total + 1.0) / 2.0)
+            a = np.array([np.searchsorted(c, x) for c, x in zip(cum, lo)])
+            b = np.array([np.searchsorted(c, x) for c, x in zip(cum, hi)])
+            ok = total > 0
+            a, b = np.minimum(a, walsh.size - 1), np.minimum(b, walsh.size - 1)
+            out[start:start + len(m)] = np.where(ok, (walsh[a] + walsh[b]) / 2.0 if walsh.size else 0.0, 0.0)
+        return out
+    return stat
+
+
+def effect_sizes(blocks: RankBlocks, *, n_boot: int = 2000, ci: float = 0.95, seed: int = 0,
+                 interval: str = "bca", control: str | None = None) -> EffectSizes:
+    """Kendall's W and, per pair (all pairs, or the k-1 against ``control``), r_rb and Hodges-Lehmann, each
+    with its interval (see the module docstring). Pairs are oriented as the Wilcoxon table's: a - b.
+
+    ``kendall_w`` columns: estimate, ci_low, ci_high, interval. ``pairs`` columns: a, b, rank_biserial,
+    rb_ci_low, rb_ci_high, rb_interval, hodges_lehmann, hl_ci_low, hl_ci_high, hl_interval, hl_conf_level.
+    """
+    n_clusters, cluster = _row_weights(blocks)
+    wres = cluster_bootstrap(_kendall_w_stat(blocks, cluster), n_clusters, n_boot=n_boot, ci=ci, seed=seed,
+                             method=interval)
+    w_table = pd.DataFrame([{"estimate": wres.estimate[0], "ci_low": wres.low[0], "ci_high": wres.high[0],
+                             "interval": wres.method[0]}])
+    rows = []
+    for i, j in pairs(blocks.conditions, control):
+        d = blocks.values[:, i] - blocks.values[:, j]
+        rb = cluster_bootstrap(_rank_biserial_stat(d, cluster), n_clusters, n_boot=n_boot, ci=ci, seed=seed,
+                               method=interval)
+        row = {"a": blocks.conditions[i], "b": blocks.conditions[j], "rank_biserial": rb.estimate[0],
+               "rb_ci_low": rb.low[0], "rb_ci_high": rb.high[0], "rb_interval": rb.method[0]}
+        if blocks.block == "participant":
+            hl = hodges_lehmann(d, ci=ci)
+            row.update(hodges_lehmann=hl.estimate, hl_ci_low=hl.ci_low, hl_ci_high=hl.ci_high,
+                       hl_interval=hl.method, hl_conf_level=hl.conf_level)
+        else:
+            hb = cluster_bootstrap(_hodges_lehmann_stat(d, cluster), n_clusters, n_boot=n_boot, ci=ci, seed=seed,
+                                   method=interval)
+            row.update(hodges_lehmann=hb.estimate[0], hl_ci_low=hb.low[0], hl_ci_high=hb.high[0],
+                       hl_interval=f"{hb.method[0]} bootstrap" if hb.method[0] != "none" else "none",
+                       hl_conf_level=ci)
+        rows.append(row)
+    cols = ["a", "b", "rank_biserial", "rb_ci_low", "rb_ci_high", "rb_interval", "hodges_lehmann", "hl_ci_low",
+            "hl_ci_high", "hl_interval", "hl_conf_level"]
+    return EffectSizes(kendall_w=w_table, pairs=pd.DataFrame(rows, columns=cols), interval=interval,
+                       n_boot=n_boot, ci=ci, seed=seed)
