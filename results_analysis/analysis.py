@@ -1,9 +1,12 @@
 """The whole rank analysis of a results frame, as data (no files): what ``report`` writes out.
 
 Per criterion: the Friedman test on the chosen blocks and the other block type as a secondary analysis,
-Nemenyi and Holm-adjusted Wilcoxon post-hoc tests (Conover optional), the critical difference,
-per-condition descriptives over all answered trials and Bradley-Terry strengths. Optionally the same per
-level of stimulus tags / participant groups, and questionnaire summaries.
+Nemenyi and Wilcoxon post-hoc tests (Conover optional) with a chosen p-value adjustment (Holm by default;
+all pairs, or the k-1 pairs against a control condition), the critical difference, effect sizes with
+intervals (:mod:`results_analysis.effect_sizes`), per-condition descriptives over all answered trials,
+Bradley-Terry strengths and the agreement between participants per stimulus
+(:mod:`results_analysis.agreement`). Optionally the same per level of stimulus tags / participant groups,
+and questionnaire summaries with reliability (:mod:`results_analysis.reliability`).
 
 The primary analysis uses participants as blocks (each participant's mean within-trial rank per
 condition): a participant's trials are repeated measures of one person, so counting them as independent
@@ -21,15 +24,20 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from results_analysis.adjust import ADJUSTMENTS
+from results_analysis.agreement import agreement_summary, stimulus_agreement
+from results_analysis.bootstrap import INTERVALS
 from results_analysis.bradley_terry import bradley_terry
 from results_analysis.descriptives import condition_summary
+from results_analysis.effect_sizes import EffectSizes, effect_sizes
 from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions, attention_summary
 from results_analysis.friedman import FriedmanResult, friedman_ranks
 from results_analysis.loader import CORE_COLUMNS, normalize_results
 from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
-from results_analysis.questionnaire import item_summary, scale_reliability
+from results_analysis.questionnaire import item_summary
+from results_analysis.reliability import item_reliability, scale_reliability_ci
 from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.validate import check_complete, validate_structure
@@ -49,6 +57,7 @@ class CriterionAnalysis:
     critical_difference: float
     bradley_terry: pd.DataFrame
     skillings_mack: SkillingsMackResult | None = None
+    effect_sizes: EffectSizes | None = None
 
 
 @dataclass
@@ -78,6 +87,12 @@ class Analysis:
     sm_permutations: int = 0
     ci: float = 0.95
     conover: bool = False
+    adjust: str = "holm"
+    control: str | None = None
+    interval: str = "bca"
+    agreement: pd.DataFrame | None = None
+    agreement_summary: pd.DataFrame | None = None
+    questionnaire_item_reliability: pd.DataFrame | None = None
 
 
 def group_columns(df: pd.DataFrame) -> list[str]:
@@ -88,6 +103,7 @@ def group_columns(df: pd.DataFrame) -> list[str]:
 def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "participant",
                       alpha: float = 0.05, conover: bool = False, n_boot: int = 2000, ci: float = 0.95,
                       seed: int = 0, skillings_mack_test: bool = False, sm_permutations: int = 2000,
+                      adjust: str = "holm", control: str | None = None, interval: str = "bca",
                       ) -> CriterionAnalysis:
     """Analyse one criterion of a validated, exclusion-applied tidy frame.
 
@@ -112,14 +128,15 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     fr = friedman_ranks(blocks.ranks)
     # Wilcoxon pairs the blocks' within-trial ranks (a participant's mean of them): never the raw answers.
     post = {"nemenyi": nemenyi(blocks.ranks, conditions, alpha=alpha),
-            "wilcoxon_holm": wilcoxon_holm(blocks.values, conditions)}
+            "wilcoxon_holm": wilcoxon_holm(blocks.values, conditions, adjust=adjust, control=control)}
     if conover:
-        post["conover"] = conover_test(blocks.ranks, conditions)
+        post["conover"] = conover_test(blocks.ranks, conditions, adjust=adjust, control=control)
     return CriterionAnalysis(
         criterion=criterion, blocks=blocks, friedman=fr, sensitivity=sens, sensitivity_block=other,
         summary=condition_summary(trial_blocks, n_boot=n_boot, ci=ci, seed=seed),
         posthoc=post, critical_difference=critical_difference(blocks.k, blocks.n, alpha),
-        bradley_terry=bradley_terry(trial_blocks, n_boot=n_boot // 2, ci=ci, seed=seed), skillings_mack=sm)
+        bradley_terry=bradley_terry(trial_blocks, n_boot=n_boot // 2, ci=ci, seed=seed), skillings_mack=sm,
+        effect_sizes=effect_sizes(blocks, n_boot=n_boot, ci=ci, seed=seed, interval=interval, control=control))
 
 
 def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], criteria: Sequence[str],
@@ -158,7 +175,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                  questionnaire: pd.DataFrame | None = None, exclude_failed_attention: bool = False,
                  exclude: Iterable[str] = (), alpha: float = 0.05, conover: bool = False, n_boot: int = 2000,
                  ci: float = 0.95, seed: int = 0, incomplete: str = "error", sm_permutations: int = 2000,
-                 ) -> Analysis:
+                 adjust: str = "holm", control: str | None = None, interval: str = "bca") -> Analysis:
     """Validate, apply exclusions and analyse every criterion (see module docstring).
 
     ``block='participant'`` (default) is the primary analysis over participants; ``block='trial'`` makes the
@@ -170,7 +187,18 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     within-trial shuffles (0: chi-squared only), while the Friedman, post-hoc and descriptive statistics use
     the complete trials. Warnings (e.g. mixed design hashes) are collected in ``Analysis.warnings``
     and also re-emitted.
+
+    ``adjust`` ('holm', 'bh' or 'bonferroni') adjusts the Wilcoxon (and Conover) p-values and the
+    per-stimulus agreement tests; ``control`` names a condition to compare every other one with (k-1 pairs,
+    adjusted over k-1) instead of all pairs; ``interval`` ('bca' or 'percentile') is the bootstrap interval
+    of the effect sizes.
     """
+    if adjust not in ADJUSTMENTS:
+        raise AnalysisInputError(df.attrs.get("source"), "--adjust",
+                                 f"{adjust!r} is not one of {', '.join(ADJUSTMENTS)}")
+    if interval not in INTERVALS:
+        raise AnalysisInputError(df.attrs.get("source"), "--interval",
+                                 f"{interval!r} is not one of {', '.join(INTERVALS)}")
     df = normalize_results(df)  # frames from studyapp's export_dataframe come with their own dtypes
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -187,21 +215,26 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     conditions = sorted(kept["condition"].unique())
     if len(conditions) < 2:
         raise AnalysisInputError(df.attrs.get("source"), "column 'condition'", "fewer than 2 conditions")
+    if control is not None and control not in conditions:
+        raise AnalysisInputError(df.attrs.get("source"), "--control",
+                                 f"no condition {control!r}; the conditions are {', '.join(conditions)}")
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
     with warnings.catch_warnings(record=True) as caught:  # e.g. a Bradley-Terry fit that did not converge
         warnings.simplefilter("always")
         results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
                                         n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm,
-                                        sm_permutations=sm_permutations) for c in criteria}
+                                        sm_permutations=sm_permutations, adjust=adjust, control=control,
+                                        interval=interval) for c in criteria}
     for w in caught:
         notes.append(str(w.message))
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block) for g in groups}
-    items = reliability = None
+    agreement = stimulus_agreement(kept, conditions=conditions, criteria=criteria, adjust=adjust)
+    items = reliability = item_rel = None
     if questionnaire is not None and len(questionnaire):
         q = questionnaire[~questionnaire["participant"].astype(str).isin(set(excluded["participant"]))]
-        items, reliability = item_summary(q), scale_reliability(q)
+        items, reliability, item_rel = item_summary(q), scale_reliability_ci(q, ci=ci), item_reliability(q)
     key = ["participant", "trial_index"]
     hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
     return Analysis(criteria=results, conditions=conditions, block=block, alpha=alpha,
@@ -213,4 +246,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                     groups=by_group, questionnaire_items=items, questionnaire_reliability=reliability,
                     warnings=notes, source=df.attrs.get("source"), design_hashes=[str(h) for h in hashes],
                     n_boot=n_boot, seed=seed, ci=ci, conover=conover,
-                    sm_permutations=sm_permutations if incomplete == "skillings-mack" else 0)
+                    sm_permutations=sm_permutations if incomplete == "skillings-mack" else 0,
+                    adjust=adjust, control=control, interval=interval, agreement=agreement,
+                    agreement_summary=agreement_summary(agreement, alpha=alpha),
+                    questionnaire_item_reliability=item_rel)

@@ -46,9 +46,8 @@ class BootstrapIntervals:
 def resample_weights(n_clusters: int, n_boot: int, seed: int) -> np.ndarray:
     """(n_boot, n_clusters) multiplicities, from the index draws scipy.stats.bootstrap makes."""
     idx = np.random.default_rng(seed).integers(0, n_clusters, (n_boot, n_clusters))
-    w = np.zeros((n_boot, n_clusters))
-    np.add.at(w, (np.repeat(np.arange(n_boot), n_clusters), idx.ravel()), 1.0)
-    return w
+    flat = (idx + (np.arange(n_boot) * n_clusters)[:, None]).ravel()
+    return np.bincount(flat, minlength=n_boot * n_clusters).reshape(n_boot, n_clusters).astype(float)
 
 
 def _evaluate(stat: WeightedStatistic, w: np.ndarray) -> np.ndarray:

@@ -38,6 +38,15 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default 2000; 0 = chi-squared approximation only)")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
     p.add_argument("--conover", action="store_true", help="add Conover's Friedman post-hoc tests")
+    p.add_argument("--adjust", choices=("holm", "bh", "bonferroni"), default="holm",
+                   help="adjustment of the post-hoc and per-stimulus p-values: holm (default; family-wise error), "
+                   "bh (Benjamini-Hochberg; false discovery rate) or bonferroni")
+    p.add_argument("--control", default=None, metavar="CONDITION",
+                   help="compare every other condition with this one only (k-1 post-hoc comparisons, adjusted "
+                   "over k-1), e.g. your model against each baseline")
+    p.add_argument("--interval", choices=("bca", "percentile"), default="bca",
+                   help="bootstrap interval of the effect sizes (W, r_rb; Hodges-Lehmann with --block trial): "
+                   "bca (default) or percentile")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
     p.add_argument("--title", default=None, help="report title (default: the study title stored in a results "
@@ -68,7 +77,8 @@ def main(argv: list[str] | None = None) -> int:
                         groups=args.group, questionnaire=q, exclude_failed_attention=args.exclude_failed_attention,
                         exclude=[x for x in args.exclude.split(",") if x.strip()], alpha=args.alpha,
                         conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete,
-                        sm_permutations=args.permutations)
+                        sm_permutations=args.permutations, adjust=args.adjust, control=args.control,
+                        interval=args.interval)
     except AnalysisInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -159,6 +159,8 @@ def hodges_lehmann(d: np.ndarray, *, ci: float = 0.95) -> HodgesLehmann:
 
 
 # --- statistics as functions of participant weights (for the cluster bootstrap) --------------------
+# Each statistic below depends on a resample only through per-participant totals (rank sums, counts of
+# each distinct difference), so a resample costs a (P x something) matrix product, never a copy of its rows.
 
 
 def _row_weights(blocks: RankBlocks) -> tuple[int, np.ndarray]:
@@ -167,74 +169,93 @@ def _row_weights(blocks: RankBlocks) -> tuple[int, np.ndarray]:
     return int(inverse.max()) + 1 if inverse.size else 0, inverse
 
 
-def _kendall_w_stat(blocks: RankBlocks, cluster: np.ndarray):
+def _per_cluster(cluster: np.ndarray, n_clusters: int, values: np.ndarray) -> np.ndarray:
+    """(P, ...) sums of ``values`` (rows = blocks) per cluster."""
+    out = np.zeros((n_clusters,) + values.shape[1:])
+    np.add.at(out, cluster, values)
+    return out
+
+
+def _kendall_w_stat(blocks: RankBlocks, cluster: np.ndarray, n_clusters: int):
     r = blocks.ranks
     n, k = r.shape
-    s = np.sort(r, axis=1)
     tie = np.zeros(n)
     for row in range(n):  # sum of t^3 - t over the tied groups of each block
-        _, t = np.unique(np.round(s[row], _DECIMALS), return_counts=True)
+        _, t = np.unique(np.round(r[row], _DECIMALS), return_counts=True)
         tie[row] = float(np.sum(t ** 3 - t))
+    rank_sums = _per_cluster(cluster, n_clusters, r)
+    tie_sums = _per_cluster(cluster, n_clusters, tie)
+    counts = _per_cluster(cluster, n_clusters, np.ones(n))
 
     def stat(w: np.ndarray) -> np.ndarray:
-        m = w[:, cluster]                                  # (R, n) multiplicity of each block
-        nb = m.sum(axis=1)
-        sums = m @ r
+        nb = w @ counts
+        sums = w @ rank_sums
         chi2 = 12.0 / (nb * k * (k + 1)) * (sums ** 2).sum(axis=1) - 3.0 * nb * (k + 1)
-        c = 1.0 - (m @ tie) / (nb * k * (k * k - 1))
+        c = 1.0 - (w @ tie_sums) / (nb * k * (k * k - 1))
         safe = c > 1e-12
         chi2 = np.where(safe, np.maximum(chi2 / np.where(safe, c, 1.0), 0.0), 0.0)
         return chi2 / (nb * (k - 1))
     return stat
 
 
-def _rank_biserial_stat(d: np.ndarray, cluster: np.ndarray):
+def _distinct_counts(d: np.ndarray, cluster: np.ndarray, n_clusters: int, key: np.ndarray):
+    """Distinct values of ``key`` over the non-zero differences and their (P, U) counts per cluster."""
     keep = np.round(d, _DECIMALS) != 0
-    d, cluster = d[keep], cluster[keep]
-    u, which = np.unique(np.round(np.abs(d), _DECIMALS), return_inverse=True)
-    onehot = np.zeros((d.size, u.size))
-    onehot[np.arange(d.size), which] = 1.0
-    pos = onehot * (d > 0)[:, None]
+    u, which = np.unique(np.round(key[keep], _DECIMALS), return_inverse=True)
+    onehot = np.zeros((int(keep.sum()), u.size))
+    onehot[np.arange(onehot.shape[0]), which] = 1.0
+    return u, keep, onehot, _per_cluster(cluster[keep], n_clusters, onehot)
+
+
+def _rank_biserial_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int):
+    _, keep, onehot, counts = _distinct_counts(d, cluster, n_clusters, np.abs(d))
+    positive = _per_cluster(cluster[keep], n_clusters, onehot * (d[keep] > 0)[:, None])
 
     def stat(w: np.ndarray) -> np.ndarray:
-        m = w[:, cluster]
-        cnt = m @ onehot                                    # (R, U) resampled count of each |d|
+        cnt = w @ counts                                    # (R, U) resampled count of each |d|
         avg_rank = np.cumsum(cnt, axis=1) - cnt + (cnt + 1.0) / 2.0
-        v = ((m @ pos) * avg_rank).sum(axis=1)
+        v = ((w @ positive) * avg_rank).sum(axis=1)
         nn = cnt.sum(axis=1)
         total = nn * (nn + 1.0) / 2.0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(nn > 0, (2.0 * v - total) / np.where(nn > 0, total, 1.0), 0.0)
+        return np.where(nn > 0, (2.0 * v - np.where(nn > 0, total, 1.0)) / np.where(nn > 0, total, 1.0), 0.0)
     return stat
 
 
-def _hodges_lehmann_stat(d: np.ndarray, cluster: np.ndarray):
-    keep = np.round(d, _DECIMALS) != 0
-    d, cluster = d[keep], cluster[keep]
-    i, j = np.triu_indices(d.size)
-    averages = np.round((d[i] + d[j]) / 2.0, _DECIMALS)
+def _hodges_lehmann_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int):
+    # A resample's Walsh averages depend only on how often each distinct difference occurs in it: values
+    # e_l and e_m (l < m) give n_l n_m averages (e_l + e_m)/2, and e_l with itself n_l (n_l + 1)/2.
+    e, _, _, counts = _distinct_counts(d, cluster, n_clusters, d)
+    li, mi = np.triu_indices(e.size)
+    averages = np.round((e[li] + e[mi]) / 2.0, _DECIMALS)
     order = np.argsort(averages, kind="stable")
-    walsh = averages[order]
-    i, j = i[order], j[order]
-    diag = i == j
+    walsh, li, mi = averages[order], li[order], mi[order]
+    same = li == mi
     step = max(1, _WALSH_CELLS // max(walsh.size, 1))
 
     def stat(w: np.ndarray) -> np.ndarray:
-        out = np.empty(len(w))
+        out = np.zeros(len(w))
+        if walsh.size == 0:
+            return out
         for start in range(0, len(w), step):
-            m = w[start:start + step][:, cluster]           # (R, n)
-            pw = np.where(diag, m[:, i] * (m[:, i] + 1.0) / 2.0, m[:, i] * m[:, j])  # Walsh multiplicities
+            n = w[start:start + step] @ counts               # (R, U)
+            pw = np.where(same, n[:, li] * (n[:, li] + 1.0) / 2.0, n[:, li] * n[:, mi])
             cum = np.cumsum(pw, axis=1)
-            total = cum[:, -1] if walsh.size else np.zeros(len(m))
+            total = cum[:, -1]
             lo = np.floor((total + 1.0) / 2.0)              # the middle one or two positions (1-based)
             hi = np.ceil((total + 1.0) / 2.0)
-            a = np.array([np.searchsorted(c, x) for c, x in zip(cum, lo)])
-            b = np.array([np.searchsorted(c, x) for c, x in zip(cum, hi)])
-            ok = total > 0
-            a, b = np.minimum(a, walsh.size - 1), np.minimum(b, walsh.size - 1)
-            out[start:start + len(m)] = np.where(ok, (walsh[a] + walsh[b]) / 2.0 if walsh.size else 0.0, 0.0)
+            a = np.minimum((cum < lo[:, None]).sum(axis=1), walsh.size - 1)
+            b = np.minimum((cum < hi[:, None]).sum(axis=1), walsh.size - 1)
+            out[start:start + len(n)] = np.where(total > 0, (walsh[a] + walsh[b]) / 2.0, 0.0)
         return out
     return stat
+
+
+def _bootstrap_name(method: str) -> str:
+    """'BCa' -> 'BCa bootstrap'; 'percentile (BCa undefined)' -> 'percentile bootstrap (BCa undefined)'."""
+    if method == "none":
+        return method
+    head, _, tail = method.partition(" (")
+    return f"{head} bootstrap" + (f" ({tail}" if tail else "")
 
 
 def effect_sizes(blocks: RankBlocks, *, n_boot: int = 2000, ci: float = 0.95, seed: int = 0,
@@ -246,27 +267,30 @@ def effect_sizes(blocks: RankBlocks, *, n_boot: int = 2000, ci: float = 0.95, se
     rb_ci_low, rb_ci_high, rb_interval, hodges_lehmann, hl_ci_low, hl_ci_high, hl_interval, hl_conf_level.
     """
     n_clusters, cluster = _row_weights(blocks)
-    wres = cluster_bootstrap(_kendall_w_stat(blocks, cluster), n_clusters, n_boot=n_boot, ci=ci, seed=seed,
-                             method=interval)
-    w_table = pd.DataFrame([{"estimate": wres.estimate[0], "ci_low": wres.low[0], "ci_high": wres.high[0],
-                             "interval": wres.method[0]}])
+    todo = pairs(blocks.conditions, control)
+    diffs = [blocks.values[:, i] - blocks.values[:, j] for i, j in todo]
+    boot_hl = blocks.block != "participant"
+    # One set of resamples for every statistic: W, then r_rb per pair, then (trial blocks) HL per pair.
+    parts = [_kendall_w_stat(blocks, cluster, n_clusters)]
+    parts += [_rank_biserial_stat(d, cluster, n_clusters) for d in diffs]
+    parts += [_hodges_lehmann_stat(d, cluster, n_clusters) for d in diffs] if boot_hl else []
+    res = cluster_bootstrap(lambda w: np.column_stack([f(w) for f in parts]), n_clusters, n_boot=n_boot, ci=ci,
+                            seed=seed, method=interval)
+    w_table = pd.DataFrame([{"estimate": res.estimate[0], "ci_low": res.low[0], "ci_high": res.high[0],
+                             "interval": _bootstrap_name(res.method[0])}])
     rows = []
-    for i, j in pairs(blocks.conditions, control):
-        d = blocks.values[:, i] - blocks.values[:, j]
-        rb = cluster_bootstrap(_rank_biserial_stat(d, cluster), n_clusters, n_boot=n_boot, ci=ci, seed=seed,
-                               method=interval)
-        row = {"a": blocks.conditions[i], "b": blocks.conditions[j], "rank_biserial": rb.estimate[0],
-               "rb_ci_low": rb.low[0], "rb_ci_high": rb.high[0], "rb_interval": rb.method[0]}
-        if blocks.block == "participant":
-            hl = hodges_lehmann(d, ci=ci)
-            row.update(hodges_lehmann=hl.estimate, hl_ci_low=hl.ci_low, hl_ci_high=hl.ci_high,
-                       hl_interval=hl.method, hl_conf_level=hl.conf_level)
+    for p, ((i, j), d) in enumerate(zip(todo, diffs)):
+        rb = 1 + p
+        row = {"a": blocks.conditions[i], "b": blocks.conditions[j], "rank_biserial": res.estimate[rb],
+               "rb_ci_low": res.low[rb], "rb_ci_high": res.high[rb], "rb_interval": _bootstrap_name(res.method[rb])}
+        if boot_hl:
+            hl = 1 + len(todo) + p
+            row.update(hodges_lehmann=res.estimate[hl], hl_ci_low=res.low[hl], hl_ci_high=res.high[hl],
+                       hl_interval=_bootstrap_name(res.method[hl]), hl_conf_level=ci)
         else:
-            hb = cluster_bootstrap(_hodges_lehmann_stat(d, cluster), n_clusters, n_boot=n_boot, ci=ci, seed=seed,
-                                   method=interval)
-            row.update(hodges_lehmann=hb.estimate[0], hl_ci_low=hb.low[0], hl_ci_high=hb.high[0],
-                       hl_interval=f"{hb.method[0]} bootstrap" if hb.method[0] != "none" else "none",
-                       hl_conf_level=ci)
+            h = hodges_lehmann(d, ci=ci)
+            row.update(hodges_lehmann=h.estimate, hl_ci_low=h.ci_low, hl_ci_high=h.ci_high, hl_interval=h.method,
+                       hl_conf_level=h.conf_level)
         rows.append(row)
     cols = ["a", "b", "rank_biserial", "rb_ci_low", "rb_ci_high", "rb_interval", "hodges_lehmann", "hl_ci_low",
             "hl_ci_high", "hl_interval", "hl_conf_level"]

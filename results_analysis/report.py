@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 import scipy
 
-from results_analysis import figures
+from results_analysis import effects_report, figures
 from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
 from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
@@ -79,6 +79,7 @@ def stats_dict(a: Analysis) -> dict:
             entry["skillings_mack"] = {"statistic": sm.statistic, "df": sm.df, "p": sm.p, "n_blocks": sm.n_blocks,
                                        "n_missing": sm.n_missing, "p_permutation": sm.p_permutation,
                                        "n_permutations": sm.n_permutations}
+        entry.update(effects_report.criterion_stats(a, c))
         out[crit] = entry
     out["_meta"] = {
         "source": a.source, "block": a.block, "primary": f"Friedman test over {a.block}s",
@@ -93,14 +94,16 @@ def stats_dict(a: Analysis) -> dict:
                      "exact_if": f"fewer than {WILCOXON_EXACT_BELOW_N} non-zero differences, no ties and no "
                                  "zero differences (R's wilcox.test default)",
                      "otherwise": "normal approximation with tie and continuity correction",
-                     "adjustment": "holm"},
+                     "adjustment": a.adjust},
         "software": {"scipy": scipy.__version__, "numpy": np.__version__, "pandas": pd.__version__},
     }
+    out["_meta"].update(effects_report.meta(a))
     if a.groups:
         out["_groups"] = {g: t.to_dict("records") for g, t in a.groups.items()}
     if a.questionnaire_reliability is not None:
         out["_questionnaire"] = {"reliability": a.questionnaire_reliability.to_dict("records"),
-                                 "items": a.questionnaire_items.to_dict("records")}
+                                 "items": a.questionnaire_items.to_dict("records"),
+                                 "item_reliability": a.questionnaire_item_reliability.to_dict("records")}
     return out
 
 
@@ -157,6 +160,7 @@ def write_tables(a: Analysis, out: Path) -> None:
     if a.questionnaire_items is not None:
         a.questionnaire_items.to_csv(out / "questionnaire_items.csv", index=False)
         a.questionnaire_reliability.to_csv(out / "questionnaire_reliability.csv", index=False)
+    effects_report.write_tables(a, out)
 
 
 def _safe(name: str) -> str:
@@ -256,7 +260,7 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
     verdict = "showed a significant difference between" if sig else "did not show a significant difference between"
     text = [f"**{c.criterion.capitalize()}.** Mean ranks (1 = best) were {ranks}. {headline} "
             f"{verdict} the {k} conditions, χ²({fr.df}) = {_num(fr.chi2)}, {fmt_p(fr.p)}, Kendall's W = "
-            f"{_num(fr.kendall_w)} (Iman–Davenport F({fr.iman_davenport_df1}, {fr.iman_davenport_df2}) = "
+            f"{effects_report.kendall_w_text(a, c)} (Iman–Davenport F({fr.iman_davenport_df1}, {fr.iman_davenport_df2}) = "
             f"{_num(fr.iman_davenport_f)}, {fmt_p(fr.iman_davenport_p)})."]
     if c.sensitivity is not None:
         sv = c.sensitivity
@@ -294,16 +298,19 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
     wparts = [f"{r.a} vs {r.b}: V = {fmt_v(r.statistic)}, r_rb = {_num(r.rank_biserial)}, "
               f"{fmt_p(r.p_adjusted, adjusted=True)}" for r in wil.itertuples()]
     # Name the pairs where the two post-hoc families disagree: a reader must not have to find them.
+    nem_sig = {frozenset((r.a, r.b)): bool(r.significant) for r in nem.itertuples()}
     differ = [f"{w.a} vs {w.b} (significant only with {'Wilcoxon' if w.p_adjusted < a.alpha else 'Nemenyi'})"
-              for w, n in zip(wil.itertuples(), nem["significant"]) if (w.p_adjusted < a.alpha) != bool(n)]
+              for w in wil.itertuples() if (w.p_adjusted < a.alpha) != nem_sig[frozenset((w.a, w.b))]]
     methods = sorted(set(wil["method"]))
     verdict = ("led to the same conclusions" if not differ else
                "agreed with the Nemenyi tests except for " + " and ".join(differ))
-    post += (f" Pairwise Wilcoxon signed-rank tests with Holm correction ({', '.join(methods)}) {verdict}: "
+    post += (f" Pairwise Wilcoxon signed-rank tests"
+             + (f" against the control {a.control}" if a.control is not None else "")
+             + f" with {effects_report.adjustment_name(a)} adjustment ({', '.join(methods)}) {verdict}: "
              + "; ".join(wparts) + ".")
     if "conover" in c.posthoc:
         con = c.posthoc["conover"]
-        post += (" Conover's post-hoc tests (t distribution, Holm): "
+        post += (f" Conover's post-hoc tests (t distribution, {effects_report.adjustment_name(a)}): "
                  + "; ".join(f"{r.a} vs {r.b}: t({r.df}) = {_num(r.statistic)}, {fmt_p(r.p_adjusted, adjusted=True)}"
                              for r in con.itertuples()) + ".")
     text.append(post)
@@ -364,7 +371,7 @@ def methods_paragraph(a: Analysis) -> str:
         f"degrees of freedom; critical difference CD = q_α/√2 · √(k(k+1)/(6n)), q_α/√2 = "
         f"{nemenyi_q_alpha(k, a.alpha):.3f} for k = {k} at α = {_alpha(a.alpha)}), and with two-sided Wilcoxon "
         f"signed-rank tests on the paired block values (within-trial ranks, or a participant's mean of them), "
-        f"Holm-adjusted over the {k * (k - 1) // 2} pairs; zero "
+        f"{effects_report.adjustment_name(a)}-adjusted over the {effects_report.n_comparisons(a)} comparisons; zero "
         f"differences were discarded (Wilcoxon's method) and, as in R's wilcox.test, the exact null "
         f"distribution was used only when fewer than {WILCOXON_EXACT_BELOW_N} non-zero differences remained and "
         f"there were neither ties nor zero differences, otherwise the normal approximation with tie and "
@@ -377,7 +384,7 @@ def methods_paragraph(a: Analysis) -> str:
         f"(Newton's method to convergence) to the pairwise wins implied by each ranking (ties: half a win each), "
         f"with {a.n_boot // 2} participant bootstrap resamples (a pseudo-count of {BOOT_PRIOR:g} wins per pair "
         f"keeps a resample finite); a condition that never won or never lost has no finite strength and is "
-        f"reported as not estimable. {incomplete} Computed with results_analysis "
+        f"reported as not estimable. {incomplete} {effects_report.methods_text(a)} Computed with results_analysis "
         f"(scipy {scipy.__version__}).")
 
 
@@ -412,23 +419,7 @@ def build_document(a: Analysis, title: str) -> Document:
     doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
               "interval, median, and share of answers at each rank (a tied answer shared between the places it "
               "spans, so each row sums to 100 %).")
-    prow = []
-    for crit, c in a.criteria.items():
-        nem = c.posthoc["nemenyi"].set_index(["a", "b"])
-        wil = c.posthoc["wilcoxon_holm"].set_index(["a", "b"])
-        for (x, y) in nem.index:
-            prow.append({"criterion": crit, "pair": f"{x} – {y}", "Δ mean rank": nem.loc[(x, y), "difference"],
-                         "Nemenyi p_adj": nem.loc[(x, y), "p_adjusted"], "Wilcoxon V": wil.loc[(x, y), "statistic"],
-                         "r_rb": wil.loc[(x, y), "rank_biserial"], "Wilcoxon p_adj (Holm)": wil.loc[(x, y), "p_adjusted"],
-                         "method": wil.loc[(x, y), "method"]})
-    ptab = pd.DataFrame(prow)
-    ptab["Wilcoxon V"] = [fmt_v(v) for v in ptab["Wilcoxon V"]]
-    for col in ("Δ mean rank", "r_rb"):
-        ptab[col] = [_num(v) for v in ptab[col]]
-    for col in ("Nemenyi p_adj", "Wilcoxon p_adj (Holm)"):
-        ptab[col] = [_p_cell(p) for p in ptab[col]]
-    doc.table(ptab, "Table 3. Post-hoc comparisons (Δ: difference of mean ranks; r_rb: matched-pairs rank-biserial "
-              "correlation of the Wilcoxon test).")
+    doc.table(effects_report.posthoc_table(a), effects_report.posthoc_caption(a))
     btrows = [{"criterion": crit, "condition": r["condition"], "strength": _bt_cell(r),
                "win rate": f"{r['win_rate']:.0%}"} for crit, c in a.criteria.items()
               for _, r in c.bradley_terry.iterrows()]
@@ -440,6 +431,7 @@ def build_document(a: Analysis, title: str) -> Document:
                "conditions joined by a bar are not significantly different.")
     doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")
     doc.figure("bradley_terry", f"Figure 4. Bradley–Terry strengths with {a.ci:.0%} participant-bootstrap interval.")
+    effects_report.agreement_section(a, doc)
     if a.groups:
         doc.h(1, "Breakdowns")
         for g, t in a.groups.items():
@@ -454,14 +446,9 @@ def build_document(a: Analysis, title: str) -> Document:
             doc.table(show, f"Friedman test per level of '{g}' (blocks: {a.block}s).")
     if a.questionnaire_reliability is not None:
         doc.h(1, "Questionnaire")
-        rel = a.questionnaire_reliability
-        doc.p("Internal consistency per scale (Cronbach's α; participants who answered every item of the scale; "
-              "α ≥ 0.7 is conventionally taken as acceptable): " + "; ".join(
-                  f"{r.scale}: α = {_num(r.alpha)} ({r.n_items} items, {r.n_participants} participants"
-                  + (", below 0.7: the items do not form a reliable scale" if np.isfinite(r.alpha) and r.alpha < 0.7
-                     else "") + ")"
-                  for r in rel.itertuples()) + ".")
+        doc.p(effects_report.reliability_text(a))
         doc.table(a.questionnaire_items, "Questionnaire items.")
+        effects_report.item_reliability_table(a, doc)
     doc.h(1, "Exclusions")
     if a.exclusions.empty:
         doc.p("No participant was excluded. Practice trials and attention-check trials are never analysed.")
