@@ -76,8 +76,11 @@ def write_tables(a: Analysis, out: Path) -> None:
 
 
 def _interval(lo: float, hi: float) -> str:
+    """'0.21–0.60', or '−0.19 to 0.91' when an end is negative (a dash would read as a minus sign)."""
     from results_analysis.report import _num
 
+    if min(lo, hi) < 0:
+        return f"{_num(lo)} to {_num(hi)}".replace("-", "−")
     return f"{_num(lo)}–{_num(hi)}"
 
 

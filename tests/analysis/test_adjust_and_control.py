@@ -79,3 +79,13 @@ def test_control_runs_only_k_minus_1_pairs_adjusted_over_k_minus_1() -> None:
     np.testing.assert_allclose(con["p_adjusted"], stats.false_discovery_control(con["p"], method="bh"))
     with pytest.raises(KeyError, match="control condition 'nope'"):
         wilcoxon_holm(v, names, control="nope")
+
+
+def test_float_noise_in_mean_ranks_neither_breaks_ties_nor_hides_zeros() -> None:
+    # 0.1 + 0.2 != 0.3 in floating point; participants' mean ranks carry such noise
+    noisy = np.array([0.1 + 0.2, 0.3, 0.5, -0.7, 1.1, 0.9, (0.1 + 0.2) - 0.3])
+    clean = np.array([0.3, 0.3, 0.5, -0.7, 1.1, 0.9, 0.0])
+    got = wilcoxon_holm(np.c_[noisy, np.zeros(7)], ["a", "b"]).iloc[0]
+    ref = wilcoxon_holm(np.c_[clean, np.zeros(7)], ["a", "b"]).iloc[0]
+    assert got["method"] == ref["method"] == "normal approximation"  # a tie and a zero: no exact test
+    assert (got["statistic"], got["p"], got["zeros_dropped"]) == (ref["statistic"], ref["p"], 1)
