@@ -56,6 +56,18 @@ def _evaluate(stat: WeightedStatistic, w: np.ndarray) -> np.ndarray:
     return res[:, None] if res.ndim == 1 else res
 
 
+def _jackknife(stat: WeightedStatistic, n_clusters: int) -> np.ndarray:
+    """The statistic with each cluster left out in turn, the weight rows built a chunk at a time (a P x P
+    matrix of a large study would not fit in memory)."""
+    out = []
+    for i in range(0, n_clusters, _CHUNK):
+        w = np.ones((min(_CHUNK, n_clusters - i), n_clusters))
+        w[np.arange(w.shape[0]), i + np.arange(w.shape[0])] = 0.0
+        res = np.asarray(stat(w), dtype=float)
+        out.append(res[:, None] if res.ndim == 1 else res)
+    return np.concatenate(out, axis=0)
+
+
 def cluster_bootstrap(stat: WeightedStatistic, n_clusters: int, *, n_boot: int = 2000, ci: float = 0.95,
                       seed: int = 0, method: str = "bca") -> BootstrapIntervals:
     """Estimate and ``ci`` interval of each statistic ``stat`` returns, resampling clusters (seeded).
@@ -78,7 +90,7 @@ def cluster_bootstrap(stat: WeightedStatistic, n_clusters: int, *, n_boot: int =
     levels = np.tile([alpha, 1.0 - alpha], (q, 1))
     names = [INTERVAL_NAMES["percentile"]] * q
     if method == "bca":
-        jack = _evaluate(stat, 1.0 - np.eye(n_clusters))  # (P, q), leave one cluster out
+        jack = _jackknife(stat, n_clusters)  # (P, q), leave one cluster out
         with np.errstate(divide="ignore", invalid="ignore"):
             share = ((boot < est).sum(axis=0) + (boot <= est).sum(axis=0)) / (2.0 * len(boot))
             z0 = ndtri(share)

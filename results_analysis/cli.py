@@ -86,8 +86,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"warning: {w}", file=sys.stderr)
     for crit, c in a.criteria.items():
         fr = c.friedman
-        print(f"{crit}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}, n = {fr.n_blocks} "
-              f"{a.block}s")
+        w = c.effect_sizes.kendall_w.iloc[0] if c.effect_sizes is not None else None
+        w_ci = f" ({a.ci:.0%} CI {w['ci_low']:.2f}-{w['ci_high']:.2f})" if w is not None else ""
+        print(f"{crit}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}{w_ci}, "
+              f"n = {fr.n_blocks} {a.block}s")
     if len(a.exclusions):
         print("excluded: " + "; ".join(f"{r.participant} ({r.reason})" for r in a.exclusions.itertuples()))
     print(f"report: {args.out / 'report.html'}")
