@@ -113,7 +113,11 @@ def posthoc_table(a: Analysis) -> pd.DataFrame:
                 e = eff.loc[(w.a, w.b)]
                 row[f"r_rb {ci}"] = _interval(e["rb_ci_low"], e["rb_ci_high"])
                 row["HL"] = _num(e["hodges_lehmann"])
-                row[f"HL {ci}"] = _interval(e["hl_ci_low"], e["hl_ci_high"])
+                # an exact interval's level is what the signed-rank distribution allows (e.g. 96.1 %), and R
+                # widens a normal one for very few blocks: say so where it differs from the level asked for
+                level = e["hl_conf_level"]
+                row[f"HL {ci}"] = _interval(e["hl_ci_low"], e["hl_ci_high"]) + (
+                    f" (at {level:.1%})" if level == level and abs(level - a.ci) > 5e-4 else "")
             row[f"Wilcoxon p_adj ({adjustment_name(a)})"] = _p_cell(w.p_adjusted)
             row["method"] = w.method
             rows.append(row)

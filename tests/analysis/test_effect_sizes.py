@@ -103,6 +103,7 @@ def _reference_stats(blocks, idx: np.ndarray, pair: tuple[int, int]) -> tuple[fl
     return w, (2 * tplus - total) / total, hl
 
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning", "ignore::scipy.stats.DegenerateDataWarning")
 @pytest.mark.parametrize("block,interval", [("participant", "bca"), ("participant", "percentile"),
                                             ("trial", "bca")])
 def test_bootstrap_intervals_equal_scipy_bootstrap(block: str, interval: str) -> None:

@@ -98,3 +98,17 @@ def test_cli_flags_and_one_line_errors(tmp_path, capsys) -> None:
     assert main([str(csv), "--out", str(tmp_path / "x"), "--control", "Ours"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--control" in err[0] and "no condition 'Ours'" in err[0] and "CaMN" in err[0]
+
+
+def test_exact_hodges_lehmann_level_is_stated_in_table_3(tmp_path) -> None:
+    # 4 participants x 2 trials: A - B mean-rank differences 2, -1, -1.5, 0.5 (no ties, no zeros), so the
+    # interval is exact: the 1st and 10th of 10 Walsh averages, at 1 - 2/16 = 87.5 %, not 95 %
+    orders = [("BCA", "BCA"), ("ABC", "CAB"), ("CAB", "BCA"), ("ACB", "CAB")]
+    rows = [{"participant": f"P{p}", "trial_index": t, "stimulus": f"s{t}", "criterion": "realism",
+             "condition": cond, "rank": place + 1}
+            for p, trials in enumerate(orders) for t, order in enumerate(trials) for place, cond in enumerate(order)]
+    a = analyze(pd.DataFrame(rows), tmp_path, n_boot=50)
+    ab = a.criteria["realism"].effect_sizes.pairs.iloc[0]
+    assert (ab["a"], ab["b"], ab["hl_interval"]) == ("A", "B", "exact")
+    assert (ab["hodges_lehmann"], ab["hl_ci_low"], ab["hl_ci_high"], ab["hl_conf_level"]) == (0.0, -1.5, 2.0, 0.875)
+    assert "| −1.50 to 2.00 (at 87.5%) |" in (tmp_path / "report.md").read_text()
