@@ -170,9 +170,9 @@ def methods_text(a: Analysis) -> str:
         f"corrected for ties, with its χ²(k−1) = m(k−1)W test, p-values {adjustment_name(a)}-adjusted over the "
         "stimuli of a criterion.")
     if a.questionnaire_reliability is not None:
-        parts.append(f"Cronbach's α of each questionnaire scale comes with Feldt's {ci} interval (F distribution "
-                     "with n−1 and (n−1)(k−1) degrees of freedom), and each item with the α of the scale without "
-                     "it and its corrected item-total correlation.")
+        parts.append(f"Cronbach's α of each questionnaire scale comes with Feldt's {ci} interval (F "
+                     "distribution with n−1 and (n−1)(k−1) degrees of freedom), and each item with the α of the "
+                     "scale without it and its corrected item-total correlation.")
     return " ".join(parts)
 
 
