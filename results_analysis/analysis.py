@@ -32,6 +32,8 @@ from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary, scale_reliability
 from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
+from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
+from results_analysis.study_meta import condition_labels, condition_order
 from results_analysis.validate import check_complete, validate_structure
 
 
@@ -78,11 +80,15 @@ class Analysis:
     sm_permutations: int = 0
     ci: float = 0.95
     conover: bool = False
+    #: condition id -> the name tables, figures and text show (its design label, else the id); ``conditions``
+    #: is in the design's order (see :mod:`results_analysis.study_meta`)
+    labels: dict[str, str] = field(default_factory=dict)
 
 
 def group_columns(df: pd.DataFrame) -> list[str]:
-    """Columns that can be used for breakdowns: everything that is not a core export column."""
-    return [c for c in df.columns if c not in CORE_COLUMNS]
+    """Columns that can be used for breakdowns: everything that is not a core export column or an answer
+    to the questionnaire."""
+    return [c for c in df.columns if c not in CORE_COLUMNS and not str(c).startswith(QUESTIONNAIRE_PREFIX)]
 
 
 def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "participant",
@@ -184,7 +190,8 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     if kept.empty:
         raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
                                  "(practice and attention-check trials are never analysed)")
-    conditions = sorted(kept["condition"].unique())
+    # The design's order (ids in order where the table has no positions); the labels are for display only.
+    conditions = condition_order(kept)
     if len(conditions) < 2:
         raise AnalysisInputError(df.attrs.get("source"), "column 'condition'", "fewer than 2 conditions")
     criteria = list(dict.fromkeys(kept["criterion"]))
@@ -213,4 +220,5 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                     groups=by_group, questionnaire_items=items, questionnaire_reliability=reliability,
                     warnings=notes, source=df.attrs.get("source"), design_hashes=[str(h) for h in hashes],
                     n_boot=n_boot, seed=seed, ci=ci, conover=conover,
-                    sm_permutations=sm_permutations if incomplete == "skillings-mack" else 0)
+                    sm_permutations=sm_permutations if incomplete == "skillings-mack" else 0,
+                    labels=condition_labels(kept, conditions))
