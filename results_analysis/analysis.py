@@ -11,6 +11,9 @@ blocks (``block='trial'``, the analysis many published studies report) overstate
 (pseudo-replication). The trial-level test stays as the secondary analysis, and as the primary one with
 ``block='trial'`` to replicate a published analysis. Every test runs on within-block ranks, so how ties
 were written (1,1,3 or 1.5,1.5,3) cannot change a result.
+
+Conditions are analysed in the design's order, and ``Analysis.labels`` holds the name each is shown by
+(:mod:`results_analysis.study_meta`); the numbers are computed, and stored, under the condition ids.
 """
 from __future__ import annotations
 
