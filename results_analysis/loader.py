@@ -163,7 +163,7 @@ def normalize_questionnaire(q: pd.DataFrame, path: str | Path | None) -> pd.Data
 
 
 def load_study_title(path: str | Path) -> str | None:
-    """The study title stored in a results database, or None (a CSV export, or a database without a title).
+    """The study title a results database stores, or a CSV export carries (column ``study_title``), or None.
 
     >>> import tempfile, pathlib, sqlite3
     >>> db = pathlib.Path(tempfile.mkdtemp()) / "s.sqlite"
@@ -175,7 +175,14 @@ def load_study_title(path: str | Path) -> str | None:
     """
     path = Path(path)
     if not _is_sqlite(path):
-        return None
+        from results_analysis.study_meta import study_title
+
+        try:
+            head = pd.read_csv(path, dtype=str, usecols=lambda c: c == "study_title", keep_default_na=False,
+                               na_values=[""])
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
+        return study_title(head)
     from results_analysis.sqlite_schema import study_title_from_connection
 
     try:

@@ -45,6 +45,10 @@ def test_csv_and_database_give_the_same_report(demo_reports) -> None:
     db_stats["_meta"].pop("source"), csv_stats["_meta"].pop("source")
     assert db_stats == csv_stats
     assert "_questionnaire" in csv_stats  # the CSV brought the questionnaire without --questionnaire
+    from results_analysis import load_study_title
+
+    folder = from_db.parent
+    assert load_study_title(folder / "results.csv") == load_study_title(folder / "demo.results.sqlite") == design.title
     tables = sorted(p.name for p in (from_db / "tables").iterdir())
     assert tables == sorted(p.name for p in (from_csv / "tables").iterdir())
     assert "questionnaire_items.csv" in tables
@@ -130,7 +134,17 @@ def test_analyze_from_python_uses_the_labels(tmp_path: Path) -> None:
     names = {ids[0]: "Zeta model", ids[1]: "Alpha model", ids[2]: "Mid model"}
     order = {ids[2]: 0, ids[0]: 1, ids[1]: 2}
     df = df.assign(condition_label=df["condition"].map(names), condition_position=df["condition"].map(order))
-    a = analyze(df, tmp_path, n_boot=50)
+    a = analyze(df, tmp_path, n_boot=50, groups=["speaker"])
     assert a.conditions == [ids[2], ids[0], ids[1]] and a.labels == names
     t = pd.read_csv(tmp_path / "tables" / "conditions.csv")
     assert t[t.criterion == t.criterion.iloc[0]]["condition"].tolist() == ["Mid model", "Zeta model", "Alpha model"]
+    # the breakdown's per-condition columns are named by label too, and hold the same numbers
+    by = pd.read_csv(tmp_path / "tables" / "by_speaker.csv")
+    raw = a.groups["speaker"]
+    for cid, label in names.items():
+        assert by[f"mean_rank_{label}"].tolist() == pytest.approx(raw[f"mean_rank_{cid}"].tolist())
+        assert f"mean_rank_{cid}" not in by.columns
+    assert "mean rank Mid model" in (tmp_path / "report.md").read_text()
+    # the questionnaire columns are answers, not a grouping
+    from results_analysis.analysis import group_columns
+    assert group_columns(df.assign(**{"questionnaire:ease:q1": "3"})) == ["speaker", "device"]
