@@ -14,6 +14,9 @@ blocks (``block='trial'``, the analysis many published studies report) overstate
 (pseudo-replication). The trial-level test stays as the secondary analysis, and as the primary one with
 ``block='trial'`` to replicate a published analysis. Every test runs on within-block ranks, so how ties
 were written (1,1,3 or 1.5,1.5,3) cannot change a result.
+
+Conditions are analysed in the design's order, and ``Analysis.labels`` holds the name each is shown by
+(:mod:`results_analysis.study_meta`); the numbers are computed, and stored, under the condition ids.
 """
 from __future__ import annotations
 
@@ -40,6 +43,8 @@ from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
 from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
+from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
+from results_analysis.study_meta import condition_labels, condition_order
 from results_analysis.validate import check_complete, validate_structure
 
 
@@ -93,11 +98,15 @@ class Analysis:
     agreement: pd.DataFrame | None = None
     agreement_summary: pd.DataFrame | None = None
     questionnaire_item_reliability: pd.DataFrame | None = None
+    #: condition id -> the name tables, figures and text show (its design label, else the id); ``conditions``
+    #: is in the design's order (see :mod:`results_analysis.study_meta`)
+    labels: dict[str, str] = field(default_factory=dict)
 
 
 def group_columns(df: pd.DataFrame) -> list[str]:
-    """Columns that can be used for breakdowns: everything that is not a core export column."""
-    return [c for c in df.columns if c not in CORE_COLUMNS]
+    """Columns that can be used for breakdowns: everything that is not a core export column or an answer
+    to the questionnaire."""
+    return [c for c in df.columns if c not in CORE_COLUMNS and not str(c).startswith(QUESTIONNAIRE_PREFIX)]
 
 
 def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str], block: str = "participant",
@@ -212,12 +221,20 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     if kept.empty:
         raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
                                  "(practice and attention-check trials are never analysed)")
-    conditions = sorted(kept["condition"].unique())
+    # The design's order (ids in order where the table has no positions); the labels are for display only.
+    conditions = condition_order(kept)
     if len(conditions) < 2:
         raise AnalysisInputError(df.attrs.get("source"), "column 'condition'", "fewer than 2 conditions")
+    labels = condition_labels(kept, conditions)
     if control is not None and control not in conditions:
-        raise AnalysisInputError(df.attrs.get("source"), "--control",
-                                 f"no condition {control!r}; the conditions are {', '.join(conditions)}")
+        # an analyst thinks in labels: accept one (labels are unique among labels and ids, see the design)
+        by_label = {name: cid for cid, name in labels.items()}
+        if control not in by_label:
+            raise AnalysisInputError(df.attrs.get("source"), "--control",
+                                     f"no condition {control!r}; the conditions are "
+                                     + ", ".join(f"{c} ({labels[c]})" if labels.get(c, c) != c else c
+                                                 for c in conditions))
+        control = by_label[control]
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
     with warnings.catch_warnings(record=True) as caught:  # e.g. a Bradley-Terry fit that did not converge
@@ -249,4 +266,4 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                     sm_permutations=sm_permutations if incomplete == "skillings-mack" else 0,
                     adjust=adjust, control=control, interval=interval, agreement=agreement,
                     agreement_summary=agreement_summary(agreement, alpha=alpha),
-                    questionnaire_item_reliability=item_rel)
+                    questionnaire_item_reliability=item_rel, labels=labels)

@@ -26,7 +26,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--group", action="append", default=[], metavar="COL",
                    help="also break the analysis down by this stimulus tag or participant group (repeatable)")
     p.add_argument("--questionnaire", type=Path, help="questionnaire CSV (participant,item,scale,value); "
-                   "with a database input its questionnaire table is used when this is omitted")
+                   "when omitted, the questionnaire the results carry is used (a database's questionnaire "
+                   "table, the questionnaire columns of a `studyapp export` CSV)")
     p.add_argument("--exclude-failed-attention", action="store_true",
                    help="exclude participants who failed any attention check")
     p.add_argument("--exclude", default="", metavar="P1,P2", help="comma-separated participants to exclude")
@@ -49,28 +50,33 @@ def build_parser() -> argparse.ArgumentParser:
                    "bca (default) or percentile")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
-    p.add_argument("--title", default=None, help="report title (default: the study title stored in a results "
-                   "database, else 'Results: FILE')")
+    p.add_argument("--title", default=None, help="report title (default: the study's title, which a results "
+                   "database and a `studyapp export` CSV carry, else 'Results: FILE')")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from results_analysis.loader import load_questionnaire, load_results, load_study_title
+    from results_analysis.loader import load_questionnaire, load_results, normalize_questionnaire
     from results_analysis.report import analyze
+    from results_analysis.study_meta import questionnaire_from_results, study_title
 
     try:
         if not 0 < args.alpha < 1:
             raise AnalysisInputError(None, "--alpha", f"{args.alpha} is not between 0 and 1")
         df = load_results(args.results)
-        # --title wins; then the title the study database stores; the file name only as the last resort.
-        title = args.title or load_study_title(args.results) or f"Results: {args.results.name}"
+        # --title wins; then the study's title the results carry; the file name only as the last resort.
+        title = args.title or study_title(df) or f"Results: {args.results.name}"
         q = None
         if args.questionnaire is not None:
             q = load_questionnaire(args.questionnaire)
         elif _is_sqlite(args.results):
             q = load_questionnaire(args.results)
             q = q if len(q) else None
+        else:  # a `studyapp export` CSV carries each participant's answers in its questionnaire columns
+            q = questionnaire_from_results(df)
+            q = normalize_questionnaire(q, args.results) if q is not None else None
+            q = q if q is not None and len(q) else None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             a = analyze(df, args.out, title=title, block=args.block,

@@ -21,7 +21,8 @@ REQUIRED_COLUMNS = ("participant", "trial_index", "stimulus", "criterion", "cond
 FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
 #: Columns that are bookkeeping, never a stimulus tag or participant group.
 CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
-    "session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "design_hash", "app_version", "_where")
+    "session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "design_hash", "app_version", "_where",
+    "condition_label", "condition_position", "study_title")
 
 #: Columns the loader adds for its own use (``_where``: where a row came from, for messages); never shown
 #: to users as one of their columns.
@@ -78,7 +79,8 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         found = [str(c) for c in df.columns if c not in INTERNAL_COLUMNS]
         raise AnalysisInputError(src, f"column(s) {', '.join(missing)}",
                                  f"missing required column(s); found: {', '.join(found) or 'no columns'}")
-    for col in ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version"):
+    for col in ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version",
+                "condition_label", "study_title"):
         if col in df.columns:
             df[col] = df[col].map(lambda v: None if _isna(v) else str(v)).astype(object)
     for col in ("participant", "stimulus", "criterion", "condition"):
@@ -86,7 +88,8 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if bad.any():
             raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
                                      "empty value")
-    for col in ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample"):
+    for col in ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample",
+                "condition_position"):
         if col in df.columns:
             num = pd.to_numeric(df[col], errors="coerce")
             bad = num.isna() & df[col].notna()
@@ -127,6 +130,12 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
     else:
         q = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
         q["_where"] = [f"line {i + 2}" for i in range(len(q))]
+    return normalize_questionnaire(q, path)
+
+
+def normalize_questionnaire(q: pd.DataFrame, path: str | Path | None) -> pd.DataFrame:
+    """Questionnaire answers as the analysis reads them (see :func:`load_questionnaire`): rated items only,
+    ``scale`` filled in, ``value`` a number, unanswered items dropped; ``path`` names the source in errors."""
     if "kind" in q.columns:
         # Free-text answers have no number to summarise.
         q = q[q["kind"].fillna("likert").astype(str).str.lower() != "text"].copy()
@@ -149,12 +158,12 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
     if dup.any():
         rows = q.loc[dup, "_where"].tolist()[:2]
         raise AnalysisInputError(path, " and ".join(rows), "the same participant answered the same item twice")
-    q.attrs["source"] = str(path)
+    q.attrs["source"] = str(path) if path is not None else None
     return q.reset_index(drop=True)
 
 
 def load_study_title(path: str | Path) -> str | None:
-    """The study title stored in a results database, or None (a CSV export, or a database without a title).
+    """The study title a results database stores, or a CSV export carries (column ``study_title``), or None.
 
     >>> import tempfile, pathlib, sqlite3
     >>> db = pathlib.Path(tempfile.mkdtemp()) / "s.sqlite"
@@ -166,7 +175,14 @@ def load_study_title(path: str | Path) -> str | None:
     """
     path = Path(path)
     if not _is_sqlite(path):
-        return None
+        from results_analysis.study_meta import study_title
+
+        try:
+            head = pd.read_csv(path, dtype=str, usecols=lambda c: c == "study_title", keep_default_na=False,
+                               na_values=[""])
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
+        return study_title(head)
     from results_analysis.sqlite_schema import study_title_from_connection
 
     try:

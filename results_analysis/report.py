@@ -23,6 +23,7 @@ from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
 from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, nemenyi_q_alpha
+from results_analysis.study_meta import relabel
 
 
 def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study results", **kwargs) -> Analysis:
@@ -39,9 +40,14 @@ def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study r
 
 
 def write_outputs(a: Analysis, out: Path, *, title: str) -> None:
-    """Write stats.json, tables, figures, report.md and report.html of an :class:`Analysis`."""
+    """Write stats.json, tables, figures, report.md and report.html of an :class:`Analysis`.
+
+    stats.json is keyed by condition ids (``_meta.labels`` maps them to their labels); the tables, figures and
+    text show each condition's label (see :func:`results_analysis.study_meta.relabel`).
+    """
     out.mkdir(parents=True, exist_ok=True)
     (out / "stats.json").write_text(json.dumps(_clean(stats_dict(a)), indent=2, allow_nan=False) + "\n")
+    a = relabel(a, a.labels)
     write_tables(a, out / "tables")
     write_figures(a, out / "figures")
     doc = build_document(a, title)
@@ -84,7 +90,7 @@ def stats_dict(a: Analysis) -> dict:
     out["_meta"] = {
         "source": a.source, "block": a.block, "primary": f"Friedman test over {a.block}s",
         "ties": "answers turned into within-trial average ranks before every test; place shares split ties",
-        "conditions": a.conditions, "criteria": list(a.criteria),
+        "conditions": a.conditions, "labels": a.labels, "criteria": list(a.criteria),
         "n_participants": a.n_participants, "n_trials": a.n_trials, "alpha": a.alpha,
         "excluded": a.exclusions.to_dict("records"), "incomplete_blocks": a.incomplete,
         "dropped_incomplete": a.dropped_incomplete, "incomplete_kept_for_skillings_mack": a.incomplete_blocks,
@@ -171,9 +177,8 @@ def _safe(name: str) -> str:
 
 
 def display_order(a: Analysis) -> list[str]:
-    """Conditions best first, by their mean rank averaged over the criteria (same order in every figure)."""
-    avg = np.mean([c.friedman.mean_rank for c in a.criteria.values()], axis=0)
-    return [a.conditions[i] for i in np.argsort(avg, kind="stable")]
+    """Conditions in the design's order (as in the tables; the same order and colours in every figure)."""
+    return list(a.conditions)
 
 
 def write_figures(a: Analysis, out: Path) -> None:

@@ -1,8 +1,16 @@
-"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 3).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 4).
 
 Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
 exactly the columns of ``studyapp export``.
+
+The table carries what the report needs besides the ranks, so a CSV export and its database give the same
+report: each condition's ``condition_label`` (the design's label, else the id: a database before version 4
+has no labels) and ``condition_position`` (its place in the design, the order of the report's tables and
+figures; empty for a pseudo-condition such as an attention check's frozen slot), the ``study_title`` (the
+report's title) and each participant's questionnaire answers, one column per rated (Likert) item named
+``questionnaire:<scale>:<item>`` (see :data:`QUESTIONNAIRE_PREFIX`; the scale part is empty where none was
+stored). Free-text answers stay out of the table (``studyapp export --questionnaire-csv`` has them).
 """
 from __future__ import annotations
 
@@ -20,10 +28,14 @@ _NEEDED = {"responses": {"participant", "trial_index", "criterion", "condition",
 #: The tidy table's first columns, in order; one column per stimulus tag and per participant group follows
 #: (sorted, a name never shadowing an earlier column), then :data:`TAIL_COLUMNS`.
 CORE_COLUMNS = (
-    "participant", "session", "trial_index", "stimulus", "criterion", "condition", "slot", "rank", "plays",
-    "response_time_s", "is_practice", "is_attention_check", "attention_passed", "trial_duration_s", "sample",
+    "participant", "session", "trial_index", "stimulus", "criterion", "condition", "condition_label",
+    "condition_position", "slot", "rank", "plays", "response_time_s", "is_practice", "is_attention_check",
+    "attention_passed", "trial_duration_s", "sample",
 )
-TAIL_COLUMNS = ("design_hash", "app_version")
+TAIL_COLUMNS = ("study_title", "design_hash", "app_version")
+#: Name prefix of the questionnaire columns: ``questionnaire:<scale>:<item>`` (an item id holds no ``:``, so
+#: the last ``:`` ends the scale). They follow the tag and group columns.
+QUESTIONNAIRE_PREFIX = "questionnaire:"
 
 # Criteria in the order the study asked them (answers are stored in that order, so the first stored row of
 # each criterion tells it): the analysis tables and figures follow the row order, and a reader expects
@@ -79,6 +91,15 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
                 continue  # never shadow a core column (or a tag) with a group of the same name
             df[name] = df[key].map(lambda v, n=name: mapping.get(str(v), {}).get(n))
             extra.append(name)
+    labels, positions = _conditions(con, tables)
+    df["condition_label"] = [labels.get(c) or c for c in df["condition"]]
+    df["condition_position"] = pd.array([positions.get(c) for c in df["condition"]], dtype="Int64")
+    df["study_title"] = study_title_from_connection(con)
+    answers = _questionnaire_columns(con, tables)
+    for name, values in answers.items():
+        if name not in df.columns and name not in extra:
+            df[name] = df["participant"].map(lambda p, v=values: v.get(str(p)))
+            extra.append(name)
     df = df[(["_rowid"] if rowid else []) + list(CORE_COLUMNS) + extra + list(TAIL_COLUMNS)]
     if not include_practice:
         df = df[~df["is_practice"]].reset_index(drop=True)
@@ -121,6 +142,35 @@ def questionnaire_from_connection(con: sqlite3.Connection, path: str | Path) -> 
     stored = rows["scale"] if "scale" in rows.columns else pd.Series([None] * len(rows), dtype=object)
     rows["scale"] = [s if isinstance(s, str) and s.strip() else _scale_of(i) for s, i in zip(stored, rows["item"])]
     return rows
+
+
+def _conditions(con: sqlite3.Connection, tables: set[str]) -> tuple[dict[str, str | None], dict[str, int]]:
+    """Each condition's stored label (None before schema version 4, or none given) and design position."""
+    if "conditions" not in tables:
+        return {}, {}
+    have = {r[1] for r in con.execute("PRAGMA table_info(conditions)")}
+    label = "label" if "label" in have else "NULL"
+    position = "position" if "position" in have else "NULL"
+    rows = con.execute(f"SELECT id, {label}, {position} FROM conditions").fetchall()
+    return ({str(i): (str(lb) if lb is not None and str(lb).strip() else None) for i, lb, _ in rows},
+            {str(i): int(p) for i, _, p in rows if p is not None})
+
+
+def _questionnaire_columns(con: sqlite3.Connection, tables: set[str]) -> dict[str, dict[str, str | None]]:
+    """``{column name: {participant: stored answer}}`` of the rated items, in the order first answered."""
+    if "questionnaire" not in tables:
+        return {}
+    have = {r[1] for r in con.execute("PRAGMA table_info(questionnaire)")}
+    scale = "scale" if "scale" in have else "NULL"
+    kind = "kind" if "kind" in have else "NULL"
+    out: dict[str, dict[str, str | None]] = {}
+    for participant, item, sc, kd, value in con.execute(
+            f"SELECT participant, item, {scale}, {kind}, value FROM questionnaire ORDER BY rowid"):
+        if str(kd or "likert").lower() == "text":
+            continue
+        name = f"{QUESTIONNAIRE_PREFIX}{sc if isinstance(sc, str) and sc.strip() else ''}:{item}"
+        out.setdefault(name, {})[str(participant)] = None if value is None else str(value)
+    return out
 
 
 def _scale_of(item: str) -> str:

@@ -9,7 +9,7 @@ What ``make_bundle`` writes (``STUDY.zip``)::
 Blinding (the choice made here): inside the bundle **condition ids and stimulus ids are replaced by opaque
 ids** (``c_<hex>`` and ``<hex>``, salted hashes), and every media file is named by a salted hash of its own
 bytes only, so nothing a participant can see -- on screen, in the cache folder or inside the zip -- carries a
-model name, a condition id or an original file name, and no part of a file name is shared by the files of
+model name, a condition id or label or an original file name, and no part of a file name is shared by the files of
 one condition: the motion files of one model cannot be grouped across clips by name. Because a motion
 file's name no longer follows from its stimulus id, each condition's ``motion`` pattern reads a tag named
 after the condition's opaque id, which every stimulus sets to the hash of its file (only study.toml, which
@@ -185,6 +185,8 @@ def make_bundle(
     for c_raw, cond in zip(raw.get("conditions", []), design.conditions):
         c = dict(c_raw)
         c["id"] = cond_map[cond.id]
+        # The label names the model for the experimenter's analysis: it stays in the key's world, never shipped.
+        c.pop("label", None)
         if cond.motion is not None and cond.body_model is None:
             # A name built from the condition (e.g. stimulus hash + condition hash) would let anyone group one
             # model's files across clips; the pattern reads a per-stimulus tag instead, so names stay per file.

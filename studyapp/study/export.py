@@ -2,7 +2,11 @@
 
 The long table has one row per participant x trial x criterion x condition, columns :data:`CORE_COLUMNS`
 in that order, then one column per stimulus tag (e.g. ``speaker``) and per participant group (e.g.
-``device``, ``ordering_version``), then ``design_hash`` and ``app_version``. ``slot`` is 0 (left),
+``device``, ``ordering_version``), one per rated questionnaire item (``questionnaire:<scale>:<item>``, the
+participant's answer), then ``study_title``, ``design_hash`` and ``app_version``. ``condition_label`` is the
+design's label of the condition (its id when it has none) and ``condition_position`` its place in the design
+(see :mod:`results_analysis.sqlite_schema`): with the title and the questionnaire they make a CSV give the
+same report as its database. ``slot`` is 0 (left),
 1 (middle), 2 (right); ``rank`` is 1 (best) to 3, average ranks for ties; ``attention_passed`` is empty for
 trials that are not attention checks; ``trial_duration_s`` is how long the trial played (empty for trials
 stored before studyapp recorded it); ``sample`` is the 1-based sample of the condition that slot showed (see

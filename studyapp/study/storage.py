@@ -33,15 +33,18 @@ from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
 
 #: Bumped whenever the tables change; a database with another version is refused, never guessed at.
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 #: Older schema versions this version upgrades in place when it opens them (see ``_MIGRATIONS``).
 #: Version 2 added ``trials.trial_duration_s``; a version 1 trial keeps it NULL (not recorded).
 #: Version 3 added ``trials.sample_left/middle/right`` (the sample each slot showed, see ``samples`` in
 #: :class:`~studyapp.study.design.Condition`); an older trial keeps them NULL (not recorded).
+#: Version 4 added ``conditions.label`` (the design's ``label``, NULL when the design gives none); an older
+#: database keeps it NULL, and the analysis names such a condition by its id.
 _MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",),
                2: ("ALTER TABLE trials ADD COLUMN sample_left INTEGER",
                    "ALTER TABLE trials ADD COLUMN sample_middle INTEGER",
-                   "ALTER TABLE trials ADD COLUMN sample_right INTEGER")}
+                   "ALTER TABLE trials ADD COLUMN sample_right INTEGER"),
+               3: ("ALTER TABLE conditions ADD COLUMN label TEXT",)}
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
@@ -61,9 +64,12 @@ CREATE TABLE stimuli (
     id TEXT PRIMARY KEY,
     tags TEXT NOT NULL DEFAULT '{}'
 );
+-- position: the condition's place in the design (the analysis's order), label: the design's label (NULL:
+-- none given, the analysis shows the id), last so an upgraded version 3 database has the same column order
 CREATE TABLE conditions (
     id TEXT PRIMARY KEY,
-    position INTEGER NOT NULL
+    position INTEGER NOT NULL,
+    label TEXT
 );
 CREATE TABLE participants (
     id TEXT PRIMARY KEY,
@@ -409,7 +415,8 @@ class ResultsDB:
                 con.execute("INSERT OR IGNORE INTO stimuli (id, tags) VALUES (?, ?)",
                             (s.id, json.dumps(dict(getattr(s, "tags", {}) or {}), sort_keys=True)))
             for i, c in enumerate(conditions):
-                con.execute("INSERT OR IGNORE INTO conditions (id, position) VALUES (?, ?)", (c.id, i))
+                con.execute("INSERT OR IGNORE INTO conditions (id, position, label) VALUES (?, ?, ?)",
+                            (c.id, i, getattr(c, "label", None)))
 
     # ------------------------------------------------------------------ plumbing
     @property

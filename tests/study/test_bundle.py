@@ -527,3 +527,24 @@ def test_smpl_motion_on_the_labs_body_model_is_bundled_without_the_model_file(tm
         # and it is the model's skeleton, not the built-in one: 1.2 times as tall
         arm = np.linalg.norm(lab.skeleton.offsets[18])
         assert abs(arm / np.linalg.norm(builtin_rest_joints("smplx")[18] - builtin_rest_joints("smplx")[16]) - 1.2) < 1e-9
+
+
+def test_condition_labels_are_never_shipped(tmp_path: Path) -> None:
+    """A label names a model for the experimenter's analysis: no byte of the bundle may carry it."""
+    design_path = write_synthetic_study(tmp_path / "study", n_stimuli=2, seconds=CLIP_S)
+    labels = {"synced": "Gesticulator v2", "lagged": "Baseline Lag", "static": "Frozen Pose"}
+    text = design_path.read_text()
+    for cid, label in labels.items():
+        text = text.replace(f'id = "{cid}"\n', f'id = "{cid}"\nlabel = "{label}"\n', 1)
+    design_path.write_text(text)
+    assert [c.label for c in load_design(design_path).conditions] == list(labels.values())
+    info = make_bundle(design_path, tmp_path / "out" / "study.zip", participants=1,
+                       results=tmp_path / "study" / "r.sqlite")
+    zf = zipfile.ZipFile(info.path)
+    for name in zf.namelist():
+        data = zf.read(name).lower()
+        for label in labels.values():
+            assert label.lower().encode() not in data, (name, label)
+    shipped = load_design(open_bundle(info.path, cache=tmp_path / "cache").design_path)
+    assert [c.label for c in shipped.conditions] == [None, None, None]
+    assert all(c.shown_as.startswith("c_") for c in shipped.conditions)

@@ -109,3 +109,37 @@ def test_questionnaire_table(results) -> None:
     text = q[q["kind"] == "text"]
     assert text["value"].isna().all() and (text["text"] == "(scripted participant)").all()
     assert isinstance(q, pd.DataFrame)
+
+
+def test_labels_order_title_and_questionnaire_travel_with_the_long_table(tmp_path: Path) -> None:
+    """What the report needs besides the ranks is in every row, checked against the raw tables."""
+    path = write_synthetic_study(tmp_path / "s", n_stimuli=2, questionnaire=True, seconds=0.5)
+    # labels on two of the three conditions; the design lists them synced, lagged, static
+    path.write_text(path.read_text().replace('id = "lagged"\n', 'id = "lagged"\nlabel = "Late, by 0.5 s"\n')
+                    .replace('id = "static"\n', 'id = "static"\nlabel = "Still"\n'))
+    design = load_design(path, check_files=False)
+    db_path = tmp_path / "r.sqlite"
+    with ResultsDB(db_path, design) as db:
+        run_bot_session(design, db, "P1", "random", 1)
+        run_bot_session(design, db, "P2", "random", 2)
+    df = export_dataframe(db_path)
+    with sqlite3.connect(db_path) as con:
+        stored = {i: (lb, p) for i, lb, p in con.execute("SELECT id, label, position FROM conditions")}
+        title = con.execute("SELECT title FROM study").fetchone()[0]
+        answers = con.execute("SELECT participant, item, scale, kind, value FROM questionnaire").fetchall()
+    assert stored == {"synced": (None, 0), "lagged": ("Late, by 0.5 s", 1), "static": ("Still", 2)}
+    expect_label = {"synced": "synced", "lagged": "Late, by 0.5 s", "static": "Still"}
+    assert (df["condition_label"] == df["condition"].map(expect_label)).all()
+    assert (df["condition_position"] == df["condition"].map({"synced": 0, "lagged": 1, "static": 2})).all()
+    assert title == design.title and (df["study_title"] == title).all()
+    rated = [a for a in answers if a[3] != "text"]
+    assert rated and len(rated) < len(answers)  # the text item stays out of the table
+    for participant, item, scale, _, value in rated:
+        column = df.loc[df["participant"] == participant, f"questionnaire:{scale or ''}:{item}"]
+        assert (column == value).all(), (participant, item)
+    assert not [c for c in df.columns if c.startswith("questionnaire:") and c.endswith(":comments")]
+    # the CSV carries them as written
+    df.to_csv(tmp_path / "r.csv", index=False)
+    back = pd.read_csv(tmp_path / "r.csv")
+    assert back["condition_label"].tolist() == df["condition_label"].tolist()
+    assert list(back.columns[-3:]) == ["study_title", "design_hash", "app_version"]

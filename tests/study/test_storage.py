@@ -174,3 +174,31 @@ def test_concurrent_processes_keep_rows_balanced(tmp_path: Path) -> None:
     assert db.row_counts(6) == [4] * 6
     assert len(db.participants()) == 24
     db.close()
+
+
+def test_conditions_keep_their_label_and_a_schema_3_database_is_upgraded_with_none(tmp_path: Path) -> None:
+    """Schema 4 stores each condition's design label; an older database gets the column, empty."""
+    from types import SimpleNamespace as NS
+
+    from studyapp.study.export import export_dataframe
+    from studyapp.study.storage import SCHEMA_VERSION
+
+    design = NS(design_hash="ab12", title="T", stimuli=[NS(id="s0", tags={})],
+                conditions=[NS(id="b", label="Baseline"), NS(id="a", label=None), NS(id="c", label="Ours")])
+    path = tmp_path / "r.sqlite"
+    with ResultsDB(path, design) as db:
+        db.add_participant("P1", n_rows=1)
+        db.save_trial(_trial("P1", 0), _ranks())
+        rows = db.connection.execute("SELECT id, position, label FROM conditions ORDER BY position").fetchall()
+    assert [tuple(r) for r in rows] == [("b", 0, "Baseline"), ("a", 1, None), ("c", 2, "Ours")]
+    with sqlite3.connect(path) as con:  # what studyapp wrote before labels: schema 3
+        con.execute("ALTER TABLE conditions DROP COLUMN label")
+        con.execute("UPDATE schema_version SET version = 3")
+    df = export_dataframe(path)  # opening upgrades it in place
+    with sqlite3.connect(path) as con:
+        assert con.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 4
+        assert con.execute("SELECT id, label FROM conditions ORDER BY position").fetchall() == [
+            ("b", None), ("a", None), ("c", None)]
+    # no label recorded: the analysis's name is the id; the design order stays
+    assert sorted(set(zip(df["condition"], df["condition_label"], df["condition_position"]))) == [
+        ("a", "a", 1), ("b", "b", 0), ("c", "c", 2)]

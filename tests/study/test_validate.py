@@ -605,3 +605,40 @@ def test_smpl_family_conditions_need_no_template_representation_or_fps(study: Pa
     raw = GOOD.replace('motion = "motion/a/{stimulus}.bvh"', 'motion = "motion/a/{stimulus}.npy"')
     probs = problems_for(study, raw)
     assert {p.key for p in probs} == {"conditions[0].template", "conditions[0].representation", "conditions[0].fps"}
+
+
+def _with_labels(*labels: str | None) -> str:
+    """GOOD with ``label = ...`` added to conditions a, b, c (None: no label)."""
+    text = GOOD
+    for cid, label in zip("abc", labels):
+        if label is not None:
+            text = text.replace(f'id = "{cid}"\nmotion', f'id = "{cid}"\nlabel = {json.dumps(label)}\nmotion')
+    return text
+
+
+def test_condition_labels_load_and_default_to_the_id(study: Path) -> None:
+    (study / "design.toml").write_text(_with_labels("Ours (diffusion)", None, "  Ground truth "))
+    d = load_design(study / "design.toml")
+    assert [c.label for c in d.conditions] == ["Ours (diffusion)", None, "Ground truth"]
+    assert [c.shown_as for c in d.conditions] == ["Ours (diffusion)", "b", "Ground truth"]
+
+
+def test_condition_labels_must_be_one_nonempty_line_and_unique(study: Path) -> None:
+    p = only(problems_for(study, _with_labels("Ours", "  ", None)), "conditions[1].label")
+    assert "empty" in p.message
+    p = only(problems_for(study, _with_labels("Ours", "two\nlines", None)), "conditions[1].label")
+    assert "line break" in p.message
+    # the same label twice, ignoring case, and a label that reads as another condition's id
+    p = only(problems_for(study, _with_labels("Ours", "ours", None)), "conditions[1].label")
+    assert "conditions[0]" in p.message
+    p = only(problems_for(study, _with_labels("c", None, None)), "conditions[2].id")
+    assert "'c' names conditions[0]" in p.message
+    assert problems_for(study, _with_labels("Ours", "Baseline", "GT")) == []
+
+
+def test_participant_visible_text_naming_a_condition_label_is_a_problem(study: Path) -> None:
+    """A label is the experimenter's name for a model: a text participants read must not hold it either."""
+    text = _with_labels("DiffuGesture", None, None).replace('instructions = "Rank them."',
+                                                            'instructions = "Rank them (diffugesture study)."')
+    p = only(problems_for(study, text), "instructions")
+    assert "'DiffuGesture'" in p.message and "unblinds" in p.message

@@ -24,6 +24,9 @@ class Condition:
     Attributes
     ----------
     id: short name recorded with every answer; never shown to participants.
+    label: the name the experimenter's analysis shows for the condition (tables, figures, report text), e.g.
+        ``"Ours (diffusion)"``; any one line of text, unique among the conditions; None (default): the id.
+        Like the id it is never shown to, nor shipped to, participants (a bundle drops it).
     motion: path pattern of the pre-computed motion files, relative to the design file, with ``{stimulus}``.
     model: path of an ONNX gesture model run live on each stimulus instead of ``motion``.
     fps: frame rate to use instead of what the motion file says (BVH headers can lie; NPZ/NPY have none).
@@ -49,6 +52,7 @@ class Condition:
     """
 
     id: str = key(STR, required=True)
+    label: str | None = key(STR, default=None)
     motion: str | None = key(STR, default=None)
     model: str | None = key(STR, default=None)
     fps: float | None = key(NUM, default=None)
@@ -61,6 +65,11 @@ class Condition:
     motion_end: str | None = key(STR, default=None)
     body_model: str | None = key(STR, default=None)
     samples: int = key(INT, default=1)
+
+    @property
+    def shown_as(self) -> str:
+        """What the analysis calls the condition: its label, else its id."""
+        return self.label if self.label is not None else self.id
 
     @property
     def is_live(self) -> bool:

@@ -57,7 +57,34 @@ def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> lis
         cond = parse_condition(col, f"conditions[{i}]", e)
         if cond is not None:
             conditions.append(cond)
+    _labels(col, conds)
     return conditions
+
+
+def _labels(col: Collector, conds: list[tuple[int, dict]]) -> None:
+    """Each condition's ``label``: one line of text, and the names the analysis shows (label, else id) unique,
+    so no two rows of a results table can read the same."""
+    seen: dict[str, tuple[int, bool]] = {}  # folded name -> (index, whether it is a label)
+    for i, e in conds:
+        label = e.get("label")
+        if label is not None and not label.strip():
+            col.add(f"conditions[{i}].label", "is empty", "write the name the analysis should show, or remove label")
+            continue
+        if label is not None and any(ch < " " or ch == "\x7f" for ch in label):
+            col.add(f"conditions[{i}].label", f"{label!r} holds a line break or control character",
+                    "write the label on one line (it heads table rows and figure axes)")
+            continue
+        name = (label if label is not None else e.get("id") or "").strip()
+        if not name:
+            continue
+        folded = name.casefold()
+        if folded in seen and (label is not None or seen[folded][1]):  # two ids alike: check_ids' concern
+            j = seen[folded][0]
+            col.add(f"conditions[{i}].label" if label is not None else f"conditions[{i}].id",
+                    f"{name!r} names conditions[{j}] too (as its label or id, ignoring case), so the analysis "
+                    "could not tell the two apart", "give every condition its own label")
+        elif folded not in seen:
+            seen[folded] = (i, label is not None)
 
 
 def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) -> Condition | None:
@@ -128,7 +155,7 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
         col.add(f"{key}.model", f"{e['model']!r} is not an .onnx file", "export the model to ONNX")
     if e.get("id"):
         return Condition(
-            id=e["id"], motion=e.get("motion"), model=e.get("model"),
+            id=e["id"], label=e["label"].strip() if e.get("label", "").strip() else None, motion=e.get("motion"), model=e.get("model"),
             fps=float(e["fps"]) if "fps" in e else None,
             representation=rep, template=e.get("template"),
             rotation_order=ro.upper() if ro else None,
@@ -452,7 +479,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     )
     for key, cid in visible_text_leaks(design):
         col.add(key, f"participants read this text and it names condition {cid!r}: that unblinds the study",
-                "reword the text, or give the condition another id")
+                "reword the text, or give the condition another id or label")
     files = referenced_files(design, col)
     if check_files:
         from studyapp.study.stimuli import check_stimulus_files
