@@ -354,12 +354,10 @@ def load_motion_npz(path: str | Path, fps: float | None = None) -> Motion:
             joints = field("end_site_joints", "integer", (None,))
             offsets = field("end_site_offsets", shape=(len(joints), 3))
             ends = {int(j): np.asarray(o, dtype=np.float64) for j, o in zip(joints, offsets)}
+        parents, offsets = field("parents", "integer", (n_j,)), field("offsets", shape=(n_j, 3))
+        rest = field("rest_rotations", shape=(n_j, 4)) if "rest_rotations" in keys else None
         try:
-            sk = Skeleton(
-                names, field("parents", "integer", (n_j,)), field("offsets", shape=(n_j, 3)), chans, ends,
-                None if np.isnan(unit) else unit,
-                field("rest_rotations", shape=(n_j, 4)) if "rest_rotations" in keys else None,
-            )
+            sk = Skeleton(names, parents, offsets, chans, ends, None if np.isnan(unit) else unit, rest)
         except (ValueError, IndexError) as exc:
             raise InputError(path, "key joints", f"invalid skeleton: {exc}") from None
         trans = (np.asarray(field("translations", shape=rot.shape[:2] + (3,)), dtype=np.float64)
