@@ -24,7 +24,8 @@ the experimenter's results database (table ``bundles``), so ``studyapp merge`` m
 real condition and stimulus ids and to the original design hash without extra arguments.
 
 On the participant's PC ``studyapp run STUDY.zip`` extracts the bundle to a per-user cache (verifying every
-checksum), stores results in the per-user data folder and, when the participant finishes, writes
+checksum; the bundle is confined to itself, see :func:`open_bundle`, and read within
+:data:`~studyapp.safe_io.BUNDLE_ZIP`), stores results in the per-user data folder and, when the participant finishes, writes
 ``results-<study>-<participant>-<hash>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
 with its sha256) into ``~/studyapp-results`` (a visible folder in the participant's home) and says where.
 
