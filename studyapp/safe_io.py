@@ -47,7 +47,8 @@ from studyapp.errors import InputError
 
 __all__ = [
     "ZipLimits", "RESULTS_ZIP", "BUNDLE_ZIP", "NPZ_ZIP", "NPY_MAX_BYTES", "SafeZip", "NpyHeader", "Npz",
-    "read_npy_header", "npy_header", "load_npy", "open_npz", "load_numpy", "require", "human_bytes",
+    "read_npy_header", "npy_header", "load_npy", "open_npz", "numpy_kind", "load_numpy", "require", "human_bytes",
+    "safe_member_name",
 ]
 
 _CHUNK = 1 << 20
@@ -56,6 +57,8 @@ _NPY_MAGIC = b"\x93NUMPY"
 _NPY_MAX_HEADER = 10_000
 #: dtype kinds a data file may hold: booleans, integers, floats, bytes and unicode text
 _PLAIN_KINDS = "biufSU"
+_PICKLED = ("holds pickled Python objects, which studyapp never loads (loading them can run code); save the data "
+            "as numbers")
 
 
 @dataclass(frozen=True)
@@ -72,12 +75,15 @@ class ZipLimits:
     max_total_bytes: int
     max_ratio: float = 100.0
     ratio_from_bytes: int = 64 << 20
+    #: names that differ only in case are refused (members extracted to disk: one file on Windows and macOS)
+    distinct_ignoring_case: bool = False
 
 
 #: a returned results file: ``results.json`` (one participant's rows) and ``manifest.json``
 RESULTS_ZIP = ZipLimits("results file", max_members=16, max_member_bytes=64 << 20, max_total_bytes=64 << 20)
 #: a study bundle: every stimulus, motion, template and avatar of a study, extracted to disk in chunks
-BUNDLE_ZIP = ZipLimits("study bundle", max_members=20_000, max_member_bytes=1 << 30, max_total_bytes=4 << 30)
+BUNDLE_ZIP = ZipLimits("study bundle", max_members=20_000, max_member_bytes=1 << 30, max_total_bytes=4 << 30,
+                       distinct_ignoring_case=True)
 #: an ``.npz``: motion and face arrays are a few MB, an SMPL-X body model a few hundred
 NPZ_ZIP = ZipLimits(".npz file", max_members=1_000, max_member_bytes=1 << 30, max_total_bytes=1 << 30)
 #: the largest array read from an ``.npy`` file
@@ -138,12 +144,7 @@ class SafeZip:
     def __init__(self, path: str | Path, limits: ZipLimits) -> None:
         self.path = Path(path)
         self.limits = limits
-        try:
-            self._fp: BinaryIO = open(self.path, "rb")
-        except FileNotFoundError:
-            raise InputError(self.path, None, "file not found") from None
-        except OSError as exc:
-            raise InputError(self.path, None, f"cannot read the file: {exc.strerror or exc}") from None
+        self._fp = _open_file(self.path)
         try:
             self._zf = self._open()
             self.infos = self._check(self._zf.infolist())
@@ -181,9 +182,11 @@ class SafeZip:
             name = info.filename
             if not safe_member_name(name):
                 raise self._fail(name, "unsafe member name (absolute, '..', a drive letter or a backslash): refused")
-            if name.lower() in seen:
-                raise self._fail(name, "the zip holds this name twice (or twice in different case): refused")
-            seen.add(name.lower())
+            folded = name.lower() if lim.distinct_ignoring_case else name
+            if folded in seen:
+                raise self._fail(name, "the zip holds this name twice" + (
+                    " (or twice in different case)" if lim.distinct_ignoring_case else "") + ": refused")
+            seen.add(folded)
             if info.flag_bits & 0x1:
                 raise self._fail(name, "the member is encrypted; studyapp never encrypts its files")
             if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
@@ -297,8 +300,12 @@ class NpyHeader:
 
 
 def read_npy_header(fp: BinaryIO, size: int, path: str | Path, where: str | None = None,
-                    max_bytes: int = NPY_MAX_BYTES) -> NpyHeader:
-    """Parse the header at the start of ``fp`` (``size`` bytes in all) and check it against ``size``."""
+                    max_bytes: int = NPY_MAX_BYTES, objects: bool = False) -> NpyHeader:
+    """Parse the header at the start of ``fp`` (``size`` bytes in all) and check it against ``size``.
+
+    An object dtype (a pickle) is refused, or with ``objects`` returned unchecked (its data is never read:
+    :meth:`Npz.is_plain` only needs to tell it apart).
+    """
 
     def fail(problem: str) -> InputError:
         return InputError(path, where, problem)
@@ -333,16 +340,17 @@ def read_npy_header(fp: BinaryIO, size: int, path: str | Path, where: str | None
         dtype = np.lib.format.descr_to_dtype(d["descr"])
     except (TypeError, ValueError, KeyError, IndexError, RecursionError, MemoryError):
         raise fail(f"the .npy header's dtype {str(d['descr'])[:60]} is not a NumPy dtype: the file is damaged") from None
+    offset = 8 + struct.calcsize(fmt) + hlen
     if dtype.hasobject:
-        raise fail("holds pickled Python objects, which studyapp never loads (loading them can run code); save "
-                   "the data as numbers")
+        if objects:
+            return NpyHeader(tuple(shape), dtype, fortran, offset, 0)
+        raise fail(_PICKLED)
     if dtype.kind not in _PLAIN_KINDS or dtype.names is not None or dtype.subdtype is not None or not dtype.itemsize:
         raise fail(f"dtype {dtype} is not numbers or text")
     count = 1
     for n in shape:
         count *= n
     nbytes = count * dtype.itemsize
-    offset = 8 + struct.calcsize(fmt) + hlen
     if nbytes > max_bytes:
         raise fail(f"the header claims a {'x'.join(map(str, shape))} {dtype} array ({human_bytes(nbytes)}); "
                    f"at most {human_bytes(max_bytes)} is read: refused")
@@ -388,12 +396,13 @@ def load_npy(path: str | Path, max_bytes: int = NPY_MAX_BYTES) -> np.ndarray:
 
 
 def _open_file(path: str | Path) -> BinaryIO:
+    """``path`` opened for reading; only a regular file (a FIFO or device would block or never end)."""
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            raise InputError(path, None, "not a regular file (a folder, pipe or device)")
         return open(path, "rb")
     except FileNotFoundError:
         raise InputError(path, None, "file not found") from None
-    except IsADirectoryError:
-        raise InputError(path, None, "a folder, not a file") from None
     except OSError as exc:
         raise InputError(path, None, f"cannot read the file: {exc.strerror or exc}") from None
 
@@ -433,21 +442,17 @@ class Npz:
             size = self._zip.info(name).file_size
             head = _read_exact(self._zip.chunks(name), min(size, 8 + 4 + _NPY_MAX_HEADER))
             self._headers[key] = read_npy_header(io.BytesIO(bytes(head)), size, self.path, f"key {key}",
-                                                 self._zip.limits.max_member_bytes)
+                                                 self._zip.limits.max_member_bytes, objects=True)
         return self._headers[key]
 
     def is_plain(self, key: str) -> bool:
         """Whether ``key`` holds plain data; ``False`` for a pickled object array (which is never read)."""
-        try:
-            self.header(key)
-        except InputError as exc:
-            if "pickled" in exc.problem:
-                return False
-            raise
-        return True
+        return not self.header(key).dtype.hasobject
 
     def __getitem__(self, key: str) -> np.ndarray:
         h = self.header(key)
+        if h.dtype.hasobject:
+            raise InputError(self.path, f"key {key}", _PICKLED)
         buf = self._zip.read_into_buffer(self._member(key))
         return _array_from(memoryview(buf)[h.offset:], h)
 
@@ -471,18 +476,23 @@ def open_npz(path: str | Path, limits: ZipLimits = NPZ_ZIP) -> Npz:
     return Npz(path, limits)
 
 
-def load_numpy(path: str | Path) -> np.ndarray | Npz:
-    """What ``np.load(path, allow_pickle=False)`` returns, read safely: an array for ``.npy``, an :class:`Npz`
-    (close it, or use ``with``) for ``.npz``; told apart by the file's first bytes, not its name."""
+def numpy_kind(path: str | Path) -> str:
+    """``"npy"`` or ``"npz"``, from the file's first bytes (not its name); anything else is an InputError."""
     with _open_file(path) as fp:
         head = fp.read(8)
     if not head:
         raise InputError(path, None, "file is empty; expected a NumPy .npy or .npz file")
     if head.startswith(_NPY_MAGIC):
-        return load_npy(path)
+        return "npy"
     if head.startswith((b"PK\x03\x04", b"PK\x05\x06")):
-        return open_npz(path)
+        return "npz"
     raise InputError(path, "header", f"not a NumPy .npy/.npz file (it starts with {head[:8]!r})")
+
+
+def load_numpy(path: str | Path) -> np.ndarray | Npz:
+    """What ``np.load(path, allow_pickle=False)`` returns, read safely: an array for ``.npy``, an :class:`Npz`
+    (close it, or use ``with``) for ``.npz``; told apart by :func:`numpy_kind`."""
+    return load_npy(path) if numpy_kind(path) == "npy" else open_npz(path)
 
 
 # ------------------------------------------------------------------------------------------------ fields

@@ -132,3 +132,19 @@ def test_the_real_beat2_sample_reads_as_numpy_reads_it() -> None:
         assert sorted(got) == sorted(ref.files)
         for k in ref.files:
             assert got[k].dtype == ref[k].dtype and np.array_equal(got[k], ref[k]), k
+
+
+def test_a_pipe_named_like_an_array_is_refused_not_waited_on(tmp_path: Path) -> None:
+    import os
+
+    fifo = tmp_path / "clip.npy"
+    os.mkfifo(fifo)
+    run = capped_cli(["inspect", str(fifo)], timeout=60)   # opening it would wait for a writer forever
+    _one_line_refusal(run, str(fifo), "not a regular file")
+
+
+def test_npz_keys_that_differ_in_case_are_kept_apart(tmp_path: Path) -> None:
+    f = tmp_path / "cases.npz"
+    np.savez(f, a=np.zeros(2), A=np.ones(3))
+    with open_npz(f) as z:
+        assert z["a"].tolist() == [0.0, 0.0] and z["A"].tolist() == [1.0, 1.0, 1.0]

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from studyapp.errors import InputError
-from studyapp.safe_io import Npz, load_numpy, npy_header, open_npz, require
+from studyapp.safe_io import Npz, load_numpy, npy_header, numpy_kind, open_npz, require
 from studyapp.motion.fk import joint_positions
 from studyapp.motion.rotations import REPRESENTATIONS, representation_width, to_quat
 from studyapp.motion.skeleton import Motion, Skeleton
@@ -62,17 +62,10 @@ def check_numpy_file(path: str | Path) -> None:
     Checked before the data is read: ``np.load`` takes any other file for a pickle and then complains about
     pickles, a message that hides the real problem (a text file or a BVH saved as ``.npy``).
     """
-    loaded = load_numpy(path) if not _is_npy(path) else npy_header(path)
-    if isinstance(loaded, Npz):
-        loaded.close()
-
-
-def _is_npy(path: str | Path) -> bool:
-    try:
-        with open(path, "rb") as f:
-            return f.read(6) == b"\x93NUMPY"
-    except OSError:
-        return False  # load_numpy says why
+    if numpy_kind(path) == "npy":
+        npy_header(path)
+    else:
+        open_npz(path).close()
 
 
 def read_array(path: str | Path, key: str | None = None) -> tuple[np.ndarray, str]:
