@@ -249,7 +249,8 @@ def load_rotation_array(
         _warn_unused_root(path, n_frames)
     else:
         root, rwhere = read_array(path, root_key)
-        root = np.asarray(root, dtype=np.float64).reshape(-1, 3) if np.asarray(root).size == n_frames * 3 else None
+        root = require(root, path, rwhere)
+        root = np.asarray(root, dtype=np.float64).reshape(-1, 3) if root.size == n_frames * 3 else None
         if root is None:
             raise InputError(path, f"key {root_key}", f"root translation must be ({n_frames}, 3)")
         roots = np.flatnonzero(sk.parents < 0)
