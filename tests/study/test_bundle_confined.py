@@ -250,3 +250,14 @@ def test_the_confinement_check_sees_every_file_the_design_package_knows(tmp_path
     assert len(known) >= (13 if which == "every-key" else 8)
     for key, value in walked.items():
         assert resolve(design, value) == known[key], key
+
+
+def test_merge_given_a_large_bundle_says_it_is_a_bundle(tmp_path: Path) -> None:
+    """A bundle is over a results file's limits (members, sizes); merge still says what the file is."""
+    from studyapp.study.bundle import _read_results_file
+
+    members = [Member("manifest.json", json.dumps({"format": "studyapp-bundle"}).encode())]
+    members += [Member(f"media/m_{i:02d}.wav", b"RIFF" * 10) for i in range(40)]
+    big = write_zip(tmp_path / "study.zip", members)
+    with pytest.raises(InputError, match="this is a study bundle"):
+        _read_results_file(big)
