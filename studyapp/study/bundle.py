@@ -25,8 +25,8 @@ real condition and stimulus ids and to the original design hash without extra ar
 
 On the participant's PC ``studyapp run STUDY.zip`` extracts the bundle to a per-user cache (verifying every
 checksum; the bundle is confined to itself, see :func:`open_bundle`, and read within
-:data:`~studyapp.safe_io.BUNDLE_ZIP`), stores results in the per-user data folder and, when the participant finishes, writes
-``results-<study>-<participant>-<hash>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
+:data:`~studyapp.safe_io.BUNDLE_ZIP`), stores results in the per-user data folder and, when the participant
+finishes, writes ``results-<study>-<participant>-<hash>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
 with its sha256) into ``~/studyapp-results`` (a visible folder in the participant's home) and says where.
 
 ``merge_results`` imports such files into the experimenter's database, refusing -- with one clear message
@@ -353,14 +353,22 @@ def open_bundle(zip_path: str | Path, cache: str | Path | None = None) -> Opened
     zip_path = Path(zip_path)
     if not zip_path.is_file():
         raise InputError(zip_path, None, "study bundle not found; check the path")
+    try:
+        return _open_bundle(zip_path, cache)
+    except InputError as exc:
+        if "damaged" not in exc.problem:
+            raise
+        raise InputError(exc.path, exc.where, f"{exc.problem}; ask the experimenter for the file again") from None
+
+
+def _open_bundle(zip_path: Path, cache: str | Path | None) -> OpenedBundle:
     with SafeZip(zip_path, BUNDLE_ZIP) as zf:
         manifest = _bundle_manifest(zip_path, zf)
         files: dict[str, str] = manifest["files"]
         design_name = manifest["design"]
         design_bytes = zf.read(design_name)
         if _sha256_bytes(design_bytes) != files[design_name]:
-            raise InputError(zip_path, design_name, "checksum mismatch: the bundle is damaged; ask the "
-                             "experimenter for the file again")
+            raise InputError(zip_path, design_name, "checksum mismatch: the bundle is damaged")
         _confine(zip_path, design_name, design_bytes, files)
         zip_digest = _sha256_file(zip_path)[:16]
         folder = Path(cache) if cache is not None else user_cache_dir() / "bundles" / f"{_slug(manifest['study'])}-{zip_digest}"
@@ -376,8 +384,7 @@ def open_bundle(zip_path: str | Path, cache: str | Path | None = None) -> Opened
                             h.update(chunk)
                             out.write(chunk)
                     if h.hexdigest() != digest:
-                        raise InputError(zip_path, name, "checksum mismatch: the bundle is damaged; ask the "
-                                         "experimenter for the file again")
+                        raise InputError(zip_path, name, "checksum mismatch: the bundle is damaged")
                 if folder.exists() or folder.is_symlink():
                     if folder.is_symlink() or not folder.is_dir():
                         folder.unlink()
