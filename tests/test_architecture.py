@@ -22,7 +22,7 @@ TOP_PACKAGES = ("studyapp", "results_analysis")
 # so the graph cannot have a cycle. Same order as the README's architecture table.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("studyapp", "studyapp.errors", "results_analysis"),       # the version, the error type; statistics stand alone
-    ("studyapp.resources", "studyapp.durations", "studyapp.tomlfile"),   # shipped files, duration rules, TOML
+    ("studyapp.resources", "studyapp.durations", "studyapp.tomlfile", "studyapp.safe_io"),   # shipped files, duration rules, TOML, checked binary containers
     ("studyapp.motion", "studyapp.face", "studyapp.audio"),   # the media, each on its own
     ("studyapp.models", "studyapp.demo_content"),             # produce motion from speech (a network, a recipe)
     ("studyapp.render",),                                     # draws media; knows nothing of studies

@@ -44,10 +44,9 @@ def load_head(path: Path) -> np.ndarray:
     if not path.is_file():
         raise InputError(path, None, "file not found")
     if path.suffix.lower() == ".npy":
-        try:
-            head = np.load(path, allow_pickle=False)
-        except ValueError as exc:
-            raise InputError(path, None, f"not a numpy array file: {exc}") from None
+        from studyapp.safe_io import load_npy
+
+        head = load_npy(path)
     else:
         lines = [(i, ln) for i, ln in enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1) if ln.strip()]
         cells = [[c.strip() for c in ln.split(",")] for _, ln in lines]

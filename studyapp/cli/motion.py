@@ -154,15 +154,16 @@ def summarize_any(path: str, fps: float | None = None) -> dict[str, Any]:
 
 def _npy_width(path: Path) -> int | None:
     """Column count of a 2-D numeric ``.npy`` (header only; ``None`` for anything else)."""
-    import numpy as np
+    from studyapp.errors import InputError
+    from studyapp.safe_io import npy_header
 
     try:
-        arr = np.load(str(path), mmap_mode="r", allow_pickle=False)
-    except (ValueError, OSError, EOFError):
+        h = npy_header(path)
+    except InputError:
         return None
-    if not isinstance(arr, np.ndarray) or arr.ndim != 2 or not np.issubdtype(arr.dtype, np.number):
+    if len(h.shape) != 2 or h.dtype.kind not in "biuf":
         return None
-    return int(arr.shape[1])
+    return int(h.shape[1])
 
 
 def _looks_like_face_array(path: Path, fps: float | None) -> bool:
@@ -171,18 +172,16 @@ def _looks_like_face_array(path: Path, fps: float | None) -> bool:
     Face NPZ files name their columns (``weights`` + ``names``), so they are recognised by their keys;
     a bare ``(F, 52)`` NPY is face data only when the caller gives the frame rate it lacks.
     """
-    import zipfile
-
-    import numpy as np
-
+    from studyapp.errors import InputError
     from studyapp.face.arkit import N_ARKIT
+    from studyapp.safe_io import open_npz
 
     if path.suffix.lower() == ".npy":
         return fps is not None and _npy_width(path) == N_ARKIT
     try:
-        with np.load(str(path), allow_pickle=False) as z:
+        with open_npz(path) as z:
             keys = set(z.files)
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, AttributeError):
+    except InputError:
         return False
     return {"weights", "names"} <= keys and "rotations" not in keys
 

@@ -32,7 +32,6 @@ import json
 import math
 import re
 import warnings
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ import numpy as np
 from studyapp.errors import InputError
 from studyapp.face.animation import FaceAnimation
 from studyapp.face.arkit import ARKIT_INDEX, ARKIT_NAMES, N_ARKIT, match_arkit_name
+from studyapp.safe_io import load_npy, open_npz
 
 #: Weights beyond these limits are not rounding noise but a different scale (e.g. percent): refuse them.
 _WEIGHT_LIMITS = (-0.5, 1.5)
@@ -393,11 +393,8 @@ def _load_beat_json(path: Path, text: str, fps: float | None) -> FaceAnimation:
 
 
 def _load_npz(path: Path, fps: float | None) -> FaceAnimation:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
-        raise InputError(path, None, f"unreadable NPZ: {exc}") from None
+    with open_npz(path) as z:
+        data = z.arrays()
     for key in ("weights", "names"):
         if key not in data:
             raise InputError(path, f"key {key}", f"missing; NPZ face data needs 'weights' (F, K) and 'names' (K,); "
@@ -420,7 +417,7 @@ def _load_npz(path: Path, fps: float | None) -> FaceAnimation:
         if "fps" not in data:
             raise InputError(path, "key fps", "missing and no fps given: store 'fps' in the NPZ or pass the frame rate")
         try:
-            fps = float(data["fps"])
+            fps = float(data["fps"]) if data["fps"].dtype.kind in "biuf" and data["fps"].size == 1 else float("nan")
         except (TypeError, ValueError):
             fps = float("nan")
         if not (math.isfinite(fps) and fps > 0):
@@ -429,10 +426,7 @@ def _load_npz(path: Path, fps: float | None) -> FaceAnimation:
 
 
 def _load_npy(path: Path, fps: float | None) -> FaceAnimation:
-    try:
-        w = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(path, None, f"unreadable NPY: {exc}") from None
+    w = load_npy(path)
     if w.ndim != 2 or w.shape[1] != N_ARKIT or not np.issubdtype(w.dtype, np.number):
         raise InputError(path, "array shape", f"a bare NPY must be (frames, {N_ARKIT}) numbers in Apple's ARKit order, "
                                               f"got {w.dtype} {w.shape}; use an NPZ with 'names' for other layouts")

@@ -30,6 +30,7 @@ import numpy as np
 from studyapp.errors import InputError
 from studyapp.face.animation import FaceAnimation
 from studyapp.face.arkit import ARKIT_INDEX, N_ARKIT
+from studyapp.safe_io import load_numpy
 
 __all__ = ["JAW_OPEN_FULL_DEG", "jaw_open_weight", "load_flame_map", "smplx_face"]
 
@@ -53,12 +54,11 @@ def jaw_open_weight(jaw: np.ndarray) -> np.ndarray:
 def load_flame_map(path: str | Path, n_coefficients: int) -> np.ndarray:
     """The user's ``(E, 52)`` FLAME-to-ARKit map, checked against the file's ``E`` expression coefficients."""
     path = str(path)
-    try:
-        m = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise InputError(path, None, "FLAME map file not found") from None
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(path, None, f"not a readable .npy ({exc})") from None
+    if not Path(path).is_file():
+        raise InputError(path, None, "FLAME map file not found")
+    m = load_numpy(path)
+    if not isinstance(m, np.ndarray):
+        m.close()
     if not isinstance(m, np.ndarray) or m.shape != (n_coefficients, N_ARKIT) or not np.issubdtype(m.dtype, np.number):
         shape = getattr(m, "shape", "an .npz archive")
         raise InputError(path, "array", f"shape {shape}; a FLAME map is ({n_coefficients}, {N_ARKIT}): one row per "

@@ -29,6 +29,7 @@ from studyapp.models import contract as C
 from studyapp.models.runner import StreamingGestureModel
 from studyapp.motion import rotations as rot
 from studyapp.motion.skeleton import Motion, Skeleton
+from studyapp.safe_io import open_npz, require
 
 log = logging.getLogger(__name__)
 
@@ -210,12 +211,13 @@ def motion_for_stimulus(model_path: str | Path, audio: AudioClip, face: FaceAnim
     output = None
     if path.is_file():
         try:
-            with np.load(path) as z:
-                output = z["rotations"]
+            with open_npz(path) as z:
+                output = require(z["rotations"], path, "key rotations", shape=(None, spec.n_joints, spec.rotation_width))
             log.debug("live model cache hit: %s", path)
-        except (OSError, ValueError, KeyError) as exc:  # a damaged entry is regenerated, never fatal
-            log.warning("ignoring unreadable cache entry %s: %s", path, exc)
-    if output is None or output.shape[1:] != (spec.n_joints, spec.rotation_width):
+        except InputError as exc:  # a damaged entry is regenerated, never fatal
+            log.warning("ignoring unreadable cache entry: %s", exc)
+            output = None
+    if output is None:
         inputs = stimulus_inputs(spec, audio, face, head)
         output = generate(model, inputs)
         _save_atomic(path, rotations=output)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from studyapp.errors import InputError
+from studyapp.safe_io import Npz, load_numpy, npy_header, numpy_kind, open_npz, require
 from studyapp.motion.fk import joint_positions
 from studyapp.motion.rotations import REPRESENTATIONS, representation_width, to_quat
 from studyapp.motion.skeleton import Motion, Skeleton
@@ -55,40 +56,28 @@ def _template_motion(template: Motion | Skeleton | str | Path) -> Motion:
 
 
 def check_numpy_file(path: str | Path) -> None:
-    """Raise :class:`InputError` unless ``path`` starts like an ``.npy`` or ``.npz`` file.
+    """Raise :class:`InputError` unless ``path`` is a readable ``.npy`` (header checked against the file's
+    size) or ``.npz`` (zip directory within :data:`~studyapp.safe_io.NPZ_ZIP`).
 
-    Checked before ``np.load``, which takes any other file for a pickle and then complains about
+    Checked before the data is read: ``np.load`` takes any other file for a pickle and then complains about
     pickles, a message that hides the real problem (a text file or a BVH saved as ``.npy``).
     """
-    try:
-        with open(path, "rb") as f:
-            head = f.read(8)
-    except FileNotFoundError:
-        raise InputError(str(path), None, "file not found") from None
-    except OSError as exc:
-        raise InputError(str(path), None, f"cannot read file: {exc.strerror or exc}") from None
-    if not head:
-        raise InputError(str(path), None, "file is empty; expected a NumPy .npy or .npz file")
-    if not head.startswith((b"\x93NUMPY", b"PK\x03\x04", b"PK\x05\x06")):
-        raise InputError(str(path), "header", f"not a NumPy .npy/.npz file (it starts with {head[:8]!r})")
+    if numpy_kind(path) == "npy":
+        npy_header(path)
+    else:
+        open_npz(path).close()
 
 
 def read_array(path: str | Path, key: str | None = None) -> tuple[np.ndarray, str]:
     """The rotation array of an ``.npy`` / ``.npz`` file and the place it came from (for messages)."""
     path = str(path)
-    check_numpy_file(path)
-    try:
-        loaded = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise InputError(path, None, "file not found") from None
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(path, None, f"not a readable NumPy .npy/.npz file ({exc})") from None
+    loaded = load_numpy(path)
     if isinstance(loaded, np.ndarray):
         if key is not None:
             raise InputError(path, f"key {key}", "an .npy file holds a single array; drop the key")
         return loaded, "array"
     with loaded:
-        keys = list(loaded.keys())
+        keys = loaded.keys()
         if key is None:
             if len(keys) == 1:
                 key = keys[0]
@@ -99,6 +88,14 @@ def read_array(path: str | Path, key: str | None = None) -> tuple[np.ndarray, st
         if key not in keys:
             raise InputError(path, f"key {key}", f"no such array; the file has: {', '.join(keys) or 'nothing'}")
         return loaded[key], f"key {key}"
+
+
+def _open_npz(path: str) -> Npz:
+    """An ``.npz`` (an ``.npy`` or any other file is refused by name)."""
+    loaded = load_numpy(path)
+    if isinstance(loaded, np.ndarray):
+        raise InputError(path, None, "an .npy file holds a single array; a motion NPZ holds several")
+    return loaded
 
 
 def fitting_representations(shape: tuple[int, ...]) -> list[str]:
@@ -252,7 +249,8 @@ def load_rotation_array(
         _warn_unused_root(path, n_frames)
     else:
         root, rwhere = read_array(path, root_key)
-        root = np.asarray(root, dtype=np.float64).reshape(-1, 3) if np.asarray(root).size == n_frames * 3 else None
+        root = require(root, path, rwhere)
+        root = np.asarray(root, dtype=np.float64).reshape(-1, 3) if root.size == n_frames * 3 else None
         if root is None:
             raise InputError(path, f"key {root_key}", f"root translation must be ({n_frames}, 3)")
         roots = np.flatnonzero(sk.parents < 0)
@@ -269,9 +267,9 @@ def _warn_unused_root(path: str, n_frames: int) -> None:
     if not path.lower().endswith(".npz"):
         return
     try:
-        with np.load(path, allow_pickle=False) as z:
-            found = [k for k in _ROOT_KEYS if k in z.files and z[k].size == n_frames * 3]
-    except (ValueError, OSError, EOFError, AttributeError):
+        with open_npz(path) as z:
+            found = [k for k in _ROOT_KEYS if k in z.files and int(np.prod(z.header(k).shape)) == n_frames * 3]
+    except InputError:
         return
     if found:
         warnings.warn(
@@ -312,50 +310,56 @@ def save_motion_npz(motion: Motion, path: str | Path) -> None:
 def is_motion_npz(path: str | Path) -> bool:
     """Whether ``path`` is an NPZ written by :func:`save_motion_npz` (has skeleton and rotations)."""
     try:
-        with np.load(str(path), allow_pickle=False) as z:
-            return isinstance(z, np.lib.npyio.NpzFile) and {"rotations", "joints", "parents", "offsets"} <= set(z.keys())
-    except (ValueError, OSError, EOFError, AttributeError):
+        with open_npz(path) as z:
+            return {"rotations", "joints", "parents", "offsets"} <= set(z.keys())
+    except InputError:
         return False
 
 
 def load_motion_npz(path: str | Path, fps: float | None = None) -> Motion:
-    """Read an NPZ written by :func:`save_motion_npz` back into a :class:`Motion`."""
+    """Read an NPZ written by :func:`save_motion_npz` back into a :class:`Motion`.
+
+    Every field's kind and shape is checked (:func:`~studyapp.safe_io.require`): a file edited or written by
+    another tool with, say, ``joints`` as numbers is refused by the field's name.
+    """
     path = str(path)
-    check_numpy_file(path)
-    try:
-        z = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(path, None, f"not a readable NPZ file ({exc})") from None
+    z = _open_npz(path)
     with z:
         keys = set(z.keys())
         need = {"rotations", "joints", "parents", "offsets"}
         if not need <= keys:
             raise InputError(path, "keys", f"not a studyapp motion NPZ: missing {', '.join(sorted(need - keys))}")
-        order = str(z["quaternion_order"]) if "quaternion_order" in keys else "xyzw"
-        rot = np.asarray(z["rotations"], dtype=np.float64)
+
+        def field(key: str, kind: str = "number", shape: tuple[int | None, ...] | None = None) -> np.ndarray:
+            return require(z[key], path, f"key {key}", kind, shape)
+
+        rot = np.asarray(field("rotations", shape=(None, None, 4)), dtype=np.float64)
+        n_j = rot.shape[1]
+        order = str(field("quaternion_order", "text", ())) if "quaternion_order" in keys else "xyzw"
         if order == "wxyz":
             rot = rot[..., [1, 2, 3, 0]]
         elif order != "xyzw":
             raise InputError(path, "key quaternion_order", f"unknown quaternion order {order!r}; expected 'xyzw' or 'wxyz'")
-        names = tuple(str(n) for n in z["joints"])
-        chans = tuple(tuple(str(c).split()) for c in z["channels"]) if "channels" in keys else ()
-        unit = float(z["unit_scale"]) if "unit_scale" in keys else float("nan")
+        names = tuple(str(n) for n in field("joints", "text", (n_j,)))
+        chans = tuple(tuple(str(c).split()) for c in field("channels", "text", (n_j,))) if "channels" in keys else ()
+        unit = float(field("unit_scale", shape=())) if "unit_scale" in keys else float("nan")
         ends = {}
         if "end_site_joints" in keys and "end_site_offsets" in keys:
-            ends = {int(j): np.asarray(o, dtype=np.float64) for j, o in zip(z["end_site_joints"], z["end_site_offsets"])}
+            joints = field("end_site_joints", "integer", (None,))
+            offsets = field("end_site_offsets", shape=(len(joints), 3))
+            ends = {int(j): np.asarray(o, dtype=np.float64) for j, o in zip(joints, offsets)}
+        parents, offsets = field("parents", "integer", (n_j,)), field("offsets", shape=(n_j, 3))
+        rest = field("rest_rotations", shape=(n_j, 4)) if "rest_rotations" in keys else None
         try:
-            sk = Skeleton(
-                names, z["parents"], z["offsets"], chans, ends, None if np.isnan(unit) else unit,
-                z["rest_rotations"] if "rest_rotations" in keys else None,
-            )
-        except ValueError as exc:
+            sk = Skeleton(names, parents, offsets, chans, ends, None if np.isnan(unit) else unit, rest)
+        except (ValueError, IndexError) as exc:
             raise InputError(path, "key joints", f"invalid skeleton: {exc}") from None
-        trans = np.asarray(z["translations"], dtype=np.float64) if "translations" in keys else np.broadcast_to(
-            sk.offsets, rot.shape[:2] + (3,)).copy()
+        trans = (np.asarray(field("translations", shape=rot.shape[:2] + (3,)), dtype=np.float64)
+                 if "translations" in keys else np.broadcast_to(sk.offsets, rot.shape[:2] + (3,)).copy())
         if fps is None:
             if "fps" not in keys:
                 raise InputError(path, "key fps", "the file stores no frame rate; pass fps")
-            fps = float(z["fps"])
+            fps = float(field("fps", shape=()))
     try:
         return Motion(sk, fps, rot, trans, source=path)
     except ValueError as exc:

@@ -148,10 +148,9 @@ def summarize_motion(path: str | Path, fps: float | None = None) -> dict[str, An
                     warnings.warn(note)
                 out.update(smpl)
             else:
-                try:
-                    loaded = np.load(str(p), allow_pickle=False)
-                except (ValueError, OSError, EOFError) as exc:
-                    raise InputError(str(path), None, f"not a readable NumPy file ({exc})") from None
+                from studyapp.safe_io import load_numpy
+
+                loaded = load_numpy(p)
                 if isinstance(loaded, np.ndarray):
                     arrays = {"array": loaded}
                 else:

@@ -41,7 +41,6 @@ over the clip at the height of the rest pose's ankles), since data sets put thei
 """
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,6 +48,7 @@ import numpy as np
 
 from studyapp.errors import InputError
 from studyapp.motion.skeleton import Motion, Skeleton
+from studyapp.safe_io import load_npy, load_numpy, npy_header, open_npz, require
 
 __all__ = [
     "FAMILY_JOINTS", "FAMILY_NAMES", "SMPL_BODY_JOINTS", "SMPLX_JOINTS", "SMPLH_JOINTS", "SMPL_JOINTS",
@@ -196,23 +196,21 @@ def body_model_rest_joints(model_path: str | Path, betas: np.ndarray | None, fam
     its expression directions after the shape ones, so only the first ``len(betas)`` columns are shape).
     """
     path = str(model_path)
-    try:
-        z = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise InputError(path, None, "body model file not found") from None
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise InputError(path, None, f"not a readable body model .npz ({exc})") from None
-    if not isinstance(z, np.lib.npyio.NpzFile):
+    if not Path(path).is_file():
+        raise InputError(path, None, "body model file not found")
+    z = load_numpy(path)
+    if isinstance(z, np.ndarray):
         raise InputError(path, None, "a body model is an .npz with J_regressor, v_template and shapedirs")
     with z:
         missing = [k for k in ("J_regressor", "v_template", "shapedirs") if k not in z.files]
         if missing:
             raise InputError(path, "keys", f"not a body model: missing {', '.join(missing)} "
                                            f"(the file has {', '.join(z.files) or 'nothing'})")
-        reg = np.asarray(z["J_regressor"], dtype=np.float64)
-        vt = np.asarray(z["v_template"], dtype=np.float64)
-        dirs = np.asarray(z["shapedirs"], dtype=np.float64)
-        tree = np.asarray(z["kintree_table"]) if "kintree_table" in z.files else None
+        reg = np.asarray(require(z["J_regressor"], path, "key J_regressor"), dtype=np.float64)
+        vt = np.asarray(require(z["v_template"], path, "key v_template"), dtype=np.float64)
+        dirs = np.asarray(require(z["shapedirs"], path, "key shapedirs"), dtype=np.float64)
+        tree = (require(z["kintree_table"], path, "key kintree_table", "integer", (2, None))
+                if "kintree_table" in z.files else None)
     n_j = FAMILY_JOINTS[family]
     if vt.ndim != 2 or vt.shape[1] != 3:
         raise InputError(path, "key v_template", f"shape {vt.shape}; expected (vertices, 3)")
@@ -271,26 +269,20 @@ _FPS_KEYS = ("mocap_frame_rate", "mocap_framerate", "fps", "frame_rate")
 _AMASS_SPLIT = ("root_orient", "pose_body")
 
 
-def _npz_arrays(path: Path) -> dict[str, np.ndarray] | None:
-    """Every array of an ``.npz`` that is data (pickled objects, which some pipelines add, are skipped)."""
-    try:
-        with np.load(str(path), allow_pickle=False) as z:
-            if not isinstance(z, np.lib.npyio.NpzFile):
-                return None
-            arrays = {}
-            for k in z.files:  # these files are a few MB at most: read them whole
-                try:
-                    arrays[k] = z[k]
-                except ValueError:  # a pickled object (a dict of settings): not ours to read
-                    continue
-            return arrays
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile, AttributeError):
-        return None
+def _npz_arrays(path: Path) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` that is data (pickled objects, which some pipelines add, are skipped, never
+    loaded); a file that is not a readable ``.npz`` is an :class:`InputError` saying why."""
+    with open_npz(path) as z:  # these files are a few MB at most: read them whole
+        return z.arrays(skip_objects=True)
 
 
 def _npz_shapes(path: Path) -> dict[str, tuple[int, ...]] | None:
-    arrays = _npz_arrays(path)
-    return None if arrays is None else {k: tuple(v.shape) for k, v in arrays.items()}
+    """The shapes of an ``.npz``'s data arrays, from their headers alone; ``None`` for an unreadable file."""
+    try:
+        with open_npz(path) as z:
+            return {k: z.header(k).shape for k in z.files if z.is_plain(k)}
+    except InputError:
+        return None
 
 
 def recognise_smpl(path: str | Path) -> str | None:
@@ -302,11 +294,11 @@ def recognise_smpl(path: str | Path) -> str | None:
     ext = p.suffix.lower()
     if ext == ".npy":
         try:
-            a = np.load(str(p), mmap_mode="r", allow_pickle=False)
-        except (ValueError, OSError, EOFError):
+            h = npy_header(p)
+        except InputError:
             return None
-        ok = isinstance(a, np.ndarray) and a.ndim == 2 and a.shape[1] == TALKSHOW_WIDTH
-        return "smplx" if ok and np.issubdtype(a.dtype, np.number) else None
+        ok = len(h.shape) == 2 and h.shape[1] == TALKSHOW_WIDTH
+        return "smplx" if ok and h.dtype.kind in "iuf" else None
     if ext != ".npz":
         return None
     shapes = _npz_shapes(p)
@@ -340,7 +332,7 @@ def read_smpl(path: str | Path, fps: float | None = None) -> SmplData:
     n_j = FAMILY_JOINTS[family]
     notes: list[str] = []
     if p.suffix.lower() == ".npy":
-        a = np.asarray(np.load(str(p), allow_pickle=False), dtype=np.float64)
+        a = np.asarray(require(load_npy(p), str(p), "array", shape=(None, TALKSHOW_WIDTH)), dtype=np.float64)
         poses = np.concatenate([a[:, 9:12], a[:, 12:75], a[:, 0:3], a[:, 3:9], a[:, 75:165]], axis=1)
         trans = np.zeros((a.shape[0], 3))
         rate = fps if fps is not None else TALKSHOW_FPS
@@ -351,12 +343,17 @@ def read_smpl(path: str | Path, fps: float | None = None) -> SmplData:
         data = SmplData(family, poses.reshape(-1, n_j, 3), trans, float(rate), None, a[:, 165:265],
                         "TalkSHOW npy", None, str(p), notes)
         return _checked(data)
-    z = _npz_arrays(p) or {}
+    z = _npz_arrays(p)
+    for key in ("poses", "root_orient", "pose_body", "pose_jaw", "pose_eye", "pose_hand", "trans", "betas",
+                *_FPS_KEYS):
+        if key in z:  # a field of text where numbers belong is refused by name, never cast into a traceback
+            require(z[key], str(p), f"key {key}")
     if "poses" in z and z["poses"].ndim == 2 and z["poses"].shape[1] == 3 * n_j:
         poses = np.asarray(z["poses"], dtype=np.float64)
         layout = "npz poses"
     else:
-        parts = [z["root_orient"], z["pose_body"]]
+        parts = [require(z["root_orient"], str(p), "key root_orient", shape=(None, 3)),
+                 require(z["pose_body"], str(p), "key pose_body", shape=(None, 63))]
         if family == "smplx":
             f = z["root_orient"].shape[0]
             parts += [z["pose_jaw"] if "pose_jaw" in z else np.zeros((f, 3)),
@@ -389,7 +386,7 @@ def read_smpl(path: str | Path, fps: float | None = None) -> SmplData:
     betas = np.asarray(z["betas"], dtype=np.float64).reshape(-1) if "betas" in z else None
     expr = None
     for k in ("expressions", "expression", "expr"):
-        if k in z and z[k].ndim == 2 and z[k].shape[0] == f:
+        if k in z and z[k].ndim == 2 and z[k].shape[0] == f and z[k].dtype.kind in "biuf":
             expr = np.asarray(z[k], dtype=np.float64)
             break
     gender = _scalar_text(z, "gender")

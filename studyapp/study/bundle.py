@@ -24,8 +24,9 @@ the experimenter's results database (table ``bundles``), so ``studyapp merge`` m
 real condition and stimulus ids and to the original design hash without extra arguments.
 
 On the participant's PC ``studyapp run STUDY.zip`` extracts the bundle to a per-user cache (verifying every
-checksum), stores results in the per-user data folder and, when the participant finishes, writes
-``results-<study>-<participant>-<hash>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
+checksum; the bundle is confined to itself, see :func:`open_bundle`, and read within
+:data:`~studyapp.safe_io.BUNDLE_ZIP`), stores results in the per-user data folder and, when the participant
+finishes, writes ``results-<study>-<participant>-<hash>.zip`` (``results.json`` with that participant's rows + ``manifest.json``
 with its sha256) into ``~/studyapp-results`` (a visible folder in the participant's home) and says where.
 
 ``merge_results`` imports such files into the experimenter's database, refusing -- with one clear message
@@ -44,9 +45,9 @@ import re
 import secrets
 import shutil
 import sqlite3
+import string
 import tempfile
 import zipfile
-import zlib
 
 import platformdirs
 from dataclasses import dataclass, field
@@ -56,6 +57,8 @@ from typing import Any, Callable, Iterable
 from studyapp import __version__
 from studyapp import tomlfile
 from studyapp.errors import InputError, StudyappError
+from studyapp.safe_io import BUNDLE_ZIP, RESULTS_ZIP, SafeZip, safe_member_name
+from studyapp.study.design.schema import BUILTIN_REFERENCE
 
 BUNDLE_FORMAT = "studyapp-bundle"
 RESULTS_FORMAT = "studyapp-results"
@@ -334,60 +337,218 @@ class OpenedBundle:
     results_dir: Path
 
 
-def _safe_name(name: str) -> bool:
-    p = Path(name)
-    return not p.is_absolute() and ".." not in p.parts and not name.startswith(("/", "\\")) and ":" not in name
+#: the largest manifest.json read (a bundle's lists a sha256 per file: 20,000 files are about 2 MB)
+_MANIFEST_MAX_BYTES = 16 << 20
 
 
 def open_bundle(zip_path: str | Path, cache: str | Path | None = None) -> OpenedBundle:
-    """Verify ``zip_path`` against its manifest and extract it to the per-user cache (reused when intact)."""
+    """Verify ``zip_path`` against its manifest and extract it to the per-user cache (reused when intact).
+
+    Everything is checked before any member is extracted and before any path in the bundle's design is
+    followed: the zip passes :data:`~studyapp.safe_io.BUNDLE_ZIP` (member count, sizes, compression ratio), its
+    members are exactly ``manifest.json`` and the files the manifest lists (a file in the zip that the
+    manifest does not list is refused, as is one it lists that is missing), the manifest's ``design`` entry is
+    one of them, and every file the design names resolves to a file of the manifest (:func:`_confine`), so a
+    bundle cannot make the participant's app open a file anywhere else on their disk. Members are extracted in
+    chunks, each checked against its sha256.
+    """
     zip_path = Path(zip_path)
     if not zip_path.is_file():
         raise InputError(zip_path, None, "study bundle not found; check the path")
     try:
-        zf = zipfile.ZipFile(zip_path)
-    except zipfile.BadZipFile:
-        raise InputError(zip_path, None, "not a zip file (damaged download?); ask the experimenter for the file again") from None
-    with zf:
-        try:
-            manifest = json.loads(zf.read("manifest.json"))
-        except (KeyError, ValueError):
-            raise InputError(zip_path, "manifest.json", "missing or unreadable: this is not a studyapp study bundle") from None
-        if manifest.get("format") != BUNDLE_FORMAT:
-            raise InputError(zip_path, "manifest.json", "not a studyapp study bundle")
-        files: dict[str, str] = manifest.get("files", {})
-        bad = [n for n in files if not _safe_name(n)]
-        if bad:
-            raise InputError(zip_path, "manifest.json", f"unsafe file names in the bundle: {bad[:3]}")
+        return _open_bundle(zip_path, cache)
+    except InputError as exc:
+        if "damaged" not in exc.problem:
+            raise
+        raise InputError(exc.path, exc.where, f"{exc.problem}; ask the experimenter for the file again") from None
+
+
+def _open_bundle(zip_path: Path, cache: str | Path | None) -> OpenedBundle:
+    with SafeZip(zip_path, BUNDLE_ZIP) as zf:
+        manifest = _bundle_manifest(zip_path, zf)
+        files: dict[str, str] = manifest["files"]
+        design_name = manifest["design"]
+        design_bytes = zf.read(design_name)
+        if _sha256_bytes(design_bytes) != files[design_name]:
+            raise InputError(zip_path, design_name, "checksum mismatch: the bundle is damaged")
+        _confine(zip_path, design_name, design_bytes, files)
         zip_digest = _sha256_file(zip_path)[:16]
         folder = Path(cache) if cache is not None else user_cache_dir() / "bundles" / f"{_slug(manifest['study'])}-{zip_digest}"
         if not _verify_folder(folder, files):
             tmp = Path(tempfile.mkdtemp(prefix=".extract-", dir=_mkdir(folder.parent)))
             try:
                 for name, digest in files.items():
-                    try:
-                        data = zf.read(name)
-                    except (KeyError, zipfile.BadZipFile, OSError) as exc:
-                        raise InputError(zip_path, name, f"cannot be read from the bundle ({exc}); the file is damaged") from None
-                    if _sha256_bytes(data) != digest:
-                        raise InputError(zip_path, name, "checksum mismatch: the bundle is damaged; ask the "
-                                         "experimenter for the file again")
                     target = tmp / name
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    target.write_bytes(data)
-                if folder.exists():
-                    shutil.rmtree(folder)
+                    h = hashlib.sha256()
+                    with open(target, "wb") as out:
+                        for chunk in zf.chunks(name):
+                            h.update(chunk)
+                            out.write(chunk)
+                    if h.hexdigest() != digest:
+                        raise InputError(zip_path, name, "checksum mismatch: the bundle is damaged")
+                if folder.exists() or folder.is_symlink():
+                    if folder.is_symlink() or not folder.is_dir():
+                        folder.unlink()
+                    else:
+                        shutil.rmtree(folder)
                 os.replace(tmp, folder)
             finally:
                 if tmp.exists():
                     shutil.rmtree(tmp, ignore_errors=True)
     study = _slug(manifest["study"])
     return OpenedBundle(
-        zip_path=zip_path, folder=folder, design_path=folder / manifest.get("design", "study.toml"), study=study,
-        bundle_hash=manifest.get("design_hash", ""), roster={k: int(v) for k, v in manifest.get("roster", {}).items()},
-        default_results=user_data_dir() / "studies" / f"{study}-{manifest.get('design_hash', '')[:12]}.results.sqlite",
+        zip_path=zip_path, folder=folder, design_path=folder / design_name, study=study,
+        bundle_hash=manifest["design_hash"], roster=manifest["roster"],
+        default_results=user_data_dir() / "studies" / f"{study}-{manifest['design_hash'][:12]}.results.sqlite",
         results_dir=results_folder(),
     )
+
+
+def _read_manifest(path: Path, zf: SafeZip) -> Any:
+    """``manifest.json`` of a zip, parsed (size checked before it is read)."""
+    if "manifest.json" not in zf.names:
+        raise InputError(path, "manifest.json", "missing: this is not a studyapp file")
+    if zf.info("manifest.json").file_size > _MANIFEST_MAX_BYTES:
+        raise InputError(path, "manifest.json", f"larger than {_MANIFEST_MAX_BYTES >> 20} MB: not a studyapp manifest")
+    try:
+        return json.loads(zf.read("manifest.json"))
+    except (ValueError, RecursionError):
+        raise InputError(path, "manifest.json", "unreadable (not JSON): the file is damaged") from None
+
+
+def _bundle_manifest(path: Path, zf: SafeZip) -> dict[str, Any]:
+    """The bundle's manifest, every field checked, and the zip's members checked against its file list."""
+    try:
+        manifest = _read_manifest(path, zf)
+    except InputError as exc:
+        raise InputError(path, exc.where, f"{exc.problem}; this is not a studyapp study bundle") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != BUNDLE_FORMAT:
+        raise InputError(path, "manifest.json", "not a studyapp study bundle")
+    files, design, roster = manifest.get("files"), manifest.get("design", "study.toml"), manifest.get("roster", {})
+    if not isinstance(files, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in files.items()):
+        raise InputError(path, "manifest.json", "its `files` is not a table of file names and checksums: damaged")
+    bad = [n for n in files if not safe_member_name(n)]
+    if bad:
+        raise InputError(path, "manifest.json", f"unsafe file names in the bundle: {bad[:3]}")
+    in_zip = set(zf.names) - {"manifest.json"}
+    unlisted = sorted(in_zip - set(files))
+    if unlisted:
+        raise InputError(path, unlisted[0], "in the zip but not in its manifest, so nothing vouches for it: refused")
+    missing = sorted(set(files) - in_zip)
+    if missing:
+        raise InputError(path, missing[0], "listed in the manifest but missing from the zip: the bundle is damaged")
+    if not isinstance(design, str) or design not in files or not design.endswith(".toml"):
+        raise InputError(path, "manifest.json", f"its design entry {str(design)[:80]!r} is not one of the bundle's "
+                         ".toml files: refused")
+    if not isinstance(manifest.get("study"), str) or not isinstance(manifest.get("design_hash"), str):
+        raise InputError(path, "manifest.json", "no study name or design hash: damaged")
+    if not isinstance(roster, dict) or not all(isinstance(k, str) and type(v) is int and v >= 0
+                                               for k, v in roster.items()):
+        raise InputError(path, "manifest.json", "its roster is not participant ids with their rows: damaged")
+    return {**manifest, "design": design, "roster": roster}
+
+
+def _confine(path: Path, design_name: str, design_bytes: bytes, files: dict[str, str]) -> None:
+    """Refuse a bundled design that names any file other than one its manifest lists (read nothing else).
+
+    Paths are compared as written: ``media/x.bvh`` is in the bundle only when the manifest lists exactly
+    that name, so absolute paths, ``..``, ``~``, drive letters, backslashes and links out of the folder
+    never match; a motion pattern is filled in for every stimulus and sample first (refusing format
+    specifications and attribute or index lookups, which ``str.format`` would run).
+    """
+    try:
+        raw = tomlfile.loads(design_bytes.decode("utf-8"))
+    except (UnicodeDecodeError, tomlfile.TOMLDecodeError, RecursionError, ValueError) as exc:
+        raise InputError(path, design_name, f"not a readable design ({exc}): the bundle is damaged") from None
+    try:
+        named = bundle_design_paths(raw, len(files))
+    except InputError as exc:
+        raise InputError(path, f"{design_name}, {exc.where}", exc.problem) from None
+    for key, value in named:
+        if value in files:
+            continue
+        outside = (value.startswith(("/", "\\", "~")) or "\\" in value or ":" in value
+                   or ".." in value.replace("\\", "/").split("/"))
+        raise InputError(path, f"{design_name}, {key}", f"{value[:120]!r} " + (
+            "points outside the bundle: refused (a bundle may only use its own files)" if outside else
+            "is not a file of the bundle's manifest: refused (a bundle may only use the files it lists)"))
+
+
+def bundle_design_paths(raw: dict[str, Any], max_samples: int) -> list[tuple[str, str]]:
+    """``(key, path as written)`` for every file a (raw, parsed TOML) design names, keyed as
+    :func:`~studyapp.study.design.referenced_files` keys them; motion patterns filled in for every stimulus and
+    sample. Raises :class:`InputError` for a pattern that cannot be filled safely."""
+    from studyapp.study.design.files import fill_sample, motion_key
+
+    def strs(table: Any) -> dict[str, Any]:
+        return table if isinstance(table, dict) else {}
+
+    def rows(key: str) -> list[dict[str, Any]]:
+        v = raw.get(key)
+        return [e for e in v if isinstance(e, dict)] if isinstance(v, list) else []
+
+    out: list[tuple[str, str]] = []
+    stimuli = rows("stimuli")
+    for i, s in enumerate(stimuli):
+        for k in ("audio", "face", "head"):
+            if isinstance(s.get(k), str):
+                out.append((f"stimuli[{i}].{k}", s[k]))
+    for i, c in enumerate(rows("conditions")):
+        if isinstance(c.get("model"), str) and c["model"] != BUILTIN_REFERENCE:
+            out.append((f"conditions[{i}].model", c["model"]))
+        for k in ("template", "body_model"):
+            if isinstance(c.get(k), str):
+                out.append((f"conditions[{i}].{k}", c[k]))
+        pattern = c.get("motion")
+        if not isinstance(pattern, str):
+            continue
+        samples = c.get("samples", 1)
+        samples = samples if type(samples) is int and samples >= 1 else 1
+        if samples > max(max_samples, 1):
+            raise InputError(None, f"conditions[{i}].samples", f"{samples} samples, more than the bundle has files")
+        for s in stimuli:
+            sid = s.get("id")
+            fields = {k: v for k, v in strs(s.get("tags")).items() if isinstance(v, str)}
+            fields["stimulus"] = sid if isinstance(sid, str) else ""
+            for k in range(1, samples + 1):
+                out.append((motion_key(i, fields["stimulus"], k, samples),
+                            _fill_pattern(fill_sample(pattern, k), fields, f"conditions[{i}].motion")))
+    avatar = strs(raw.get("avatar"))
+    if isinstance(avatar.get("model"), str) and avatar["model"] != "builtin":
+        out.append(("avatar.model", avatar["model"]))
+    for k, v in strs(avatar.get("by_speaker")).items():
+        if isinstance(v, str) and v != "builtin":
+            out.append((f"avatar.by_speaker.{k}", v))
+    return out
+
+
+def _fill_pattern(pattern: str, fields: dict[str, str], key: str) -> str:
+    """``pattern`` with each ``{name}`` replaced by ``fields[name]``; nothing else of ``str.format`` is run.
+
+    >>> _fill_pattern("media/m_{c_ab}.bvh", {"c_ab": "12", "stimulus": "s"}, "k")
+    'media/m_12.bvh'
+    >>> _fill_pattern("{stimulus:>99999999}", {"stimulus": "s"}, "k")
+    Traceback (most recent call last):
+    ...
+    studyapp.errors.InputError: k: the pattern's placeholder {stimulus:>99999999} is not a plain {name}: refused
+    """
+    out = []
+    try:
+        parsed = list(string.Formatter().parse(pattern))
+    except ValueError as exc:
+        raise InputError(None, key, f"the pattern {pattern[:80]!r} cannot be read ({exc})") from None
+    for literal, name, spec, conv in parsed:
+        out.append(literal)
+        if name is None:
+            continue
+        if spec or conv:
+            shown = "{" + name + (f"!{conv}" if conv else "") + (f":{spec}" if spec else "") + "}"
+            raise InputError(None, key, f"the pattern's placeholder {shown[:80]} is not a plain {{name}}: refused")
+        if name not in fields:
+            raise InputError(None, key, f"the pattern uses {{{name[:80]}}}, which a stimulus does not set: refused")
+        out.append(fields[name])
+    return "".join(out)
 
 
 def _mkdir(p: Path) -> Path:
@@ -396,10 +557,19 @@ def _mkdir(p: Path) -> Path:
 
 
 def _verify_folder(folder: Path, files: dict[str, str]) -> bool:
-    if not folder.is_dir():
+    """Whether an earlier extraction in ``folder`` is intact: every file there, none a link, every checksum right."""
+    if not folder.is_dir() or folder.is_symlink():
         return False
     try:
-        return all(_sha256_file(folder / name) == digest for name, digest in files.items())
+        for name, digest in files.items():
+            p = folder
+            for part in name.split("/"):
+                p = p / part
+                if p.is_symlink():
+                    return False
+            if not p.is_file() or _sha256_file(p) != digest:
+                return False
+        return True
     except OSError:
         return False
 
@@ -453,15 +623,15 @@ def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened
     answered = {_answer_key(t) for t in payload["trials"]}
     while path.exists():
         try:
-            with zipfile.ZipFile(path) as zf:
-                old = json.loads(zf.read("manifest.json"))
+            with SafeZip(path, RESULTS_ZIP) as zf:
+                old = _read_manifest(path, zf)
                 if (old.get("format"), old.get("participant"), old.get("design_hash")) == (
                         RESULTS_FORMAT, participant_id, db.design_hash):
                     before = {_answer_key(t) for t in json.loads(zf.read("results.json")).get("trials", [])}
                     if before <= answered:
                         break  # this participant's own earlier file (ended early, then resumed): update it
                     # else a run from a reset local database: the earlier answers may not have been sent yet
-        except (zipfile.BadZipFile, KeyError, ValueError, OSError, AttributeError, TypeError):
+        except (InputError, ValueError, RecursionError, AttributeError, TypeError):
             pass  # not a results file we wrote: keep it
         k += 1
         path = out_dir / f"{stem}-{k}.zip"
@@ -498,22 +668,24 @@ class _Refused(StudyappError):
 
 
 def _read_results_file(path: Path) -> dict[str, Any]:
-    is_bundle = False
+    """The payload of a returned results file, its zip within :data:`~studyapp.safe_io.RESULTS_ZIP` and its
+    checksum right (which proves only that it arrived as written: the answers are checked afterwards)."""
+    if not path.is_file():
+        raise InputError(path, None, "file not found")
     try:
-        with zipfile.ZipFile(path) as zf:
-            manifest = json.loads(zf.read("manifest.json"))
-            is_bundle = isinstance(manifest, dict) and manifest.get("format") == BUNDLE_FORMAT
-            data = b"" if is_bundle else zf.read("results.json")
-    except FileNotFoundError:
-        raise InputError(path, None, "file not found") from None
-    # Flipped bytes inside a compressed member surface as zlib.error or EOFError, a zip CRC failure as
-    # BadZipFile, encryption or an unknown compression method as RuntimeError/NotImplementedError.
-    except (zipfile.BadZipFile, zlib.error, EOFError, RuntimeError, NotImplementedError, KeyError, ValueError,
-            OSError) as exc:
-        raise InputError(path, None, f"not a readable results file ({exc}); ask the participant to send it again") from None
-    if is_bundle:
-        raise InputError(path, None, "this is a study bundle (the file participants run), not a results file; "
-                         "merge the results-*.zip files that participants send back")
+        with SafeZip(path, RESULTS_ZIP) as zf:
+            manifest = _read_manifest(path, zf)
+            if isinstance(manifest, dict) and manifest.get("format") == BUNDLE_FORMAT:
+                raise InputError(path, None, _BUNDLE_GIVEN)
+            data = zf.read("results.json")
+    except InputError as exc:
+        if exc.problem != _BUNDLE_GIVEN and _is_bundle(path):  # too big for a results file: say what it is
+            raise InputError(path, None, _BUNDLE_GIVEN) from None
+        # the member named in the problem: the merge report shows only the problem
+        where = f"{exc.where}: " if exc.where else ""
+        damaged = "damaged" in exc.problem or "not a readable" in exc.problem
+        raise InputError(path, None, f"{where}{exc.problem}" + ("; ask the participant to send it again"
+                                                                 if damaged else "")) from None
     if not isinstance(manifest, dict) or manifest.get("format") != RESULTS_FORMAT:
         raise InputError(path, "manifest.json", "not a studyapp results file")
     files = manifest.get("files")
@@ -522,11 +694,25 @@ def _read_results_file(path: Path) -> dict[str, Any]:
                          "participant to send the original again")
     try:
         payload = json.loads(data)
-    except ValueError as exc:
-        raise InputError(path, "results.json", f"not valid JSON ({exc})") from None
+    except (ValueError, RecursionError) as exc:
+        raise InputError(path, "results.json", f"not valid JSON ({str(exc)[:120]})") from None
     if not isinstance(payload, dict) or payload.get("design_hash") != manifest.get("design_hash"):
         raise InputError(path, "results.json", "the manifest and the results disagree on the design")
     return payload
+
+
+_BUNDLE_GIVEN = ("this is a study bundle (the file participants run), not a results file; merge the "
+                 "results-*.zip files that participants send back")
+
+
+def _is_bundle(path: Path) -> bool:
+    """Whether ``path`` is a study bundle (read only as far as its manifest)."""
+    try:
+        with SafeZip(path, BUNDLE_ZIP) as zf:
+            manifest = _read_manifest(path, zf)
+    except InputError:
+        return False
+    return isinstance(manifest, dict) and manifest.get("format") == BUNDLE_FORMAT
 
 
 def _merge_design(db: Any, db_path: Path, design_path: str | Path | None) -> Any:

@@ -202,8 +202,10 @@ def load_head(path: Path) -> np.ndarray:
     """
     def read() -> np.ndarray:
         if path.suffix.lower() == ".npy":
-            arr = np.load(path, allow_pickle=False)
-            if arr.ndim != 2 or arr.shape[1] != 3:
+            from studyapp.safe_io import load_npy
+
+            arr = load_npy(path)
+            if arr.ndim != 2 or arr.shape[1] != 3 or arr.dtype.kind not in "biuf":
                 raise InputError(path, "array shape", f"{arr.shape}, expected (frames, 3) yaw/pitch/roll radians")
             return arr.astype(np.float64)
         with open(path, newline="", encoding="utf-8-sig") as f:
