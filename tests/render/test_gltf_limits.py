@@ -1,0 +1,262 @@
+"""Each size, index and path a glTF file claims is checked before it is trusted: one malformed real file per
+limit (CesiumMan, edited in one place), refused with one InputError naming the file and the JSON place."""
+from __future__ import annotations
+
+import base64
+import os
+import struct
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gltf_mutations import dump_json, pack_glb, split_glb
+from render_helpers import SAMPLES
+from studyapp.errors import InputError
+from studyapp.render.avatar_report import summarize_avatar
+from studyapp.render.gltf import load_gltf
+
+CESIUM = SAMPLES / "avatars" / "CesiumMan.glb"
+# CesiumMan's layout (see the file): the primitive's attributes and the skin's matrices
+INDICES, JOINTS, NORMAL, POSITION, TEXCOORD, WEIGHTS, IBM = 0, 1, 2, 3, 4, 5, 82
+POSITION_VIEW, IBM_VIEW, IMAGE_VIEW = 2, 7, 8
+
+
+def _edited(tmp_path: Path, edit: Callable[[dict, bytearray], None], name: str = "avatar.glb") -> Path:
+    doc, binary = split_glb(CESIUM.read_bytes())
+    binary = bytearray(binary)
+    edit(doc, binary)
+    path = tmp_path / name
+    path.write_bytes(pack_glb(doc, bytes(binary)))
+    return path
+
+
+def _refused(path: Path, where: str, *words: str) -> InputError:
+    with pytest.raises(InputError) as caught:
+        load_gltf(path)
+    err = caught.value
+    assert err.path == str(path) and err.where == where, str(err)
+    assert "\n" not in str(err)
+    for w in words:
+        assert w in err.problem, str(err)
+    return err
+
+
+def _ibm_offset(doc: dict, k: int) -> int:
+    return doc["bufferViews"][IBM_VIEW]["byteOffset"] + 64 * k
+
+
+def test_the_unedited_file_loads(tmp_path: Path) -> None:
+    avatar = load_gltf(_edited(tmp_path, lambda doc, b: None))
+    assert avatar.n_vertices == 3273 and avatar.skeleton.n_joints == 19
+
+
+# --- byte ranges ---------------------------------------------------------------------------
+
+def test_accessor_reading_past_its_buffer_view(tmp_path: Path) -> None:
+    # POSITION ends exactly at its view's end; one more element reads the next view's bytes
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["accessors"][POSITION]["count"] += 1
+    _refused(_edited(tmp_path, edit), f"key accessors[{POSITION}].count", "3274 elements", "bufferView 2 has 78552")
+
+
+def test_buffer_view_past_its_buffer(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["bufferViews"][IMAGE_VIEW]["byteLength"] += 1_000_000
+    _refused(_edited(tmp_path, edit), f"key bufferViews[{IMAGE_VIEW}].byteLength", "buffer 0, which has 637192")
+
+
+def test_byte_stride_shorter_than_an_element(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["bufferViews"][POSITION_VIEW]["byteStride"] = 8
+    _refused(_edited(tmp_path, edit), f"key bufferViews[{POSITION_VIEW}].byteStride", "shorter than one element")
+
+
+def test_negative_count(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["accessors"][INDICES]["count"] = -3
+    _refused(_edited(tmp_path, edit), f"key accessors[{INDICES}].count", "-3 is out of range")
+
+
+def test_huge_count_without_data_is_refused_before_allocating(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        del doc["accessors"][IBM]["bufferView"]
+        doc["accessors"][IBM]["count"] = 2**40
+    _refused(_edited(tmp_path, edit), f"key accessors[{IBM}].count", "without a bufferView")
+
+
+def test_attribute_count_differs_from_the_vertex_count(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["accessors"][NORMAL]["count"] -= 1
+    _refused(_edited(tmp_path, edit), "key meshes[0].primitives[0].attributes.NORMAL", "3272 elements", "3273 vertices")
+
+
+def test_float_joint_indices(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["accessors"][JOINTS]["componentType"] = 5126
+    _refused(_edited(tmp_path, edit), "key meshes[0].primitives[0].attributes.JOINTS_0", "not unsigned integers")
+
+
+def test_glb_chunk_longer_than_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "avatar.glb"
+    raw = bytearray(CESIUM.read_bytes())
+    raw[12:16] = struct.pack("<I", 2**31)
+    path.write_bytes(bytes(raw))
+    _refused(path, "byte 12", "runs past the end of the file")
+
+
+# --- indices and the node hierarchy --------------------------------------------------------
+
+def test_index_into_a_missing_array_item(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = 4000
+    _refused(_edited(tmp_path, edit), "key meshes[0].primitives[0].attributes.TEXCOORD_0", "the file has 83 accessors")
+
+
+def test_node_that_is_its_own_ancestor(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:  # leg_joint_R_5 (7) gets the root (0) as its child
+        doc["nodes"][7]["children"] = [0]
+    _refused(_edited(tmp_path, edit), "key nodes[7].children", "node 0 is its own ancestor")
+
+
+def test_node_with_two_parents(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["nodes"][7]["children"] = [5]  # 5 is already the child of 4
+    _refused(_edited(tmp_path, edit), "key nodes[7].children", "child of both node 4 and node 7")
+
+
+def test_node_hierarchy_too_deep(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        start = len(doc["nodes"])
+        doc["nodes"] += [{"children": [start + k + 1]} for k in range(999)] + [{"mesh": 0}]
+        doc["nodes"][7]["children"] = [start]
+    _refused(_edited(tmp_path, edit), "key nodes[272]", "levels below its root")
+
+
+# --- skins ---------------------------------------------------------------------------------
+
+def test_fewer_inverse_bind_matrices_than_joints(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["accessors"][IBM]["count"] = 10
+    _refused(_edited(tmp_path, edit), "key skins[0].inverseBindMatrices", "10 matrices for 19 joints")
+
+
+def test_singular_inverse_bind_matrix(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        at = _ibm_offset(doc, 4)
+        b[at: at + 64] = bytes(60) + struct.pack("<f", 1.0)
+    _refused(_edited(tmp_path, edit), "key skins[0].inverseBindMatrices", "matrix 4: singular")
+
+
+# --- numbers -------------------------------------------------------------------------------
+
+def test_nan_position(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        at = doc["bufferViews"][POSITION_VIEW]["byteOffset"] + doc["accessors"][POSITION]["byteOffset"] + 12 * 17
+        b[at: at + 4] = struct.pack("<f", float("nan"))
+    _refused(_edited(tmp_path, edit), f"key accessors[{POSITION}]", "element 17 is not a finite number")
+
+
+def test_nan_in_a_node_rotation(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["nodes"][4]["rotation"] = [float("nan"), 0.0, 0.0, 1.0]
+    _refused(_edited(tmp_path, edit), "key nodes[4].rotation[0]", "finite number")
+
+
+def test_node_transform_overflowing(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["nodes"][3]["scale"] = [1e200, 1e200, 1e200]
+        doc["nodes"][4]["scale"] = [1e200, 1e200, 1e200]
+    _refused(_edited(tmp_path, edit), "key nodes[4]", "overflows")
+
+
+def test_wrong_json_type(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["buffers"][0]["byteLength"] = {"a": 1}
+    _refused(_edited(tmp_path, edit), "key buffers[0].byteLength", "must be an integer, not an object")
+
+
+def test_json_nested_100000_deep(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["extras"], doc["extras_depth"] = "@DEEP@", 100_000
+    _refused(_edited(tmp_path, edit), "JSON chunk", "nested 100001 levels deep")
+
+
+def test_json_number_with_5000_digits(tmp_path: Path) -> None:
+    path = tmp_path / "avatar.gltf"
+    path.write_text('{"asset": {"version": "2.0"}, "nodes": [{"name": "a", "scale": [' + "7" * 5000 + ", 1, 1]}]}")
+    _refused(path, None, "invalid JSON")
+
+
+# --- files outside the glTF's folder, images -------------------------------------------------
+
+def _split_gltf(tmp_path: Path, uri: str) -> Path:
+    doc, binary = split_glb(CESIUM.read_bytes())
+    (tmp_path / "outside.bin").write_bytes(binary)  # a perfectly good buffer, but not the glTF's to read
+    folder = tmp_path / "avatar"
+    folder.mkdir()
+    doc["buffers"][0]["uri"] = uri
+    path = folder / "avatar.gltf"
+    path.write_bytes(dump_json(doc))
+    return path
+
+
+@pytest.mark.parametrize("uri", ["../outside.bin", "%2E%2E/outside.bin", "ABSOLUTE", "file://ABSOLUTE"])
+def test_buffer_uri_outside_the_folder_is_not_opened(tmp_path: Path, uri: str) -> None:
+    uri = uri.replace("ABSOLUTE", str(tmp_path / "outside.bin"))
+    _refused(_split_gltf(tmp_path, uri), "key buffers[0].uri", "leads outside the glTF's folder")
+
+
+def test_buffer_uri_through_a_symbolic_link_leading_outside(tmp_path: Path) -> None:
+    path = _split_gltf(tmp_path, "inside.bin")
+    os.symlink(tmp_path / "outside.bin", path.parent / "inside.bin")
+    _refused(path, "key buffers[0].uri", "leads outside the glTF's folder")
+
+
+def test_buffer_uri_inside_the_folder_loads(tmp_path: Path) -> None:
+    path = _split_gltf(tmp_path, "bin/avatar.bin")
+    (path.parent / "bin").mkdir()
+    (tmp_path / "outside.bin").rename(path.parent / "bin" / "avatar.bin")
+    assert load_gltf(path).n_vertices == 3273
+
+
+def _png_header(width: int, height: int) -> bytes:
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b""))
+
+
+def test_texture_claiming_too_many_pixels(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["images"][0] = {"uri": "data:image/png;base64," + base64.b64encode(_png_header(10000, 10000)).decode()}
+    _refused(_edited(tmp_path, edit), "images[0]", "10000 x 10000 pixels", "scale it down")
+
+
+def test_bad_base64_image(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["images"][0] = {"uri": "data:image/png;base64,A"}
+    _refused(_edited(tmp_path, edit), "key images[0].uri", "bad base64")
+
+
+def test_inspect_reports_a_malformed_file_instead_of_crashing(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["extensionsRequired"] = [1, "KHR_materials_unlit"]
+    report = summarize_avatar(_edited(tmp_path, edit))
+    assert report["extensions_required"] == ["KHR_materials_unlit"]
+    assert report["problems"] == ["key extensionsRequired[0]: must be a string, not an integer (1)"
+                                  + "; the file is damaged or breaks the glTF 2.0 rules: download or export it "
+                                  "again (the Khronos glTF Validator shows what is wrong)"]
+
+
+def test_limits_keep_real_avatars_bit_identical(tmp_path: Path) -> None:
+    # the checked reader returns exactly the arrays a plain read of the accessors gives
+    doc, binary = split_glb(CESIUM.read_bytes())
+    view = doc["bufferViews"][POSITION_VIEW]
+    start = view["byteOffset"] + doc["accessors"][POSITION]["byteOffset"]
+    raw = np.frombuffer(binary, np.float32, 3273 * 3, start).reshape(3273, 3)
+    from studyapp.render.gltf import _Doc
+
+    np.testing.assert_array_equal(_Doc(CESIUM).accessor(POSITION), raw)
