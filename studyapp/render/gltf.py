@@ -32,6 +32,14 @@ What is read
 Other compression (Draco), KTX2/WebP textures and any other *required*
 extension raise :class:`InputError` naming the extension; so does a web page saved as ``.glb``.
 
+Nothing a file claims is trusted before it is checked: the document's types and indices, the node hierarchy
+and external URIs by :mod:`studyapp.render.gltf_schema`; byte ranges here, where bytes are read (GLB chunks
+within the file, buffers at least ``byteLength`` long, buffer views within their buffer, accessors with
+their ``byteStride`` within their view, sparse parts within theirs, decoded meshopt sizes); then what the
+loader relies on: attribute types and counts equal to the vertex count, unsigned indices below it, joint
+indices below the skin's joint count, one invertible inverse bind matrix per joint, finite float data and
+node transforms. Each problem is one :class:`InputError` naming the file and the JSON place.
+
 >>> import tempfile, pathlib
 >>> from studyapp.render.avatar import build_default_avatar
 >>> path = pathlib.Path(tempfile.mkdtemp()) / "avatar.glb"
