@@ -65,8 +65,8 @@ from studyapp.motion.skeleton import Skeleton
 from studyapp.render.avatar import Avatar, vertex_normals
 from studyapp.render.gltf_schema import COMPONENT_TYPES as _COMPONENT_NAMES
 from studyapp.render.gltf_schema import DAMAGED as _DAMAGED
-from studyapp.render.gltf_schema import (MAX_FILE_BYTES, MAX_TEXTURE_PIXELS, MAX_VERTICES, check_document, confined_file,
-                                         node_parents, parse_json)
+from studyapp.render.gltf_schema import (MAX_DECODED_VIEW, MAX_FILE_BYTES, MAX_TEXTURE_PIXELS, MAX_VERTICES,
+                                         check_document, confined_file, node_parents, parse_json)
 
 GLB_MAGIC = 0x46546C67  # "glTF"
 CHUNK_JSON = 0x4E4F534A
@@ -220,9 +220,10 @@ class _Doc:
         if off + length > len(buf):
             raise InputError(self.path, f"{where}.byteLength",
                              "compressed data runs past the end of its buffer" + _DAMAGED)
-        if count * stride > MAX_FILE_BYTES:
+        if count * stride > MAX_DECODED_VIEW:
             raise InputError(self.path, f"{where}.count", f"{count} elements of {stride} bytes would decode to "
-                             f"{count * stride} bytes; at most {MAX_FILE_BYTES} are read" + _DAMAGED)
+                             f"{count * stride} bytes; at most {MAX_DECODED_VIEW} are decoded per buffer view"
+                             + _DAMAGED)
         try:
             data = decode_view(bytes(buf[off: off + length]), count, stride, ext["mode"], ext.get("filter", "NONE"))
         except MeshoptError as exc:
@@ -790,8 +791,8 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                     ignored.add(raw)
                     continue
                 at = f"{where}.targets[{ti}]"
-                d = attribute("POSITION", ("VEC3",), of=t, at=at).astype(np.float64) if "POSITION" in t else np.zeros((nv, 3))
-                dn = attribute("NORMAL", ("VEC3",), of=t, at=at).astype(np.float64) if "NORMAL" in t else np.zeros((nv, 3))
+                d, dn = (attribute(a, ("VEC3",), of=t, at=at).astype(np.float64) if a in t else np.zeros((nv, 3))
+                         for a in ("POSITION", "NORMAL"))
                 if blend is not None:
                     d = np.einsum("vij,vj->vi", blend[:, :3, :3], d)
                     dn = np.einsum("vij,vj->vi", blend[:, :3, :3], dn)

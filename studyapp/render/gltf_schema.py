@@ -50,6 +50,10 @@ MAX_NODE_DEPTH = 256
 #: Bytes of an avatar file or external buffer or image: far above any real-time avatar, and safely below
 #: the memory the loader then needs.
 MAX_FILE_BYTES = 512 * 2**20
+#: Bytes one meshopt-compressed buffer view may decode to: the stream can compress 64 to 1 and this
+#: decoder writes about a megabyte a second, so the bound keeps a crafted file from running for minutes
+#: (gltfpack's largest real view, 52 quantized morph targets of 300,000 vertices, fits).
+MAX_DECODED_VIEW = 64 * 2**20
 #: Vertices of the whole avatar: each costs ~1.3 kB of morph-target arrays (52 ARKit shapes, positions
 #: and normals), so this keeps a loaded avatar under ~700 MB; real-time avatars have under 100,000.
 MAX_VERTICES = 500_000
