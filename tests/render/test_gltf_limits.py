@@ -260,3 +260,14 @@ def test_limits_keep_real_avatars_bit_identical(tmp_path: Path) -> None:
     from studyapp.render.gltf import _Doc
 
     np.testing.assert_array_equal(_Doc(CESIUM).accessor(POSITION), raw)
+
+
+def test_meshopt_view_decoding_to_too_many_bytes(tmp_path: Path) -> None:
+    doc, binary = split_glb((SAMPLES / "avatars" / "RobotExpressive.gltfpack-khr.glb").read_bytes())
+    k, view = next((k, v) for k, v in enumerate(doc["bufferViews"])
+                   if "KHR_meshopt_compression" in v.get("extensions", {}))
+    # 2**26 elements of 4 bytes or more: 256 MiB or more from a few kB, refused before decoding
+    view["extensions"]["KHR_meshopt_compression"]["count"] = 2**26
+    path = tmp_path / "avatar.glb"
+    path.write_bytes(pack_glb(doc, binary))
+    _refused(path, f"key bufferViews[{k}].extensions.KHR_meshopt_compression.count", "at most 67108864 are decoded")
