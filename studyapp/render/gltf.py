@@ -585,12 +585,17 @@ def _inverse_binds(doc: _Doc, skin: int, n_joints: int) -> np.ndarray:
     return m
 
 
-def _check_invertible(m: np.ndarray, path: Path, where: str, item: str = "vertex") -> None:
-    """Refuse 3x3 transforms that cannot be inverted (skinning inverts them to carry normals)."""
+def _singular(m: np.ndarray) -> np.ndarray:
+    """Which of the ``(..., 3, 3)`` transforms cannot be inverted (relative to their own scale)."""
     with np.errstate(over="ignore", invalid="ignore"):
         det = np.linalg.det(m)
-        scale = np.abs(m).max(axis=(1, 2)) ** 3
-    bad = ~(np.isfinite(det) & (np.abs(det) > 1e-12 * scale))
+        scale = np.abs(m).max(axis=(-2, -1)) ** 3
+    return ~(np.isfinite(det) & (np.abs(det) > 1e-12 * scale))
+
+
+def _check_invertible(m: np.ndarray, path: Path, where: str, item: str = "vertex") -> None:
+    """Refuse 3x3 transforms that cannot be inverted (skinning inverts them to carry normals)."""
+    bad = _singular(m)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise InputError(path, f"key {where}", f"{item} {k}: singular transform (a zero scale or a degenerate "
@@ -734,6 +739,9 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                     ww = np.where(s > 0, ww / np.where(s > 0, s, 1), [[1.0, 0, 0, 0]])
                 blend = np.einsum("vk,vkij->vij", ww, bind_by_joint[jj])
             else:
+                if _singular(world[ni, :3, :3]):  # a part hidden by a zero scale stays hidden
+                    notes.append(f"{where}: its node {ni} has a zero scale, not drawn")
+                    continue
                 p = ni
                 while p >= 0 and p not in node_to_joint:
                     p = node_parent[p]

@@ -272,7 +272,7 @@ _DOCUMENT = obj({
                                                  "KHR_meshopt_compression": _MESHOPT})},
                              required=("buffer", "byteLength"))),
     "accessors": array(obj({"bufferView": index("bufferViews"), "byteOffset": _UINT,
-                            "componentType": one_of(*COMPONENT_TYPES), "count": _UINT,
+                            "componentType": one_of(*COMPONENT_TYPES), "count": integer(1),
                             "type": one_of(*ELEMENT_TYPES), "normalized": boolean, "sparse": _SPARSE},
                            required=("componentType", "count", "type"))),
     "nodes": array(obj({"children": array(index("nodes")), "mesh": index("meshes"), "skin": index("skins"),

@@ -271,3 +271,24 @@ def test_meshopt_view_decoding_to_too_many_bytes(tmp_path: Path) -> None:
     path = tmp_path / "avatar.glb"
     path.write_bytes(pack_glb(doc, binary))
     _refused(path, f"key bufferViews[{k}].extensions.KHR_meshopt_compression.count", "at most 67108864 are decoded")
+
+
+def test_accessor_of_zero_elements(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        prim = doc["meshes"][0]["primitives"][0]
+        prim["attributes"] = {"POSITION": POSITION}
+        del prim["indices"]
+        doc["accessors"][POSITION]["count"] = 0
+    _refused(_edited(tmp_path, edit), f"key accessors[{POSITION}].count", "0 is out of range (1 to")
+
+
+def test_a_part_hidden_by_a_zero_scale_is_left_out_not_a_crash(tmp_path: Path) -> None:
+    # the VRM 1.0 sample's rigid props hang from bones; hiding one with scale 0 must not stop the others
+    doc, binary = split_glb((SAMPLES / "avatars" / "VRMC_vrm_expressions_isBinary_Overrides.vrm").read_bytes())
+    whole = load_gltf(SAMPLES / "avatars" / "VRMC_vrm_expressions_isBinary_Overrides.vrm")
+    doc["nodes"][25]["scale"] = [0.0, 0.0, 0.0]  # "Meter Happy", mesh 2
+    path = tmp_path / "avatar.vrm"
+    path.write_bytes(pack_glb(doc, binary))
+    avatar = load_gltf(path)
+    assert "meshes[2].primitives[0]: its node 25 has a zero scale, not drawn" in avatar.notes
+    assert avatar.n_vertices == whole.n_vertices - 4
