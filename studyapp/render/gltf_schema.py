@@ -5,13 +5,14 @@ it by plain indexing, so everything it reads is checked here first, and each pro
 :class:`~studyapp.errors.InputError` naming the file, the JSON place (``key accessors[3].count``) and
 what is wrong:
 
-* :func:`parse_json`: UTF-8 JSON, nested at most :data:`MAX_JSON_DEPTH` deep (measured before parsing, so
-  a 100,000-deep ``[[[[...`` is refused without recursion), numbers of at most 4,300 digits.
+* :func:`parse_json`: UTF-8 JSON, nested at most :data:`MAX_JSON_DEPTH` deep and of at most
+  :data:`MAX_JSON_VALUES` values (both measured before parsing, so a 100,000-deep ``[[[[...`` is refused
+  without recursion), numbers of at most 4,300 digits.
 * :func:`check_document`: every field the loader reads has the right JSON type (integers are integers,
   not floats or booleans), every index points at an existing item (``accessors[3].bufferView`` <
   ``len(bufferViews)``), every number is finite, and enumerations (``componentType``, ``type``, ``mode``)
-  hold known values. Unknown keys and extensions the loader does not read are left alone (glTF is
-  extensible). VRM 0.x and 1.0 humanoid and expression fields are checked the same way.
+  hold known values; at most :data:`MAX_NODES` nodes. Unknown keys and extensions the loader does not
+  read are left alone (glTF is extensible). VRM 0.x and 1.0 humanoid and expression fields are checked the same way.
 * :func:`node_parents`: each node has at most one parent, no node is its own ancestor and the hierarchy
   is at most :data:`MAX_NODE_DEPTH` levels deep.
 * :func:`confined_file`: an external ``uri`` (buffer or image) names a regular file inside the glTF's own
@@ -45,6 +46,11 @@ from studyapp.errors import InputError
 
 #: JSON nesting accepted (a glTF document is ~6 deep; VRM extensions and extras a few more).
 MAX_JSON_DEPTH = 64
+#: Values (array items and object members) in the JSON: a large avatar has ~100,000; each costs Python
+#: ~100 bytes once parsed, so this bounds the parsed document to a few hundred MB.
+MAX_JSON_VALUES = 2_000_000
+#: Nodes: real avatars have a few hundred to a few thousand; each costs the loader ~0.1 ms.
+MAX_NODES = 16_384
 #: Levels of nodes below a scene root (real rigs, hair chains included, stay under 40).
 MAX_NODE_DEPTH = 256
 #: Bytes of an avatar file or external buffer or image: far above any real-time avatar, and safely below
@@ -71,16 +77,18 @@ ELEMENT_TYPES = ("SCALAR", "VEC2", "VEC3", "VEC4", "MAT2", "MAT3", "MAT4")
 _STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 
 
-def json_depth(text: bytes) -> int:
-    """Deepest nesting of ``[``/``{`` in JSON text, outside strings (linear time, no recursion).
+def json_shape(text: bytes) -> tuple[int, int]:
+    """Deepest nesting of ``[``/``{`` in JSON text and roughly how many values it holds (separators and
+    brackets), outside strings: linear time, no recursion, nothing parsed.
 
-    >>> json_depth(b'{"a": [1, {"b": "[[[["}]}')
-    3
+    >>> json_shape(b'{"a": [1, {"b": "[[[[,,,"}]}')
+    (3, 9)
     """
     bare = np.frombuffer(_STRING.sub(b'""', text), np.uint8)
-    step = (np.isin(bare, (ord("["), ord("{"))).astype(np.int64)
-            - np.isin(bare, (ord("]"), ord("}"))).astype(np.int64))
-    return int(np.cumsum(step).max(initial=0))
+    opens, closes = np.isin(bare, (ord("["), ord("{"))), np.isin(bare, (ord("]"), ord("}")))
+    depth = int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))
+    separators = np.count_nonzero(bare == ord(",")) + np.count_nonzero(bare == ord(":"))
+    return depth, int(opens.sum() + closes.sum() + separators)
 
 
 def parse_json(text: bytes, path: str | Path, where: str | None) -> object:
@@ -91,9 +99,11 @@ def parse_json(text: bytes, path: str | Path, where: str | None) -> object:
         decoded = text.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise InputError(path, where, f"the JSON is not UTF-8 text (byte {exc.start})" + DAMAGED) from None
-    depth = json_depth(text)
+    depth, values = json_shape(text)
     if depth > MAX_JSON_DEPTH:
         raise InputError(path, where, f"JSON nested {depth} levels deep; at most {MAX_JSON_DEPTH} are read" + DAMAGED)
+    if values > MAX_JSON_VALUES:
+        raise InputError(path, where, f"JSON of about {values} values; at most {MAX_JSON_VALUES} are read" + DAMAGED)
     try:
         return json.loads(decoded)
     except json.JSONDecodeError as exc:
@@ -294,6 +304,9 @@ def check_document(doc: object, path: str | Path) -> None:
     """Raise :class:`InputError` for the first field the loader reads that has a wrong type, index or value."""
     if not isinstance(doc, dict):
         raise InputError(path, None, f"the glTF JSON must be an object, not {_kind(doc)}" + DAMAGED)
+    nodes = doc.get("nodes")
+    if isinstance(nodes, list) and len(nodes) > MAX_NODES:
+        raise InputError(path, "key nodes", f"{len(nodes)} nodes; at most {MAX_NODES} are read" + DAMAGED)
     _DOCUMENT(doc, "", _Context(doc, path))
 
 

@@ -292,3 +292,15 @@ def test_a_part_hidden_by_a_zero_scale_is_left_out_not_a_crash(tmp_path: Path) -
     avatar = load_gltf(path)
     assert "meshes[2].primitives[0]: its node 25 has a zero scale, not drawn" in avatar.notes
     assert avatar.n_vertices == whole.n_vertices - 4
+
+
+def test_too_many_nodes(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["nodes"] += [{} for _ in range(20_000)]
+    _refused(_edited(tmp_path, edit), "key nodes", "20022 nodes; at most 16384")
+
+
+def test_json_with_too_many_values(tmp_path: Path) -> None:
+    def edit(doc: dict, b: bytearray) -> None:
+        doc["extras"] = [0] * 2_100_000
+    _refused(_edited(tmp_path, edit), "JSON chunk", "at most 2000000 are read")
