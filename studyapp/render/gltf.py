@@ -65,8 +65,8 @@ from studyapp.motion.skeleton import Skeleton
 from studyapp.render.avatar import Avatar, vertex_normals
 from studyapp.render.gltf_schema import COMPONENT_TYPES as _COMPONENT_NAMES
 from studyapp.render.gltf_schema import DAMAGED as _DAMAGED
-from studyapp.render.gltf_schema import (MAX_DECODED_VIEW, MAX_FILE_BYTES, MAX_TEXTURE_PIXELS, MAX_VERTICES,
-                                         check_document, confined_file, node_parents, parse_json)
+from studyapp.render.gltf_schema import (MAX_DECODED_VIEW, MAX_FILE_BYTES, MAX_TEXTURE_PIXELS, MAX_TEXTURE_PIXELS_TOTAL,
+                                         MAX_VERTICES, check_document, confined_file, node_parents, parse_json)
 
 GLB_MAGIC = 0x46546C67  # "glTF"
 CHUNK_JSON = 0x4E4F534A
@@ -780,6 +780,11 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                     tex_index = tex["source"]
                     if tex_index not in textures:
                         textures[tex_index] = doc.image(tex_index)
+                        pixels = sum(t.shape[0] * t.shape[1] for t in textures.values() if t is not None)
+                        if pixels > MAX_TEXTURE_PIXELS_TOTAL:
+                            raise InputError(path, f"key images[{tex_index}]", f"the textures used so far have "
+                                             f"{pixels} pixels; at most {MAX_TEXTURE_PIXELS_TOTAL} are read: "
+                                             "scale them down")
                 else:
                     notes.append(f"{where}: texture without a PNG/JPEG source ignored")
             uv = attribute("TEXCOORD_0", ("VEC2",)).astype(np.float64) if "TEXCOORD_0" in attrs else None

@@ -65,6 +65,9 @@ MAX_DECODED_VIEW = 64 * 2**20
 MAX_VERTICES = 500_000
 #: Pixels of one texture (8192 x 4096): decoding goes through 16-byte float pixels.
 MAX_TEXTURE_PIXELS = 8192 * 4096
+#: Pixels of all textures an avatar uses (each kept as 4 bytes a pixel while loading; real avatars have
+#: a dozen textures of 2048 x 2048 or fewer).
+MAX_TEXTURE_PIXELS_TOTAL = 4 * MAX_TEXTURE_PIXELS
 
 # what to do about a file that breaks the glTF rules (truncated download, buggy exporter)
 DAMAGED = ("; the file is damaged or breaks the glTF 2.0 rules: download or export it again "

@@ -304,3 +304,12 @@ def test_json_with_too_many_values(tmp_path: Path) -> None:
     def edit(doc: dict, b: bytearray) -> None:
         doc["extras"] = [0] * 2_100_000
     _refused(_edited(tmp_path, edit), "JSON chunk", "at most 2000000 are read")
+
+
+def test_textures_over_the_total_pixel_budget(monkeypatch: pytest.MonkeyPatch) -> None:
+    # CesiumMan's one real texture (1024 x 1024) against a budget lowered below it: the sum is checked as
+    # each texture is decoded, so many small-in-the-file, large-in-memory images stop at the budget
+    import studyapp.render.gltf as gltf
+
+    monkeypatch.setattr(gltf, "MAX_TEXTURE_PIXELS_TOTAL", 1024 * 1024 - 1)
+    _refused(CESIUM, "key images[0]", "1048576 pixels; at most 1048575")
