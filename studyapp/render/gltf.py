@@ -102,6 +102,8 @@ class _Doc:
     def __init__(self, path: Path, check: bool = True) -> None:
         self.path = path
         try:
+            if not path.is_file():  # a device or pipe (e.g. a link to /dev/zero) would be read forever
+                raise InputError(path, None, "not a regular file" if path.exists() else "avatar file not found")
             size = path.stat().st_size
             if size > MAX_FILE_BYTES:
                 raise InputError(path, None, f"avatar file has {size} bytes; at most {MAX_FILE_BYTES} are read")

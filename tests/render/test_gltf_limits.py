@@ -313,3 +313,16 @@ def test_textures_over_the_total_pixel_budget(monkeypatch: pytest.MonkeyPatch) -
 
     monkeypatch.setattr(gltf, "MAX_TEXTURE_PIXELS_TOTAL", 1024 * 1024 - 1)
     _refused(CESIUM, "key images[0]", "1048576 pixels; at most 1048575")
+
+
+@pytest.mark.parametrize("target", ["/dev/zero", "fifo"])
+def test_avatar_path_that_is_not_a_regular_file(tmp_path: Path, target: str) -> None:
+    # read_bytes() on either would never return (a FIFO blocks, /dev/zero never ends)
+    if target == "fifo":
+        os.mkfifo(tmp_path / "fifo")
+        target = str(tmp_path / "fifo")
+    path = tmp_path / "avatar.glb"
+    os.symlink(target, path)
+    _refused(path, None, "not a regular file")
+    report_error = pytest.raises(InputError, summarize_avatar, path)
+    assert "not a regular file" in str(report_error.value)
