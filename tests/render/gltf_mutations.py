@@ -232,7 +232,7 @@ def _vsize() -> int:
         return int(f.read().split()[0]) * resource.getpagesize()
 
 
-def run_case(path: Path, reader: Callable[[Path], object]) -> tuple[str, str]:
+def run_case(path: Path, reader: Callable[[Path], object], time_cap: float = TIME_CAP) -> tuple[str, str]:
     """Run ``reader(path)`` in a forked child with an address-space cap and a time limit.
 
     Returns ``(outcome, detail)``: ``OK``, ``INPUT_ERROR`` (detail: the message), ``TRACEBACK`` (the
@@ -267,7 +267,7 @@ def run_case(path: Path, reader: Callable[[Path], object]) -> tuple[str, str]:
         finally:
             os._exit(code)
     os.close(wfd)
-    deadline = time.monotonic() + TIME_CAP
+    deadline = time.monotonic() + time_cap
     chunks = []
     while True:
         left = deadline - time.monotonic()
@@ -275,7 +275,7 @@ def run_case(path: Path, reader: Callable[[Path], object]) -> tuple[str, str]:
             os.kill(pid, signal.SIGKILL)
             os.waitpid(pid, 0)
             os.close(rfd)
-            return HANG, f"no answer in {TIME_CAP:.0f} s"
+            return HANG, f"no answer in {time_cap:.0f} s"
         ready, _, _ = select.select([rfd], [], [], left)
         if ready:
             data = os.read(rfd, 1 << 16)

@@ -81,6 +81,30 @@ def test_mutated_avatars_never_crash_hang_or_blow_up(tmp_path: Path) -> None:
     assert counts[INPUT_ERROR] > CASES // 3 and counts[OK] > 0, counts
 
 
+def _blow_up(path: Path) -> None:
+    import numpy as np
+
+    np.ones(2 * 2**30, np.uint8)  # 2 GiB, over the 1.5 GB cap
+
+
+def _hang(path: Path) -> None:
+    import time
+
+    time.sleep(60)
+
+
+def _crash(path: Path) -> None:
+    [][1]
+
+
+def test_the_harness_sees_blow_ups_hangs_and_tracebacks(tmp_path: Path) -> None:
+    assert run_case(tmp_path, _blow_up)[0] == MEMORY
+    assert run_case(tmp_path, _hang, time_cap=1.0)[0] == HANG
+    outcome, detail = run_case(tmp_path, _crash)
+    assert outcome == TRACEBACK and detail.startswith("IndexError at test_gltf_fuzz.py:")
+    assert run_case(AVATARS / "Fox.glb", _read) == (OK, "")
+
+
 def test_mutations_are_seeded(tmp_path: Path) -> None:
     raw = (AVATARS / "Fox.glb").read_bytes()
     first = [mutate(raw, random.Random(k)) for k in range(20)]
