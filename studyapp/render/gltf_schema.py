@@ -77,7 +77,6 @@ COMPONENT_TYPES = {5120: "byte", 5121: "unsigned byte", 5122: "short", 5123: "un
                    5125: "unsigned int", 5126: "float"}
 ELEMENT_TYPES = ("SCALAR", "VEC2", "VEC3", "VEC4", "MAT2", "MAT3", "MAT4")
 
-_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 
 
 def json_shape(text: bytes) -> tuple[int, int]:
@@ -87,11 +86,23 @@ def json_shape(text: bytes) -> tuple[int, int]:
     >>> json_shape(b'{"a": [1, {"b": "[[[[,,,"}]}')
     (3, 9)
     """
-    bare = np.frombuffer(_STRING.sub(b'""', text), np.uint8)
-    opens, closes = np.isin(bare, (ord("["), ord("{"))), np.isin(bare, (ord("]"), ord("}")))
+    b = np.frombuffer(text, np.uint8)
+    n = len(b)
+    # a quote ends or starts a string unless an odd run of backslashes escapes it
+    not_bs = np.flatnonzero(b != ord("\\"))
+    last = np.full(n + 1, -1, np.int64)  # last[i + 1]: index of the last non-backslash at or before i
+    last[not_bs + 1] = not_bs
+    last = np.maximum.accumulate(last)
+    quotes = np.flatnonzero(b == ord('"'))
+    run = quotes - 1 - last[quotes]  # backslashes right before each quote
+    toggles = np.zeros(n, np.int64)
+    toggles[quotes[run % 2 == 0]] = 1
+    outside = np.cumsum(toggles) % 2 == 0  # brackets and separators are never quotes themselves
+    opens = outside & ((b == ord("[")) | (b == ord("{")))
+    closes = outside & ((b == ord("]")) | (b == ord("}")))
+    separators = outside & ((b == ord(",")) | (b == ord(":")))
     depth = int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))
-    separators = np.count_nonzero(bare == ord(",")) + np.count_nonzero(bare == ord(":"))
-    return depth, int(opens.sum() + closes.sum() + separators)
+    return depth, int(opens.sum() + closes.sum() + separators.sum())
 
 
 def parse_json(text: bytes, path: str | Path, where: str | None) -> object:

@@ -326,3 +326,17 @@ def test_avatar_path_that_is_not_a_regular_file(tmp_path: Path, target: str) -> 
     _refused(path, None, "not a regular file")
     report_error = pytest.raises(InputError, summarize_avatar, path)
     assert "not a regular file" in str(report_error.value)
+
+
+def test_json_shape_skips_strings_with_escapes_in_linear_time() -> None:
+    import time
+
+    from studyapp.render.gltf_schema import json_shape
+
+    # an escaped quote stays inside its string; an escaped backslash before a quote ends it
+    assert json_shape(rb'{"a": "x\"[[[", "b": ["y\\", 1]}') == (2, 8)
+    assert json_shape(rb'["\\\"]]]"]') == (1, 2)
+    # a megabyte of escaped quotes (a regular expression over strings retries from every quote: quadratic)
+    start = time.perf_counter()
+    assert json_shape(b'["' + b'\\"' * 500_000 + b'"]') == (1, 2)
+    assert time.perf_counter() - start < 2.0
