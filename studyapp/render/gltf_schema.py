@@ -46,6 +46,8 @@ from studyapp.errors import InputError
 
 #: JSON nesting accepted (a glTF document is ~6 deep; VRM extensions and extras a few more).
 MAX_JSON_DEPTH = 64
+#: Bytes of the JSON text (a .gltf may embed its buffers as base64 ``data:`` URIs; a .glb's JSON is small).
+MAX_JSON_BYTES = 128 * 2**20
 #: Values (array items and object members) in the JSON: a large avatar has ~100,000; each costs Python
 #: ~100 bytes once parsed, so this bounds the parsed document to a few hundred MB.
 MAX_JSON_VALUES = 2_000_000
@@ -79,30 +81,40 @@ ELEMENT_TYPES = ("SCALAR", "VEC2", "VEC3", "VEC4", "MAT2", "MAT3", "MAT4")
 
 
 
-def json_shape(text: bytes) -> tuple[int, int]:
+def json_shape(text: bytes, chunk: int = 1 << 22) -> tuple[int, int]:
     """Deepest nesting of ``[``/``{`` in JSON text and roughly how many values it holds (separators and
-    brackets), outside strings: linear time, no recursion, nothing parsed.
+    brackets), outside strings: linear time, no recursion, nothing parsed, read ``chunk`` bytes at a time
+    so the scan itself needs little memory.
 
     >>> json_shape(b'{"a": [1, {"b": "[[[[,,,"}]}')
     (3, 9)
     """
-    b = np.frombuffer(text, np.uint8)
-    n = len(b)
-    # a quote ends or starts a string unless an odd run of backslashes escapes it
-    not_bs = np.flatnonzero(b != ord("\\"))
-    last = np.full(n + 1, -1, np.int64)  # last[i + 1]: index of the last non-backslash at or before i
-    last[not_bs + 1] = not_bs
-    last = np.maximum.accumulate(last)
-    quotes = np.flatnonzero(b == ord('"'))
-    run = quotes - 1 - last[quotes]  # backslashes right before each quote
-    toggles = np.zeros(n, np.int64)
-    toggles[quotes[run % 2 == 0]] = 1
-    outside = np.cumsum(toggles) % 2 == 0  # brackets and separators are never quotes themselves
-    opens = outside & ((b == ord("[")) | (b == ord("{")))
-    closes = outside & ((b == ord("]")) | (b == ord("}")))
-    separators = outside & ((b == ord(",")) | (b == ord(":")))
-    depth = int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))
-    return depth, int(opens.sum() + closes.sum() + separators.sum())
+    depth = deepest = values = 0
+    inside = False  # within a string at the chunk's start
+    run = 0  # backslashes just before the chunk's start
+    for start in range(0, len(text), chunk):
+        b = np.frombuffer(text, np.uint8, min(chunk, len(text) - start), start)
+        n = len(b)
+        # a quote ends or starts a string unless an odd run of backslashes escapes it
+        is_bs = b == ord("\\")
+        last = np.where(is_bs, -1, np.arange(n, dtype=np.int64))
+        last = np.maximum.accumulate(last)  # last non-backslash at or before each byte (-1: none)
+        quotes = np.flatnonzero(b == ord('"'))
+        before = np.where(quotes > 0, last[np.maximum(quotes - 1, 0)], -1)
+        runs = quotes - 1 - before + np.where(before < 0, run, 0)
+        toggles = np.zeros(n, np.uint8)
+        toggles[quotes[runs % 2 == 0]] = 1
+        parity = np.bitwise_xor.accumulate(toggles) ^ np.uint8(inside)
+        outside = parity == 0  # brackets and separators are never quotes themselves
+        step = (outside & ((b == ord("[")) | (b == ord("{")))).astype(np.int64)
+        closes = outside & ((b == ord("]")) | (b == ord("}")))
+        level = depth + np.cumsum(step - closes)
+        deepest = max(deepest, int(level.max(initial=depth)))
+        depth = int(level[-1]) if n else depth
+        values += int(step.sum() + closes.sum() + (outside & ((b == ord(",")) | (b == ord(":")))).sum())
+        inside = bool(parity[-1]) if n else inside
+        run = n - 1 - int(last[-1]) + (run if last[-1] < 0 else 0) if n else run
+    return deepest, values
 
 
 def parse_json(text: bytes, path: str | Path, where: str | None) -> object:
@@ -113,6 +125,9 @@ def parse_json(text: bytes, path: str | Path, where: str | None) -> object:
         decoded = text.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise InputError(path, where, f"the JSON is not UTF-8 text (byte {exc.start})" + DAMAGED) from None
+    if len(text) > MAX_JSON_BYTES:
+        raise InputError(path, where, f"{len(text)} bytes of JSON; at most {MAX_JSON_BYTES} are read (a .gltf "
+                         "with large embedded data: URIs converts to a .glb, e.g. with gltfpack or Blender)")
     depth, values = json_shape(text)
     if depth > MAX_JSON_DEPTH:
         raise InputError(path, where, f"JSON nested {depth} levels deep; at most {MAX_JSON_DEPTH} are read" + DAMAGED)

@@ -340,3 +340,44 @@ def test_json_shape_skips_strings_with_escapes_in_linear_time() -> None:
     start = time.perf_counter()
     assert json_shape(b'["' + b'\\"' * 500_000 + b'"]') == (1, 2)
     assert time.perf_counter() - start < 2.0
+
+
+def test_json_shape_is_the_same_read_in_small_chunks() -> None:
+    import random
+
+    from studyapp.render.gltf_schema import json_shape
+
+    rng = random.Random(3)
+    alphabet = b'[]{},:"\\\\ab'
+    for _ in range(300):
+        text = bytes(rng.choice(alphabet) for _ in range(rng.randrange(1, 60)))
+        whole = json_shape(text)
+        for chunk in (1, 2, 3, 7):
+            assert json_shape(text, chunk) == whole, (text, chunk)
+    # and on a real document
+    doc, _ = split_glb(CESIUM.read_bytes())
+    text = dump_json(doc)
+    assert json_shape(text, 1000) == json_shape(text) == (6, 3884)
+
+
+def test_json_shape_depth_matches_the_parsed_document() -> None:
+    import json
+    import random
+
+    from studyapp.render.gltf_schema import json_shape
+
+    rng = random.Random(5)
+
+    def value(level: int) -> tuple[object, int]:
+        kind = rng.random()
+        if level > 6 or kind < 0.3:
+            return "".join(rng.choice('ab"\\[]{},:') for _ in range(rng.randrange(6))), 0
+        items = [value(level + 1) for _ in range(rng.randrange(4))]
+        deepest = 1 + max((d for _, d in items), default=0)
+        if kind < 0.65:
+            return [v for v, _ in items], deepest
+        return {f"k{i}\\\"[": v for i, (v, _) in enumerate(items)}, deepest
+
+    for _ in range(200):
+        doc, deepest = value(0)
+        assert json_shape(json.dumps(doc).encode(), 5)[0] == deepest, json.dumps(doc)
