@@ -25,12 +25,19 @@ _NOT_MEASURED = "facing not measured"
 
 
 def _file_format(gltf: dict, path: Path) -> str:
-    ext = gltf.get("extensions", {})
+    ext = gltf.get("extensions")
+    ext = ext if isinstance(ext, dict) else {}
     if "VRMC_vrm" in ext:
         return "VRM 1.0"
     if "VRM" in ext:
         return "VRM 0.x"
     return "glTF" if path.suffix.lower() == ".gltf" else "GLB"
+
+
+def _names(gltf: dict, key: str) -> list[str]:
+    """A list of extension names, sorted; the strings only (a file that failed to load may hold anything)."""
+    value = gltf.get(key)
+    return sorted(x for x in value if isinstance(x, str)) if isinstance(value, list) else []
 
 
 def _target_names(gltf: dict) -> list[str]:
@@ -64,8 +71,8 @@ def summarize_avatar(path: str | Path, bone_map: dict[str, str] | None = None) -
     try:
         avatar = load_gltf(path, bone_map=bone_map)
     except InputError as exc:
-        report["extensions_used"] = sorted(gltf.get("extensionsUsed", []))
-        report["extensions_required"] = sorted(gltf.get("extensionsRequired", []))
+        report["extensions_used"] = _names(gltf, "extensionsUsed")
+        report["extensions_required"] = _names(gltf, "extensionsRequired")
         report["problems"] = [f"{exc.where}: {exc.problem}" if exc.where else exc.problem]
         return report
     sk = avatar.skeleton

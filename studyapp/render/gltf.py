@@ -32,6 +32,14 @@ What is read
 Other compression (Draco), KTX2/WebP textures and any other *required*
 extension raise :class:`InputError` naming the extension; so does a web page saved as ``.glb``.
 
+Nothing a file claims is trusted before it is checked: the document's types and indices, the node hierarchy
+and external URIs by :mod:`studyapp.render.gltf_schema`; byte ranges here, where bytes are read (GLB chunks
+within the file, buffers at least ``byteLength`` long, buffer views within their buffer, accessors with
+their ``byteStride`` within their view, sparse parts within theirs, decoded meshopt sizes); then what the
+loader relies on: attribute types and counts equal to the vertex count, unsigned indices below it, joint
+indices below the skin's joint count, one invertible inverse bind matrix per joint, finite float data and
+node transforms. Each problem is one :class:`InputError` naming the file and the JSON place.
+
 >>> import tempfile, pathlib
 >>> from studyapp.render.avatar import build_default_avatar
 >>> path = pathlib.Path(tempfile.mkdtemp()) / "avatar.glb"
@@ -46,7 +54,6 @@ import io
 import json
 import struct
 from pathlib import Path
-from urllib.parse import unquote
 
 import numpy as np
 
@@ -56,6 +63,10 @@ from studyapp.motion.fk import rest_global_transforms
 from studyapp.motion.rotations import matrix_to_quat, quat_to_matrix
 from studyapp.motion.skeleton import Skeleton
 from studyapp.render.avatar import Avatar, vertex_normals
+from studyapp.render.gltf_schema import COMPONENT_TYPES as _COMPONENT_NAMES
+from studyapp.render.gltf_schema import DAMAGED as _DAMAGED
+from studyapp.render.gltf_schema import (MAX_DECODED_VIEW, MAX_FILE_BYTES, MAX_TEXTURE_PIXELS, MAX_TEXTURE_PIXELS_TOTAL,
+                                         MAX_VERTICES, check_document, confined_file, node_parents, parse_json)
 
 GLB_MAGIC = 0x46546C67  # "glTF"
 CHUNK_JSON = 0x4E4F534A
@@ -72,9 +83,6 @@ _READABLE = {"EXT_meshopt_compression", "KHR_meshopt_compression", "KHR_mesh_qua
              "KHR_materials_unlit", "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_ior",
              "KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_lights_punctual", "VRM", "VRMC_vrm",
              "VRMC_materials_mtoon", "VRMC_springBone", "VRMC_node_constraint"}
-# what to do about a file that breaks the glTF rules (truncated download, buggy exporter)
-_DAMAGED = ("; the file is damaged or breaks the glTF 2.0 rules: download or export it again "
-            "(the Khronos glTF Validator shows what is wrong)")
 _FIX = ("re-export the avatar without it (Blender's glTF exporter with Draco off; gltfpack without -tc: "
         "its meshopt compression is read)")
 _MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
@@ -85,11 +93,20 @@ _MESHOPT = ("EXT_meshopt_compression", "KHR_meshopt_compression")
 # ---------------------------------------------------------------------------------------------
 
 class _Doc:
-    """A parsed glTF document with its binary buffers, decoding accessors on demand."""
+    """A parsed glTF document with its binary buffers, decoding accessors on demand.
+
+    The document passes :func:`~studyapp.render.gltf_schema.check_document` (types and indices) before
+    anything else reads it; byte ranges are checked here, where the bytes are read.
+    """
 
     def __init__(self, path: Path, check: bool = True) -> None:
         self.path = path
         try:
+            if not path.is_file():  # a device or pipe (e.g. a link to /dev/zero) would be read forever
+                raise InputError(path, None, "not a regular file" if path.exists() else "avatar file not found")
+            size = path.stat().st_size
+            if size > MAX_FILE_BYTES:
+                raise InputError(path, None, f"avatar file has {size} bytes; at most {MAX_FILE_BYTES} are read")
             raw = path.read_bytes()
         except OSError as exc:
             raise InputError(path, None, f"cannot read avatar file: {exc.strerror or exc}") from None
@@ -104,20 +121,21 @@ class _Doc:
                              "download the model file itself, not the web page showing it")
         else:
             try:
-                self.gltf = json.loads(raw.decode("utf-8-sig"))
+                raw.decode("utf-8-sig")
             except UnicodeDecodeError:
                 raise InputError(path, None, "not a glTF file: neither GLB ('glTF' magic) nor UTF-8 JSON") from None
-            except json.JSONDecodeError as exc:
-                raise InputError(path, f"line {exc.lineno}, column {exc.colno}", f"invalid JSON: {exc.msg}") from None
+            self.gltf = parse_json(raw, path, None)
         if not isinstance(self.gltf, dict):
             raise InputError(path, None, "the glTF JSON must be an object")
-        version = str(self.gltf.get("asset", {}).get("version", ""))
+        asset = self.gltf.get("asset", {})
+        version = str(asset.get("version", "")) if isinstance(asset, dict) else ""
         if not version.startswith("2"):
             raise InputError(path, "key asset.version", f"only glTF 2.0 is supported, file says {version or 'nothing'!r}")
         self._cache: dict = {}
         if not check:  # the JSON only (for reports on files that cannot be loaded)
             self.buffers = []
             return
+        check_document(self.gltf, path)
         required = set(self.gltf.get("extensionsRequired", []))
         used = required | set(self.gltf.get("extensionsUsed", []))
         for ext in sorted(used):
@@ -131,7 +149,7 @@ class _Doc:
                                  "re-export the avatar with PNG or JPEG textures (gltfpack without -tc)")
         self.buffers = [self._load_buffer(i, b, bin_chunk) for i, b in enumerate(self.gltf.get("buffers", []))]
 
-    def _parse_glb(self, raw: bytes) -> tuple[dict, bytes | None]:
+    def _parse_glb(self, raw: bytes) -> tuple[object, bytes | None]:
         if len(raw) < 20:
             raise InputError(self.path, "header", "GLB file is truncated" + _DAMAGED)
         magic, version, length = struct.unpack_from("<III", raw, 0)
@@ -145,14 +163,12 @@ class _Doc:
         binary = None
         while pos + 8 <= length:
             clen, ctype = struct.unpack_from("<II", raw, pos)
+            if pos + 8 + clen > length:
+                raise InputError(self.path, f"byte {pos}", f"GLB chunk of {clen} bytes runs past the end of the "
+                                 f"file ({length} bytes)" + _DAMAGED)
             data = raw[pos + 8: pos + 8 + clen]
-            if len(data) != clen:
-                raise InputError(self.path, f"byte {pos}", "GLB chunk runs past the end of the file" + _DAMAGED)
-            if ctype == CHUNK_JSON:
-                try:
-                    doc = json.loads(data.decode("utf-8"))
-                except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                    raise InputError(self.path, "JSON chunk", f"invalid JSON: {exc}" + _DAMAGED) from None
+            if ctype == CHUNK_JSON and doc is None:
+                doc = parse_json(data, self.path, "JSON chunk")
             elif ctype == CHUNK_BIN and binary is None:
                 binary = bytes(data)
             pos += 8 + clen  # chunk lengths are 4-byte aligned by the spec
@@ -160,45 +176,38 @@ class _Doc:
             raise InputError(self.path, "header", "GLB has no JSON chunk" + _DAMAGED)
         return doc, binary
 
-    def _load_buffer(self, i: int, spec: dict, bin_chunk: bytes | None) -> bytes:
+    def _load_buffer(self, i: int, spec: dict, bin_chunk: bytes | None) -> memoryview:
         uri = spec.get("uri")
         where = f"key buffers[{i}]"
         if uri is None and (i > 0 or bin_chunk is None) and set(_MESHOPT) & set(spec.get("extensions", {})):
-            return b""  # placeholder for meshopt-compressed views: never read, they are decoded
+            return memoryview(b"")  # placeholder for meshopt-compressed views: never read, they are decoded
         if uri is None:
             if bin_chunk is None:
                 raise InputError(self.path, where, "buffer has no uri and the file has no GLB binary chunk" + _DAMAGED)
             data = bin_chunk
         elif uri.startswith("data:"):
-            head, _, payload = uri.partition(",")
-            if ";base64" not in head:
-                raise InputError(self.path, where, "only base64 data URIs are supported")
-            try:
-                data = base64.b64decode(payload, validate=False)
-            except ValueError as exc:
-                raise InputError(self.path, where, f"bad base64 data: {exc}") from None
+            data = _data_uri(uri, self.path, f"{where}.uri")
         else:
-            file = self.path.parent / unquote(uri)
-            if not file.is_file():
-                raise InputError(self.path, where, f"buffer file {uri!r} not found next to the glTF ({file})")
-            data = file.read_bytes()
-        need = int(spec.get("byteLength", len(data)))
+            data = confined_file(self.path, uri, f"{where}.uri").read_bytes()
+        need = spec.get("byteLength", len(data))
         if len(data) < need:
-            raise InputError(self.path, where, f"buffer has {len(data)} bytes, byteLength says {need}" + _DAMAGED)
-        return data
+            raise InputError(self.path, f"{where}.byteLength",
+                             f"buffer has {len(data)} bytes, byteLength says {need}" + _DAMAGED)
+        return memoryview(data)[:need]
 
-    def view_bytes(self, index: int) -> tuple[bytes, int, int | None]:
-        views = self.gltf.get("bufferViews", [])
-        if not 0 <= index < len(views):
-            raise InputError(self.path, f"bufferView {index}", "bufferView index out of range" + _DAMAGED)
-        v = views[index]
+    def view_bytes(self, index: int) -> tuple[memoryview, int | None]:
+        """The bytes of buffer view ``index`` (decoded when meshopt-compressed) and its ``byteStride``."""
+        v = self.gltf["bufferViews"][index]
         if set(_MESHOPT) & set(v.get("extensions", {})):
-            return self._meshopt_view(index), 0, v.get("byteStride")
+            return self._meshopt_view(index), v.get("byteStride")
         buf = self.buffers[v["buffer"]]
-        off = int(v.get("byteOffset", 0))
-        return buf, off, v.get("byteStride")
+        off, length = v.get("byteOffset", 0), v["byteLength"]
+        if off + length > len(buf):
+            raise InputError(self.path, f"key bufferViews[{index}].byteLength",
+                             f"bytes {off} to {off + length} of buffer {v['buffer']}, which has {len(buf)}" + _DAMAGED)
+        return buf[off: off + length], v.get("byteStride")
 
-    def _meshopt_view(self, index: int) -> bytes:
+    def _meshopt_view(self, index: int) -> memoryview:
         """The uncompressed bytes of a meshopt-compressed buffer view (EXT or KHR; decoded once)."""
         if ("view", index) in self._cache:
             return self._cache[("view", index)]
@@ -208,42 +217,49 @@ class _Doc:
         name = next(n for n in _MESHOPT if n in exts)
         ext = exts[name]
         where = f"key bufferViews[{index}].extensions.{name}"
+        buf = self.buffers[ext["buffer"]]
+        off, length, count, stride = ext.get("byteOffset", 0), ext["byteLength"], ext["count"], ext["byteStride"]
+        if off + length > len(buf):
+            raise InputError(self.path, f"{where}.byteLength",
+                             "compressed data runs past the end of its buffer" + _DAMAGED)
+        if count * stride > MAX_DECODED_VIEW:
+            raise InputError(self.path, f"{where}.count", f"{count} elements of {stride} bytes would decode to "
+                             f"{count * stride} bytes; at most {MAX_DECODED_VIEW} are decoded per buffer view"
+                             + _DAMAGED)
         try:
-            buf = self.buffers[int(ext["buffer"])]
-            off, length = int(ext.get("byteOffset", 0)), int(ext["byteLength"])
-            if off + length > len(buf):
-                raise MeshoptError("compressed data runs past the end of its buffer")
-            data = decode_view(bytes(buf[off: off + length]), int(ext["count"]), int(ext["byteStride"]),
-                               str(ext.get("mode")), str(ext.get("filter", "NONE")))
-        except (KeyError, IndexError, TypeError) as exc:
-            raise InputError(self.path, where, f"missing or bad {exc}" + _DAMAGED) from None
+            data = decode_view(bytes(buf[off: off + length]), count, stride, ext["mode"], ext.get("filter", "NONE"))
         except MeshoptError as exc:
             raise InputError(self.path, where, f"cannot decode: {exc}" + _DAMAGED) from None
-        self._cache[("view", index)] = data
-        return data
+        self._cache[("view", index)] = memoryview(data)
+        return self._cache[("view", index)]
+
     def accessor(self, index: int) -> np.ndarray:
-        """Decode accessor ``index`` to an ``(count, width)`` array (floats when ``normalized``)."""
+        """Decode accessor ``index`` to an ``(count, width)`` array (floats when ``normalized``).
+
+        Every byte range is checked against the bytes really there before it is read, and float data must
+        be finite.
+        """
         if index in self._cache:
             return self._cache[index]
-        accs = self.gltf.get("accessors", [])
-        if not 0 <= index < len(accs):
-            raise InputError(self.path, f"accessor {index}", "accessor index out of range" + _DAMAGED)
-        a = accs[index]
-        where = f"accessors[{index}]"
-        try:
-            dtype = np.dtype(_COMPONENT[a["componentType"]])
-            width = _WIDTH[a["type"]]
-            count = int(a["count"])
-        except KeyError as exc:
-            raise InputError(self.path, f"key {where}", f"missing or unknown {exc}" + _DAMAGED) from None
+        a = self.gltf["accessors"][index]
+        where = f"key accessors[{index}]"
+        dtype = np.dtype(_COMPONENT[a["componentType"]])
+        width = _WIDTH[a["type"]]
+        count = a["count"]
+        elem = dtype.itemsize * width
         if "bufferView" in a:
-            buf, off, stride = self.view_bytes(a["bufferView"])
-            off += int(a.get("byteOffset", 0))
-            elem = dtype.itemsize * width
-            stride = int(stride or elem)
+            buf, stride = self.view_bytes(a["bufferView"])
+            off = a.get("byteOffset", 0)
+            stride = stride or elem
+            if stride < elem:
+                raise InputError(self.path, f"key bufferViews[{a['bufferView']}].byteStride",
+                                 f"stride {stride} is shorter than one element of accessor {index} ({elem} bytes)"
+                                 + _DAMAGED)
             end = off + stride * (count - 1) + elem if count else off
             if end > len(buf):
-                raise InputError(self.path, f"key {where}", "accessor reads past the end of its buffer" + _DAMAGED)
+                raise InputError(self.path, f"{where}.count",
+                                 f"{count} elements of {elem} bytes (stride {stride}) from byte {off} need {end} "
+                                 f"bytes; bufferView {a['bufferView']} has {len(buf)}" + _DAMAGED)
             if stride == elem:
                 out = np.frombuffer(buf, dtype, count * width, off).reshape(count, width)
             else:
@@ -252,20 +268,27 @@ class _Doc:
                 out = rows[idx].view(dtype).reshape(count, width)
             out = out.copy()
         else:
+            if count > MAX_VERTICES:
+                raise InputError(self.path, f"{where}.count", f"{count} elements without a bufferView; "
+                                 f"at most {MAX_VERTICES} are read" + _DAMAGED)
             out = np.zeros((count, width), dtype)
         sparse = a.get("sparse")
         if sparse:
-            n = int(sparse["count"])
+            n = sparse["count"]
+            if n > count:
+                raise InputError(self.path, f"{where}.sparse.count",
+                                 f"{n} sparse values for an accessor of {count} elements" + _DAMAGED)
             si, sv = sparse["indices"], sparse["values"]
-            buf, off, _ = self.view_bytes(si["bufferView"])
-            ind = np.frombuffer(buf, _COMPONENT[si["componentType"]], n, off + int(si.get("byteOffset", 0)))
-            buf, off, _ = self.view_bytes(sv["bufferView"])
-            vals = np.frombuffer(buf, dtype, n * width, off + int(sv.get("byteOffset", 0))).reshape(n, width)
-            ind = ind.astype(np.int64)
+            ind = self._sparse_part(si, np.dtype(_COMPONENT[si["componentType"]]), n, 1, f"{where}.sparse.indices")
+            vals = self._sparse_part(sv, dtype, n, width, f"{where}.sparse.values")
+            ind = ind.reshape(-1).astype(np.int64)
             if n and int(ind.max()) >= count:
-                raise InputError(self.path, f"key {where}.sparse", "sparse index beyond the accessor count" + _DAMAGED)
+                raise InputError(self.path, f"{where}.sparse", "sparse index beyond the accessor count" + _DAMAGED)
             out = out.copy()
-            out[ind.astype(np.int64)] = vals
+            out[ind] = vals
+        if dtype.kind == "f" and not np.isfinite(out).all():
+            bad = int(np.flatnonzero(~np.isfinite(out).all(axis=1))[0])
+            raise InputError(self.path, where, f"element {bad} is not a finite number (NaN or infinity)" + _DAMAGED)
         if a.get("normalized") and dtype.kind in "iu":
             info = np.iinfo(dtype)
             out = out.astype(np.float32) / info.max
@@ -274,32 +297,76 @@ class _Doc:
         self._cache[index] = out
         return out
 
+    def _sparse_part(self, spec: dict, dtype: np.dtype, n: int, width: int, where: str) -> np.ndarray:
+        """``n`` elements of a sparse accessor's indices or values, inside their buffer view."""
+        buf, _ = self.view_bytes(spec["bufferView"])
+        off = spec.get("byteOffset", 0)
+        if off + n * width * dtype.itemsize > len(buf):
+            raise InputError(self.path, where, f"{n} elements from byte {off} run past the end of bufferView "
+                             f"{spec['bufferView']} ({len(buf)} bytes)" + _DAMAGED)
+        return np.frombuffer(buf, dtype, n * width, off).reshape(n, width)
+
+    def checked(self, index: int, where: str, types: tuple[str, ...], count: int | None = None,
+                integer: bool = False) -> np.ndarray:
+        """Accessor ``index`` used as ``where`` (a primitive's attribute, indices, a skin's matrices): its
+        element type must be one of ``types``, its count ``count`` when given, and (``integer``) its
+        components unsigned integers."""
+        a = self.gltf["accessors"][index]
+        if a["type"] not in types:
+            raise InputError(self.path, f"key {where}", f"accessor {index} holds {a['type']}, not "
+                             + " or ".join(types) + _DAMAGED)
+        if integer and a["componentType"] not in (5121, 5123, 5125):
+            raise InputError(self.path, f"key {where}", f"accessor {index} holds "
+                             f"{_COMPONENT_NAMES[a['componentType']]} values, not unsigned integers" + _DAMAGED)
+        if count is not None and a["count"] != count:
+            raise InputError(self.path, f"key {where}",
+                             f"accessor {index} has {a['count']} elements, the primitive has {count} vertices"
+                             + _DAMAGED)
+        return self.accessor(index)
+
     def image(self, index: int) -> np.ndarray | None:
         """An image as ``(H, W, 4) uint8`` (top row first), or None when it cannot be decoded."""
         imgs = self.gltf.get("images", [])
         if not 0 <= index < len(imgs):
             return None
         img = imgs[index]
+        where = f"key images[{index}]"
         if "bufferView" in img:
-            buf, off, _ = self.view_bytes(img["bufferView"])
-            length = int(self.gltf["bufferViews"][img["bufferView"]]["byteLength"])
-            data = buf[off: off + length]
+            data = bytes(self.view_bytes(img["bufferView"])[0])
         elif "uri" in img:
             uri = img["uri"]
             if uri.startswith("data:"):
-                data = base64.b64decode(uri.partition(",")[2])
+                data = _data_uri(uri, self.path, f"{where}.uri")
             else:
-                f = self.path.parent / unquote(uri)
-                if not f.is_file():
-                    raise InputError(self.path, f"key images[{index}]", f"texture file {uri!r} not found")
-                data = f.read_bytes()
+                data = confined_file(self.path, uri, f"{where}.uri").read_bytes()
         else:
             return None
         return decode_image(data, self.path, f"images[{index}]")
 
 
+def _data_uri(uri: str, path: Path, where: str) -> bytes:
+    """The bytes of a base64 ``data:`` URI."""
+    head, _, payload = uri.partition(",")
+    if ";base64" not in head:
+        raise InputError(path, where, "only base64 data URIs are supported")
+    try:
+        return base64.b64decode(payload, validate=False)
+    except ValueError as exc:
+        raise InputError(path, where, f"bad base64 data: {exc}" + _DAMAGED) from None
+
+
 def decode_image(data: bytes, path: Path | None = None, where: str | None = None) -> np.ndarray:
     """PNG or JPEG bytes -> ``(H, W, 4) uint8``: PNG via matplotlib, JPEG via Pillow (matplotlib's dependency)."""
+    try:
+        from PIL import Image
+
+        with Image.open(io.BytesIO(data)) as probe:  # reads the header only
+            w, h = probe.size
+    except Exception as exc:
+        raise InputError(path, where, f"cannot decode texture image: {exc}") from None
+    if w * h > MAX_TEXTURE_PIXELS:
+        raise InputError(path, where, f"texture of {w} x {h} pixels; at most {MAX_TEXTURE_PIXELS} pixels "
+                         "(e.g. 8192 x 4096) are read: scale it down")
     try:
         if data[:8] == b"\x89PNG\r\n\x1a\n":
             import matplotlib.image as mpimg
@@ -335,13 +402,10 @@ def _node_matrix(node: dict) -> np.ndarray:
     return m
 
 
-def _world_matrices(nodes: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-    """World matrix and parent index of every node (scenes' roots have parent -1)."""
+def _world_matrices(nodes: list[dict], path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """World matrix and parent index of every node (scenes' roots have parent -1); every matrix finite."""
     n = len(nodes)
-    parent = np.full(n, -1)
-    for i, node in enumerate(nodes):
-        for c in node.get("children", []):
-            parent[c] = i
+    parent = node_parents(nodes, path)
     world = np.zeros((n, 4, 4))
     done = np.zeros(n, bool)
 
@@ -350,11 +414,13 @@ def _world_matrices(nodes: list[dict]) -> tuple[np.ndarray, np.ndarray]:
         while i >= 0 and not done[i]:
             chain.append(i)
             i = parent[i]
-            if len(chain) > n:
-                raise ValueError("node hierarchy has a cycle")
         base = world[i] if i >= 0 else np.eye(4)
         for k in reversed(chain):
-            base = base @ _node_matrix(nodes[k])
+            with np.errstate(over="ignore", invalid="ignore"):
+                base = base @ _node_matrix(nodes[k])
+            if not np.isfinite(base).all():
+                raise InputError(path, f"key nodes[{k}]", "the node's transform (with its parents') overflows "
+                                 "to infinity: its scale or translation is far too large" + _DAMAGED)
             world[k] = base
             done[k] = True
         return base
@@ -508,6 +574,36 @@ def _skeleton(order: list[int], up: dict[int, int], names: list[str], world: np.
     return Skeleton(names=tuple(names), parents=parents, offsets=offsets, unit_scale=1.0, rest_rotations=local_q)
 
 
+def _inverse_binds(doc: _Doc, skin: int, n_joints: int) -> np.ndarray:
+    """A skin's inverse bind matrices as ``(n, 4, 4)`` row-major float64: one invertible matrix per joint."""
+    index = doc.gltf["skins"][skin]["inverseBindMatrices"]
+    where = f"skins[{skin}].inverseBindMatrices"
+    m = doc.checked(index, where, ("MAT4",)).astype(np.float64)
+    if len(m) < n_joints:
+        raise InputError(doc.path, f"key {where}", f"accessor {index} has {len(m)} matrices for {n_joints} joints"
+                         + _DAMAGED)
+    m = m.reshape(-1, 4, 4).transpose(0, 2, 1)
+    _check_invertible(m[:n_joints, :3, :3], doc.path, where, "matrix")
+    return m
+
+
+def _singular(m: np.ndarray) -> np.ndarray:
+    """Which of the ``(..., 3, 3)`` transforms cannot be inverted (relative to their own scale)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        det = np.linalg.det(m)
+        scale = np.abs(m).max(axis=(-2, -1)) ** 3
+    return ~(np.isfinite(det) & (np.abs(det) > 1e-12 * scale))
+
+
+def _check_invertible(m: np.ndarray, path: Path, where: str, item: str = "vertex") -> None:
+    """Refuse 3x3 transforms that cannot be inverted (skinning inverts them to carry normals)."""
+    bad = _singular(m)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise InputError(path, f"key {where}", f"{item} {k}: singular transform (a zero scale or a degenerate "
+                         "inverse bind matrix), so its normals cannot be computed" + _DAMAGED)
+
+
 def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avatar:
     """Load a glTF/GLB/VRM avatar (see the module docstring for what is supported).
 
@@ -519,10 +615,7 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
     doc = _Doc(path)
     g = doc.gltf
     nodes = g.get("nodes", [])
-    try:
-        world, node_parent = _world_matrices(nodes)
-    except (ValueError, IndexError) as exc:
-        raise InputError(path, "key nodes", f"bad node hierarchy: {exc}" + _DAMAGED) from None
+    world, node_parent = _world_matrices(nodes, path)
     notes: list[str] = []
     skins = g.get("skins", [])
     mesh_nodes = [i for i, n in enumerate(nodes) if "mesh" in n]
@@ -530,9 +623,10 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
         raise InputError(path, "key nodes", "no node has a mesh; export the character with its mesh, "
                          "not only its armature or animation")
     skin_index = next((nodes[i]["skin"] for i in mesh_nodes if "skin" in nodes[i]), 0 if skins else None)
-    if skin_index is not None and skin_index >= len(skins):
-        raise InputError(path, f"key skins[{skin_index}]", "skin index out of range" + _DAMAGED)
     joint_nodes = list(skins[skin_index]["joints"]) if skin_index is not None else []
+    if len(set(joint_nodes)) < len(joint_nodes):
+        twice = next(n for n in joint_nodes if joint_nodes.count(n) > 1)
+        raise InputError(path, f"key skins[{skin_index}].joints", f"node {twice} is listed twice" + _DAMAGED)
     if skin_index is not None and len(skins) > 1:
         notes.append(f"{len(skins)} skins; using skin {skin_index} for every skinned mesh")
     vrm = _vrm_bone_names(g)
@@ -552,7 +646,7 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
     aliases: dict[str, str] = {}  # a VRM node's own name -> its humanoid joint name
     for n in order:
         name = vrm.get(n) or nodes[n].get("name") or f"joint{n}"
-        if name in names:
+        while name in names:  # a duplicate, and even "Arm_7" for the second "Arm" (node 7) may be taken
             name = f"{name}_{n}"
         names.append(name)
         if nodes[n].get("name") and nodes[n]["name"] != name:
@@ -583,8 +677,9 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
     # geometry
     skin_ibm = None
     if skin_index is not None and "inverseBindMatrices" in skins[skin_index]:
-        skin_ibm = doc.accessor(skins[skin_index]["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
+        skin_ibm = _inverse_binds(doc, skin_index, len(joint_nodes))
     parts = []
+    total_vertices = 0
     textures: dict[int, np.ndarray | None] = {}
     morph_names_found: set[str] = set()
     ignored: set[str] = set()
@@ -608,19 +703,29 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                     raise InputError(path, f"key {where}.extensions", f"{ext} ({_UNSUPPORTED[ext]}) is not supported")
             if "POSITION" not in attrs:
                 raise InputError(path, f"key {where}.attributes", "primitive has no POSITION" + _DAMAGED)
-            v = doc.accessor(attrs["POSITION"]).astype(np.float64)
+            v = doc.checked(attrs["POSITION"], f"{where}.attributes.POSITION", ("VEC3",)).astype(np.float64)
             nv = len(v)
-            idx = (doc.accessor(prim["indices"]).reshape(-1).astype(np.int64) if "indices" in prim
-                   else np.arange(nv))
+            total_vertices += nv
+            if total_vertices > MAX_VERTICES:
+                raise InputError(path, f"key {where}.attributes.POSITION", f"the avatar has more than {MAX_VERTICES} "
+                                 "vertices, more than the renderer is made for: decimate the mesh")
+
+            def attribute(name: str, types: tuple[str, ...], integer: bool = False, of: dict = attrs,
+                          at: str = f"{where}.attributes") -> np.ndarray:
+                return doc.checked(of[name], f"{at}.{name}", types, nv, integer)
+
+            idx = (doc.checked(prim["indices"], f"{where}.indices", ("SCALAR",), integer=True).reshape(-1)
+                   .astype(np.int64) if "indices" in prim else np.arange(nv))
             if len(idx) % 3:
                 raise InputError(path, f"key {where}.indices", f"{len(idx)} indices is not a multiple of 3" + _DAMAGED)
             if len(idx) and idx.max() >= nv:
                 raise InputError(path, f"key {where}.indices", "index beyond the vertex count" + _DAMAGED)
             tri = idx.reshape(-1, 3)
-            nrm = doc.accessor(attrs["NORMAL"]).astype(np.float64) if "NORMAL" in attrs else vertex_normals(v, tri).astype(np.float64)
+            nrm = (attribute("NORMAL", ("VEC3",)).astype(np.float64) if "NORMAL" in attrs
+                   else vertex_normals(v, tri).astype(np.float64))
             if skinned and "JOINTS_0" in attrs and "WEIGHTS_0" in attrs:
-                jj = doc.accessor(attrs["JOINTS_0"]).astype(np.int64)
-                ww = doc.accessor(attrs["WEIGHTS_0"]).astype(np.float64)
+                jj = attribute("JOINTS_0", ("VEC4",), integer=True).astype(np.int64)
+                ww = attribute("WEIGHTS_0", ("VEC4",)).astype(np.float64)
                 if jj.max(initial=0) >= len(joint_nodes):
                     raise InputError(path, f"key {where}.attributes.JOINTS_0",
                                      "joint index beyond the skin's joints" + _DAMAGED)
@@ -636,6 +741,9 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                     ww = np.where(s > 0, ww / np.where(s > 0, s, 1), [[1.0, 0, 0, 0]])
                 blend = np.einsum("vk,vkij->vij", ww, bind_by_joint[jj])
             else:
+                if _singular(world[ni, :3, :3]):  # a part hidden by a zero scale stays hidden
+                    notes.append(f"{where}: its node {ni} has a zero scale, not drawn")
+                    continue
                 p = ni
                 while p >= 0 and p not in node_to_joint:
                     p = node_parent[p]
@@ -646,6 +754,7 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                 ww[:, 0] = 1
                 blend = np.broadcast_to(world[ni], (nv, 4, 4))
             if np.abs(blend - np.eye(4)).max() > 1e-5:
+                _check_invertible(blend[:, :3, :3], path, where)
                 v = np.einsum("vij,vj->vi", blend[:, :3, :3], v) + blend[:, :3, 3]
                 nrm = np.einsum("vij,vj->vi", np.linalg.inv(blend[:, :3, :3]).transpose(0, 2, 1), nrm)
             else:
@@ -659,11 +768,11 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
             factor = np.array(pbr.get("baseColorFactor", [1, 1, 1, 1]), np.float64)
             col = np.tile(factor[:3], (nv, 1))
             if "COLOR_0" in attrs:
-                c0 = doc.accessor(attrs["COLOR_0"]).astype(np.float64)
+                c0 = attribute("COLOR_0", ("VEC3", "VEC4")).astype(np.float64)
                 if c0.dtype.kind != "f" or c0.max() > 1.0 + 1e-6:
                     c0 = c0 / max(c0.max(), 1.0)
                 col = col * c0[:, :3]
-            material_ids = (doc.accessor(attrs["_MATERIAL"]).reshape(-1).astype(np.uint8)
+            material_ids = (attribute("_MATERIAL", ("SCALAR",)).reshape(-1).astype(np.uint8)
                             if "_MATERIAL" in attrs else np.zeros(nv, np.uint8))
             tex_index = None
             if "baseColorTexture" in pbr:
@@ -673,9 +782,14 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                     tex_index = tex["source"]
                     if tex_index not in textures:
                         textures[tex_index] = doc.image(tex_index)
+                        pixels = sum(t.shape[0] * t.shape[1] for t in textures.values() if t is not None)
+                        if pixels > MAX_TEXTURE_PIXELS_TOTAL:
+                            raise InputError(path, f"key images[{tex_index}]", f"the textures used so far have "
+                                             f"{pixels} pixels; at most {MAX_TEXTURE_PIXELS_TOTAL} are read: "
+                                             "scale them down")
                 else:
                     notes.append(f"{where}: texture without a PNG/JPEG source ignored")
-            uv = doc.accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
+            uv = attribute("TEXCOORD_0", ("VEC2",)).astype(np.float64) if "TEXCOORD_0" in attrs else None
             if uv is not None and "baseColorTexture" in pbr:
                 uv = _texture_transform(uv, pbr["baseColorTexture"].get("extensions", {}).get("KHR_texture_transform"))
             # morph targets
@@ -691,8 +805,9 @@ def load_gltf(path: str | Path, bone_map: dict[str, str] | None = None) -> Avata
                 if not uses:
                     ignored.add(raw)
                     continue
-                d = doc.accessor(t["POSITION"]).astype(np.float64) if "POSITION" in t else np.zeros((nv, 3))
-                dn = doc.accessor(t["NORMAL"]).astype(np.float64) if "NORMAL" in t else np.zeros((nv, 3))
+                at = f"{where}.targets[{ti}]"
+                d, dn = (attribute(a, ("VEC3",), of=t, at=at).astype(np.float64) if a in t else np.zeros((nv, 3))
+                         for a in ("POSITION", "NORMAL"))
                 if blend is not None:
                     d = np.einsum("vij,vj->vi", blend[:, :3, :3], d)
                     dn = np.einsum("vij,vj->vi", blend[:, :3, :3], dn)
