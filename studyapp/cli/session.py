@@ -1,4 +1,4 @@
-"""``studyapp run | export | bundle | merge``: running sessions and moving their results around."""
+"""``studyapp run | export | bundle | key | merge``: running sessions and moving their results around."""
 from __future__ import annotations
 
 import argparse
@@ -57,8 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="pack a study into one zip for remote participants (opaque file names)",
         description="Pack a study design and every file it uses into one zip (-o STUDY.zip) that remote "
         "participants run with `studyapp run STUDY.zip`. Inside it, condition ids, stimulus ids and file names "
-        "are opaque; the key mapping them back is written to STUDY.key.json next to the zip and stored in the "
-        "results database, for `studyapp merge`.",
+        "are opaque; the key mapping them back is kept in the experimenter's results database only (for "
+        "`studyapp merge`), never written next to the zip unless asked for with --export-key.",
     )
     b.add_argument("design", type=Path, help="study design (.toml)")
     b.add_argument("-o", "--output", type=Path, required=True, help="bundle to write (STUDY.zip)")
@@ -67,7 +67,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "of the experimenter's database)")
     b.add_argument("--results", type=Path, help="the experimenter's results database, which keeps the bundle's key "
                    "(default: <design>.results.sqlite next to the design)")
+    b.add_argument("--export-key", type=Path, metavar="FILE",
+                   help="also write the key to FILE (for `merge --key` on another machine); keep it private, "
+                   "never send it with the bundle")
     b.set_defaults(func=_cmd_bundle)
+
+    k = sub.add_parser(
+        "key",
+        help="export a bundle's key from the experimenter's results database (for merging elsewhere)",
+        description="Write the key of a bundle (opaque ids -> real conditions, stimuli and files), which "
+        "`studyapp bundle` keeps in the experimenter's results database, to a file for `merge --key` on another "
+        "machine. Keep the file private: with it, anyone can tell the models apart in the bundle.",
+    )
+    k.add_argument("db", type=Path, help="the experimenter's results database")
+    k.add_argument("bundle", help="the bundle (STUDY.zip) or the first digits of its hash")
+    k.add_argument("-o", "--output", type=Path, required=True, help="key file to write (e.g. STUDY.key.json)")
+    k.set_defaults(func=_cmd_key)
 
     m = sub.add_parser(
         "merge",
@@ -81,7 +96,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     m.add_argument("db", type=Path, help="the experimenter's results database")
     m.add_argument("files", type=Path, nargs="+", help="results-*.zip files sent back by participants")
-    m.add_argument("--key", type=Path, help="a bundle key file (STUDY.key.json) when the database does not hold it")
+    m.add_argument("--key", type=Path, help="a bundle key file (from `bundle --export-key` or `studyapp key`) "
+                   "when the database does not hold it")
     m.add_argument("--design", type=Path, help="the study design the database was made for (default: NAME.toml "
                    "next to NAME.results.sqlite); every answer is checked against its schedule")
     m.add_argument("--allow-unlisted", action="store_true",
@@ -249,13 +265,24 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
     from studyapp.study.bundle import make_bundle
 
     results = args.results or default_results_path(args.design)
-    info = make_bundle(args.design, args.output, participants=args.participants, results=results)
+    info = make_bundle(args.design, args.output, participants=args.participants, results=results,
+                       export_key=args.export_key)
     print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml and manifest.json; "
           f"{info.size_bytes / 1e6:.1f} MB)")
-    print(f"Key (opaque ids -> conditions and files), keep it private: {info.key_path}")
-    print(f"The key is also stored in {results}, so `studyapp merge` can map results back.")
+    print(f"The key (opaque ids -> conditions and files) is kept in {results}, so `studyapp merge` can map "
+          "results back; it is not written next to the zip.")
+    if info.key_path is not None:
+        print(f"Key also written to {info.key_path}: keep it private, never send it with the bundle.")
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
+    return 0
+
+
+def _cmd_key(args: argparse.Namespace) -> int:
+    from studyapp.study.bundle import export_key
+
+    path = export_key(args.db, args.bundle, args.output)
+    print(f"Wrote the bundle key to {path}: keep it private, never send it with the bundle.")
     return 0
 
 

@@ -19,9 +19,13 @@ must link files to conditions anyway, holds that link). A condition with several
 it streams for each clip (the same frames a lab session plays), so no ``.onnx`` file singles it out and the
 participant's PC never runs a model. The salt is random per bundle unless given, and everything above is a function of the salt
 and the design, so a bundle made again with the same salt is the same bundle (same ids, same hash).
-The mapping back (the *key*) stays with the experimenter: in ``STUDY.key.json`` next to the zip and in
-the experimenter's results database (table ``bundles``), so ``studyapp merge`` maps results back to the
-real condition and stimulus ids and to the original design hash without extra arguments.
+The mapping back (the *key*) stays with the experimenter, in the experimenter's results database (table
+``bundles``) only, so ``studyapp merge`` maps results back to the real condition and stimulus ids and to the
+original design hash without extra arguments. No key file is written beside the zip, where it would be easy
+to send along by accident; ``bundle --export-key FILE`` or ``studyapp key`` writes one on request (for
+``merge --key`` on another machine). A killed ``bundle`` leaves either nothing or the zip with its key
+(:func:`_publish`, :func:`settle_pending_keys`): never a ``.part`` file, a key without its zip or a zip
+without its key.
 
 On the participant's PC ``studyapp run STUDY.zip`` extracts the bundle to a per-user cache (verifying every
 checksum), stores results in the per-user data folder and, when the participant finishes, writes
@@ -51,7 +55,7 @@ import zlib
 import platformdirs
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, BinaryIO, Callable, Iterable
 
 from studyapp import __version__
 from studyapp import tomlfile
@@ -102,7 +106,8 @@ class BundleInfo:
     """What :func:`make_bundle` wrote."""
 
     path: Path
-    key_path: Path
+    #: where the key was exported (``export_key``), else None: the key is kept in the results database only
+    key_path: Path | None
     bundle_hash: str
     #: entries in the zip, manifest.json and study.toml included (what a participant sees when unzipping)
     n_files: int
@@ -110,6 +115,8 @@ class BundleInfo:
     roster: dict[str, int] = field(default_factory=dict)
     #: media files in the zip (``n_files`` less manifest.json and study.toml)
     n_media: int = 0
+    #: the key (opaque ids -> real ones), as stored in the results database
+    key: dict[str, Any] = field(default_factory=dict)
 
 
 def make_bundle(
@@ -119,6 +126,7 @@ def make_bundle(
     participants: int = 0,
     results: str | Path | None = None,
     salt: str | None = None,
+    export_key: str | Path | None = None,
 ) -> BundleInfo:
     """Write ``output`` (a zip) with everything a remote participant needs; see the module docstring.
 
@@ -262,8 +270,10 @@ def make_bundle(
         bundle_hash = bundled.design_hash
 
     results = Path(results) if results is not None else design_path.with_name(f"{design_path.stem}.results.sqlite")
+    output.parent.mkdir(parents=True, exist_ok=True)
     db = ResultsDB(results, design)
     try:
+        settle_pending_keys(db)
         roster: dict[str, int] = {}
         if participants > 0:
             counts = db.row_counts(n_rows(design))
@@ -290,31 +300,178 @@ def make_bundle(
         }
         # the same design bundled again has the same hash: keep the ids earlier bundles handed out
         earlier = db.bundle_key(bundle_hash) or {}
-        db.add_bundle_key(bundle_hash, {**key, "roster": {**earlier.get("roster", {}), **roster}})
+        key["roster"] = {**earlier.get("roster", {}), **roster}
+
+        files = {"study.toml": design_text.encode("utf-8"), **media}
+        manifest = {
+            "format": BUNDLE_FORMAT, "version": FORMAT_VERSION, "study": study, "title": design.title,
+            "design": "study.toml", "design_hash": bundle_hash, "app_version": __version__,
+            "roster": roster, "files": {name: _sha256_bytes(data) for name, data in sorted(files.items())},
+        }
+
+        def write_zip(fh: BinaryIO) -> None:
+            with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+                zf.writestr("manifest.json", json.dumps(manifest, indent=2, sort_keys=True))
+                for name, data in sorted(files.items()):
+                    zf.writestr(name, data)
+
+        def record_pending(digest: str) -> None:
+            if earlier and not isinstance(earlier.get("pending"), dict):
+                # this very bundle was completed before (and may have been sent): its key stays complete
+                db.add_bundle_key(bundle_hash, key)
+            else:
+                db.add_bundle_key(bundle_hash, {**key, "pending": {"path": str(output.resolve()), "sha256": digest}})
+
+        _publish(output, write_zip, record_pending)
+        db.add_bundle_key(bundle_hash, key)  # the zip is in place: the key is complete
     finally:
         db.close()
-
-    files = {"study.toml": design_text.encode("utf-8"), **media}
-    manifest = {
-        "format": BUNDLE_FORMAT, "version": FORMAT_VERSION, "study": study, "title": design.title,
-        "design": "study.toml", "design_hash": bundle_hash, "app_version": __version__,
-        "roster": roster, "files": {name: _sha256_bytes(data) for name, data in sorted(files.items())},
-    }
-    output.parent.mkdir(parents=True, exist_ok=True)
-    tmp_out = output.with_name(output.name + ".part")
-    with zipfile.ZipFile(tmp_out, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        zf.writestr("manifest.json", json.dumps(manifest, indent=2, sort_keys=True))
-        for name, data in sorted(files.items()):
-            zf.writestr(name, data)
-    os.replace(tmp_out, output)
-    key_path = output.with_name(f"{output.stem}.key.json")
-    key_path.write_text(json.dumps(key, indent=2, sort_keys=True), encoding="utf-8")
+    key_path = None
+    if export_key is not None:
+        key_path = write_key_file(key, export_key)
     # Counted from the zip as written, so the number reported can never drift from what is inside again.
     with zipfile.ZipFile(output) as zf:
         entries = zf.namelist()
     return BundleInfo(path=output, key_path=key_path, bundle_hash=bundle_hash, n_files=len(entries),
                       size_bytes=output.stat().st_size, roster=roster,
-                      n_media=sum(n.startswith("media/") for n in entries))
+                      n_media=sum(n.startswith("media/") for n in entries), key=key)
+
+
+# ------------------------------------------------------------------------------------------ the key, atomically
+def _publish(output: Path, write: Callable[[BinaryIO], None], record_pending: Callable[[str], None]) -> None:
+    """Write ``output`` so that a kill at any moment leaves either the old state or the finished zip with
+    its key (see :func:`settle_pending_keys`), and never a half-written file beside it.
+
+    The zip is written into an anonymous file in the output's folder (Linux ``O_TMPFILE``: it has no name,
+    so a killed process leaves nothing), fsynced, its key recorded as *pending* (naming the zip's path and
+    sha256), and only then linked into place: the link is the moment the bundle exists. Where anonymous
+    files are not available (macOS, Windows, some file systems) the zip goes to ``<output>.part`` and is
+    renamed into place; a ``.part`` left by a killed run is removed by the next ``bundle`` of that output.
+    """
+    folder = output.parent
+    fd = -1
+    if hasattr(os, "O_TMPFILE") and Path("/proc/self/fd").is_dir():
+        try:
+            fd = os.open(folder, os.O_TMPFILE | os.O_RDWR, 0o644)
+        except OSError:
+            fd = -1  # the file system has no anonymous files: fall back to a named .part
+    if fd >= 0:
+        with os.fdopen(fd, "w+b") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+            fh.seek(0)
+            digest = _sha256_stream(fh)
+            record_pending(digest)
+            # A link cannot replace: an older bundle of the same name goes first. A kill in between leaves
+            # no zip and a pending key without its zip, which counts as never made.
+            output.unlink(missing_ok=True)
+            # a directory fd makes Python call linkat(AT_SYMLINK_FOLLOW), which links the file behind the
+            # /proc entry (plain link() would try to link the /proc symlink itself)
+            dir_fd = os.open(folder, os.O_RDONLY)
+            try:
+                os.link(f"/proc/self/fd/{fh.fileno()}", output, src_dir_fd=dir_fd, follow_symlinks=True)
+            finally:
+                os.close(dir_fd)
+    else:
+        part = output.with_name(output.name + ".part")
+        with open(part, "w+b") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+            fh.seek(0)
+            digest = _sha256_stream(fh)
+        record_pending(digest)
+        os.replace(part, output)
+    _fsync_dir(folder)
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return  # Windows cannot open folders; its renames are durable enough for this
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _sha256_stream(fh: BinaryIO) -> str:
+    h = hashlib.sha256()
+    for chunk in iter(lambda: fh.read(1 << 20), b""):
+        h.update(chunk)
+    return h.hexdigest()
+
+
+def settle_pending_keys(db: Any) -> list[str]:
+    """Finish or forget keys that a killed ``bundle`` left *pending*; returns the hashes forgotten.
+
+    A pending key whose zip is at its path with its sha256 belongs to a bundle that was completed (the
+    run was killed after linking the zip): it is kept, and marked complete. Any other pending key belongs to
+    a bundle that never came to exist and is removed, so its roster ids are free again. A ``.part`` file a
+    killed run left (only where anonymous files are not available) is removed too.
+    """
+    forgotten = []
+    for h, key in db.bundle_keys().items():
+        pending = key.get("pending")
+        if not isinstance(pending, dict):
+            continue
+        path = Path(str(pending.get("path", "")))
+        Path(f"{path}.part").unlink(missing_ok=True)
+        try:
+            done = path.is_file() and _sha256_file(path) == pending.get("sha256")
+        except OSError:
+            done = False
+        if done:
+            db.add_bundle_key(h, {k: v for k, v in key.items() if k != "pending"})
+        else:
+            db.remove_bundle_key(h)
+            forgotten.append(h)
+    return forgotten
+
+
+def write_key_file(key: dict[str, Any], path: str | Path) -> Path:
+    """Write a bundle key (JSON) for ``merge --key`` on another machine; created private (mode 0600)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = json.dumps({k: v for k, v in key.items() if k != "pending"}, indent=2, sort_keys=True).encode("utf-8")
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def export_key(results: str | Path, bundle: str | Path, path: str | Path) -> Path:
+    """Write the key of ``bundle`` (a bundle zip, or its hash or a prefix of it) kept in the experimenter's
+    database ``results`` to ``path``."""
+    from studyapp.study.storage import ResultsDB
+
+    db = ResultsDB(results, create=False)
+    try:
+        keys = {h: k for h, k in db.bundle_keys().items() if not isinstance(k.get("pending"), dict)}
+    finally:
+        db.close()
+    wanted = str(bundle)
+    if Path(wanted).suffix.lower() == ".zip":
+        try:
+            with zipfile.ZipFile(wanted) as zf:
+                wanted = str(json.loads(zf.read("manifest.json"))["design_hash"])
+        except (OSError, zipfile.BadZipFile, KeyError, ValueError, TypeError) as exc:
+            raise InputError(bundle, "manifest.json", f"not a readable study bundle ({exc})") from None
+    found = [h for h in keys if h.startswith(wanted)] if wanted else []
+    if len(found) != 1:
+        known = ", ".join(f"{h[:12]} ({keys[h].get('bundle', '?')})" for h in sorted(keys)) or "none"
+        raise InputError(results, "bundles", f"{'no' if not found else 'more than one'} bundle key matches "
+                         f"{str(bundle)!r}; the keys kept here are: {known}")
+    return write_key_file(keys[found[0]], path)
 
 
 # ------------------------------------------------------------------------------------------ opening bundles

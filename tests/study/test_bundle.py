@@ -69,7 +69,7 @@ def test_bundle_hides_conditions_and_file_names(lab, tmp_path: Path) -> None:
         assert manifest["files"][n] == hashlib.sha256(zf.read(n)).hexdigest()
     # rows continue the lab's balance (rows 0 and 1 are taken once each)
     assert info.roster == {"R01": 2, "R02": 3, "R03": 4, "R04": 5}
-    key = json.loads(info.key_path.read_text())
+    key = info.key
     assert sorted(key["conditions"].values()) == sorted(REAL_CONDITIONS)
     assert ResultsDB(results, design).bundle_key(info.bundle_hash)["design_hash"] == design.design_hash
     # a second bundle hands out new ids, so merging both never meets the same participant twice
@@ -231,7 +231,7 @@ def test_live_model_is_bundled_as_its_generated_motion(tmp_path: Path) -> None:
     assert "model =" not in text and "reference" not in text and "onnx" not in text
     bundled = load_design(opened.design_path)
     assert all(c.model is None and c.motion.endswith(".bvh") for c in bundled.conditions)
-    key = json.loads(info.key_path.read_text())
+    key = info.key
     live = next(c for c in bundled.conditions if key["conditions"][c.id] == "reference")
     lab_live = next(c for c in lab_design.conditions if c.id == "reference")
     for s in bundled.stimuli:
@@ -249,11 +249,10 @@ def _grams(text: str, n: int = 4) -> set[str]:
     return {text[i:i + n] for i in range(len(text) - n + 1)}
 
 
-def _motion_files_by_condition(design, opened) -> dict[str, list[Path]]:
+def _motion_files_by_condition(design, opened, key) -> dict[str, list[Path]]:
     """Real condition id -> the extracted motion files (on disk) the bundled design plays for it."""
     from studyapp.study.design import motion_path
 
-    key = json.loads(opened.zip_path.with_name(f"{opened.zip_path.stem}.key.json").read_text())
     bundled = load_design(opened.design_path)
     files: dict[str, list[Path]] = {}
     for c in bundled.conditions:
@@ -291,7 +290,7 @@ def test_bundle_file_names_cannot_be_grouped_by_condition(which: str, tmp_path: 
     design = load_design(design_path)
     info = make_bundle(design_path, tmp_path / "out" / "study.zip", results=tmp_path / "lab.sqlite", salt="qa-salt")
     opened = open_bundle(info.path, cache=tmp_path / "cache")
-    by_cond = _motion_files_by_condition(design, opened)
+    by_cond = _motion_files_by_condition(design, opened, info.key)
     assert sorted(by_cond) == sorted(c.id for c in design.conditions)
     on_disk = sorted(p.name for p in (opened.folder / "media").iterdir())
     assert on_disk == sorted(n[len("media/"):] for n in zipfile.ZipFile(info.path).namelist() if n.startswith("media/"))
@@ -513,7 +512,7 @@ def test_smpl_motion_on_the_labs_body_model_is_bundled_without_the_model_file(tm
     opened = open_bundle(info.path, cache=tmp_path / "cache")
     assert "body_model" not in opened.design_path.read_text()
     bundled = load_design(opened.design_path)
-    key = json.loads(info.key_path.read_text())
+    key = info.key
     shipped_cond = next(c for c in bundled.conditions if key["conditions"][c.id] == "emage_like")
     assert shipped_cond.motion.endswith(".bvh")
     for s in bundled.stimuli:

@@ -54,7 +54,9 @@ def returned(tmp_path_factory) -> dict[str, Any]:
                   "--bot-pace", str(CLIP_S), env=env, cwd=home)
     assert remote.returncode == 0, remote.stderr
     [results_zip] = (home / "studyapp-results").glob("results-*-R01-*.zip")
-    key = json.loads((root / "send" / "study.key.json").read_text())
+    exported = _run("key", lab_db, root / "send" / "study.zip", "-o", root / "private" / "study.key.json")
+    assert exported.returncode == 0, exported.stderr
+    key = json.loads((root / "private" / "study.key.json").read_text())
     return {"root": root, "design": design, "db": lab_db, "zip": results_zip, "key": key,
             "bundle": root / "send" / "study.zip"}
 

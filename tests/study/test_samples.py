@@ -248,7 +248,7 @@ def test_bundle_ships_every_sample_under_its_own_name_and_merge_keeps_the_sample
     assert all(re.fullmatch(r"media/m_[0-9a-f]{12}\.(bvh|wav)", n) for n in names), names
     opened = open_bundle(info.path, cache=tmp_path / "cache")
     bundled = load_design(opened.design_path)
-    key = json.loads(info.key_path.read_text())
+    key = info.key
     stochastic = next(c for c in bundled.conditions if key["conditions"][c.id] == "lagged")
     assert stochastic.samples == N
     files = []
@@ -308,7 +308,7 @@ def test_samples_on_the_labs_smpl_body_model_are_each_bundled_as_their_own_motio
     info = make_bundle(source, tmp_path / "smpl.zip", results=tmp_path / "smpl.sqlite")
     opened = open_bundle(info.path, cache=tmp_path / "cache")
     bundled = load_design(opened.design_path)
-    key = json.loads(info.key_path.read_text())
+    key = info.key
     shipped = next(c for c in bundled.conditions if key["conditions"][c.id] == "emage_like")
     assert shipped.samples == 2 and shipped.motion.endswith(".bvh")
     for s in bundled.stimuli:
