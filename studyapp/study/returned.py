@@ -111,12 +111,18 @@ def _trial_name(t: Row) -> str:
 
 # ------------------------------------------------------------------------------------------ ids
 def map_ids(payload: Mapping[str, Any], conditions: Mapping[str, str], stimuli: Mapping[str, str],
-            strict: bool) -> tuple[dict[str, Any], list[Finding]]:
+            strict: bool, trials: Mapping[str, Mapping[str, Any]] | None = None) -> tuple[dict[str, Any], list[Finding]]:
     """``payload`` with the bundle's opaque condition and stimulus ids replaced by the real ones.
 
     ``strict`` (a bundle's results): an id the key does not know -- a real condition name written into
     the file, an edited id -- is a finding (and stays as it is, so the schedule check shows where).
+    ``trials`` (keys of bundles that ship one stimulus per participant and trial, see
+    :mod:`studyapp.study.shipped`): shipped stimulus -> its participant, trial index, real stimulus and
+    ``{token: real condition}`` / ``{token: sample}``; conditions and samples are then mapped per trial, and a
+    shipped stimulus answered by another participant or at another trial index is a finding.
     """
+    if trials is not None:
+        return _map_trials(payload, trials)
     found: dict[str, Finding] = {}
 
     def cond(c: Any, where: str) -> Any:
@@ -145,6 +151,55 @@ def map_ids(payload: Mapping[str, Any], conditions: Mapping[str, str], stimuli: 
     responses = [{**r, "condition": cond(r.get("condition"), f"responses of {_trial_name(r)}")}
                  for r in payload["responses"]]
     return {**payload, "trials": trials, "responses": responses}, list(found.values())
+
+
+def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, Any]]) -> tuple[dict[str, Any], list[Finding]]:
+    """:func:`map_ids` for per-trial keys: tokens mean something only within their own shipped stimulus."""
+    found: list[Finding] = []
+    pid = payload.get("participant")
+    by_index: dict[Any, Mapping[str, Any]] = {}
+    slots = ("slot_left", "slot_middle", "slot_right")
+    samples = ("sample_left", "sample_middle", "sample_right")
+
+    def cond(entry: Mapping[str, Any] | None, c: Any, where: str) -> Any:
+        if entry is None or not isinstance(c, str):
+            return c
+        frozen = c.startswith(FROZEN_PREFIX)
+        real = entry["conditions"].get(c.removeprefix(FROZEN_PREFIX))
+        if real is None:
+            found.append(Finding(where, f"condition id {c!r} is not one of the bundle's: the file was edited (a "
+                                        "real condition name, or an invented id)"))
+            return c
+        return (FROZEN_PREFIX if frozen else "") + real
+
+    mapped_trials = []
+    for t in payload["trials"]:
+        where = _trial_name(t)
+        entry = trials.get(t.get("stimulus")) if isinstance(t.get("stimulus"), str) else None
+        if entry is None:
+            found.append(Finding(where, f"stimulus id {t.get('stimulus')!r} is not one of the bundle's: the file "
+                                        "was edited"))
+            mapped_trials.append(dict(t))
+            continue
+        if (entry["participant"], entry["trial_index"]) != (pid, t.get("trial_index")):
+            found.append(Finding(where, f"shows the bundle's trial {entry['trial_index']} of participant "
+                                        f"{entry['participant']}: the file was edited (answers moved between "
+                                        "trials or participants)"))
+        by_index.setdefault(t.get("trial_index"), entry)
+        shown = [t.get(k) for k in slots]
+        wrong = [k for k in samples if t.get(k) not in (1, None)]
+        if wrong:
+            found.append(Finding(where, f"{wrong[0]} is {t.get(wrong[0])!r}, but a bundle's session records 1 (the "
+                                        "bundle picks the sample): the file was edited"))
+        row = {**t, "stimulus": entry["stimulus"], **{k: cond(entry, c, where) for k, c in zip(slots, shown)}}
+        for k, c in zip(samples, shown):
+            tok = c.removeprefix(FROZEN_PREFIX) if isinstance(c, str) else c
+            row[k] = entry["samples"].get(tok, t.get(k)) if isinstance(tok, str) else t.get(k)
+        mapped_trials.append(row)
+    responses = [{**r, "condition": cond(by_index.get(r.get("trial_index")), r.get("condition"),
+                                         f"responses of {_trial_name(r)}")} for r in payload["responses"]]
+    unique = list(dict.fromkeys(found))
+    return {**payload, "trials": mapped_trials, "responses": responses}, unique
 
 
 # ------------------------------------------------------------------------------------------ roster and row
