@@ -173,6 +173,8 @@ def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, An
         return (FROZEN_PREFIX if frozen else "") + real
 
     mapped_trials = []
+    foreign: dict[str, list[Any]] = {}  # participant the bundle made a trial for -> trial indices in this file
+    moved: list[Any] = []
     for t in payload["trials"]:
         where = _trial_name(t)
         entry = trials.get(t.get("stimulus")) if isinstance(t.get("stimulus"), str) else None
@@ -181,10 +183,10 @@ def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, An
                                         "was edited"))
             mapped_trials.append(dict(t))
             continue
-        if (entry["participant"], entry["trial_index"]) != (pid, t.get("trial_index")):
-            found.append(Finding(where, f"shows the bundle's trial {entry['trial_index']} of participant "
-                                        f"{entry['participant']}: the file was edited (answers moved between "
-                                        "trials or participants)"))
+        if entry["participant"] != pid:
+            foreign.setdefault(str(entry["participant"]), []).append(t.get("trial_index"))
+        elif entry["trial_index"] != t.get("trial_index"):
+            moved.append(t.get("trial_index"))
         by_index.setdefault(t.get("trial_index"), entry)
         shown = [t.get(k) for k in slots]
         wrong = [k for k in samples if t.get(k) not in (1, None)]
@@ -196,6 +198,13 @@ def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, An
             tok = c.removeprefix(FROZEN_PREFIX) if isinstance(c, str) else c
             row[k] = entry["samples"].get(tok, t.get(k)) if isinstance(tok, str) else t.get(k)
         mapped_trials.append(row)
+    for other, idx in foreign.items():
+        found.append(Finding(f"participant {pid}", f"{len(idx)} of {len(payload['trials'])} trials are those the "
+                                                   f"bundle made for participant {other}: their answers under "
+                                                   "another id (the file was edited)"))
+    if moved:
+        found.append(Finding("trials " + ", ".join(map(str, moved[:6])), "each shows the clip and models of another "
+                                                                       "trial: the file was edited"))
     responses = [{**r, "condition": cond(by_index.get(r.get("trial_index")), r.get("condition"),
                                          f"responses of {_trial_name(r)}")} for r in payload["responses"]]
     unique = list(dict.fromkeys(found))

@@ -136,15 +136,15 @@ _KILLER = textwrap.dedent("""
 POINTS = ["mid-zip", "before-pending", "after-pending", "before-link", "after-link", "after-complete", "none"]
 
 
-def _check_after_kill(send: Path, results: Path, design_path: Path) -> str | None:
-    """The folder holds the finished zip or nothing; every key the database keeps is the zip's."""
+def _check_after_kill(send: Path, results: Path, design_path: Path) -> dict[str, str]:
+    """The folder holds finished zips only; the database keeps exactly their keys. Returns zip name -> hash."""
     left = sorted(p.name for p in send.iterdir()) if send.exists() else []
-    assert left in ([], ["study.zip"]), left  # no .part, no temporary file, no key file
-    zip_hash = None
-    if left:
-        with zipfile.ZipFile(send / "study.zip") as zf:
+    assert all(n.endswith(".zip") and not n.startswith(".") for n in left), left  # no .part, temp or key file
+    hashes = {}
+    for name in left:
+        with zipfile.ZipFile(send / name) as zf:
             assert zf.testzip() is None
-            zip_hash = json.loads(zf.read("manifest.json"))["design_hash"]
+            hashes[name] = json.loads(zf.read("manifest.json"))["design_hash"]
     if results.exists():
         db = ResultsDB(results, load_design(design_path, check_files=False))
         try:
@@ -155,9 +155,9 @@ def _check_after_kill(send: Path, results: Path, design_path: Path) -> str | Non
     else:
         keys = {}
     # a zip never lacks its key, and a key is never left for a zip that does not exist
-    assert set(keys) == ({zip_hash} if zip_hash else set()), (left, sorted(keys))
+    assert set(keys) == set(hashes.values()), (left, sorted(keys))
     assert all("pending" not in k for k in keys.values())
-    return zip_hash
+    return hashes
 
 
 @pytest.mark.skipif(os.name != "posix", reason="SIGKILL is POSIX")
@@ -173,10 +173,10 @@ def test_bundle_killed_at_each_step_leaves_the_zip_with_its_key_or_nothing(point
     else:
         assert proc.returncode == -signal.SIGKILL, (proc.returncode, proc.stderr)
     made = _check_after_kill(send, results, design_path)
-    assert (made is not None) == (point in ("after-link", "after-complete", "none")), point
-    # bundling again completes it, and a bundle that never existed handed out no ids: R01, R02 again
-    info = make_bundle(design_path, send / "study.zip", participants=2, results=results, salt="kill-salt")
-    assert _check_after_kill(send, results, design_path) == info.bundle_hash
+    assert bool(made) == (point in ("after-link", "after-complete", "none")), point
+    # bundling again works, and a bundle that never existed handed out no ids: R01, R02 again
+    info = make_bundle(design_path, send / "again.zip", participants=2, results=results, salt="kill-salt")
+    assert _check_after_kill(send, results, design_path) == {**made, "again.zip": info.bundle_hash}
     expected = ["R03", "R04"] if made else ["R01", "R02"]
     assert list(info.roster) == expected, point
 
@@ -199,5 +199,5 @@ def test_bundle_command_killed_at_timed_moments(tmp_path: Path) -> None:
         time.sleep(total * frac)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=60)
-        outcomes.add(_check_after_kill(send, results, design_path) is not None)
+        outcomes.add(bool(_check_after_kill(send, results, design_path)))
     assert outcomes  # the checks above are what matters; which moments landed where varies with the machine
