@@ -3,22 +3,21 @@
 What ``make_bundle`` writes (``STUDY.zip``)::
 
     manifest.json   format, study name, sha256 of every file, the remote roster (participant id -> row)
-    study.toml      the design, rewritten to point at the bundled files
-    media/m_<hex>.* every stimulus, motion (live models as the motion they generate), template and avatar file, renamed
+    study.toml      the shipped (blinded) design, pointing at the bundled files
+    schedule.json   each roster participant's trials, from the real schedule
+    media/m_<hex>.* every motion (converted to BVH where needed), audio, face and avatar file, renamed
 
-Blinding (the choice made here): inside the bundle **condition ids and stimulus ids are replaced by opaque
-ids** (``c_<hex>`` and ``<hex>``, salted hashes), and every media file is named by a salted hash of its own
-bytes only, so nothing a participant can see -- on screen, in the cache folder or inside the zip -- carries a
-model name, a condition id or an original file name, and no part of a file name is shared by the files of
-one condition: the motion files of one model cannot be grouped across clips by name. Because a motion
-file's name no longer follows from its stimulus id, each condition's ``motion`` pattern reads a tag named
-after the condition's opaque id, which every stimulus sets to the hash of its file (only study.toml, which
-must link files to conditions anyway, holds that link). A condition with several samples per stimulus
-(``samples = N``) ships all N files, each under its own name, read through one tag per sample
-(``{c_<hex>_s{sample}}``: ``{sample}`` is filled first), so its samples are not grouped by name either. A live model condition is shipped as the BVH motion
-it streams for each clip (the same frames a lab session plays), so no ``.onnx`` file singles it out and the
-participant's PC never runs a model. The salt is random per bundle unless given, and everything above is a function of the salt
-and the design, so a bundle made again with the same salt is the same bundle (same ids, same hash).
+Blinding: what ``study.toml``, ``schedule.json`` and the media names say is built by
+:mod:`studyapp.study.shipped` (read its notes): one opaque stimulus per participant and trial, neutral
+condition tokens whose meaning is shuffled per trial, the same keys for every condition, and media names
+that never link two clips of one model. The choice made for media: a motion file is named by a salted hash
+of (model, clip, sample, bytes) and is shared by every participant's trial that shows it, rather than copied
+per participant (which would multiply the zip's size by the roster); audio, face and avatar files are
+named by a salted hash of their bytes. Zip entries carry one fixed time stamp. The salt is random per bundle
+unless given, and everything is a function of the salt, the design and the roster, so a bundle made again
+with the same salt and roster is the same bundle (same ids, same hash). Only roster ids can run a bundle:
+another id's trials could not be computed on the participant's PC without telling the models apart.
+
 The mapping back (the *key*) stays with the experimenter, in the experimenter's results database (table
 ``bundles``) only, so ``studyapp merge`` maps results back to the real condition and stimulus ids and to the
 original design hash without extra arguments. No key file is written beside the zip, where it would be easy

@@ -6,7 +6,10 @@ the file *says was answered*, against what the study makes possible (after the b
 opaque ids back to the real condition and stimulus ids):
 
 * **roster**: the participant id is on the bundle's roster (unless unlisted ids are allowed), and a
-  listed id follows the Latin-square row the roster gave it;
+  listed id follows the Latin-square row the roster gave it; with a bundle that ships one stimulus per
+  participant and trial (:mod:`studyapp.study.shipped`), every trial is one the bundle made for this
+  participant at this place (:func:`map_ids`), so another participant's answers under a new id are refused
+  even before anyone else's answers are in the database;
 * **schedule**: every trial's index, stimulus, practice and attention-check flags, slots (which condition
   sat left, middle, right) and samples equal the schedule recomputed by
   :func:`studyapp.study.schedule.participant_schedule` from the design's seed, the id and the row -- the
