@@ -277,18 +277,18 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
     results = args.results or default_results_path(args.design)
     info = make_bundle(args.design, args.output, participants=args.participants, results=results,
                        export_key=args.export_key)
-    if info.small_seed:
-        print("Note: the design's seed is small. The schedule is a function of the seed, so someone holding the "
-              "bundle could try every small seed to tell the models apart; for a remote study set `seed` to a large "
-              "random number (python -c \"import secrets; print(secrets.randbits(62))\") before the first participant.")
-    print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml and manifest.json; "
-          f"{info.size_bytes / 1e6:.1f} MB)")
+    print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml, schedule.json and "
+          f"manifest.json; {info.size_bytes / 1e6:.1f} MB)")
     print(f"The key (opaque ids -> conditions and files) is kept in {results}, so `studyapp merge` can map "
           "results back; it is not written next to the zip.")
     if info.key_path is not None:
         print(f"Key also written to {info.key_path}: keep it private, never send it with the bundle.")
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
+    if info.small_seed:
+        print("Note: the design's seed is small. The schedule is a function of the seed, so someone holding the "
+              "bundle could try every small seed to tell the models apart; for a remote study set `seed` to a large "
+              "random number (python -c \"import secrets; print(secrets.randbits(62))\") before the first participant.")
     return 0
 
 

@@ -113,11 +113,12 @@ class BundleInfo:
     #: where the key was exported (``export_key``), else None: the key is kept in the results database only
     key_path: Path | None
     bundle_hash: str
-    #: entries in the zip, manifest.json and study.toml included (what a participant sees when unzipping)
+    #: entries in the zip, manifest.json, schedule.json and study.toml included (what a participant sees when
+    #: unzipping)
     n_files: int
     size_bytes: int
     roster: dict[str, int] = field(default_factory=dict)
-    #: media files in the zip (``n_files`` less manifest.json and study.toml)
+    #: media files in the zip (``n_files`` less manifest.json, schedule.json and study.toml)
     n_media: int = 0
     #: the key (opaque ids -> real ones), as stored in the results database
     key: dict[str, Any] = field(default_factory=dict)

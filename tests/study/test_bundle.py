@@ -342,7 +342,8 @@ def test_bundle_reports_the_files_that_are_in_the_zip(lab, tmp_path: Path, capsy
     names = zipfile.ZipFile(out).namelist()
     total = re.search(r"\((\d+) files\b", printed)
     assert total and int(total.group(1)) == len(names) == 3 + 6 * (1 + 3), (printed, names)
-    media = re.search(r"\(\d+ files: (\d+) media files, study\.toml and manifest\.json; [\d.]+ MB\)", printed)
+    media = re.search(r"\(\d+ files: (\d+) media files, study\.toml, schedule\.json and manifest\.json; [\d.]+ MB\)",
+                      printed)
     assert media and int(media.group(1)) == sum(n.startswith("media/") for n in names) == len(names) - 3, printed
     assert {"manifest.json", "study.toml", "schedule.json"} <= set(names)
     info = make_bundle(design_path, tmp_path / "again.zip", results=results, participants=1)

@@ -70,6 +70,7 @@ def test_key_command_and_merge_with_the_exported_key(tmp_path: Path) -> None:
                           "--results", str(results)], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "kept in" in out.stdout and "not written next to the zip" in out.stdout
+    assert "the design's seed is small" in out.stdout  # the synthetic study's seed is 7
     assert not list(tmp_path.glob("*.json"))
     key = subprocess.run([*CLI, "key", str(results), str(tmp_path / "s.zip"), "-o", str(tmp_path / "k.json")],
                          capture_output=True, text=True, timeout=300)
@@ -78,6 +79,13 @@ def test_key_command_and_merge_with_the_exported_key(tmp_path: Path) -> None:
     bad = subprocess.run([*CLI, "key", str(results), "0000", "-o", str(tmp_path / "x.json")],
                          capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and "no bundle key matches" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_bundle_says_when_the_seed_is_small_enough_to_guess(tmp_path: Path) -> None:
+    small = write_synthetic_study(tmp_path / "small", n_stimuli=2, practice=False, seed=2026)
+    large = write_synthetic_study(tmp_path / "large", n_stimuli=2, practice=False, seed=2 ** 61 + 12345)
+    assert make_bundle(small, tmp_path / "a.zip", participants=1, results=tmp_path / "a.sqlite").small_seed
+    assert not make_bundle(large, tmp_path / "b.zip", participants=1, results=tmp_path / "b.sqlite").small_seed
 
 
 # ------------------------------------------------------------------------------------------ kills
