@@ -88,6 +88,26 @@ def test_bundle_says_when_the_seed_is_small_enough_to_guess(tmp_path: Path) -> N
     assert not make_bundle(large, tmp_path / "b.zip", participants=1, results=tmp_path / "b.sqlite").small_seed
 
 
+def test_merge_on_another_machine_with_the_exported_key(tmp_path: Path) -> None:
+    from fixtures.bundles import remote_run
+    from studyapp.study.bundle import merge_results
+    from studyapp.study.export import export_dataframe
+
+    design_path = write_synthetic_study(tmp_path / "study", n_stimuli=2, seconds=0.3, practice=False)
+    info = make_bundle(design_path, tmp_path / "s.zip", participants=1, results=tmp_path / "lab.sqlite",
+                       export_key=tmp_path / "private" / "k.json")
+    (tmp_path / "pc").mkdir()
+    returned = remote_run(info.path, tmp_path / "pc", "R01", pace_s=0.3)
+    elsewhere = tmp_path / "elsewhere" / "lab.sqlite"
+    elsewhere.parent.mkdir()
+    ResultsDB(elsewhere, load_design(design_path)).close()  # a database that never saw the bundle
+    refused = merge_results(elsewhere, [returned], design=design_path)
+    assert not refused[0].ok and "--key" in refused[0].message
+    merged = merge_results(elsewhere, [returned], design=design_path, key_file=tmp_path / "private" / "k.json")
+    assert merged[0].ok, merged[0].problems
+    assert set(export_dataframe(elsewhere)["condition"]) == {"synced", "lagged", "static"}
+
+
 # ------------------------------------------------------------------------------------------ kills
 _KILLER = textwrap.dedent("""
     import os, signal, sys, zipfile
