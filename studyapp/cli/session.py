@@ -101,7 +101,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--design", type=Path, help="the study design the database was made for (default: NAME.toml "
                    "next to NAME.results.sqlite); every answer is checked against its schedule")
     m.add_argument("--allow-unlisted", action="store_true",
-                   help="accept participant ids that are not on the bundle's roster (participants chose their own)")
+                   help="accept participant ids that are not on the bundle's roster (bundles made before bundles "
+                   "carried each participant's trials, whose participants could choose their own ids)")
     m.set_defaults(func=_cmd_merge)
 
 
