@@ -15,7 +15,7 @@ calls :func:`run_bot` only.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from studyapp.bots.policies import POLICIES
 
@@ -29,19 +29,22 @@ __all__ = ["POLICIES", "run_bot"]
 
 def run_bot(design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int = 0, *, render: bool,
             out_dir: Path | str | None = None, on_trial: Callable[[TrialPlan], None] | None = None,
-            pace_s: float = 0.0) -> int:
+            pace_s: float = 0.0, plans: Sequence[TrialPlan] | None = None, n_rows: int | None = None) -> int:
     """Run (or resume) one scripted participant; 0 when the session finished.
 
     ``render=True`` goes through the participant's UI offscreen (with ``out_dir``, a PNG of every screen is
     written there); ``render=False`` through the session only, fast. ``on_trial(plan)`` (called after each
     committed answer) and ``pace_s`` (seconds spent per clip as if watching it) apply to the latter only.
+    ``plans`` and ``n_rows``: a schedule given instead of the design's (a bundle's participant).
     """
     if render:
         # imported here: a session-level pilot never loads the GL and ImGui stack
         from studyapp.bots.ui_driver import run_offscreen_bot
 
-        return int(run_offscreen_bot(design, db, participant_id, policy, seed, out_dir=out_dir) or 0)
+        return int(run_offscreen_bot(design, db, participant_id, policy, seed, out_dir=out_dir, plans=plans,
+                                     n_rows=n_rows) or 0)
     from studyapp.bots.session_driver import run_bot_session
 
-    session = run_bot_session(design, db, participant_id, policy, seed, on_trial=on_trial, pace_s=pace_s)
+    session = run_bot_session(design, db, participant_id, policy, seed, on_trial=on_trial, pace_s=pace_s, plans=plans,
+                              n_rows=n_rows)
     return 0 if session.finished else 1

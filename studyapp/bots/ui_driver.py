@@ -13,7 +13,7 @@ Its frames go through the same frame loop as the participant's window (:mod:`stu
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     import moderngl
 
     from studyapp.study.design import Design
+    from studyapp.study.schedule import TrialPlan
     from studyapp.study.storage import ResultsDB
     from studyapp.ui.seams import ParticipantSession
 
@@ -320,15 +321,20 @@ class UIBot:
 
 def run_offscreen_bot(design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int,
                       out_dir: Path | str | None = None, max_frames_per_trial: int = 400,
-                      size: tuple[int, int] = (1280, 720)) -> int:
+                      size: tuple[int, int] = (1280, 720), *, plans: Sequence[TrialPlan] | None = None,
+                      n_rows: int | None = None) -> int:
     """A scripted participant through the real session and UI code, without a display.
 
     Frames are rendered offscreen (EGL); a virtual silent clock jumps ahead so a 10 s clip takes a few
     frames; clicks, drags and key presses are synthesized through :mod:`studyapp.ui.input`. With
-    ``out_dir`` a PNG of every screen is written there. Returns 0 when the session finished.
+    ``out_dir`` a PNG of every screen is written there. Returns 0 when the session finished. ``plans`` and
+    ``n_rows``: a schedule given instead of the design's (a bundle's participant, see :class:`Session`).
     """
+    from studyapp.study.session import Session
+
+    session = Session(design, db, participant_id, plans=plans, n_rows=n_rows) if plans is not None else None
     bot = UIBot(design, db, participant_id, policy, seed, size=size, out_dir=out_dir,
-                max_frames_per_trial=max_frames_per_trial)
+                max_frames_per_trial=max_frames_per_trial, session=session)
     try:
         return bot.run()
     finally:

@@ -18,7 +18,7 @@ _COMMAND_MODULES = (
     motion,    # inspect, convert
     render,    # render, view
     design,    # validate, schedule
-    session,   # run, export, bundle, merge
+    session,   # run, export, bundle, key, merge
     models,    # generate
     doctor,    # doctor
     demo,      # demo

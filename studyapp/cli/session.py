@@ -1,4 +1,4 @@
-"""``studyapp run | export | bundle | merge``: running sessions and moving their results around."""
+"""``studyapp run | export | bundle | key | merge``: running sessions and moving their results around."""
 from __future__ import annotations
 
 import argparse
@@ -59,17 +59,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="pack a study into one zip for remote participants (opaque file names)",
         description="Pack a study design and every file it uses into one zip (-o STUDY.zip) that remote "
         "participants run with `studyapp run STUDY.zip`. Inside it, condition ids, stimulus ids and file names "
-        "are opaque; the key mapping them back is written to STUDY.key.json next to the zip and stored in the "
-        "results database, for `studyapp merge`.",
+        "are opaque; the key mapping them back is kept in the experimenter's results database only (for "
+        "`studyapp merge`), never written next to the zip unless asked for with --export-key.",
     )
     b.add_argument("design", type=Path, help="study design (.toml)")
     b.add_argument("-o", "--output", type=Path, required=True, help="bundle to write (STUDY.zip)")
-    b.add_argument("--participants", type=int, default=0,
-                   help="pre-assign Latin-square rows to N remote participant ids R01..RN (continuing the balance "
-                   "of the experimenter's database)")
+    b.add_argument("--participants", type=int, required=True,
+                   help="make the bundle for N remote participants, ids R01..RN, on the Latin-square rows the "
+                   "experimenter's database has used least; the bundle carries each one's trials")
     b.add_argument("--results", type=Path, help="the experimenter's results database, which keeps the bundle's key "
                    "(default: <design>.results.sqlite next to the design)")
+    b.add_argument("--export-key", type=Path, metavar="FILE",
+                   help="also write the key to FILE (for `merge --key` on another machine); keep it private, "
+                   "never send it with the bundle")
     b.set_defaults(func=_cmd_bundle)
+
+    k = sub.add_parser(
+        "key",
+        help="export a bundle's key from the experimenter's results database (for merging elsewhere)",
+        description="Write the key of a bundle (opaque ids -> real conditions, stimuli and files), which "
+        "`studyapp bundle` keeps in the experimenter's results database, to a file for `merge --key` on another "
+        "machine. Keep the file private: with it, anyone can tell the models apart in the bundle.",
+    )
+    k.add_argument("db", type=Path, help="the experimenter's results database")
+    k.add_argument("bundle", help="the bundle (STUDY.zip) or the first digits of its hash")
+    k.add_argument("-o", "--output", type=Path, required=True, help="key file to write (e.g. STUDY.key.json)")
+    k.set_defaults(func=_cmd_key)
 
     m = sub.add_parser(
         "merge",
@@ -83,11 +98,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     m.add_argument("db", type=Path, help="the experimenter's results database")
     m.add_argument("files", type=Path, nargs="+", help="results-*.zip files sent back by participants")
-    m.add_argument("--key", type=Path, help="a bundle key file (STUDY.key.json) when the database does not hold it")
+    m.add_argument("--key", type=Path, help="a bundle key file (from `bundle --export-key` or `studyapp key`) "
+                   "when the database does not hold it")
     m.add_argument("--design", type=Path, help="the study design the database was made for (default: NAME.toml "
                    "next to NAME.results.sqlite); every answer is checked against its schedule")
     m.add_argument("--allow-unlisted", action="store_true",
-                   help="accept participant ids that are not on the bundle's roster (participants chose their own)")
+                   help="accept participant ids that are not on the bundle's roster (bundles made before bundles "
+                   "carried each participant's trials, whose participants could choose their own ids)")
     m.set_defaults(func=_cmd_merge)
 
 
@@ -152,13 +169,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
     print(f"Results database: {results}", flush=True)
     finished_files: list[Path] = []
     known = {p.id for p in db.participants()}
+    schedule: dict[str, Any] = {}
     try:
         row = args.row
         groups = parse_groups(args.group)
         if opened is not None:
-            from studyapp.study.bundle import remote_row, write_results_file
+            from studyapp.study.bundle import remote_plan, remote_row, write_results_file
 
-            if row is None:
+            carried = remote_plan(opened, args.participant)
+            if carried is not None:
+                # the bundle carries this participant's trials (blinded: see studyapp.study.shipped)
+                if row is not None and row != carried.row:
+                    raise InputError(None, "--row", f"participant {args.participant!r} follows row {carried.row} "
+                                     "in this study file; drop --row")
+                row = carried.row
+                schedule = {"plans": carried.plans, "n_rows": carried.n_rows}
+            elif row is None:
                 row = remote_row(design, opened, args.participant)
             groups.setdefault("remote", "yes")
             out_dir = opened.results_dir
@@ -170,11 +196,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
             db.on_participant_finished = pack
         rec = prepare_participant(design, db, args.participant, row=row, groups=groups,
-                                  allow_rerun=args.allow_rerun)
+                                  allow_rerun=args.allow_rerun, n_rows=schedule.get("n_rows"))
         if rec.id != args.participant:
             print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
         try:
-            code = _run_mode(args, design, db, rec.id)
+            code = _run_mode(args, design, db, rec.id, schedule)
         except BaseException:
             _forget_unstarted(db, results, rec.id, known, new_db)
             raise
@@ -208,11 +234,12 @@ def _forget_unstarted(db: Any, results: Path, pid: str, known: set[str], new_db:
             Path(f"{results}{suffix}").unlink(missing_ok=True)
 
 
-def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:
+def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule: dict[str, Any]) -> int:
+    """Run the session; ``schedule``: ``plans`` and ``n_rows`` a bundle carries for its participant (or empty)."""
     if args.no_render or args.offscreen:
         # the offscreen participant shows its progress on screen (its PNGs), not as "saved trial" lines
         return run_bot(design, db, pid, args.bot, args.seed, render=args.offscreen,
-                       on_trial=None if args.offscreen else _print_saved, pace_s=args.bot_pace)
+                       on_trial=None if args.offscreen else _print_saved, pace_s=args.bot_pace, **schedule)
     from studyapp.cli.demo import display_available
 
     if not display_available():
@@ -223,7 +250,7 @@ def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str) -> int:
     device = args.audio_device
     if device is not None and device.isdigit():
         device = int(device)
-    return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device) or 0)
+    return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device, **schedule) or 0)
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
@@ -251,13 +278,28 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
     from studyapp.study.bundle import make_bundle
 
     results = args.results or default_results_path(args.design)
-    info = make_bundle(args.design, args.output, participants=args.participants, results=results)
-    print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml and manifest.json; "
-          f"{info.size_bytes / 1e6:.1f} MB)")
-    print(f"Key (opaque ids -> conditions and files), keep it private: {info.key_path}")
-    print(f"The key is also stored in {results}, so `studyapp merge` can map results back.")
+    info = make_bundle(args.design, args.output, participants=args.participants, results=results,
+                       export_key=args.export_key)
+    print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml, schedule.json and "
+          f"manifest.json; {info.size_bytes / 1e6:.1f} MB)")
+    print(f"The key (opaque ids -> conditions and files) is kept in {results}, so `studyapp merge` can map "
+          "results back; it is not written next to the zip.")
+    if info.key_path is not None:
+        print(f"Key also written to {info.key_path}: keep it private, never send it with the bundle.")
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
+    if info.small_seed:
+        print("Note: the design's seed is small. The schedule is a function of the seed, so someone holding the "
+              "bundle could try every small seed to tell the models apart; for a remote study set `seed` to a large "
+              "random number (python -c \"import secrets; print(secrets.randbits(62))\") before the first participant.")
+    return 0
+
+
+def _cmd_key(args: argparse.Namespace) -> int:
+    from studyapp.study.bundle import export_key
+
+    path = export_key(args.db, args.bundle, args.output)
+    print(f"Wrote the bundle key to {path}: keep it private, never send it with the bundle.")
     return 0
 
 

@@ -3,25 +3,28 @@
 What ``make_bundle`` writes (``STUDY.zip``)::
 
     manifest.json   format, study name, sha256 of every file, the remote roster (participant id -> row)
-    study.toml      the design, rewritten to point at the bundled files
-    media/m_<hex>.* every stimulus, motion (live models as the motion they generate), template and avatar file, renamed
+    study.toml      the shipped (blinded) design, pointing at the bundled files
+    schedule.json   each roster participant's trials, from the real schedule
+    media/m_<hex>.* every motion (converted to BVH where needed), audio, face and avatar file, renamed
 
-Blinding (the choice made here): inside the bundle **condition ids and stimulus ids are replaced by opaque
-ids** (``c_<hex>`` and ``<hex>``, salted hashes), and every media file is named by a salted hash of its own
-bytes only, so nothing a participant can see -- on screen, in the cache folder or inside the zip -- carries a
-model name, a condition id or label or an original file name, and no part of a file name is shared by the files of
-one condition: the motion files of one model cannot be grouped across clips by name. Because a motion
-file's name no longer follows from its stimulus id, each condition's ``motion`` pattern reads a tag named
-after the condition's opaque id, which every stimulus sets to the hash of its file (only study.toml, which
-must link files to conditions anyway, holds that link). A condition with several samples per stimulus
-(``samples = N``) ships all N files, each under its own name, read through one tag per sample
-(``{c_<hex>_s{sample}}``: ``{sample}`` is filled first), so its samples are not grouped by name either. A live model condition is shipped as the BVH motion
-it streams for each clip (the same frames a lab session plays), so no ``.onnx`` file singles it out and the
-participant's PC never runs a model. The salt is random per bundle unless given, and everything above is a function of the salt
-and the design, so a bundle made again with the same salt is the same bundle (same ids, same hash).
-The mapping back (the *key*) stays with the experimenter: in ``STUDY.key.json`` next to the zip and in
-the experimenter's results database (table ``bundles``), so ``studyapp merge`` maps results back to the
-real condition and stimulus ids and to the original design hash without extra arguments.
+Blinding: what ``study.toml``, ``schedule.json`` and the media names say is built by
+:mod:`studyapp.study.shipped` (read its notes): one opaque stimulus per participant and trial, neutral
+condition tokens whose meaning is shuffled per trial, the same keys for every condition, and media names
+that never link two clips of one model. The choice made for media: a motion file is named by a salted hash
+of (model, clip, sample, bytes) and is shared by every participant's trial that shows it, rather than copied
+per participant (which would multiply the zip's size by the roster); audio, face and avatar files are
+named by a salted hash of their bytes. Zip entries carry one fixed time stamp. The salt is random per bundle
+unless given, and everything is a function of the salt, the design and the roster, so a bundle made again
+with the same salt and roster is the same bundle (same ids, same hash). Only roster ids can run a bundle:
+another id's trials could not be computed on the participant's PC without telling the models apart.
+
+The mapping back (the *key*) stays with the experimenter, in the experimenter's results database (table
+``bundles``) only, so ``studyapp merge`` maps results back to the real condition and stimulus ids and to the
+original design hash without extra arguments. No key file is written beside the zip, where it would be easy
+to send along by accident; ``bundle --export-key FILE`` or ``studyapp key`` writes one on request (for
+``merge --key`` on another machine). A killed ``bundle`` leaves either nothing or the zip with its key
+(:func:`_publish`, :func:`settle_pending_keys`): never a ``.part`` file, a key without its zip or a zip
+without its key.
 
 On the participant's PC ``studyapp run STUDY.zip`` extracts the bundle to a per-user cache (verifying every
 checksum; the bundle is confined to itself, see :func:`open_bundle`, and read within
@@ -52,7 +55,7 @@ import zipfile
 import platformdirs
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, BinaryIO, Callable, Iterable
 
 from studyapp import __version__
 from studyapp import tomlfile
@@ -61,6 +64,11 @@ from studyapp.safe_io import BUNDLE_ZIP, RESULTS_ZIP, SafeZip, safe_member_name
 from studyapp.study.design.schema import BUILTIN_REFERENCE
 
 BUNDLE_FORMAT = "studyapp-bundle"
+#: The participants' trials inside a bundle (see :mod:`studyapp.study.shipped`).
+SCHEDULE_FILE = "schedule.json"
+#: Version 2 keys map each shipped stimulus (a participant's trial) and its tokens back; version 1 keys (the
+#: bundles made before) had one opaque id per condition and per stimulus.
+KEY_VERSION = 2
 RESULTS_FORMAT = "studyapp-results"
 FORMAT_VERSION = 1
 
@@ -105,14 +113,20 @@ class BundleInfo:
     """What :func:`make_bundle` wrote."""
 
     path: Path
-    key_path: Path
+    #: where the key was exported (``export_key``), else None: the key is kept in the results database only
+    key_path: Path | None
     bundle_hash: str
-    #: entries in the zip, manifest.json and study.toml included (what a participant sees when unzipping)
+    #: entries in the zip, manifest.json, schedule.json and study.toml included (what a participant sees when
+    #: unzipping)
     n_files: int
     size_bytes: int
     roster: dict[str, int] = field(default_factory=dict)
-    #: media files in the zip (``n_files`` less manifest.json and study.toml)
+    #: media files in the zip (``n_files`` less manifest.json, schedule.json and study.toml)
     n_media: int = 0
+    #: the key (opaque ids -> real ones), as stored in the results database
+    key: dict[str, Any] = field(default_factory=dict)
+    #: the design's seed is small enough to be found by trying them all (see :mod:`studyapp.study.shipped`)
+    small_seed: bool = False
 
 
 def make_bundle(
@@ -122,18 +136,24 @@ def make_bundle(
     participants: int = 0,
     results: str | Path | None = None,
     salt: str | None = None,
+    export_key: str | Path | None = None,
 ) -> BundleInfo:
     """Write ``output`` (a zip) with everything a remote participant needs; see the module docstring.
 
-    ``participants`` pre-assigns Latin-square rows to ids ``R01..RN``, continuing the balance of the
-    experimenter's database ``results`` (which also receives the key).
+    ``participants`` (at least 1) pre-assigns Latin-square rows to ids ``R01..RN``, continuing the balance
+    of the experimenter's database ``results`` (which also keeps the key); the bundle carries each of those
+    participants' trials (:mod:`studyapp.study.shipped`).
     """
-    from studyapp.study.design import conditions_named_in, load_design, model_path, motion_path, resolve
+    from studyapp.study.design import conditions_named_in, load_design
     from studyapp.study.schedule import n_rows
+    from studyapp.study.shipped import SAFE_SEED, converter, ship_design
     from studyapp.study.storage import ResultsDB
 
     design_path = Path(design_path)
     output = Path(output)
+    if participants < 1:
+        raise InputError(None, "--participants", "a bundle carries the trials of each remote participant it is "
+                         "made for: give --participants N (the ids R01..RN are handed out)")
     design = load_design(design_path)
     named = conditions_named_in(design, output.name)
     if named:
@@ -141,185 +161,230 @@ def make_bundle(
                          "it: that unblinds the study; choose a neutral name (e.g. the study's title)")
     raw = tomlfile.loads(design_path.read_text(encoding="utf-8"))
     salt = salt or secrets.token_hex(16)
-
-    def opaque(kind: str, text: str, n: int = 8) -> str:
-        return hashlib.sha256(f"{salt}\0{kind}\0{text}".encode()).hexdigest()[:n]
-
-    cond_map = {c.id: f"c_{opaque('condition', c.id, 6)}" for c in design.conditions}
-    stim_map = {s.id: opaque("stimulus", s.id) for s in design.stimuli}
-    media: dict[str, bytes] = {}  # bundle name -> bytes
-    origin: dict[str, str] = {}   # bundle name -> original path (for the key)
-
-    def add_file(path: Path, slot: str = "") -> str:
-        # ``slot`` keeps files that must stay separate (one motion file per condition and clip, as always)
-        # apart even when their bytes are equal; it goes through the salted hash, so it shows in no name.
-        data = path.read_bytes()
-        name = f"media/m_{opaque('file', slot + _sha256_bytes(data), 12)}{path.suffix.lower()}"
-        media[name] = data
-        origin[name] = str(path)
-        return name
-
-    def motion_slot(cond: Any, stim: Any, k: int) -> str:
-        return f"motion\0{cond.id}\0{stim.id}\0" + (f"{k}\0" if k > 1 else "")
-
-    def add_generated_motion(cond: Any, stim: Any, k: int = 1) -> str:
-        from studyapp.motion.bvh import write_bvh
-        from studyapp.study.stimuli import load_condition_motion
-
-        with tempfile.TemporaryDirectory(prefix="studyapp-bundle-") as tmp:
-            path = Path(tmp) / "generated.bvh"
-            write_bvh(load_condition_motion(design, cond, stim, k), path)
-            name = add_file(path, slot=motion_slot(cond, stim, k))
-        origin[name] = (f"generated by {model_path(design, cond)} for stimulus {stim.id}" if cond.model is not None
-                        else f"{motion_path(design, cond, stim, k)} on the skeleton of {cond.body_model}")
-        return name
-
-    def sample_tags(tag: str, cond: Any) -> tuple[str, list[tuple[int, str]]]:
-        # One tag per sample, picked by {sample} inside the tag's name (filled first, see fill_sample): every
-        # sample file keeps a name of its own, so no name ties the samples of one model together either.
-        if cond.samples == 1:
-            return f"{{{tag}}}", [(1, tag)]
-        return f"{{{tag}_s{{sample}}}}", [(k, f"{tag}_s{k}") for k in range(1, cond.samples + 1)]
-
-    out = {k: v for k, v in raw.items() if k not in ("conditions", "stimuli", "practice", "attention_checks")}
-    conditions = []
-    # stimulus id -> {condition's opaque id: hash in its motion file's name}, filled into the stimuli's tags
-    motion_tags: dict[str, dict[str, str]] = {s.id: {} for s in design.stimuli}
-    for c_raw, cond in zip(raw.get("conditions", []), design.conditions):
-        c = dict(c_raw)
-        c["id"] = cond_map[cond.id]
-        # The label names the model for the experimenter's analysis: it stays in the key's world, never shipped.
-        c.pop("label", None)
-        if cond.motion is not None and cond.body_model is None:
-            # A name built from the condition (e.g. stimulus hash + condition hash) would let anyone group one
-            # model's files across clips; the pattern reads a per-stimulus tag instead, so names stay per file.
-            field_, tags = sample_tags(cond_map[cond.id], cond)
-            suffix = Path(cond.motion).suffix.lower()
-            c["motion"] = f"media/m_{field_}{suffix}"
-            for s in design.stimuli:
-                for k, tag in tags:
-                    # validation makes every pattern end in its suffix, so the file's name ends in it too
-                    name = add_file(motion_path(design, cond, s, k), slot=motion_slot(cond, s, k))
-                    motion_tags[s.id][tag] = Path(name).stem[len("m_"):]
-        elif cond.model is not None or cond.body_model is not None:
-            # A live model is shipped as the motion it streams for each clip, never as the model: an .onnx
-            # beside BVH files would single out the live condition, and the participant's PC need not run it.
-            # SMPL files on the lab's own body model travel the same way, as the motion on that model's
-            # skeleton: the SMPL-family licences do not let the model file itself be passed on.
-            field_, tags = sample_tags(cond_map[cond.id], cond)
-            c["motion"] = f"media/m_{field_}.bvh"
-            for key_name in ("model", "template", "fps", "representation", "rotation_order", "joints", "degrees",
-                             "body_model"):
-                c.pop(key_name, None)
-            for s in design.stimuli:
-                for k, tag in tags:
-                    name = add_generated_motion(cond, s, k)
-                    motion_tags[s.id][tag] = Path(name).stem[len("m_"):]
-        if cond.template is not None and cond.model is None:
-            c["template"] = add_file(resolve(design, cond.template))
-        conditions.append(c)
-    stimuli = []
-    for s_raw, stim in zip(raw.get("stimuli", []), design.stimuli):
-        s = dict(s_raw)
-        s["id"] = stim_map[stim.id]
-        if motion_tags[stim.id]:
-            clash = sorted(set(s.get("tags", {})) & set(motion_tags[stim.id]))
-            if clash:  # an own tag named like a salted condition id: overwriting it would lose its value
-                raise InputError(design_path, f"stimuli.{stim.id}.tags.{clash[0]}",
-                                 "this tag name is needed by the bundle; rename the tag (or bundle with another salt)")
-            s["tags"] = {**s.get("tags", {}), **motion_tags[stim.id]}
-        s["audio"] = add_file(stim.audio)
-        if stim.face is not None:
-            s["face"] = add_file(stim.face)
-        if stim.head is not None:
-            s["head"] = add_file(stim.head)
-        stimuli.append(s)
-    out["conditions"] = conditions
-    out["stimuli"] = stimuli
-    if "practice" in raw:
-        out["practice"] = [stim_map[p] for p in raw["practice"]]
-    if "attention_checks" in raw:
-        checks = []
-        for a in raw["attention_checks"]:
-            a = dict(a)
-            a["stimulus"] = stim_map[a["stimulus"]]
-            if "condition" in a:
-                a["condition"] = cond_map[a["condition"]]
-            checks.append(a)
-        out["attention_checks"] = checks
-    if "avatar" in raw:
-        av = dict(raw["avatar"])
-        if av.get("model", "builtin") != "builtin":
-            av["model"] = add_file(resolve(design, av["model"]))
-        if "by_speaker" in av:
-            av["by_speaker"] = {k: v if v == "builtin" else add_file(resolve(design, v)) for k, v in av["by_speaker"].items()}
-        out["avatar"] = av
-    design_text = tomlfile.dumps(out)
-
-    # The hash the participant's copy will compute: load the rewritten design from a scratch folder.
-    with tempfile.TemporaryDirectory(prefix="studyapp-bundle-") as tmp:
-        tmp_path = Path(tmp)
-        for name, data in media.items():
-            (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-            (tmp_path / name).write_bytes(data)
-        (tmp_path / "study.toml").write_text(design_text, encoding="utf-8")
-        bundled = load_design(tmp_path / "study.toml")
-        bundle_hash = bundled.design_hash
-
     results = Path(results) if results is not None else design_path.with_name(f"{design_path.stem}.results.sqlite")
+    output.parent.mkdir(parents=True, exist_ok=True)
     db = ResultsDB(results, design)
     try:
+        settle_pending_keys(db)
+        rows = n_rows(design)
+        counts = db.row_counts(rows)
+        # ids continue after those already used, so a merge never meets a participant twice
+        taken = {r.id for r in db.participants()} | db.issued_remote_ids()
+        width = max(2, len(str(participants + len(taken))))
         roster: dict[str, int] = {}
-        if participants > 0:
-            counts = db.row_counts(n_rows(design))
-            # ids continue after those already used, so a merge never meets a participant twice
-            taken = {r.id for r in db.participants()} | db.issued_remote_ids()
-            width = max(2, len(str(participants + len(taken))))
-            k = 0
-            while len(roster) < participants:
-                k += 1
-                pid = f"R{k:0{width}d}"
-                if pid in taken or any(t.upper() == pid for t in taken):
-                    continue
-                row = counts.index(min(counts))
-                counts[row] += 1
-                roster[pid] = row
+        k = 0
+        while len(roster) < participants:
+            k += 1
+            pid = f"R{k:0{width}d}"
+            if pid in taken or any(t.upper() == pid for t in taken):
+                continue
+            row = counts.index(min(counts))
+            counts[row] += 1
+            roster[pid] = row
+
+        shipped = ship_design(design, raw, roster, salt, converter(design))
+        design_text = tomlfile.dumps(shipped.design)
+        schedule_text = json.dumps({"format": "studyapp-bundle-schedule", "rows": rows,
+                                    "participants": shipped.schedules}, indent=1, sort_keys=True)
+        # The hash the participant's copy will compute: load the shipped design from a scratch folder.
+        with tempfile.TemporaryDirectory(prefix="studyapp-bundle-") as tmp:
+            tmp_path = Path(tmp)
+            for name, data in shipped.media.items():
+                (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+                (tmp_path / name).write_bytes(data)
+            (tmp_path / "study.toml").write_text(design_text, encoding="utf-8")
+            bundle_hash = load_design(tmp_path / "study.toml").design_hash
+
         # The participant sees this name (cache and results file names): the design's title, which
         # validation already keeps free of condition names, never the experimenter's file name.
         study = _slug(design.title)[:40].strip("-.") or "study"
         key = {
-            "format": "studyapp-bundle-key", "study": study, "bundle": output.name,
-            "design_hash": design.design_hash, "bundle_hash": bundle_hash,
-            "conditions": {v: k for k, v in cond_map.items()}, "stimuli": {v: k for k, v in stim_map.items()},
-            "files": origin, "roster": roster, "app_version": __version__,
+            "format": "studyapp-bundle-key", "version": KEY_VERSION, "study": study, "bundle": output.name,
+            "design_hash": design.design_hash, "bundle_hash": bundle_hash, "trials": shipped.trials,
+            "files": shipped.origin, "roster": roster, "app_version": __version__,
         }
-        # the same design bundled again has the same hash: keep the ids earlier bundles handed out
         earlier = db.bundle_key(bundle_hash) or {}
-        db.add_bundle_key(bundle_hash, {**key, "roster": {**earlier.get("roster", {}), **roster}})
+
+        files = {"study.toml": design_text.encode("utf-8"), SCHEDULE_FILE: schedule_text.encode("utf-8"),
+                 **shipped.media}
+        manifest = {
+            "format": BUNDLE_FORMAT, "version": FORMAT_VERSION, "study": study, "title": design.title,
+            "design": "study.toml", "design_hash": bundle_hash, "app_version": __version__,
+            "roster": roster, "files": {name: _sha256_bytes(data) for name, data in sorted(files.items())},
+        }
+
+        def write_zip(fh: BinaryIO) -> None:
+            with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+                zf.writestr(_entry("manifest.json"), json.dumps(manifest, indent=2, sort_keys=True))
+                for name, data in sorted(files.items()):
+                    zf.writestr(_entry(name), data)
+
+        def record_pending(digest: str) -> None:
+            if earlier and not isinstance(earlier.get("pending"), dict):
+                # this very bundle was completed before (and may have been sent): its key stays complete
+                db.add_bundle_key(bundle_hash, key)
+            else:
+                db.add_bundle_key(bundle_hash, {**key, "pending": {"path": str(output.resolve()), "sha256": digest}})
+
+        _publish(output, write_zip, record_pending)
+        db.add_bundle_key(bundle_hash, key)  # the zip is in place: the key is complete
     finally:
         db.close()
-
-    files = {"study.toml": design_text.encode("utf-8"), **media}
-    manifest = {
-        "format": BUNDLE_FORMAT, "version": FORMAT_VERSION, "study": study, "title": design.title,
-        "design": "study.toml", "design_hash": bundle_hash, "app_version": __version__,
-        "roster": roster, "files": {name: _sha256_bytes(data) for name, data in sorted(files.items())},
-    }
-    output.parent.mkdir(parents=True, exist_ok=True)
-    tmp_out = output.with_name(output.name + ".part")
-    with zipfile.ZipFile(tmp_out, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        zf.writestr("manifest.json", json.dumps(manifest, indent=2, sort_keys=True))
-        for name, data in sorted(files.items()):
-            zf.writestr(name, data)
-    os.replace(tmp_out, output)
-    key_path = output.with_name(f"{output.stem}.key.json")
-    key_path.write_text(json.dumps(key, indent=2, sort_keys=True), encoding="utf-8")
+    key_path = None
+    if export_key is not None:
+        key_path = write_key_file(key, export_key)
     # Counted from the zip as written, so the number reported can never drift from what is inside again.
     with zipfile.ZipFile(output) as zf:
         entries = zf.namelist()
     return BundleInfo(path=output, key_path=key_path, bundle_hash=bundle_hash, n_files=len(entries),
                       size_bytes=output.stat().st_size, roster=roster,
-                      n_media=sum(n.startswith("media/") for n in entries))
+                      n_media=sum(n.startswith("media/") for n in entries), key=key,
+                      small_seed=design.seed < SAFE_SEED)
+
+
+def _entry(name: str) -> zipfile.ZipInfo:
+    """A zip entry that tells nothing but its name: a fixed time stamp and the same attributes for all."""
+    info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16
+    return info
+
+
+# ------------------------------------------------------------------------------------------ the key, atomically
+def _publish(output: Path, write: Callable[[BinaryIO], None], record_pending: Callable[[str], None]) -> None:
+    """Write ``output`` so that a kill at any moment leaves either the old state or the finished zip with
+    its key (see :func:`settle_pending_keys`), and never a half-written file beside it.
+
+    The zip is written into an anonymous file in the output's folder (Linux ``O_TMPFILE``: it has no name,
+    so a killed process leaves nothing), fsynced, its key recorded as *pending* (naming the zip's path and
+    sha256), and only then linked into place: the link is the moment the bundle exists. Where anonymous
+    files are not available (macOS, Windows, some file systems) the zip goes to ``<output>.part`` and is
+    renamed into place; a ``.part`` left by a killed run is removed by the next ``bundle`` of that output.
+    """
+    folder = output.parent
+    fd = -1
+    if hasattr(os, "O_TMPFILE") and Path("/proc/self/fd").is_dir():
+        try:
+            fd = os.open(folder, os.O_TMPFILE | os.O_RDWR, 0o644)
+        except OSError:
+            fd = -1  # the file system has no anonymous files: fall back to a named .part
+    if fd >= 0:
+        with os.fdopen(fd, "w+b") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+            fh.seek(0)
+            digest = _sha256_stream(fh)
+            record_pending(digest)
+            # A link cannot replace: an older bundle of the same name goes first. A kill in between leaves
+            # no zip and a pending key without its zip, which counts as never made.
+            output.unlink(missing_ok=True)
+            # a directory fd makes Python call linkat(AT_SYMLINK_FOLLOW), which links the file behind the
+            # /proc entry (plain link() would try to link the /proc symlink itself)
+            dir_fd = os.open(folder, os.O_RDONLY)
+            try:
+                os.link(f"/proc/self/fd/{fh.fileno()}", output, src_dir_fd=dir_fd, follow_symlinks=True)
+            finally:
+                os.close(dir_fd)
+    else:
+        part = output.with_name(output.name + ".part")
+        with open(part, "w+b") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+            fh.seek(0)
+            digest = _sha256_stream(fh)
+        record_pending(digest)
+        os.replace(part, output)
+    _fsync_dir(folder)
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return  # Windows cannot open folders; its renames are durable enough for this
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _sha256_stream(fh: BinaryIO) -> str:
+    h = hashlib.sha256()
+    for chunk in iter(lambda: fh.read(1 << 20), b""):
+        h.update(chunk)
+    return h.hexdigest()
+
+
+def settle_pending_keys(db: Any) -> list[str]:
+    """Finish or forget keys that a killed ``bundle`` left *pending*; returns the hashes forgotten.
+
+    A pending key whose zip is at its path with its sha256 belongs to a bundle that was completed (the
+    run was killed after linking the zip): it is kept, and marked complete. Any other pending key belongs to
+    a bundle that never came to exist and is removed, so its roster ids are free again. A ``.part`` file a
+    killed run left (only where anonymous files are not available) is removed too.
+    """
+    forgotten = []
+    for h, key in db.bundle_keys().items():
+        pending = key.get("pending")
+        if not isinstance(pending, dict):
+            continue
+        path = Path(str(pending.get("path", "")))
+        Path(f"{path}.part").unlink(missing_ok=True)
+        try:
+            done = path.is_file() and _sha256_file(path) == pending.get("sha256")
+        except OSError:
+            done = False
+        if done:
+            db.add_bundle_key(h, {k: v for k, v in key.items() if k != "pending"})
+        else:
+            db.remove_bundle_key(h)
+            forgotten.append(h)
+    return forgotten
+
+
+def write_key_file(key: dict[str, Any], path: str | Path) -> Path:
+    """Write a bundle key (JSON) for ``merge --key`` on another machine; created private (mode 0600)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = json.dumps({k: v for k, v in key.items() if k != "pending"}, indent=2, sort_keys=True).encode("utf-8")
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def export_key(results: str | Path, bundle: str | Path, path: str | Path) -> Path:
+    """Write the key of ``bundle`` (a bundle zip, or its hash or a prefix of it) kept in the experimenter's
+    database ``results`` to ``path``."""
+    from studyapp.study.storage import ResultsDB
+
+    db = ResultsDB(results, create=False)
+    try:
+        keys = {h: k for h, k in db.bundle_keys().items() if not isinstance(k.get("pending"), dict)}
+    finally:
+        db.close()
+    wanted = str(bundle)
+    if Path(wanted).suffix.lower() == ".zip":
+        try:
+            with zipfile.ZipFile(wanted) as zf:
+                wanted = str(json.loads(zf.read("manifest.json"))["design_hash"])
+        except (OSError, zipfile.BadZipFile, KeyError, ValueError, TypeError) as exc:
+            raise InputError(bundle, "manifest.json", f"not a readable study bundle ({exc})") from None
+    found = [h for h in keys if h.startswith(wanted)] if wanted else []
+    if len(found) != 1:
+        known = ", ".join(f"{h[:12]} ({keys[h].get('bundle', '?')})" for h in sorted(keys)) or "none"
+        raise InputError(results, "bundles", f"{'no' if not found else 'more than one'} bundle key matches "
+                         f"{str(bundle)!r}; the keys kept here are: {known}")
+    return write_key_file(keys[found[0]], path)
 
 
 # ------------------------------------------------------------------------------------------ opening bundles
@@ -583,6 +648,43 @@ def remote_row(design: Any, opened: OpenedBundle, participant_id: str) -> int:
     return int(default_row(design, participant_id))
 
 
+@dataclass(frozen=True)
+class RemotePlan:
+    """A roster participant's trials as the bundle carries them (see :mod:`studyapp.study.shipped`)."""
+
+    row: int
+    #: the design's row count, for registering the participant on their row
+    n_rows: int
+    plans: list[Any]
+
+
+def remote_plan(opened: OpenedBundle, participant_id: str) -> RemotePlan | None:
+    """The trials the bundle carries for ``participant_id``; None for a bundle made before bundles carried
+    them (its design computes the schedule). An id the bundle was not made for is refused: its trials
+    cannot be computed on the participant's PC without telling the models apart."""
+    from studyapp.study.schedule import TrialPlan
+
+    path = opened.folder / SCHEDULE_FILE
+    if not path.is_file():
+        return None
+    where = f"{opened.zip_path.name}:{SCHEDULE_FILE}"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        people = data["participants"]
+        if participant_id not in people:
+            raise InputError(None, "--participant", f"{participant_id!r} is not one of the participant ids this "
+                             f"study file was made for; use the id your experimenter gave you (this file has "
+                             f"{', '.join(sorted(people)) or 'none'})")
+        mine = people[participant_id]
+        row, rows = int(mine["row"]), int(data["rows"])
+        plans = [TrialPlan(i, str(sid), (str(slots[0]), str(slots[1]), str(slots[2])), bool(prac), bool(check), row)
+                 for i, (sid, slots, prac, check) in enumerate(mine["trials"])]
+    except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
+        raise InputError(where, None, f"the participants' trials cannot be read ({exc}); ask the experimenter "
+                         "for the file again") from None
+    return RemotePlan(row=row, n_rows=rows, plans=plans)
+
+
 # ------------------------------------------------------------------------------------------ results files
 def _participant_rows(db: Any, pid: str) -> dict[str, list[dict[str, Any]]]:
     con = db.connection
@@ -814,7 +916,8 @@ def _prepare(db: Any, path: Path, extra_keys: dict[str, dict]) -> _Returned:
                                 f"(hash {db.design_hash[:12]}…) and knows no bundle with that hash. Merge it into the "
                                 "database of its own study, or pass that bundle's --key file")
     remote = key.get("bundle_hash") != db.design_hash
-    mapped, findings = map_ids(payload, key["conditions"], key["stimuli"], strict=remote)
+    mapped, findings = map_ids(payload, key.get("conditions", {}), key.get("stimuli", {}), strict=remote,
+                               trials=key.get("trials"))
     parts = payload["participants"]
     if len(parts) != 1:
         raise StudyappError(f"expected one participant in the file, found {len(parts)}")

@@ -6,7 +6,10 @@ the file *says was answered*, against what the study makes possible (after the b
 opaque ids back to the real condition and stimulus ids):
 
 * **roster**: the participant id is on the bundle's roster (unless unlisted ids are allowed), and a
-  listed id follows the Latin-square row the roster gave it;
+  listed id follows the Latin-square row the roster gave it; with a bundle that ships one stimulus per
+  participant and trial (:mod:`studyapp.study.shipped`), every trial is one the bundle made for this
+  participant at this place (:func:`map_ids`), so another participant's answers under a new id are refused
+  even before anyone else's answers are in the database;
 * **schedule**: every trial's index, stimulus, practice and attention-check flags, slots (which condition
   sat left, middle, right) and samples equal the schedule recomputed by
   :func:`studyapp.study.schedule.participant_schedule` from the design's seed, the id and the row -- the
@@ -111,12 +114,18 @@ def _trial_name(t: Row) -> str:
 
 # ------------------------------------------------------------------------------------------ ids
 def map_ids(payload: Mapping[str, Any], conditions: Mapping[str, str], stimuli: Mapping[str, str],
-            strict: bool) -> tuple[dict[str, Any], list[Finding]]:
+            strict: bool, trials: Mapping[str, Mapping[str, Any]] | None = None) -> tuple[dict[str, Any], list[Finding]]:
     """``payload`` with the bundle's opaque condition and stimulus ids replaced by the real ones.
 
     ``strict`` (a bundle's results): an id the key does not know -- a real condition name written into
     the file, an edited id -- is a finding (and stays as it is, so the schedule check shows where).
+    ``trials`` (keys of bundles that ship one stimulus per participant and trial, see
+    :mod:`studyapp.study.shipped`): shipped stimulus -> its participant, trial index, real stimulus and
+    ``{token: real condition}`` / ``{token: sample}``; conditions and samples are then mapped per trial, and a
+    shipped stimulus answered by another participant or at another trial index is a finding.
     """
+    if trials is not None:
+        return _map_trials(payload, trials)
     found: dict[str, Finding] = {}
 
     def cond(c: Any, where: str) -> Any:
@@ -145,6 +154,64 @@ def map_ids(payload: Mapping[str, Any], conditions: Mapping[str, str], stimuli: 
     responses = [{**r, "condition": cond(r.get("condition"), f"responses of {_trial_name(r)}")}
                  for r in payload["responses"]]
     return {**payload, "trials": trials, "responses": responses}, list(found.values())
+
+
+def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, Any]]) -> tuple[dict[str, Any], list[Finding]]:
+    """:func:`map_ids` for per-trial keys: tokens mean something only within their own shipped stimulus."""
+    found: list[Finding] = []
+    pid = payload.get("participant")
+    by_index: dict[Any, Mapping[str, Any]] = {}
+    slots = ("slot_left", "slot_middle", "slot_right")
+    samples = ("sample_left", "sample_middle", "sample_right")
+
+    def cond(entry: Mapping[str, Any] | None, c: Any, where: str) -> Any:
+        if entry is None or not isinstance(c, str):
+            return c
+        frozen = c.startswith(FROZEN_PREFIX)
+        real = entry["conditions"].get(c.removeprefix(FROZEN_PREFIX))
+        if real is None:
+            found.append(Finding(where, f"condition id {c!r} is not one of the bundle's: the file was edited (a "
+                                        "real condition name, or an invented id)"))
+            return c
+        return (FROZEN_PREFIX if frozen else "") + real
+
+    mapped_trials = []
+    foreign: dict[str, list[Any]] = {}  # participant the bundle made a trial for -> trial indices in this file
+    moved: list[Any] = []
+    for t in payload["trials"]:
+        where = _trial_name(t)
+        entry = trials.get(t.get("stimulus")) if isinstance(t.get("stimulus"), str) else None
+        if entry is None:
+            found.append(Finding(where, f"stimulus id {t.get('stimulus')!r} is not one of the bundle's: the file "
+                                        "was edited"))
+            mapped_trials.append(dict(t))
+            continue
+        if entry["participant"] != pid:
+            foreign.setdefault(str(entry["participant"]), []).append(t.get("trial_index"))
+        elif entry["trial_index"] != t.get("trial_index"):
+            moved.append(t.get("trial_index"))
+        by_index.setdefault(t.get("trial_index"), entry)
+        shown = [t.get(k) for k in slots]
+        wrong = [k for k in samples if t.get(k) not in (1, None)]
+        if wrong:
+            found.append(Finding(where, f"{wrong[0]} is {t.get(wrong[0])!r}, but a bundle's session records 1 (the "
+                                        "bundle picks the sample): the file was edited"))
+        row = {**t, "stimulus": entry["stimulus"], **{k: cond(entry, c, where) for k, c in zip(slots, shown)}}
+        for k, c in zip(samples, shown):
+            tok = c.removeprefix(FROZEN_PREFIX) if isinstance(c, str) else c
+            row[k] = entry["samples"].get(tok, t.get(k)) if isinstance(tok, str) else t.get(k)
+        mapped_trials.append(row)
+    for other, idx in foreign.items():
+        found.append(Finding(f"participant {pid}", f"{len(idx)} of {len(payload['trials'])} trials are those the "
+                                                   f"bundle made for participant {other}: their answers under "
+                                                   "another id (the file was edited)"))
+    if moved:
+        found.append(Finding("trials " + ", ".join(map(str, moved[:6])), "each shows the clip and models of another "
+                                                                       "trial: the file was edited"))
+    responses = [{**r, "condition": cond(by_index.get(r.get("trial_index")), r.get("condition"),
+                                         f"responses of {_trial_name(r)}")} for r in payload["responses"]]
+    unique = list(dict.fromkeys(found))
+    return {**payload, "trials": mapped_trials, "responses": responses}, unique
 
 
 # ------------------------------------------------------------------------------------------ roster and row

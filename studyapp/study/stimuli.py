@@ -489,7 +489,10 @@ def _scene_identity(design: Design, stim: Stimulus, conds: list[int], sample: in
         src = fid(model_path(design, c)) if c.model is not None else fid(motion_path(design, c, stim, sample))
         motions.append((src, c.fps, c.representation, c.template, c.rotation_order, c.joints, c.degrees,
                         tuple(sorted(c.name_map.items())), c.motion_end, c.body_model))
-    return (tuple(motions), fid(stim.audio), fid(stim.face), fid(stim.head), design.avatar_for(stim), stim.duration_s)
+    # Sorted: the same motions in other slots check nothing new, and a bundle's design shows each clip's
+    # models in a new order per trial (studyapp.study.shipped), which would otherwise rebuild every order.
+    return (tuple(sorted(motions, key=repr)), fid(stim.audio), fid(stim.face), fid(stim.head), design.avatar_for(stim),
+            stim.duration_s)
 
 
 def _dry_run(design: Design, stim: Stimulus, conds: list[int],

@@ -709,3 +709,11 @@ class ResultsDB:
         row = self._con.execute("SELECT key FROM bundles WHERE design_hash = ?", (bundle_hash,)).fetchone()
         return None if row is None else json.loads(row[0])
 
+    def bundle_keys(self) -> dict[str, dict[str, Any]]:
+        """Every stored bundle key, by bundle hash (completed and pending ones; see bundle.py)."""
+        return {h: json.loads(text) for h, text in self._con.execute("SELECT design_hash, key FROM bundles")}
+
+    def remove_bundle_key(self, bundle_hash: str) -> None:
+        with self.transaction() as con:
+            con.execute("DELETE FROM bundles WHERE design_hash = ?", (bundle_hash,))
+

@@ -18,7 +18,7 @@ import logging
 import os
 import wave
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 from studyapp.errors import StudyappError
 from studyapp.render.frames import FlipPredictor
@@ -381,12 +381,14 @@ class WindowRunner:
 
 
 def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: bool = False,
-               audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720)) -> int:
+               audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720),
+               plans: Sequence[Any] | None = None, n_rows: int | None = None) -> int:
     """Run the participant's session in a window. Returns 0 when the study was completed (or ended
     early by the attention rule), 1 when the window was closed before the end (run again to resume).
 
     ``audio_device``: output index or name (default: ``$STUDYAPP_AUDIO_DEVICE``, else the system
     default); without any output the study runs silently and says so (console and environment check).
+    ``plans`` and ``n_rows``: a schedule given instead of the design's (a bundle's participant).
     """
     from studyapp.audio.playback import open_clock
     from studyapp.study.session import Session
@@ -395,7 +397,7 @@ def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: b
         audio_device = os.environ.get("STUDYAPP_AUDIO_DEVICE") or None
     clock, message = open_clock(audio_device)
     print(message, flush=True)
-    session = Session(design, db, participant_id)
+    session = Session(design, db, participant_id, plans=plans, n_rows=n_rows)
     runner = None
     try:
         # maximized: the figures get the whole screen; F11 switches to full screen and back

@@ -31,7 +31,7 @@ from studyapp.study.design.parse import parse_design
 def bundled(tmp_path_factory) -> tuple[Path, Path]:
     root = tmp_path_factory.mktemp("confined")
     design_path = write_synthetic_study(root / "study", n_stimuli=2, seconds=0.3)
-    return design_path, make_bundle(design_path, root / "study.zip").path
+    return design_path, make_bundle(design_path, root / "study.zip", participants=1).path
 
 
 def rebundle(src: Path, dst: Path, *, design: Callable[[dict[str, Any]], None] | None = None,

@@ -88,7 +88,10 @@ def test_bundle_remote_run_and_merge(tmp_path: Path, cli) -> None:
     lab_db = tmp_path / "lab.sqlite"
     bundled = cli("bundle", design, "-o", tmp_path / "send" / "study.zip", "--participants", "2", "--results", lab_db)
     assert bundled.returncode == 0, bundled.stderr
-    assert "R01 (row 0)" in bundled.stdout and (tmp_path / "send" / "study.key.json").is_file()
+    assert "R01 (row 0)" in bundled.stdout
+    # the key stays in the lab database: nothing but the zip is written where the bundle goes
+    assert sorted(p.name for p in (tmp_path / "send").iterdir()) == ["study.zip"]
+    assert "not written next to the zip" in bundled.stdout
 
     # the participant's PC: own home, cache and data folders; runs from an unrelated folder
     home = tmp_path / "participant"

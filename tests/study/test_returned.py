@@ -54,7 +54,9 @@ def returned(tmp_path_factory) -> dict[str, Any]:
                   "--bot-pace", str(CLIP_S), env=env, cwd=home)
     assert remote.returncode == 0, remote.stderr
     [results_zip] = (home / "studyapp-results").glob("results-*-R01-*.zip")
-    key = json.loads((root / "send" / "study.key.json").read_text())
+    exported = _run("key", lab_db, root / "send" / "study.zip", "-o", root / "private" / "study.key.json")
+    assert exported.returncode == 0, exported.stderr
+    key = json.loads((root / "private" / "study.key.json").read_text())
     return {"root": root, "design": design, "db": lab_db, "zip": results_zip, "key": key,
             "bundle": root / "send" / "study.zip"}
 
@@ -165,11 +167,15 @@ def test_edited_results_are_refused_each_with_its_own_message_and_nothing_is_imp
 def test_untouched_file_merges_once_then_already_merged_and_a_copy_under_a_new_id_is_refused(returned, tmp_path: Path) -> None:
     db = _fresh_db(returned, tmp_path)
     good = returned["zip"]
-    # an id that is not on the roster: refused for that alone (the database holds no one to copy yet)
+    # an id that is not on the roster, showing the trials the bundle made for R01 (the database holds no one
+    # to copy yet): one line for each
     z9 = _edited(good, tmp_path / "results-Z9.zip", _rename("Z9"))
     unlisted = _run("merge", db, z9)
     assert unlisted.returncode == 1 and f"REFUSED: {z9}" in unlisted.stdout
+    n = len(json.loads(zipfile.ZipFile(good).read("results.json"))["trials"])
     assert [ln for ln in unlisted.stdout.splitlines() if ln.startswith(f"  {z9}: ")] == [
+        f"  {z9}: participant Z9: {n} of {n} trials are those the bundle made for participant R01: their answers "
+        "under another id (the file was edited)",
         f"  {z9}: participant Z9: this id is not on the bundle's roster (ids handed out: R01, R02, R03); merge "
         "with --allow-unlisted if you let participants choose their own ids"]
     assert _participants(db) == set()
@@ -190,7 +196,8 @@ def test_untouched_file_merges_once_then_already_merged_and_a_copy_under_a_new_i
     allowed = _run("merge", db, z9, "--allow-unlisted")
     assert allowed.returncode == 1 and f"REFUSED: {z9}" in allowed.stdout
     problems = [ln for ln in allowed.stdout.splitlines() if ln.startswith(f"  {z9}: ")]
-    assert len(problems) == 1 and "a copy of their answers under another id" in problems[0], problems
+    assert len(problems) == 2 and "the bundle made for participant R01" in problems[0], problems
+    assert "a copy of their answers under another id" in problems[1], problems
     assert _participants(db) == {"R01"}
 
     # export with no output flag prints the CSV to stdout

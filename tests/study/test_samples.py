@@ -232,43 +232,35 @@ def _grams(text: str, n: int = 4) -> set[str]:
 
 
 def test_bundle_ships_every_sample_under_its_own_name_and_merge_keeps_the_sample(tmp_path: Path) -> None:
-    import json
-
-    from studyapp.bots.session_driver import run_bot_session
-    from studyapp.study.bundle import make_bundle, merge_results, open_bundle, remote_row, write_results_file
+    from fixtures.bundles import remote_run, shipped_motions
+    from studyapp.study.bundle import make_bundle, merge_results, open_bundle
     from studyapp.study.export import export_dataframe
     from studyapp.study.schedule import participant_schedule
-    from studyapp.study.storage import ResultsDB
 
     path = stochastic_study(tmp_path / "lab")
     design = load_design(path)
     results = tmp_path / "lab.sqlite"
-    info = make_bundle(path, tmp_path / "out" / "study.zip", participants=2, results=results, salt="qa-salt")
+    # rows 0, 1 and 2 see samples 1, 2 and 3 of every clip between them
+    info = make_bundle(path, tmp_path / "out" / "study.zip", participants=3, results=results, salt="qa-salt")
     names = [n for n in zipfile.ZipFile(info.path).namelist() if n.startswith("media/")]
     assert len(names) == 3 * (1 + 1 + N + 1)  # per clip: audio, synced, 3 lagged samples, static
     assert all(re.fullmatch(r"media/m_[0-9a-f]{12}\.(bvh|wav)", n) for n in names), names
     opened = open_bundle(info.path, cache=tmp_path / "cache")
     bundled = load_design(opened.design_path)
-    key = json.loads(info.key_path.read_text())
-    stochastic = next(c for c in bundled.conditions if key["conditions"][c.id] == "lagged")
-    assert stochastic.samples == N
-    files = []
-    for s in bundled.stimuli:
-        for k in range(1, N + 1):
-            got = motion_path(bundled, stochastic, s, k)
-            # each sample plays the very file it was made from
-            assert got.read_bytes() == motion_path(design, "lagged", key["stimuli"][s.id], k).read_bytes()
-            files.append(got.stem[len("m_"):])
-    assert len(set(files)) == len(files) == 3 * N
-    assert not set.intersection(*(_grams(t) for t in files)), "a name fragment ties one model's samples together"
+    assert all(c.samples == 1 for c in bundled.conditions)  # the bundle picks the sample of every trial
+    files = set()
+    for m in shipped_motions(info.key, opened.design_path):
+        # each sample plays the very file it was made from
+        assert m.path.read_bytes() == motion_path(design, m.condition, m.stimulus, m.sample).read_bytes()
+        if m.condition == "lagged":
+            files.add((m.stimulus, m.sample, m.path.stem[len("m_"):]))
+    assert len(files) == len({f[2] for f in files}) == 3 * N
+    assert not set.intersection(*(_grams(f[2]) for f in files)), "a name fragment ties one model's samples together"
 
     # a remote participant's answers come back with the sample each slot showed
-    db = ResultsDB(tmp_path / "remote.sqlite", bundled)
-    db.on_participant_finished = lambda p: write_results_file(db, p, tmp_path / "outbox", opened)
     # watching each 1-second clip as long as it lasts: merge refuses answers given sooner
-    session = run_bot_session(bundled, db, "R01", "ordered", 3, row=remote_row(bundled, opened, "R01"), pace_s=1.0)
-    db.close()
-    assert merge_results(results, [session.results_file], design=path)[0].ok
+    returned = remote_run(info.path, tmp_path, "R01", pace_s=1.0)
+    assert merge_results(results, [returned], design=path)[0].ok
     df = export_dataframe(results)
     row = info.roster["R01"]
     for _, r in df.iterrows():
@@ -283,6 +275,7 @@ def test_samples_on_the_labs_smpl_body_model_are_each_bundled_as_their_own_motio
     from studyapp.motion.fk import joint_positions
     from studyapp.motion.smpl import builtin_rest_joints, parents
     from studyapp.resources import designs_dir
+    from fixtures.bundles import shipped_motions
     from studyapp.study.bundle import make_bundle, open_bundle
     from studyapp.study.stimuli import load_condition_motion
 
@@ -306,17 +299,19 @@ def test_samples_on_the_labs_smpl_body_model_are_each_bundled_as_their_own_motio
     source.write_text(text)
     lab = load_design(source)
     assert lab.conditions[0].samples == 2 and lab.conditions[0].body_model is not None
-    info = make_bundle(source, tmp_path / "smpl.zip", results=tmp_path / "smpl.sqlite")
+    info = make_bundle(source, tmp_path / "smpl.zip", results=tmp_path / "smpl.sqlite", participants=2)
     opened = open_bundle(info.path, cache=tmp_path / "cache")
     bundled = load_design(opened.design_path)
-    key = json.loads(info.key_path.read_text())
-    shipped = next(c for c in bundled.conditions if key["conditions"][c.id] == "emage_like")
-    assert shipped.samples == 2 and shipped.motion.endswith(".bvh")
-    for s in bundled.stimuli:
-        lab_stim = lab.stimulus(key["stimuli"][s.id])
+    assert all(c.samples == 1 and c.motion.endswith(".bvh") for c in bundled.conditions)
+    shipped = {(m.stimulus, m.sample): m for m in shipped_motions(info.key, opened.design_path)
+               if m.condition == "emage_like"}
+    assert {k for _, k in shipped} == {1, 2}  # two rows: both samples travel
+    for lab_sid in {sid for sid, _ in shipped}:
+        lab_stim = lab.stimulus(lab_sid)
         positions = []
         for k in (1, 2):
-            got = load_condition_motion(bundled, shipped, s, k)
+            m = shipped[(lab_sid, k)]
+            got = load_condition_motion(bundled, bundled.condition(m.token), bundled.stimulus(m.shipped_stimulus))
             want = load_condition_motion(lab, lab.conditions[0], lab_stim, k)
             order = [got.skeleton.names.index(n) for n in want.skeleton.names]
             pos = joint_positions(got)[:, order] * got.skeleton.unit_scale
