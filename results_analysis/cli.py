@@ -40,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--conover", action="store_true", help="add Conover's Friedman post-hoc tests")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    p.add_argument("--metrics", type=Path, metavar="FILE", help="objective metrics CSV (`studyapp metrics DESIGN "
+                   "--out FILE`): reported per condition with each metric's rank correlation with the mean ranks")
     p.add_argument("--title", default=None, help="report title (default: the study title stored in a results "
                    "database, else 'Results: FILE')")
     return p
@@ -62,13 +64,18 @@ def main(argv: list[str] | None = None) -> int:
         elif _is_sqlite(args.results):
             q = load_questionnaire(args.results)
             q = q if len(q) else None
+        metrics = None
+        if args.metrics is not None:
+            from results_analysis.objective_metrics import load_metrics
+
+            metrics = load_metrics(args.metrics)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             a = analyze(df, args.out, title=title, block=args.block,
                         groups=args.group, questionnaire=q, exclude_failed_attention=args.exclude_failed_attention,
                         exclude=[x for x in args.exclude.split(",") if x.strip()], alpha=args.alpha,
                         conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete,
-                        sm_permutations=args.permutations)
+                        sm_permutations=args.permutations, metrics=metrics)
     except AnalysisInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
