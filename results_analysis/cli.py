@@ -50,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "bca (default) or percentile")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    p.add_argument("--metrics", type=Path, metavar="FILE", help="objective metrics CSV (`studyapp metrics DESIGN "
+                   "--out FILE`): reported per condition with each metric's rank correlation with the mean ranks")
     p.add_argument("--title", default=None, help="report title (default: the study's title, which a results "
                    "database and a `studyapp export` CSV carry, else 'Results: FILE')")
     return p
@@ -77,6 +79,11 @@ def main(argv: list[str] | None = None) -> int:
             q = questionnaire_from_results(df)
             q = normalize_questionnaire(q, args.results) if q is not None else None
             q = q if q is not None and len(q) else None
+        metrics = None
+        if args.metrics is not None:
+            from results_analysis.objective_metrics import load_metrics
+
+            metrics = load_metrics(args.metrics)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             a = analyze(df, args.out, title=title, block=args.block,
@@ -84,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                         exclude=[x for x in args.exclude.split(",") if x.strip()], alpha=args.alpha,
                         conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete,
                         sm_permutations=args.permutations, adjust=args.adjust, control=args.control,
-                        interval=args.interval)
+                        interval=args.interval, metrics=metrics)
     except AnalysisInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

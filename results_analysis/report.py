@@ -22,35 +22,46 @@ from results_analysis import effects_report, figures
 from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
 from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
+from results_analysis.objective_metrics import compare_metrics
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, nemenyi_q_alpha
 from results_analysis.study_meta import relabel
 
 
-def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study results", **kwargs) -> Analysis:
+def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study results",
+            metrics: pd.DataFrame | None = None, **kwargs) -> Analysis:
     """Run :func:`results_analysis.analysis.run_analysis` on ``df`` and write every output into ``out_dir``.
 
     Keyword arguments are those of ``run_analysis`` (block, groups, questionnaire,
     exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete, sm_permutations). Returns the
-    :class:`Analysis`; the report is ``out_dir / "report.html"``.
+    :class:`Analysis`; the report is ``out_dir / "report.html"``. ``metrics``: a ``studyapp metrics`` table
+    (:mod:`results_analysis.objective_metrics`), reported beside the mean ranks.
     """
     out = Path(out_dir)
     analysis = run_analysis(df, **kwargs)
-    write_outputs(analysis, out, title=title)
+    write_outputs(analysis, out, title=title, metrics=metrics)
     return analysis
 
 
-def write_outputs(a: Analysis, out: Path, *, title: str) -> None:
+def write_outputs(a: Analysis, out: Path, *, title: str, metrics: pd.DataFrame | None = None) -> None:
     """Write stats.json, tables, figures, report.md and report.html of an :class:`Analysis`.
 
     stats.json is keyed by condition ids (``_meta.labels`` maps them to their labels); the tables, figures and
     text show each condition's label (see :func:`results_analysis.study_meta.relabel`).
     """
     out.mkdir(parents=True, exist_ok=True)
-    (out / "stats.json").write_text(json.dumps(_clean(stats_dict(a)), indent=2, allow_nan=False) + "\n")
+    # the metrics CSV names conditions by id: join before relabelling
+    objective = None if metrics is None else compare_metrics(metrics, {
+        crit: dict(zip(c.summary["condition"], c.summary["mean_rank"])) for crit, c in a.criteria.items()},
+        labels=a.labels)
+    stats = stats_dict(a) | ({} if objective is None else {"_objective_metrics": objective.as_dict()})
+    (out / "stats.json").write_text(json.dumps(_clean(stats), indent=2, allow_nan=False) + "\n")
     a = relabel(a, a.labels)
     write_tables(a, out / "tables")
     write_figures(a, out / "figures")
     doc = build_document(a, title)
+    if objective is not None:
+        objective.write_tables(out / "tables")
+        objective.add_to(doc)
     (out / "report.md").write_text(doc.to_markdown() + "\n")
     (out / "report.html").write_text(doc.to_html(out / "figures"))
 

@@ -11,7 +11,7 @@ import logging
 import sys
 
 from studyapp import __version__
-from studyapp.cli import demo, design, doctor, models, motion, render, session
+from studyapp.cli import demo, design, doctor, models, motion, planning, render, session
 from studyapp.errors import StudyappError
 
 _COMMAND_MODULES = (
@@ -22,6 +22,7 @@ _COMMAND_MODULES = (
     models,    # generate
     doctor,    # doctor
     demo,      # demo
+    planning,  # metrics, plan
 )
 
 
