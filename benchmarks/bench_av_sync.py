@@ -90,6 +90,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--load", type=int, default=2 * (os.cpu_count() or 1),
                     help="busy processes to run meanwhile (default: twice the core count)")
     ap.add_argument("--device", default=None)
+    ap.add_argument("--latency", type=float, default=0.1,
+                    help="audio output latency in seconds (the participant app's default is 0.1)")
     args = ap.parse_args(argv)
 
     ctx = create_offscreen_context()
@@ -103,7 +105,7 @@ def main(argv: list[str]) -> int:
 
     pulse_pid = start_null_audio()
     try:
-        player = AudioPlayer(args.device)
+        player = AudioPlayer(args.device, latency=args.latency)
     except Exception as exc:
         print(f"no audio output ({exc}); install pulseaudio for the null sink. Skipped.")
         return 0
@@ -165,7 +167,7 @@ def main(argv: list[str]) -> int:
     record("av_sync_max_offset_frames_under_render", round(worst, 3), 1.0, "display frame periods",
            within_one_frame_pct=round(within, 2), goal_within_pct=99.0, frames_drawn=drawn,
            frames_shown=rec.frames_shown, dropped_late=loop.dropped_late, fps=round(drawn / wall, 2),
-           drift_ms_per_min=round(slope, 3), busy_processes=args.load,
+           drift_ms_per_min=round(slope, 3), busy_processes=args.load, audio_latency_s=args.latency,
            load_average=[load_before, load_after], cpu_count=os.cpu_count(), gl_renderer=ctx.info["GL_RENDERER"])
     return 0
 

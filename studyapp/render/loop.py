@@ -144,6 +144,7 @@ class FrameTimer(Protocol):
     def flip_time(self) -> float: ...   # when the frame just presented was flipped
     def tick(self) -> None: ...         # after a frame
     def idle(self) -> None: ...         # instead of a frame (a minimised window)
+    def wait_until(self, t: float) -> None: ...  # hold a finished frame back until ``t`` (``now()``'s time base)
 
 
 class WallTimer:
@@ -162,6 +163,9 @@ class WallTimer:
 
     def idle(self) -> None:
         time.sleep(0.05)  # a minimised window: nothing to draw, do not spin
+
+    def wait_until(self, t: float) -> None:
+        time.sleep(max(0.0, t - time.perf_counter()))
 
 
 class VirtualTimer:
@@ -192,6 +196,9 @@ class VirtualTimer:
     def idle(self) -> None:
         self.tick()
 
+    def wait_until(self, t: float) -> None:
+        pass  # no real time passes
+
 
 # -- the loop ------------------------------------------------------------------------------------------------
 
@@ -221,7 +228,9 @@ class FrameLoop:
         the first flip they can make; a frame that aimed at a flip and was still drawing when that flip
         passed is dropped (not presented, no ``after_flip``) and counted in :attr:`dropped_late`. Frames
         are never shown late: each one is drawn for the audio time of its own flip, so a slow frame costs
-        a skipped picture, not a picture that lags the sound (drop, never drift).
+        a skipped picture, not a picture that lags the sound (drop, never drift). Nor early: a frame done
+        more than half a period before its flip is held back until then (a vsync'd swap would otherwise
+        show it at the next flip, ahead of the sound).
     """
 
     def __init__(self, target: FrameTarget, timer: FrameTimer, draw: DrawFn,
@@ -263,6 +272,9 @@ class FrameLoop:
                 self.dropped_late += 1
                 self.frames += 1
                 return True
+            period = pacer.period
+            if pacer.aimed is not None and period and done < pacer.aimed - period / 2:
+                self.timer.wait_until(pacer.aimed - period / 2)  # the swap then lands on the aimed flip
         if self.capture:
             self.last_rgb = self.target.read_rgb()
         self.target.present()
