@@ -45,7 +45,8 @@ def main(argv: list[str]) -> int:
             if sink.exists():
                 for line in sink.read_text(encoding="utf-8").splitlines():
                     row = json.loads(line)
-                    figures[row.pop("key")] = {**row, "benchmark": script.name}
+                    key = row.pop("key")
+                    figures[key] = {**row, "benchmark": script.name}
     if args.json is not None:
         args.json.write_text(json.dumps(figures, indent=2) + "\n", encoding="utf-8")
         print(f"\nfigures written to {args.json}: {', '.join(sorted(figures)) or 'none'} (load average "
