@@ -19,7 +19,7 @@ from typing import Any
 ENV = "STUDYAPP_BENCH_JSON"
 
 
-def record(key: str, *, value: float, baseline: float | None, unit: str, **extra: Any) -> None:
+def record(key: str, value: float, baseline: float | None, unit: str, **extra: Any) -> None:
     """Add (or replace) figure ``key`` in the JSON file named by ``$STUDYAPP_BENCH_JSON``, if set."""
     target = os.environ.get(ENV)
     if not target:
@@ -32,3 +32,8 @@ def record(key: str, *, value: float, baseline: float | None, unit: str, **extra
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(figures, indent=2, sort_keys=True) + "\n")
     os.replace(tmp, path)
+
+
+def load_average() -> float:
+    """The 1-minute load average now: every figure states it, since a shared machine's figures move with it."""
+    return round(os.getloadavg()[0], 2)

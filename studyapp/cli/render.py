@@ -186,7 +186,7 @@ def _view_window(args: argparse.Namespace, audio) -> int:
 
         win.on_key(on_key)
         player.start(0.0)
-        FrameLoop(WindowTarget(win), WallTimer(), draw, player.after_flip).run()
+        FrameLoop(WindowTarget(win), WallTimer(), draw, player.after_flip, pacer=player.predictor).run()
     finally:
         clock.close()
         if renderer is not None:

@@ -56,13 +56,47 @@ def clock_media_time(clock: MediaClock, now: float, predictor: FlipPredictor | N
     return min(t, duration_s)
 
 
+DRAW_TIME_WINDOW = 30  # recent draw durations the lead is estimated from (half a second at 60 Hz)
+DRAW_TIME_QUANTILE = 0.9  # lead = this quantile of them: a frame misses its flip about once in ten spikes
+
+
 class FlipPredictor:
-    """Predicts the next flip from the last one and the refresh period (measured when not known)."""
+    """Predicts the flip a frame drawn now will make, from the last flip, the refresh period (measured
+    when not known) and how long drawing takes (:meth:`drew`, fed by the frame loop).
+
+    On a fast machine drawing takes a fraction of a period and the frame aims at the next flip. When
+    drawing takes longer (a software renderer, a loaded machine) the frame aims at the first flip its
+    drawing can make (``now`` plus :attr:`lead_s`), so it is drawn for the audio time at which it will
+    really be seen; a frame that still misses that flip is dropped by the loop, never shown late.
+
+    >>> fp = FlipPredictor(50.0); fp.flipped(1.0)
+    >>> fp.predict(1.001)                          # nothing known about drawing: the next flip
+    1.02
+    >>> for d in [0.05] * 10: fp.drew(d)           # drawing takes two and a half periods
+    >>> round(fp.predict(1.001), 3)                # the first flip after 1.051
+    1.06
+    """
 
     def __init__(self, refresh_hz: float | None = None) -> None:
         self.nominal_hz = refresh_hz
         self.last_flip: float | None = None
         self._intervals: list[float] = []
+        self._draws: list[float] = []
+        #: The flip the frame being drawn aims at, set when its drawing asked (:meth:`predict`); None when
+        #: the frame shows no media time (a static screen), which is then never late.
+        self.aimed: float | None = None
+
+    @property
+    def lead_s(self) -> float:
+        """How long drawing a frame is expected to take (0 until the loop reported a draw)."""
+        if not self._draws:
+            return 0.0
+        return float(np.quantile(self._draws, DRAW_TIME_QUANTILE))
+
+    def drew(self, seconds: float) -> None:
+        """Report how long drawing one frame took (from the time it was aimed to the end of drawing)."""
+        self._draws.append(max(0.0, float(seconds)))
+        del self._draws[:-DRAW_TIME_WINDOW]
 
     @property
     def period(self) -> float | None:
@@ -77,9 +111,11 @@ class FlipPredictor:
         if self.last_flip is None or period is None:
             return None
         nxt = self.last_flip + period
-        if nxt < now:  # we are late: the frame goes out at the next whole period after now
-            nxt += np.ceil((now - nxt) / period) * period
-        return float(nxt)
+        ready = now + self.lead_s  # when drawing will be done
+        if nxt < ready:  # the frame goes out at the first whole period after it is ready
+            nxt += np.ceil((ready - nxt) / period) * period
+        self.aimed = float(nxt)
+        return self.aimed
 
     def flipped(self, t: float) -> None:
         if self.last_flip is not None:

@@ -144,6 +144,7 @@ class FrameTimer(Protocol):
     def flip_time(self) -> float: ...   # when the frame just presented was flipped
     def tick(self) -> None: ...         # after a frame
     def idle(self) -> None: ...         # instead of a frame (a minimised window)
+    def wait_until(self, t: float) -> None: ...  # hold a finished frame back until ``t`` (``now()``'s time base)
 
 
 class WallTimer:
@@ -162,6 +163,9 @@ class WallTimer:
 
     def idle(self) -> None:
         time.sleep(0.05)  # a minimised window: nothing to draw, do not spin
+
+    def wait_until(self, t: float) -> None:
+        time.sleep(max(0.0, t - time.perf_counter()))
 
 
 class VirtualTimer:
@@ -192,6 +196,9 @@ class VirtualTimer:
     def idle(self) -> None:
         self.tick()
 
+    def wait_until(self, t: float) -> None:
+        pass  # no real time passes
+
 
 # -- the loop ------------------------------------------------------------------------------------------------
 
@@ -215,19 +222,32 @@ class FrameLoop:
         Checked before each frame; the loop stops when it returns False (a participant finished).
     capture:
         Read every frame back into :attr:`last_rgb` (before presenting, while the back buffer holds it).
+    pacer:
+        The :class:`~studyapp.render.frames.FlipPredictor` the drawing function aims its media time with
+        (real-time timers only). The loop tells it how long each frame took to draw, so frames aim at
+        the first flip they can make; a frame that aimed at a flip and was still drawing when that flip
+        passed is dropped (not presented, no ``after_flip``) and counted in :attr:`dropped_late`. Frames
+        are never shown late: each one is drawn for the audio time of its own flip, so a slow frame costs
+        a skipped picture, not a picture that lags the sound (drop, never drift). Nor early: a frame done
+        more than half a period before its flip is held back until then (a vsync'd swap would otherwise
+        show it at the next flip, ahead of the sound).
     """
 
     def __init__(self, target: FrameTarget, timer: FrameTimer, draw: DrawFn,
                  after_flip: Callable[[float], None] | None = None, *,
-                 running: Callable[[], bool] | None = None, capture: bool = False) -> None:
+                 running: Callable[[], bool] | None = None, capture: bool = False,
+                 pacer: FlipPredictor | None = None) -> None:
         self.target = target
         self.timer = timer
         self.draw = draw
         self.after_flip = after_flip
         self.running = running
         self.capture = capture
+        self.pacer = None if timer.virtual else pacer  # virtual time does not pass while drawing
         self.last_rgb: np.ndarray | None = None
         self.frames = 0
+        #: Frames drawn but not shown because they finished after the flip they were drawn for.
+        self.dropped_late = 0
 
     def step(self) -> bool:
         """One frame; False (nothing drawn) once the target closed or ``running`` says stop."""
@@ -240,8 +260,21 @@ class FrameLoop:
             self.timer.idle()
             return True
         now = self.timer.now()
+        pacer = self.pacer
+        if pacer is not None:
+            pacer.aimed = None
         self.target.use()
         self.draw(self.target.fbo, size, now)
+        if pacer is not None:
+            done = self.timer.now()
+            pacer.drew(done - now)
+            if pacer.aimed is not None and done > pacer.aimed:  # its flip has passed: drop, do not show late
+                self.dropped_late += 1
+                self.frames += 1
+                return True
+            period = pacer.period
+            if pacer.aimed is not None and period and done < pacer.aimed - period / 2:
+                self.timer.wait_until(pacer.aimed - period / 2)  # the swap then lands on the aimed flip
         if self.capture:
             self.last_rgb = self.target.read_rgb()
         self.target.present()

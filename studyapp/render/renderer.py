@@ -3,8 +3,11 @@
 Per frame the CPU only blends two precomputed palettes per slot, writes them to three small uniform
 buffers and sets the handful of non-zero morph weights; skinning and morphing run in the vertex
 shader. Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
-caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's). On software
-rasterisers (llvmpipe) an FXAA pass replaces MSAA by default (see :class:`Renderer`).
+caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's), or handed
+over as a texture (:meth:`Renderer.render_texture`, what the participant UI's scene cache shows, so the
+picture is not copied once more). On software rasterisers (llvmpipe) MSAA is replaced by default (see
+:class:`Renderer`): every full-frame pass there waits for the CPU raster threads while holding the
+Python interpreter (and with it the audio callback), so the software path draws with no extra pass.
 
 Example (headless)::
 
@@ -24,6 +27,8 @@ Example (headless)::
 """
 from __future__ import annotations
 
+import logging
+
 import moderngl
 import numpy as np
 
@@ -38,6 +43,10 @@ LABEL_COLOR = (0.22, 0.23, 0.26, 0.9)
 MAX_CACHED_AVATARS = 4  # GPU meshes kept for avatars not drawn lately (a study normally uses one)
 MORPH_EPS = 1e-4  # weights below this are skipped (invisible, and it keeps the vertex loop short)
 FXAA_BANDS = 8  # anti-aliasing rectangles per figure (horizontal bands fitted to the figure's joints)
+SOFTWARE_AA = ("none", "fxaa", "msaa")
+
+log = logging.getLogger(__name__)
+_logged_aa: set[tuple[str, str]] = set()  # (GL renderer, decision): said once per process
 
 
 def slot_viewports(viewport: tuple[int, int, int, int], n: int) -> list[tuple[int, int, int, int]]:
@@ -69,20 +78,29 @@ class Renderer:
         MSAA sample count (0: no multisampling).
     software_aa:
         What to do on a software rasteriser (llvmpipe), where multisampling costs about three times the
-        frame time: ``"fxaa"`` (default) replaces MSAA by one FXAA pass, ``"msaa"`` keeps MSAA anyway.
-        On GPUs MSAA is always used as asked.
+        frame time: ``"none"`` (default) draws single-sampled with no extra pass (each full-frame pass
+        there is a stall while the raster threads finish: FXAA's two cost a fifth of the frame), ``"fxaa"``
+        replaces MSAA by an FXAA pass around the figures, ``"msaa"`` keeps MSAA anyway. On GPUs MSAA is
+        always used as asked. The choice is made once per renderer and logged once per process.
 
     ``antialiasing`` tells which method is in use: ``"msaa"``, ``"fxaa"`` or ``"none"``.
     """
 
-    def __init__(self, ctx: moderngl.Context, samples: int = 4, software_aa: str = "fxaa") -> None:
+    def __init__(self, ctx: moderngl.Context, samples: int = 4, software_aa: str = "none") -> None:
         self.ctx = ctx
-        if software_aa not in ("fxaa", "msaa"):
-            raise ValueError(f"software_aa must be 'fxaa' or 'msaa', got {software_aa!r}")
+        if software_aa not in SOFTWARE_AA:
+            raise ValueError(f"software_aa must be one of {', '.join(SOFTWARE_AA)}, got {software_aa!r}")
         samples = min(int(samples), ctx.max_samples) if samples else 0
-        self.fxaa = bool(samples) and software_aa == "fxaa" and is_software_renderer(ctx)
-        self.samples = 0 if self.fxaa else samples
+        software = is_software_renderer(ctx)
+        self.fxaa = bool(samples) and software_aa == "fxaa" and software
+        self.samples = 0 if (software and software_aa != "msaa") else samples
         self.antialiasing = "fxaa" if self.fxaa else ("msaa" if self.samples else "none")
+        if software and samples:
+            key = (str(ctx.info.get("GL_RENDERER", "")), self.antialiasing)
+            if key not in _logged_aa:
+                _logged_aa.add(key)
+                log.info("software renderer %s: anti-aliasing %s instead of %dx MSAA", key[0], key[1], samples)
+        self.frames_drawn = 0  # pictures drawn so far: a texture from render_texture is valid until the next
         vert = read_shader("fullscreen.vert")
         self.prog = ctx.program(vertex_shader=read_shader("skinned.vert"), fragment_shader=read_shader("skinned.frag"))
         self.bg_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("background.frag"))
@@ -181,6 +199,26 @@ class Renderer:
         if viewport is None:
             viewport = (0, 0, *target_fbo.size)
         x, y, w, h = (int(v) for v in viewport)
+        self._draw_picture(scene, t, (w, h), figures)
+        self._present(target_fbo, (x, y, w, h), scene.n_slots)
+
+    def render_texture(self, scene, t: float, size: tuple[int, int], *, figures: bool = True) -> moderngl.Texture:
+        """Draw ``scene`` at ``t`` and return the finished picture as a texture of ``size`` (bottom row first),
+        without copying it anywhere: the renderer's own buffer, valid until it draws again (see
+        :attr:`frames_drawn`). What :meth:`draw_trial` would copy into a framebuffer, pixel for pixel."""
+        w, h = (int(v) for v in size)
+        self._draw_picture(scene, t, (w, h), figures)
+        if self.fxaa:
+            self._fxaa(scene.n_slots)
+            return self._aa.color_attachments[0]
+        if self.samples:
+            self.ctx.copy_framebuffer(self._resolve, self._msaa)
+        return self._resolve.color_attachments[0]
+
+    def _draw_picture(self, scene, t: float, size: tuple[int, int], figures: bool) -> None:
+        """Draw the frame into the renderer's own buffer (``self._msaa``) of ``size``."""
+        w, h = size
+        self.frames_drawn += 1
         self._ensure_buffers((w, h))
         fbo = self._msaa
         fbo.use()
@@ -195,7 +233,6 @@ class Renderer:
             fbo.color_mask = (True, True, True, True)
             fbo.use()
         self._draw_slots(scene, t, (0, 0, w, h), figures, backdrop=backdrop is None)
-        self._present(target_fbo, (x, y, w, h), scene.n_slots)
 
     def _backdrop(self, n_slots: int) -> moderngl.Framebuffer | None:
         """The backdrop of every slot, drawn once per size and slot count into a texture (single-sampled
@@ -313,7 +350,7 @@ class Renderer:
         self._aa_rects = []
         for i, vp in enumerate(vps):
             fbo.viewport = vp
-            if figures:
+            if figures and self.fxaa:  # where FXAA works (nothing else needs the figure's rectangles)
                 avatar = scene.avatars[i]
                 self._aa_rects.append(self._figure_rects(self._joint_boxes(avatar), pals[i], frames[i], view_proj, vp))
             else:
@@ -492,6 +529,7 @@ class Renderer:
     def draw_bare(self, avatar: Avatar, scene, target_fbo: moderngl.Framebuffer, program: moderngl.Program) -> None:
         """Benchmark baseline: the same triangles in the same slots with a trivial shader."""
         w, h = target_fbo.size
+        self.frames_drawn += 1
         self._ensure_buffers((w, h))
         fbo = self._msaa
         fbo.use()

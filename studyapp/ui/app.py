@@ -344,7 +344,8 @@ class WindowRunner:
         self.app = StudyApp(design, session, self.window.ctx, clock, queue=self.queue, refresh_hz=refresh,
                             display=display)
         self.loop = FrameLoop(WindowTarget(self.window), timer if timer is not None else WallTimer(),
-                              self._draw, self._after_flip, running=lambda: not self.app.quit)
+                              self._draw, self._after_flip, running=lambda: not self.app.quit,
+                              pacer=self.app.predictor)
 
     @property
     def capture(self) -> bool:

@@ -3,6 +3,10 @@
 While the participant ranks (or the clip is paused) the avatars do not move, yet the UI still redraws
 every frame; re-rendering three skinned, multisampled avatars each time would keep a laptop's CPU or
 GPU busy for nothing (and slow the offscreen bot tenfold on a software renderer).
+
+The texture is the renderer's own finished picture (:meth:`~studyapp.render.renderer.Renderer.render_texture`),
+not a copy of it: a new picture costs the renderer's drawing and one quad. It is redrawn when (scene,
+time, size) change or the renderer drew something else since.
 """
 from __future__ import annotations
 
@@ -35,7 +39,7 @@ void main() { f_color = vec4(texture(u_image, v_uv).rgb, 1.0); }
 
 
 class SceneCache:
-    """Renders ``renderer.draw_trial`` into its own texture when (scene, time, size) change."""
+    """Shows ``renderer.render_texture``, drawn anew when (scene, time, size) change."""
 
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
@@ -44,27 +48,18 @@ class SceneCache:
         self.vbo = ctx.buffer(quad.tobytes())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f", "in_pos")])
         self.tex: moderngl.Texture | None = None
-        self.fbo: moderngl.Framebuffer | None = None
         self.key: tuple | None = None
+        self._drawn = -1  # renderer.frames_drawn when self.tex was drawn
         self.renders = 0
-
-    def _ensure(self, size: tuple[int, int]) -> None:
-        if self.tex is not None and self.tex.size == size:
-            return
-        self.release_target()
-        self.tex = self.ctx.texture(size, 4)
-        self.tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.fbo = self.ctx.framebuffer([self.tex])
-        self.key = None
 
     def draw(self, renderer: Renderer, scene: TrialScene, t: float, target: moderngl.Framebuffer,
              viewport: tuple[int, int, int, int], target_size: tuple[int, int]) -> None:
         """Draw the scene at ``t`` into ``viewport`` (GL pixels, origin bottom-left) of ``target``."""
         x, y, w, h = (int(v) for v in viewport)
-        self._ensure((w, h))
-        key = (id(scene), round(float(t), 6), w, h)
-        if key != self.key:
-            renderer.draw_trial(scene, t, self.fbo, (0, 0, w, h))
+        key = (id(scene), round(float(t), 6), w, h, id(renderer))
+        if key != self.key or self.tex is None or self._drawn != renderer.frames_drawn:
+            self.tex = renderer.render_texture(scene, t, (w, h))
+            self._drawn = renderer.frames_drawn
             self.key = key
             self.renders += 1
         target.use()
@@ -73,17 +68,14 @@ class SceneCache:
         ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
         tw, th = target_size
         self.prog["u_rect"].value = (2 * x / tw - 1, 2 * y / th - 1, 2 * w / tw, 2 * h / th)
+        filt = self.tex.filter
+        self.tex.filter = (moderngl.NEAREST, moderngl.NEAREST)  # pixel for pixel, whatever the renderer needs
         self.tex.use(0)
         self.prog["u_image"].value = 0
         self.vao.render(moderngl.TRIANGLE_STRIP)
-
-    def release_target(self) -> None:
-        for obj in (self.fbo, self.tex):
-            if obj is not None:
-                obj.release()
-        self.fbo = self.tex = None
+        self.tex.filter = filt
 
     def release(self) -> None:
-        self.release_target()
+        self.tex = None  # the renderer's: it releases it
         for obj in (self.vao, self.vbo, self.prog):
             obj.release()

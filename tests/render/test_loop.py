@@ -83,3 +83,150 @@ def test_video_frames_are_the_stills_at_k_over_fps(renderer, avatar):
     for k in range(5):
         assert np.array_equal(video[k], stills[k]), k
     assert np.abs(video[0].astype(int) - video[4].astype(int)).sum(-1).max() > 100
+
+
+class _FakeTime:
+    """Real time, simulated: drawing and waiting for vsync move it on; nothing else does."""
+
+    def __init__(self):
+        self.t = 0.0
+
+
+class _SoundClock(SilentClock):
+    """An audio clock on the fake time: the sound is at ``t - started`` (it never waits for the picture)."""
+
+    def __init__(self, time_):
+        super().__init__()
+        self.time = time_
+
+    def position_s(self):
+        return min(self.time.t, self.duration_s)
+
+
+class _FakeWallTimer:
+    virtual = False
+
+    def __init__(self, time_):
+        self.time = time_
+
+    def now(self):
+        return self.time.t
+
+    def flip_time(self):
+        return self.time.t
+
+    def tick(self):
+        pass
+
+    def idle(self):
+        pass
+
+    def wait_until(self, t):
+        self.time.t = max(self.time.t, t)
+
+
+class _VsyncTarget(NullTarget):
+    """Presenting waits for the next vsync of a 60 Hz display (a whole multiple of the period)."""
+
+    def __init__(self, time_, period):
+        self.time = time_
+        self.period = period
+        self.presented = 0
+
+    def present(self):
+        self.time.t = (np.floor(self.time.t / self.period + 1e-9) + 1) * self.period
+        self.presented += 1
+
+
+class _SlowRenderer:
+    """A renderer whose frames take ``costs[k]`` seconds of (fake) time to draw."""
+
+    def __init__(self, time_, costs):
+        self.time = time_
+        self.costs = list(costs)
+        self.times: list[float] = []
+
+    def draw_trial(self, scene, t, fbo, viewport):
+        self.times.append(t)
+        self.time.t += self.costs[(len(self.times) - 1) % len(self.costs)]
+
+
+class _LongScene:
+    duration = 100.0
+
+
+def _paced_play(costs, frames, pacer):
+    from studyapp.render.frames import FlipPredictor
+
+    period = 1 / 60
+    time_ = _FakeTime()
+    clock = _SoundClock(time_)
+    renderer = _SlowRenderer(time_, costs)
+    predictor = FlipPredictor(60.0)
+    predictor.flipped(0.0)  # the display was running before the clip started (the UI draws every frame)
+    player = ScenePlayer(renderer, _LongScene(), clock, predictor=predictor)
+    target = _VsyncTarget(time_, period)
+    loop = FrameLoop(target, _FakeWallTimer(time_), player.draw, player.after_flip,
+                     pacer=predictor if pacer else None)
+    player.start(0.0)
+    loop.run(frames)
+    return loop, player, target, period
+
+
+def test_slow_frames_are_dropped_and_counted_never_shown_late():
+    """Drawing takes 1.3 periods with a 4-period spike every 10th frame (a loaded software renderer): the
+    loop aims each frame at the first flip it can make, drops the frames that miss it, and every frame
+    shown is within one period of the sound; the offset does not grow over the play (no drift)."""
+    p = 1 / 60
+    costs = [1.3 * p] * 9 + [4.0 * p]
+    loop, player, target, period = _paced_play(costs, 400, pacer=True)
+    off = np.abs(np.array(player.recorder.offsets_s))
+    assert target.presented == loop.frames - loop.dropped_late == len(off)
+    assert loop.dropped_late >= 40 - 5  # (about) every spike is dropped ...
+    assert loop.dropped_late <= 400 * 0.15  # ... and little else once the lead is learnt
+    assert np.all(off <= period + 1e-9)
+    # no drift: the offsets of the last hundred frames shown are no larger than those of the first
+    assert off[-100:].mean() <= off[:100].mean() + 1e-9
+    # the pictures shown are drawn for the sound's time at their own flips, not a running count of frames
+    shown = np.array(player.recorder.drawn_s)
+    flips = np.array(player.recorder.flips)
+    assert np.allclose(shown, flips, atol=period + 1e-9)
+
+
+def test_without_pacing_slow_frames_show_the_sound_late():
+    """The same slow renderer without the pacer (the loop before drop-not-drift): frames drawn for the next
+    flip appear at a later one: every spike is shown three or more periods behind the sound."""
+    p = 1 / 60
+    loop, player, target, period = _paced_play([1.3 * p] * 9 + [4.0 * p], 400, pacer=False)
+    off = np.abs(np.array(player.recorder.offsets_s))
+    assert loop.dropped_late == 0
+    assert np.mean(off <= period + 1e-9) < 0.99  # the spikes are shown, late
+    assert off.max() >= 3 * period - 1e-9
+
+
+def test_quick_frames_wait_for_the_flip_they_were_drawn_for():
+    """Mostly quick frames with a long one every sixth (the lead covers the long ones, so quick frames aim
+    several flips ahead): a quick frame is held back until its flip, not shown early at the next vsync."""
+    p = 1 / 60
+    loop, player, target, period = _paced_play([0.3 * p] * 5 + [3.5 * p], 300, pacer=True)
+    off = np.abs(np.array(player.recorder.offsets_s))
+    assert len(off) > 200
+    assert np.mean(off <= period + 1e-9) >= 0.99
+    assert np.all(off[30:] <= period + 1e-9)  # once the lead is learnt
+
+
+def test_static_frames_are_never_dropped():
+    """A frame that shows no media time (a paused clip, a questionnaire page) never misses anything."""
+    from studyapp.render.frames import FlipPredictor
+
+    time_ = _FakeTime()
+    target = _VsyncTarget(time_, 1 / 60)
+
+    def draw(fbo, size, now):
+        time_.t += 0.1  # very slow, but asks the predictor for no flip
+
+    predictor = FlipPredictor(60.0)
+    predictor.flipped(0.0)
+    loop = FrameLoop(target, _FakeWallTimer(time_), draw, pacer=predictor)
+    loop.run(5)
+    assert loop.dropped_late == 0 and target.presented == 5

@@ -48,7 +48,7 @@ def test_fxaa_rectangles_hold_every_figure_pixel(gl_ctx, avatar, size):
     scene = _scene(avatar)
     plain = Renderer(gl_ctx, samples=0)
     fig = np.abs(_frame(plain, scene, size).astype(int) - _frame(plain, scene, size, figures=False)).max(-1) > 0
-    aa = Renderer(gl_ctx)
+    aa = Renderer(gl_ctx, software_aa="fxaa")
     _frame(aa, scene, size)
     w, h = size
     inside = np.zeros((h, w), bool)
@@ -62,7 +62,7 @@ def test_fxaa_rectangles_hold_every_figure_pixel(gl_ctx, avatar, size):
 
 def test_fxaa_is_deterministic_and_stays_in_its_rectangles(gl_ctx, avatar):
     scene = _scene(avatar)
-    aa = Renderer(gl_ctx)
+    aa = Renderer(gl_ctx, software_aa="fxaa")
     if aa.antialiasing != "fxaa":
         pytest.skip("FXAA is used on software rasterisers only")
     a = _frame(aa, scene, (960, 540))
@@ -84,3 +84,52 @@ def test_cached_backdrop_matches_after_resize_and_slot_count(gl_ctx, avatar):
     for s, size in ((scene, (640, 360)), (one, (640, 360)), (scene, (500, 400)), (scene, (640, 360))):
         fresh = _frame(Renderer(gl_ctx, samples=0), s, size)
         assert (_frame(r, s, size) == fresh).all()
+
+
+def _texture_rgb(tex):
+    w, h = tex.size
+    return np.frombuffer(tex.read(), np.uint8).reshape(h, w, 4)[::-1, :, :3]
+
+
+@pytest.mark.parametrize("kind", ["default", "none", "fxaa", "msaa"])
+def test_render_texture_and_the_scene_cache_show_the_draw_trial_picture(gl_ctx, avatar, kind):
+    """The participant UI shows the renderer's own texture (no copy) through the scene cache: pixel for
+    pixel what ``draw_trial`` writes into a framebuffer (what stills, videos and ``view`` show)."""
+    from studyapp.ui.scene_cache import SceneCache
+
+    make = {"default": lambda: Renderer(gl_ctx), "none": lambda: Renderer(gl_ctx, samples=0),
+            "fxaa": lambda: Renderer(gl_ctx, software_aa="fxaa"), "msaa": lambda: Renderer(gl_ctx, software_aa="msaa")}
+    scene = _scene(avatar)
+    size = (480, 270)
+    renderer = make[kind]()
+    want = _frame(renderer, scene, size)
+    assert np.abs(want.astype(int) - _frame(renderer, scene, size, figures=False)).max() > 40  # figures drawn
+    got = _texture_rgb(renderer.render_texture(scene, 0.0, size))
+    assert (got == want).all()
+    cache = SceneCache(gl_ctx)
+    target = OffscreenTarget(gl_ctx, size)
+    try:
+        cache.draw(renderer, scene, 0.0, target.fbo, (0, 0, *size), size)
+        assert (target.read_rgb() == want).all()
+        renderer.draw_trial(scene, 0.0, target.fbo, figures=False)  # the renderer draws something else ...
+        cache.draw(renderer, scene, 0.0, target.fbo, (0, 0, *size), size)
+        assert (target.read_rgb() == want).all() and cache.renders == 2  # ... so the cache draws anew
+        cache.draw(renderer, scene, 0.0, target.fbo, (0, 0, *size), size)
+        assert cache.renders == 2  # nothing changed: the same picture, not drawn again
+    finally:
+        target.release()
+        cache.release()
+
+
+def test_software_renderers_draw_without_an_extra_pass_by_default(gl_ctx):
+    from studyapp.render.renderer import is_software_renderer
+
+    r = Renderer(gl_ctx)
+    if is_software_renderer(gl_ctx):
+        assert (r.antialiasing, r.samples, r.fxaa) == ("none", 0, False)
+        assert Renderer(gl_ctx, software_aa="fxaa").antialiasing == "fxaa"
+        assert Renderer(gl_ctx, software_aa="msaa").antialiasing == "msaa"
+    else:  # GPUs keep the MSAA they asked for, whatever the software setting
+        assert r.antialiasing == "msaa" and r.samples > 0
+    with pytest.raises(ValueError):
+        Renderer(gl_ctx, software_aa="smaa")
