@@ -160,7 +160,7 @@ class _EncoderTarget(OffscreenFrames):
     def present(self) -> None:
         buf = self.encoder.acquire()
         self.target.resolve()  # OffscreenFrames is single-sampled: its fbo is the resolved image
-        self.target.fbo.read_into(buf, components=3, alignment=1)
+        self.target.fbo.read_into(buf, components=4, alignment=1)
         self.encoder.submit(buf)
 
 
