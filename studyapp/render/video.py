@@ -13,7 +13,6 @@
 """
 from __future__ import annotations
 
-from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -70,16 +69,24 @@ def play_frames(scene, fps: float, n_frames: int, size: tuple[int, int] = (1280,
     ctx = renderer.ctx if renderer is not None else _shared_context()
     renderer = renderer or Renderer(ctx)
     target = OffscreenFrames(ctx, size)
-    clock = SilentClock(virtual=True, reason="offscreen render")
-    player = ScenePlayer(renderer, scene, clock, duration_s=duration)
-    loop = FrameLoop(target, VirtualTimer(fps, clocks=[clock]), player.draw, player.after_flip, capture=True)
-    player.start(0.0)
+    loop = _play_loop(renderer, scene, target, fps, duration, capture=True)
     try:
         for _ in range(int(n_frames)):
             loop.step()
             yield loop.last_rgb
     finally:
         target.release()
+
+
+def _play_loop(renderer: Renderer, scene, target, fps: float, duration: float | None, *,
+               capture: bool = False) -> FrameLoop:
+    """The frame loop of one play of ``scene`` from its start into ``target``, on a virtual clock that moves
+    exactly ``1 / fps`` per frame (what :func:`play_frames` and :func:`render_video` both step)."""
+    clock = SilentClock(virtual=True, reason="offscreen render")
+    player = ScenePlayer(renderer, scene, clock, duration_s=duration)
+    loop = FrameLoop(target, VirtualTimer(fps, clocks=[clock]), player.draw, player.after_flip, capture=capture)
+    player.start(0.0)
+    return loop
 
 
 def render_still(scene, t: float, out_png: str | Path, size: tuple[int, int] = (1280, 720),
@@ -128,21 +135,19 @@ def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (12
             samples = samples[: int(round(duration * float(audio.sample_rate))), :2]
             astream = container.add_stream("aac", rate=int(audio.sample_rate))
             astream.layout = layout
-        encoder = PipelinedEncoder(container, vstream)
         ctx = renderer.ctx if renderer is not None else _shared_context()
         renderer = renderer or Renderer(ctx)
-        target = _EncoderTarget(ctx, size, encoder)
-        clock = SilentClock(virtual=True, reason="offscreen render")
-        player = ScenePlayer(renderer, scene, clock, duration_s=duration)
-        loop = FrameLoop(target, VirtualTimer(fps, clocks=[clock]), player.draw, player.after_flip)
-        player.start(0.0)
+        encoder = PipelinedEncoder(container, vstream)
+        target = None
         try:
-            loop.run(n_frames)
+            target = _EncoderTarget(ctx, size, encoder)
+            _play_loop(renderer, scene, target, fps, duration).run(n_frames)
         except BaseException:
-            encoder.abort()
+            encoder.abort()  # the drawing side's error is the one to report
             raise
         finally:
-            target.release()
+            if target is not None:
+                target.release()
         encoder.close()
         if astream is not None:
             _write_audio(container, astream, samples, int(audio.sample_rate))
