@@ -133,6 +133,30 @@ def test_an_encoder_error_reaches_the_drawing_thread_without_a_hang():
     enc = PipelinedEncoder(container=None, stream=Broken(), depth=1)
     enc.submit(enc.acquire())
     with pytest.raises(ValueError, match="encoder broke"):
-        for _ in range(5):
-            enc.submit(enc.acquire())
-        enc.close()
+        try:
+            for _ in range(5):
+                enc.submit(enc.acquire())
+            enc.close()
+        finally:
+            enc.abort()
+    assert not enc._thread.is_alive()
+
+
+def test_a_drawing_error_stops_the_encoder_thread_and_is_the_error_raised(tmp_path, scene, renderer):
+    import threading
+
+    class FailsOnThirdFrame:
+        ctx = renderer.ctx
+
+        def __init__(self):
+            self.frames = 0
+
+        def draw_trial(self, *args, **kwargs):
+            self.frames += 1
+            if self.frames == 3:
+                raise RuntimeError("draw failed")
+            renderer.draw_trial(*args, **kwargs)
+
+    with pytest.raises(RuntimeError, match="draw failed"):
+        render_video(scene, None, tmp_path / "broken.mp4", size=(64, 48), fps=30, renderer=FailsOnThirdFrame())
+    assert not [t for t in threading.enumerate() if t.name == "studyapp-encoder"]
