@@ -13,13 +13,13 @@
 """
 from __future__ import annotations
 
-from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 
 from studyapp.audio.clock import SilentClock
 from studyapp.render.context import create_offscreen_context, make_current
+from studyapp.render.encode import SETTINGS, EncoderSettings, PipelinedEncoder, open_video_stream
 from studyapp.render.loop import FrameLoop, OffscreenFrames, ScenePlayer, VirtualTimer
 from studyapp.render.renderer import Renderer
 
@@ -69,16 +69,24 @@ def play_frames(scene, fps: float, n_frames: int, size: tuple[int, int] = (1280,
     ctx = renderer.ctx if renderer is not None else _shared_context()
     renderer = renderer or Renderer(ctx)
     target = OffscreenFrames(ctx, size)
-    clock = SilentClock(virtual=True, reason="offscreen render")
-    player = ScenePlayer(renderer, scene, clock, duration_s=duration)
-    loop = FrameLoop(target, VirtualTimer(fps, clocks=[clock]), player.draw, player.after_flip, capture=True)
-    player.start(0.0)
+    loop = _play_loop(renderer, scene, target, fps, duration, capture=True)
     try:
         for _ in range(int(n_frames)):
             loop.step()
             yield loop.last_rgb
     finally:
         target.release()
+
+
+def _play_loop(renderer: Renderer, scene, target, fps: float, duration: float | None, *,
+               capture: bool = False) -> FrameLoop:
+    """The frame loop of one play of ``scene`` from its start into ``target``, on a virtual clock that moves
+    exactly ``1 / fps`` per frame (what :func:`play_frames` and :func:`render_video` both step)."""
+    clock = SilentClock(virtual=True, reason="offscreen render")
+    player = ScenePlayer(renderer, scene, clock, duration_s=duration)
+    loop = FrameLoop(target, VirtualTimer(fps, clocks=[clock]), player.draw, player.after_flip, capture=capture)
+    player.start(0.0)
+    return loop
 
 
 def render_still(scene, t: float, out_png: str | Path, size: tuple[int, int] = (1280, 720),
@@ -94,12 +102,17 @@ def render_still(scene, t: float, out_png: str | Path, size: tuple[int, int] = (
 
 
 def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (1280, 720), fps: int = 30,
-                 renderer: Renderer | None = None, duration: float | None = None, crf: int = 20) -> Path:
+                 renderer: Renderer | None = None, duration: float | None = None,
+                 settings: EncoderSettings = SETTINGS) -> Path:
     """Write an MP4 (H.264 yuv420p, plus AAC audio when ``audio`` is an AudioClip) of the whole trial.
 
     The video lasts ``duration`` seconds (default: the longer of the motion and the audio); the audio is
     muxed from the start of the clip and cut at ``duration``, so picture and sound line up as they do in the
     study and a shortened video does not go on talking over a frozen last frame.
+
+    The frames are those of :func:`play_frames` (the same frame loop, virtual clock and player); each is
+    read back into a reused buffer and encoded on a thread of its own while the next one is drawn
+    (:mod:`studyapp.render.encode`, whose ``SETTINGS`` say codec, crf, preset and pixel format).
     """
     import av
 
@@ -112,10 +125,7 @@ def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (12
             duration = max(duration, len(audio.samples) / float(audio.sample_rate))
     n_frames = max(1, int(round(duration * fps)))
     with av.open(str(out_path), mode="w") as container:
-        vstream = container.add_stream("libx264", rate=Fraction(int(fps), 1))
-        vstream.width, vstream.height = size
-        vstream.pix_fmt = "yuv420p"
-        vstream.options = {"crf": str(crf), "preset": "veryfast"}
+        vstream = open_video_stream(container, size, fps, settings)
         astream = None
         if audio is not None:
             samples = np.asarray(audio.samples, np.float32)
@@ -125,15 +135,38 @@ def render_video(scene, audio, out_path: str | Path, size: tuple[int, int] = (12
             samples = samples[: int(round(duration * float(audio.sample_rate))), :2]
             astream = container.add_stream("aac", rate=int(audio.sample_rate))
             astream.layout = layout
-        for img in play_frames(scene, fps, n_frames, size, renderer, duration=duration):
-            frame = av.VideoFrame.from_ndarray(img, format="rgb24")
-            for packet in vstream.encode(frame):
-                container.mux(packet)
-        for packet in vstream.encode():
-            container.mux(packet)
+        ctx = renderer.ctx if renderer is not None else _shared_context()
+        renderer = renderer or Renderer(ctx)
+        encoder = PipelinedEncoder(container, vstream)
+        target = None
+        try:
+            target = _EncoderTarget(ctx, size, encoder)
+            _play_loop(renderer, scene, target, fps, duration).run(n_frames)
+        except BaseException:
+            encoder.abort()  # the drawing side's error is the one to report
+            raise
+        finally:
+            if target is not None:
+                target.release()
+        encoder.close()
         if astream is not None:
             _write_audio(container, astream, samples, int(audio.sample_rate))
     return out_path
+
+
+class _EncoderTarget(OffscreenFrames):
+    """An offscreen frame target whose "present" hands the frame to the encoder: it is read straight into
+    a free buffer of the encoder's pool (OpenGL row order; the encoder thread turns it upright)."""
+
+    def __init__(self, ctx, size: tuple[int, int], encoder: PipelinedEncoder) -> None:
+        super().__init__(ctx, size)
+        self.encoder = encoder
+
+    def present(self) -> None:
+        buf = self.encoder.acquire()
+        self.target.resolve()  # OffscreenFrames is single-sampled: its fbo is the resolved image
+        self.target.fbo.read_into(buf, components=4, alignment=1)
+        self.encoder.submit(buf)
 
 
 def _write_audio(container, stream, samples: np.ndarray, rate: int) -> None:
