@@ -87,7 +87,7 @@ def walsh_distinct(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     >>> v, c = walsh_distinct(np.array([1.0, 3.0, 1.0]))
     >>> v.tolist(), c.tolist()
-    [[1.0, 2.0, 3.0], [3, 2, 1]]
+    ([1.0, 2.0, 3.0], [3, 2, 1])
     """
     e, c = np.unique(np.asarray(d, dtype=float), return_counts=True)
     li, mi = np.triu_indices(e.size)
