@@ -224,7 +224,7 @@ def _as_text(col: pd.Series) -> pd.Series:
     object column keeps the cell-by-cell rule, where ``str`` of each value decides (``1`` and ``1.0`` differ).
     """
     values = col.to_numpy(dtype=object)
-    if col.dtype == object and pd.api.types.infer_dtype(values, skipna=True) in ("string", "empty"):
+    if pd.api.types.infer_dtype(values, skipna=True) in ("string", "empty"):  # object or pandas' str dtype
         out = values.copy()
         out[pd.isna(values)] = None
         return pd.Series(out, index=col.index, dtype=object)
