@@ -87,8 +87,12 @@ def resample_weights(n_clusters: int, n_boot: int, seed: int) -> np.ndarray:
     """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes."""
     def draw(n: int) -> np.ndarray:
         idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters))
-        flat = (idx + (np.arange(n) * n_clusters)[:, None]).ravel()
-        return np.bincount(flat, minlength=n * n_clusters).reshape(n, n_clusters).astype(float)
+        out = np.empty((n, n_clusters))
+        for i in range(0, n, _CHUNK):  # counted a block of rows at a time: no second and third (n, P) array
+            rows = idx[i:i + _CHUNK]
+            flat = (rows + (np.arange(len(rows)) * n_clusters)[:, None]).ravel()
+            out[i:i + len(rows)] = np.bincount(flat, minlength=rows.size).reshape(len(rows), n_clusters)
+        return out
 
     return shared_draw(("index", n_clusters, seed), n_boot, draw)
 
