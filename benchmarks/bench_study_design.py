@@ -1,9 +1,14 @@
-"""Study engine part 1 on the demo design: design loading, trial media (cold vs replay), schedules, careful scores.
+"""Study engine part 1 on the demo design: design loading, trial media, schedules, careful scores.
 
-Prints one table; ratios compare figures measured in this same run, so they are meaningful on a busy machine.
+Prints one table of medians with min-max over the same number of runs for every row. Cold rows (files
+re-read, caches cleared) and cached rows (a dictionary lookup after the first load) run interleaved, cold then
+cached in each round, so both see the same machine load; they are shown side by side but never divided: a
+cache hit is not a faster load, and a ratio between them says nothing about either.
 """
 from __future__ import annotations
 
+import os
+import statistics
 import time
 
 from studyapp.bots.careful import careful_scores
@@ -13,15 +18,26 @@ from studyapp.study.design import load_design
 from studyapp.study.design.files import _HASH_CACHE
 from studyapp.study.schedule import full_schedule, participant_schedule
 
+RUNS = 7
 
-def best(fn, repeat: int = 5) -> float:
-    """Best of ``repeat`` wall-clock runs, in seconds (the least disturbed by other processes)."""
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+
+def timed(fn) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+def interleaved(*fns, runs: int = RUNS) -> list[list[float]]:
+    """Wall-clock seconds of each function, ``runs`` rounds, the functions alternating within a round."""
+    out: list[list[float]] = [[] for _ in fns]
+    for _ in range(runs):
+        for i, fn in enumerate(fns):
+            out[i].append(timed(fn))
+    return out
+
+
+def _fmt(t: float) -> str:
+    return f"{t * 1e3:9.3f} ms" if t >= 1e-3 else f"{t * 1e6:9.1f} us"
 
 
 def main() -> None:
@@ -32,8 +48,7 @@ def main() -> None:
         _HASH_CACHE.clear()
         load_design(demo_design())
 
-    t_cold = best(cold_load, 3)
-    t_warm = best(lambda: load_design(demo_design()))
+    t_cold, t_warm = interleaved(cold_load, lambda: load_design(demo_design()))
     design = load_design(demo_design())
     plan = participant_schedule(design, "P01", row=0)[1]
 
@@ -41,28 +56,27 @@ def main() -> None:
         stimuli.clear_cache()
         stimuli.load_trial_media(design, plan)
 
-    t_media_cold = best(cold_media, 3)
-    stimuli.load_trial_media(design, plan)
-    t_media_replay = best(lambda: stimuli.load_trial_media(design, plan), 50)
+    t_media_cold, t_media_replay = interleaved(cold_media, lambda: stimuli.load_trial_media(design, plan))
     media = stimuli.load_trial_media(design, plan)
-    t_careful = best(lambda: careful_scores(media), 3)
-    t_sched_1 = best(lambda: participant_schedule(design, "P01", row=3), 20)
-    t_sched_1200 = best(lambda: full_schedule(design, 1200), 3)
+    (t_careful,) = interleaved(lambda: careful_scores(media))
+    (t_sched_1,) = interleaved(lambda: participant_schedule(design, "P01", row=3))
+    (t_sched_1200,) = interleaved(lambda: full_schedule(design, 1200))
 
     rows = [
-        ("load_design, files re-read (validate + hash)", t_cold, ""),
-        ("load_design, files cached", t_warm, f"{t_cold / t_warm:.0f}x faster than re-reading"),
-        ("load_trial_media, first show", t_media_cold, ""),
-        ("load_trial_media, replay", t_media_replay, f"{t_media_cold / t_media_replay:.0f}x faster than first show"),
+        ("load_design, files re-read (validate + hash)", t_cold, "what `validate` and a session start pay"),
+        ("load_design, file hashes cached", t_warm, "the design is still parsed and validated"),
+        ("load_trial_media, first show", t_media_cold, "what a participant waits for"),
+        ("load_trial_media, replay", t_media_replay, "cache hit (dictionary lookup), not a load"),
         ("careful_scores, one trial (3 x 10 s motion)", t_careful, ""),
         ("participant_schedule, one participant", t_sched_1, ""),
-        ("full_schedule, 1200 participants", t_sched_1200, f"{t_sched_1200 / 1200 * 1e6:.0f} us per participant"),
+        ("full_schedule, 1200 participants", t_sched_1200,
+         f"{statistics.median(t_sched_1200) / 1200 * 1e6:.0f} us per participant"),
     ]
-    print(f"{'what':48s} {'time':>12s}  note")
+    print(f"{RUNS} runs per row, cold and cached rows interleaved; load average {os.getloadavg()[0]:.2f} "
+          f"({os.cpu_count()} cores)")
+    print(f"{'what':48s} {'median':>12s} {'min':>12s} {'max':>12s}  note")
     for name, t, note in rows:
-        shown = f"{t * 1e3:9.3f} ms" if t >= 1e-3 else f"{t * 1e6:9.1f} us"
-        print(f"{name:48s} {shown:>12s}  {note}")
-
+        print(f"{name:48s} {_fmt(statistics.median(t)):>12s} {_fmt(min(t)):>12s} {_fmt(max(t)):>12s}  {note}")
 
 if __name__ == "__main__":
     main()

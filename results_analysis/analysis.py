@@ -29,7 +29,7 @@ import pandas as pd
 
 from results_analysis.adjust import ADJUSTMENTS
 from results_analysis.agreement import agreement_summary, stimulus_agreement
-from results_analysis.bootstrap import INTERVALS
+from results_analysis.bootstrap import INTERVALS, shared_resamples
 from results_analysis.bradley_terry import bradley_terry
 from results_analysis.descriptives import condition_summary
 from results_analysis.effect_sizes import EffectSizes, effect_sizes
@@ -237,7 +237,9 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         control = by_label[control]
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
-    with warnings.catch_warnings(record=True) as caught:  # e.g. a Bradley-Terry fit that did not converge
+    # caught: e.g. a Bradley-Terry fit that did not converge; shared_resamples: the criteria and intervals
+    # resample the same participants with the same seed, so each resample matrix is drawn once
+    with warnings.catch_warnings(record=True) as caught, shared_resamples():
         warnings.simplefilter("always")
         results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
                                         n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm,

@@ -18,7 +18,9 @@ Resamples are drawn as scipy.stats.bootstrap draws them (``rng.integers(0, P, (B
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Hashable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,11 +45,56 @@ class BootstrapIntervals:
     method: list[str]
 
 
+#: (kind, clusters, seed) -> the largest weight matrix drawn so far; set only inside :func:`shared_resamples`.
+_SHARED: ContextVar[dict[Hashable, np.ndarray] | None] = ContextVar("results_analysis_shared_resamples",
+                                                                    default=None)
+
+
+@contextmanager
+def shared_resamples() -> Iterator[None]:
+    """Within this block each resample matrix (kind, clusters, seed) is drawn once and handed, read-only, to
+    every caller that asks for it.
+
+    The rows of one seeded draw are a sequence, so the first m rows of an n-row draw are the m-row draw: a
+    caller asking for fewer resamples gets a prefix, bit-identical to drawing them itself. One analysis
+    (each criterion's mean-rank, Bradley-Terry and effect-size intervals) thus draws each matrix once instead
+    of once per criterion and statistic; the matrices are dropped when the block ends.
+    """
+    if _SHARED.get() is not None:  # nested: the outer block's resamples are shared with this one
+        yield
+        return
+    token = _SHARED.set({})
+    try:
+        yield
+    finally:
+        _SHARED.reset(token)
+
+
+def shared_draw(key: Hashable, n_boot: int, draw: Callable[[int], np.ndarray]) -> np.ndarray:
+    """``draw(n_boot)`` (an (n_boot, P) matrix whose rows are a seeded sequence), read-only, taken from (or
+    kept for) the enclosing :func:`shared_resamples` block."""
+    cache = _SHARED.get()
+    if cache is not None and key in cache and len(cache[key]) >= n_boot:
+        return cache[key][:n_boot]
+    w = draw(n_boot)
+    w.flags.writeable = False
+    if cache is not None:
+        cache[key] = w
+    return w
+
+
 def resample_weights(n_clusters: int, n_boot: int, seed: int) -> np.ndarray:
-    """(n_boot, n_clusters) multiplicities, from the index draws scipy.stats.bootstrap makes."""
-    idx = np.random.default_rng(seed).integers(0, n_clusters, (n_boot, n_clusters))
-    flat = (idx + (np.arange(n_boot) * n_clusters)[:, None]).ravel()
-    return np.bincount(flat, minlength=n_boot * n_clusters).reshape(n_boot, n_clusters).astype(float)
+    """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes."""
+    def draw(n: int) -> np.ndarray:
+        idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters))
+        out = np.empty((n, n_clusters))
+        for i in range(0, n, _CHUNK):  # counted a block of rows at a time: no second and third (n, P) array
+            rows = idx[i:i + _CHUNK]
+            flat = (rows + (np.arange(len(rows)) * n_clusters)[:, None]).ravel()
+            out[i:i + len(rows)] = np.bincount(flat, minlength=rows.size).reshape(len(rows), n_clusters)
+        return out
+
+    return shared_draw(("index", n_clusters, seed), n_boot, draw)
 
 
 def _evaluate(stat: WeightedStatistic, w: np.ndarray) -> np.ndarray:

@@ -183,7 +183,7 @@ def bradley_terry(blocks: RankBlocks | pd.DataFrame, criterion: str | None = Non
         per[:, np.arange(k), np.arange(k)] = 0.0
         by_participant = np.zeros((ids.size, k, k))
         np.add.at(by_participant, inverse, per)
-        weights = bootstrap_weights(ids.size, n_boot, seed).astype(float)
+        weights = bootstrap_weights(ids.size, n_boot, seed)
         resampled = np.einsum("bp,pij->bij", weights, by_participant)[:, keep][:, :, keep]
         boot = fit_bradley_terry(resampled, prior=BOOT_PRIOR, tol=1e-8)
         a = (1.0 - ci) / 2.0

@@ -6,16 +6,21 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from results_analysis.bootstrap import shared_draw
 from results_analysis.ranks import RankBlocks, as_blocks, place_shares
 
 
 def bootstrap_weights(n_participants: int, n_boot: int, seed: int) -> np.ndarray:
-    """(n_boot, n_participants) multiplicities of each participant in each resample (drawn with replacement).
+    """(n_boot, n_participants) multiplicities (as floats, read-only) of each participant in each resample
+    (drawn with replacement; shared within :func:`results_analysis.bootstrap.shared_resamples`).
 
     Resampling whole participants keeps a participant's correlated trials together.
     """
-    rng = np.random.default_rng(seed)
-    return rng.multinomial(n_participants, np.full(n_participants, 1.0 / n_participants), size=n_boot)
+    def draw(n: int) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        return rng.multinomial(n_participants, np.full(n_participants, 1.0 / n_participants), size=n).astype(float)
+
+    return shared_draw(("multinomial", n_participants, seed), n_boot, draw)
 
 
 def per_participant_sums(blocks: RankBlocks, values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -67,7 +72,7 @@ def bootstrap_mean_rank_ci(blocks: RankBlocks, *, n_boot: int = 2000, ci: float 
     if blocks.n == 0 or n_boot <= 0:
         return np.full(k, np.nan), np.full(k, np.nan)
     _, sums, counts = per_participant_sums(blocks)
-    w = bootstrap_weights(sums.shape[0], n_boot, seed).astype(float)
+    w = bootstrap_weights(sums.shape[0], n_boot, seed)
     means = (w @ sums) / (w @ counts)[:, None]
     a = (1.0 - ci) / 2.0
     return np.quantile(means, a, axis=0), np.quantile(means, 1.0 - a, axis=0)

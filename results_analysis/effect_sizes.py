@@ -79,6 +79,30 @@ def walsh_averages(d: np.ndarray) -> np.ndarray:
     return np.sort(np.round((d[i] + d[j]) / 2.0, _DECIMALS))  # rounded: equal averages stay equal
 
 
+def walsh_distinct(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct values of :func:`walsh_averages` (sorted) and how often each occurs, without building
+    the n(n+1)/2 averages: blocks' differences take few distinct values e_l (c_l times each), and the pairs
+    i <= j of values e_l <= e_m number c_l c_m (l < m) or c_l (c_l + 1)/2 (l = m). The averages are computed
+    as walsh_averages computes them, so the values are the same floats.
+
+    >>> v, c = walsh_distinct(np.array([1.0, 3.0, 1.0]))
+    >>> v.tolist(), c.tolist()
+    ([1.0, 2.0, 3.0], [3, 2, 1])
+    """
+    e, c = np.unique(np.asarray(d, dtype=float), return_counts=True)
+    li, mi = np.triu_indices(e.size)
+    averages = np.round((e[li] + e[mi]) / 2.0, _DECIMALS)
+    pairs_ = np.where(li == mi, c[li] * (c[li] + 1) // 2, c[li] * c[mi])
+    values, which = np.unique(averages, return_inverse=True)
+    return values, np.bincount(which, weights=pairs_, minlength=values.size).astype(np.int64)
+
+
+def _walsh_at(values: np.ndarray, cum: np.ndarray, q: int) -> float:
+    """The q-th (0-based) of the sorted Walsh averages, from :func:`walsh_distinct` (``cum``: cumulative
+    counts)."""
+    return float(values[int(np.searchsorted(cum, q, side="right"))])
+
+
 def signed_rank_cdf(n: int) -> np.ndarray:
     """P(T+ <= t) for t = 0 .. n(n+1)/2 under the null (exact distribution of the signed-rank statistic)."""
     counts = np.zeros(n * (n + 1) // 2 + 1)
@@ -104,8 +128,8 @@ def _z_shifted(x: np.ndarray, shift: float) -> float:
 
 def _first_below(walsh: np.ndarray, x: np.ndarray, level: float) -> float:
     """The Walsh average at which z(x - d) first falls below ``level`` as d grows (z is non-increasing in d
-    and constant between Walsh averages): binary search over the gaps between them."""
-    walsh = np.unique(walsh)
+    and constant between Walsh averages): binary search over the gaps between them (``walsh``: the distinct
+    averages, sorted)."""
     mids = np.r_[walsh[0] - 1.0, (walsh[:-1] + walsh[1:]) / 2.0, walsh[-1] + 1.0]
     lo, hi = 0, mids.size - 1   # z(mids[lo]) >= level > z(mids[hi])
     while hi - lo > 1:
@@ -135,8 +159,12 @@ def hodges_lehmann(d: np.ndarray, *, ci: float = 0.95) -> HodgesLehmann:
     zeros = np.asarray(d).size - n
     if n == 0:
         return HodgesLehmann(0.0, np.nan, np.nan, "none", np.nan, 0)
-    walsh = walsh_averages(nz)
-    est = float(np.median(walsh))
+    # Walsh averages as distinct values and counts: n = 10,000 participants would be 50 M averages
+    walsh, cum = walsh_distinct(nz)
+    cum = np.cumsum(cum)
+    total = int(cum[-1])
+    mid_lo, mid_hi = _walsh_at(walsh, cum, (total - 1) // 2), _walsh_at(walsh, cum, total // 2)
+    est = mid_lo if total % 2 else float(np.mean([mid_lo, mid_hi]))  # as numpy's median of the averages
     alpha = 1.0 - ci
     ties = np.unique(np.round(np.abs(nz), _DECIMALS)).size < n
     if n < WILCOXON_EXACT_BELOW_N and not ties and zeros == 0:
@@ -145,7 +173,8 @@ def hodges_lehmann(d: np.ndarray, *, ci: float = 0.95) -> HodgesLehmann:
         qu = max(qu, 1)
         ql = n * (n + 1) // 2 - qu
         achieved = 2.0 * cdf[qu - 1]
-        return HodgesLehmann(est, float(walsh[qu - 1]), float(walsh[ql]), "exact", float(1.0 - achieved), n)
+        return HodgesLehmann(est, _walsh_at(walsh, cum, qu - 1), _walsh_at(walsh, cum, ql), "exact",
+                             float(1.0 - achieved), n)
     # R widens the level until the ends lie inside [min d, max d] (possible only with very few blocks).
     while alpha < 1.0:
         zq = float(stats.norm.isf(alpha / 2.0))

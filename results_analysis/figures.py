@@ -35,6 +35,12 @@ def _figure(size: tuple[float, float]) -> Figure:
     return Figure(figsize=size)
 
 
+def _caption_y(fig: Figure) -> float:
+    """Height (figure fraction) of a caption's baseline: a small margin below it, as the files have no
+    ``bbox_inches="tight"`` padding (see :func:`save`)."""
+    return 0.06 / fig.get_figheight()
+
+
 def rank_colors(k: int) -> list[tuple[float, float, float]]:
     """Sequential blues, darkest for rank 1 (best)."""
     cmap = matplotlib.colormaps["Blues"]
@@ -46,11 +52,16 @@ def condition_color(i: int) -> str:
 
 
 def save(fig, out_dir: Path, name: str) -> list[Path]:
-    """Write ``name.png`` (200 dpi) and ``name.svg`` into ``out_dir``; close the figure."""
+    """Write ``name.png`` (200 dpi) and ``name.svg`` into ``out_dir``; close the figure.
+
+    Each file is one draw of the figure: every figure lays itself out with ``tight_layout`` when it is built,
+    so a plain ``savefig`` keeps its labels inside the canvas (``bbox_inches="tight"`` would draw the whole
+    figure a second time just to measure it).
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / f"{name}.png", out_dir / f"{name}.svg"]
     for p in paths:
-        fig.savefig(p, bbox_inches="tight", facecolor="white", dpi=200)
+        fig.savefig(p, facecolor="white", dpi=200)
     return paths
 
 
@@ -189,7 +200,7 @@ def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: flo
                 y = -0.22 - 0.16 * c_i
                 ax.plot([sorted_vals[a] - 0.05, sorted_vals[b] + 0.05], [y, y], color="black", lw=3,
                         solid_capstyle="round")
-        fig.text(0.5, 0.0, f"Mean rank (1 = best). Bars join conditions the Nemenyi test does not separate "
+        fig.text(0.5, _caption_y(fig), f"Mean rank (1 = best). Bars join conditions the Nemenyi test does not separate "
                  f"(α = {alpha:g}).", ha="center", va="bottom", fontsize=7.5, color="#444444")
         fig.tight_layout(rect=(0, 0.03, 1, 1))
         return fig
@@ -225,7 +236,7 @@ def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] |
             ax.set_xlabel("mean rank (1 = best)")
             ax.grid(axis="x", color="#e5e5e5", lw=0.6)
             ax.set_axisbelow(True)
-        fig.text(0.5, 0.0, f"Dots: mean rank; lines: {ci:.0%} percentile bootstrap interval (participants "
+        fig.text(0.5, _caption_y(fig), f"Dots: mean rank; lines: {ci:.0%} percentile bootstrap interval (participants "
                  "resampled). Dotted line: chance.", ha="center", va="bottom", fontsize=7.5, color="#444444")
         fig.tight_layout(rect=(0, 0.05, 1, 1))
         return fig
@@ -267,7 +278,7 @@ def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = No
             ax.spines["left"].set_visible(False)
             ax.set_title(crit.capitalize())
             ax.set_xlabel("Bradley-Terry strength")
-        fig.text(0.5, 0.0, f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap interval over participants. "
+        fig.text(0.5, _caption_y(fig), f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap interval over participants. "
                  "Dotted line: equal strengths." + (" Red: no finite strength (the condition never won or never "
                                                     "lost)." if flagged else ""),
                  ha="center", va="bottom", fontsize=7.5, color="#444444")

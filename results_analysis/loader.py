@@ -82,7 +82,7 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
     for col in ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version",
                 "condition_label", "study_title"):
         if col in df.columns:
-            df[col] = df[col].map(lambda v: None if _isna(v) else str(v)).astype(object)
+            df[col] = _as_text(df[col])
     for col in ("participant", "stimulus", "criterion", "condition"):
         bad = df[col].isna()
         if bad.any():
@@ -216,24 +216,49 @@ def _isna(v) -> bool:
     return v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA
 
 
+def _as_text(col: pd.Series) -> pd.Series:
+    """Each value as ``str(v)``, missing values as None (object dtype).
+
+    A large study has millions of cells, so the common cases are done column-wise: text columns (a CSV read
+    as strings) only get their missing values replaced, plain numeric columns are converted by numpy. A mixed
+    object column keeps the cell-by-cell rule, where ``str`` of each value decides (``1`` and ``1.0`` differ).
+    """
+    values = col.to_numpy(dtype=object)
+    if pd.api.types.infer_dtype(values, skipna=True) in ("string", "empty"):  # object or pandas' str dtype
+        out = values.copy()
+        out[pd.isna(values)] = None
+        return pd.Series(out, index=col.index, dtype=object)
+    if col.dtype.kind in "iub":  # no missing values possible; numpy's str of an integer is Python's
+        return pd.Series(col.astype(str).to_numpy(dtype=object), index=col.index, dtype=object)
+    return col.map(lambda v: None if _isna(v) else str(v)).astype(object)
+
+
+def _flag_value(v, default: bool) -> bool | None:
+    """One flag cell as a bool, None when it is not a true/false flag."""
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    s = str(v).strip().lower()
+    if s.endswith(".0"):
+        s = s[:-2]
+    if s in _TRUE:
+        return True
+    if s in _FALSE:
+        return False if s else default
+    return None
+
+
 def _parse_flags(col: pd.Series, name: str, where: pd.Series, src, default: bool) -> pd.Series:
     if col.dtype == bool:
         return col
-    out = np.empty(len(col), dtype=bool)
-    for i, v in enumerate(col.tolist()):
-        if _isna(v):
-            out[i] = default
-            continue
-        if isinstance(v, (bool, np.bool_)):
-            out[i] = bool(v)
-            continue
-        s = str(v).strip().lower()
-        if s.endswith(".0"):
-            s = s[:-2]
-        if s in _TRUE:
-            out[i] = True
-        elif s in _FALSE:
-            out[i] = False if s else default
-        else:
-            raise AnalysisInputError(src, f"{where.iloc[i]}, column '{name}'", f"{v!r} is not a true/false flag")
-    return pd.Series(out, index=col.index)
+    # A flag column holds a handful of distinct values: read each once, not once per cell. Values equal in
+    # Python (1, 1.0, True) share one entry and read the same; uniques come in order of first appearance, so
+    # the first unreadable one is also the first bad row.
+    codes, uniques = pd.factorize(col.to_numpy(dtype=object), use_na_sentinel=True)
+    parsed = [_flag_value(v, default) for v in uniques]
+    for j, flag in enumerate(parsed):
+        if flag is None:
+            i = int(np.argmax(codes == j))
+            raise AnalysisInputError(src, f"{where.iloc[i]}, column '{name}'",
+                                     f"{uniques[j]!r} is not a true/false flag")
+    table = np.array(parsed + [default], dtype=bool)  # code -1 (missing) picks the last entry: the default
+    return pd.Series(table[codes], index=col.index)

@@ -23,8 +23,6 @@ from math import gcd
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
-from scipy.io import wavfile
 
 from studyapp.errors import InputError
 
@@ -96,6 +94,8 @@ class AudioClip:
             raise ValueError(f"sample rate must be positive, got {rate}")
         if rate == self.sample_rate:
             return AudioClip(self.samples.copy(), rate, self.source)
+        from scipy import signal  # here, not at the top: scipy.signal costs ~0.8 s of every command's start
+
         g = gcd(rate, self.sample_rate)
         out = signal.resample_poly(self.samples.astype(np.float64), rate // g, self.sample_rate // g, axis=0)
         return AudioClip(np.clip(out, -1.0, 1.0).astype(np.float32), rate, self.source)
@@ -182,6 +182,8 @@ def _read(path: Path) -> tuple[int, np.ndarray]:
     if len(head) < 12 or head[:4] not in (b"RIFF", b"RIFX", b"RF64") or head[8:12] != b"WAVE":
         raise InputError(path, "header", f"not a WAV file (starts with {head[:12]!r}, expected RIFF....WAVE)")
     _check_chunks(path, head)
+    from scipy.io import wavfile  # here: scipy.io costs ~0.3-1 s, and most commands never read samples
+
     with warnings.catch_warnings():
         # scipy warns (rather than fails) on chunks it skips and on data cut short; a short file is an error here.
         warnings.simplefilter("error", wavfile.WavFileWarning)
@@ -239,6 +241,8 @@ def save_wav(clip: AudioClip, path: str | Path, subtype: str = "int16") -> None:
 
     Integer encodings round to the nearest step and saturate at full scale (``+1.0`` becomes the largest code).
     """
+    from scipy.io import wavfile  # here: see _read
+
     if subtype not in SUBTYPES:
         raise ValueError(f"unknown WAV subtype {subtype!r}; choose from {', '.join(SUBTYPES)}")
     path = Path(path)

@@ -47,8 +47,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
-from scipy.signal import find_peaks
 
 from studyapp.motion.skeleton import Motion
 
@@ -97,6 +95,10 @@ def speech_accents(energy: np.ndarray, fps: float) -> np.ndarray:
     >>> int(np.argmax(a)), bool(a[20] > a[15])
     (10, True)
     """
+    # imported here: scipy.signal and scipy.ndimage are heavy, and only a bot that listens needs them
+    from scipy.ndimage import gaussian_filter1d
+    from scipy.signal import find_peaks
+
     e = np.asarray(energy, dtype=np.float64)
     smooth = gaussian_filter1d(e, 0.05 * fps) if 0.05 * fps > 0.3 else e
     peaks, _ = find_peaks(smooth, height=0.2 * max(smooth.max(initial=0.0), 1e-12),

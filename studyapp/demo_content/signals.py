@@ -13,8 +13,6 @@ against :func:`speech_energy`, so both sides measure "in time with speech" the s
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
-from scipy.signal import find_peaks
 
 from studyapp.audio.wav import AudioClip
 
@@ -62,6 +60,8 @@ def delay(signal: np.ndarray, fps: float, seconds: float, hold_first: bool = Fal
 
 def smooth(signal: np.ndarray, fps: float, sigma_s: float) -> np.ndarray:
     """Gaussian smoothing with a standard deviation in seconds (edges held at the nearest value)."""
+    from scipy.ndimage import gaussian_filter1d  # here: heavy, and loading a design must not pay for it
+
     return gaussian_filter1d(np.asarray(signal, np.float64), sigma_s * fps, mode="nearest")
 
 
@@ -81,6 +81,8 @@ def speech_activity(energy: np.ndarray, fps: float, threshold: float = 0.08, hol
 
 def stress_peaks(energy: np.ndarray, fps: float, min_height: float = 0.45, min_gap_s: float = 0.3) -> np.ndarray:
     """Frame indices of stressed-syllable energy peaks (loud, prominent, at least ``min_gap_s`` apart)."""
+    from scipy.signal import find_peaks  # here: scipy.signal costs ~0.8 s at import
+
     e = smooth(energy, fps, 0.03)
     peaks, _ = find_peaks(e, height=min_height, prominence=0.2, distance=max(1, int(round(min_gap_s * fps))))
     return peaks

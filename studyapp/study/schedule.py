@@ -40,11 +40,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from studyapp.study.design import FROZEN_PREFIX, Design
 from studyapp.study.ordering import latin_row, n_latin_rows, participant_seed, slot_permutations
+
+if TYPE_CHECKING:  # pandas is imported where a table is built: loading a design must not pay ~0.3-1 s for it
+    import pandas as pd
 
 SLOT_NAMES = ("left", "middle", "right")
 SCHEDULE_COLUMNS = ["participant", "row", "trial_index", "stimulus", "is_practice", "is_attention_check",
@@ -192,6 +194,8 @@ def participant_ids(n_participants: int) -> list[str]:
 
 def schedule_frame(plans: dict[str, list[TrialPlan]]) -> pd.DataFrame:
     """One row per participant x trial, columns :data:`SCHEDULE_COLUMNS`."""
+    import pandas as pd
+
     records = [
         (pid, p.row, p.trial_index, p.stimulus_id, p.is_practice, p.is_attention_check, *p.slots, *p.samples)
         for pid, trials in plans.items() for p in trials
@@ -221,6 +225,8 @@ def balance_counts(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
     at each position), ``slot_x_condition`` (condition x slot: how often each condition sits in each slot)
     and ``sample_x_condition_stimulus`` ((condition, stimulus) x sample: how often each sample is shown).
     """
+    import pandas as pd
+
     rated = df[~df["is_practice"].astype(bool) & ~df["is_attention_check"].astype(bool)].copy()
     rated["position"] = rated.groupby("participant").cumcount() + 1
     pos = pd.crosstab(rated["position"], rated["stimulus"])

@@ -1,0 +1,123 @@
+"""Benchmark: how long an experimenter and a participant wait for the app to start, in fresh processes.
+
+* ``studyapp --help`` against a bare ``python -c "import numpy"`` (target: within 2x), and ``studyapp
+  validate`` of the demo design, each a cold process, the three alternating over the same number of runs;
+* the first trial frame of the demo, offscreen: from just before the process starts to the first frame of
+  the first trial rendered at 1280x720 and read back, with the time of each step inside the process
+  (imports, design, trial media, GL context, renderer and scene, the frame itself; target: 1.5 s).
+
+Medians with min-max; the load average is printed and recorded (``startup_help_ratio_vs_numpy``,
+``first_trial_frame_s``) with :func:`figures.record` for ``run_all.py --json``.
+Usage: ``python benchmarks/bench_startup.py [runs]`` (default 5).
+"""
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+FIRST_FRAME = r"""
+import json, sys, time
+phases = {}
+t = time.perf_counter()
+from studyapp.render.context import create_offscreen_context
+from studyapp.render.renderer import Renderer
+from studyapp.render.scene import build_trial_scene
+from studyapp.render.video import render_frames
+from studyapp.resources import demo_design
+from studyapp.study.design import load_design
+from studyapp.study.schedule import participant_schedule
+from studyapp.study.stimuli import load_trial_media
+phases["imports"] = time.perf_counter() - t
+t = time.perf_counter()
+design = load_design(demo_design())
+plan = [p for p in participant_schedule(design, "P01", row=0) if not p.is_practice][0]
+phases["design + schedule"] = time.perf_counter() - t
+t = time.perf_counter()
+media = load_trial_media(design, plan)
+phases["trial media (motion, audio, avatars)"] = time.perf_counter() - t
+t = time.perf_counter()
+ctx = create_offscreen_context()
+phases["GL context"] = time.perf_counter() - t
+t = time.perf_counter()
+renderer = Renderer(ctx)
+scene = build_trial_scene(renderer, media)
+phases["renderer + scene (shaders, uploads)"] = time.perf_counter() - t
+t = time.perf_counter()
+img = next(render_frames(scene, [0.0], (1280, 720)))
+phases["first frame (draw + read-back)"] = time.perf_counter() - t
+print(json.dumps({"done": time.time(), "phases": phases, "shape": list(img.shape), "lit": float(img.std())}))
+"""
+
+
+def _cold(cmd: list[str]) -> float:
+    t = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True)
+    return time.perf_counter() - t
+
+
+def _first_frame() -> dict:
+    start = time.time()
+    out = subprocess.run([sys.executable, "-c", FIRST_FRAME], check=True, capture_output=True, text=True).stdout
+    res = json.loads(out.strip().splitlines()[-1])
+    res["total"] = res["done"] - start
+    return res
+
+
+def _fmt(xs: list[float]) -> str:
+    return f"{statistics.median(xs):7.3f} s (min {min(xs):.3f}, max {max(xs):.3f})"
+
+
+def main(argv: list[str]) -> int:
+    from figures import record
+    from studyapp.resources import demo_design
+    runs = int(argv[0]) if argv else 5
+    py = sys.executable
+    cmds = {"python -c 'import numpy'": [py, "-c", "import numpy"],
+            "studyapp --help": [py, "-m", "studyapp.cli", "--help"],
+            "studyapp validate demo.toml": [py, "-m", "studyapp.cli", "validate", str(demo_design())]}
+    load_before = os.getloadavg()
+    times: dict[str, list[float]] = {k: [] for k in cmds}
+    frames = []
+    for r in range(runs):
+        order = list(cmds) if r % 2 == 0 else list(reversed(cmds))
+        for k in order:
+            times[k].append(_cold(cmds[k]))
+        frames.append(_first_frame())
+    load_after = os.getloadavg()
+    print(f"{runs} cold runs each, interleaved; load average {load_before[0]:.2f} before, {load_after[0]:.2f} "
+          f"after ({os.cpu_count()} cores)")
+    for k, xs in times.items():
+        print(f"  {k:40s} {_fmt(xs)}")
+    bare, help_ = statistics.median(times[cmds_key(cmds, 0)]), statistics.median(times[cmds_key(cmds, 1)])
+    print(f"  --help / import numpy: {help_ / bare:.2f}x (target <= 2x)")
+    print("  first trial frame of the demo, offscreen 1280x720, from process start:")
+    for phase in frames[0]["phases"]:
+        print(f"    {phase:38s} {_fmt([f['phases'][phase] for f in frames])}")
+    totals = [f["total"] for f in frames]
+    print(f"    {'total (incl. interpreter start)':38s} {_fmt(totals)}  (target <= 1.5 s)")
+    common = {"runs": runs, "loadavg": [load_before[0], load_after[0]], "cores": os.cpu_count()}
+    record("startup_help_ratio_vs_numpy", value=help_ / bare, baseline=1.0, unit="x bare `import numpy` time",
+           help_s=help_, numpy_s=bare, validate_s=statistics.median(times[cmds_key(cmds, 2)]), target=2.0,
+           note="cold `studyapp --help` vs cold `python -c 'import numpy'`, medians, interleaved", **common)
+    record("first_trial_frame_s", value=statistics.median(totals), baseline=1.5, unit="s",
+           spread=[min(totals), max(totals)],
+           phases={p: statistics.median(f["phases"][p] for f in frames) for p in frames[0]["phases"]},
+           note="process start to the demo's first trial frame rendered offscreen and read back; baseline = "
+                "the 1.5 s target", **common)
+    return 0
+
+
+def cmds_key(cmds: dict, i: int) -> str:
+    return list(cmds)[i]
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
