@@ -158,6 +158,7 @@ def build_corpus(samples: Path, work: Path) -> dict[str, list[Seed]]:
         seeds["toml"].append(Seed("toml", REPO / "study_designs" / name, design_cmds, ".toml", "design"))
 
     db = work / "results.sqlite"
+    db.unlink(missing_ok=True)
     _sh(["run", str(REPO / "study_designs/demo.toml"), "--participant", "P01", "--no-render", "--bot", "careful",
          "--results", str(db)], work)
     seeds["sqlite"].append(Seed("sqlite", db, (("export", IN, "--csv", "out.csv"), ("export", IN)), ".sqlite"))
@@ -190,8 +191,8 @@ def _prepare(case: Case, s: Seed, data: bytes, folder: Path) -> list[str]:
     if s.context == "design":
         name = "design.toml"
     elif s.context.startswith("slot:") and "design.toml" in case.argv:
-        # the demo design with clip01's file of this kind replaced by the mutated one
-        text = (REPO / "study_designs/demo.toml").read_text(encoding="utf-8")
+        # the demo design cut to two clips, clip01's file of this kind replaced by the mutated one
+        text = _two_clip_demo()
         slot = s.context[5:]
         if slot == "bvh":
             (folder / "m").mkdir()
@@ -205,6 +206,14 @@ def _prepare(case: Case, s: Seed, data: bytes, folder: Path) -> list[str]:
         (folder / "design.toml").write_text(text, encoding="utf-8")
     (folder / name).write_bytes(data)
     return [name if a == IN else a for a in case.argv]
+
+
+def _two_clip_demo() -> str:
+    """``demo.toml`` without clip03, clip04 and the attention check (on clip03): ``validate`` opens half the files."""
+    text = (REPO / "study_designs/demo.toml").read_text(encoding="utf-8")
+    blocks = text.split("\n[")
+    keep = [b for b in blocks if not ('id = "clip03"' in b or 'id = "clip04"' in b or b.startswith("[attention_checks]"))]
+    return "\n[".join(keep)
 
 
 def _child(argv: list[str], folder: Path, mem_mb: int) -> None:
@@ -350,7 +359,15 @@ def _warm_up() -> None:
     import studyapp.render.avatar_report  # noqa: F401
     import studyapp.study.design  # noqa: F401
     import studyapp.study.storage  # noqa: F401
+    import studyapp.study.stimuli  # noqa: F401
+    import studyapp.study.export  # noqa: F401
+    import studyapp.study.schedule  # noqa: F401
+    import studyapp.render.scene  # noqa: F401
+    import studyapp.render.pose  # noqa: F401
+    import studyapp.motion.smpl  # noqa: F401
+    import studyapp.face.smplx  # noqa: F401
     import pandas  # noqa: F401
+    import scipy.signal  # noqa: F401
 
 
 def main(argv: list[str] | None = None) -> int:
