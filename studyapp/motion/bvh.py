@@ -80,6 +80,7 @@ MAX_HEADER_LINE = 65_536
 MAX_JOINT_DEPTH = 128
 #: Most joints read (real skeletons: 22 to 75; hand-and-face rigs a few hundred).
 MAX_JOINTS = 4096
+_MIN_FRAME_TIME = 1e-5
 #: Characters allowed per channel value on a frame line ("-1.2345678901234567e+308 " is 25).
 _CHARS_PER_CHANNEL = 64
 
@@ -470,6 +471,9 @@ def _parse_motion_header(lines: list[str], motion_line: int, path: str) -> tuple
         raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)!r} is not a number") from None
     if not math.isfinite(frame_time) or frame_time < 0:
         raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)} must be a positive number of seconds")
+    if 0 < frame_time < _MIN_FRAME_TIME:  # 1 / frame_time must stay a frame rate (1e-300 gives infinity)
+        raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)} s is more than {1 / _MIN_FRAME_TIME:,.0f} "
+                                                "frames per second; is it in seconds?")
     return frames, frame_time, i + 1
 
 

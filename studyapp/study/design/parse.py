@@ -15,7 +15,8 @@ from studyapp import tomlfile
 from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
 from studyapp.study.design.blinding import visible_text_leaks
 from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
-from studyapp.study.design.files import design_hash, has_sample_field, pattern_fields, referenced_files, resolve
+from studyapp.study.design.files import (design_hash, has_sample_field, pattern_fields, pattern_problem, referenced_files,
+                                         resolve)
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design, Display,
                                              Playback, Problem, QuestionItem, Stimulus)
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
@@ -95,7 +96,11 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
         col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
     if "motion" in e:
         fields = pattern_fields(e["motion"]) if pattern else ["stimulus"]
-        if not fields:
+        problem = pattern_problem(e["motion"]) if pattern else None
+        if problem is not None:
+            col.add(f"{key}.motion", f"pattern {e['motion'][:120]!r}: {problem}",
+                    'use only {stimulus}, {sample} and tag names in braces, e.g. motion = "motion/model_a/{stimulus}.bvh"')
+        elif not fields:
             col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
                     "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
         if not e["motion"].lower().endswith(MOTION_SUFFIXES):
