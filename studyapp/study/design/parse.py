@@ -400,6 +400,18 @@ def _read(path: Path) -> tuple[bytes, str, dict] | Problem:
                        "see https://toml.io; strings need quotes, tables [name], lists [a, b]", line)
 
 
+def _keys_with_nul(node: object, key: str = "") -> list[str]:
+    """Dotted keys (``stimuli[0].audio``) of every string or key in the TOML data that holds a NUL."""
+    if isinstance(node, str):
+        return [key or "<top>"] if "\0" in node else []
+    if isinstance(node, dict):
+        return [k for name, v in node.items()
+                for k in ([f"{key}.{name}".lstrip(".")] if "\0" in name else _keys_with_nul(v, f"{key}.{name}".lstrip(".")))]
+    if isinstance(node, list):
+        return [k for i, v in enumerate(node) for k in _keys_with_nul(v, f"{key}[{i}]")]
+    return []
+
+
 def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]:
     """The design in ``path`` (None when it cannot be read) and every problem found in it."""
     path = Path(path)
@@ -408,6 +420,11 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
         return None, [got]
     data, text, raw = got
     col = Collector(path, text)
+    for key in _keys_with_nul(raw):
+        col.add(key, "contains a NUL character (\\u0000), which no file name or text may hold",
+                "delete it (a damaged file? check the rest of it too)")
+    if col.problems:  # paths holding NUL cannot even be looked up: nothing below can be checked
+        return None, col.problems
     top = check_table(col, raw, DesignFile, "")
     conds = check_array(col, top, "conditions", Condition)
     stims = check_array(col, top, "stimuli", Stimulus)
