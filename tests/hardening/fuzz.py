@@ -269,20 +269,22 @@ def _detail(folder: Path) -> str:
     return lines[-1][:300] if lines else ""
 
 
-def run_cases(cases: list[tuple[Case, Seed, bytes]], work: Path, jobs: int, timeout: float, mem_mb: int,
-              keep: bool = False) -> list[Case]:
-    """Run every case in its own forked child, at most ``jobs`` at a time."""
-    pending = list(cases)
+def run_cases(seed: int, indices: list[int], corpus: dict[str, list[Seed]], work: Path, jobs: int, timeout: float,
+              mem_mb: int, keep: bool = False, progress: bool = False) -> list[Case]:
+    """Run every case in its own forked child, at most ``jobs`` at a time (each case's file is made just
+    before it runs, so a long run holds one file per job in memory)."""
+    pending = list(indices)
     running: dict[int, tuple[Case, float]] = {}
     done: list[Case] = []
     while pending or running:
         while pending and len(running) < jobs:
-            case, s, data = pending.pop(0)
+            case, s, data = make_case(seed, pending.pop(0), corpus)
             case.folder = work / f"case-{case.seed}-{case.index}"
             if case.folder.exists():
                 shutil.rmtree(case.folder)
             argv = _prepare(case, s, data, case.folder)
             case.argv = argv
+            del data
             sys.stdout.flush()
             sys.stderr.flush()
             pid = os.fork()
@@ -309,6 +311,9 @@ def run_cases(cases: list[tuple[Case, Seed, bytes]], work: Path, jobs: int, time
             if not keep:
                 shutil.rmtree(case.folder, ignore_errors=True)
             done.append(case)
+            if progress and len(done) % 100 == 0:
+                bad = sum(c.outcome in FAILURES for c in done)
+                print(f"{len(done)} of {len(indices)} cases, {bad} failing", file=sys.stderr, flush=True)
         if not finished:
             time.sleep(0.005)
     done.sort(key=lambda c: c.index)
@@ -397,8 +402,8 @@ def main(argv: list[str] | None = None) -> int:
     corpus = build_corpus(args.samples, work / "corpus")
     _warm_up()
     indices = args.case or [i for i in range(args.start, args.start + args.cases) if READERS[i % len(READERS)] in readers]
-    cases = [make_case(args.seed, i, corpus) for i in indices]
-    done = run_cases(cases, work, args.jobs, args.timeout, args.mem_mb, keep=keep)
+    done = run_cases(args.seed, indices, corpus, work, args.jobs, args.timeout, args.mem_mb, keep=keep,
+                     progress=len(indices) >= 500)
     if args.case:
         for c in done:
             print(f"case {c.index} ({c.reader}): {c.source} + {' + '.join(c.mutations)}")

@@ -85,7 +85,8 @@ def dup_chunk(rng: random.Random, data: bytes) -> bytes:
     i = rng.randrange(len(data))
     chunk = data[i:i + rng.randint(1, 4096)]
     j = _pos(rng, data)
-    return _cap(data[:j] + chunk * rng.choice((1, 2, 10, 100)) + data[j:])
+    reps = min(rng.choice((1, 2, 10, 100)), max(1, (MAX_SIZE - len(data)) // len(chunk)))
+    return _cap(data[:j] + chunk * reps + data[j:])
 
 
 def magic_int(rng: random.Random, data: bytes) -> bytes:
@@ -112,8 +113,10 @@ def _lines(data: bytes) -> list[bytes]:
 def dup_lines(rng: random.Random, data: bytes) -> bytes:
     lines = _lines(data)
     i = rng.randrange(len(lines))
-    block = lines[i:i + rng.randint(1, 5)]
-    return _cap(b"".join(lines[:i] + block * rng.choice((1, 2, 100, 10_000)) + lines[i:]))
+    block = b"".join(lines[i:i + rng.randint(1, 5)])
+    # a few copies only of a long block (after long_line, say): the file stays under MAX_SIZE
+    reps = min(rng.choice((1, 2, 100, 10_000)), max(1, (MAX_SIZE - len(data)) // max(1, len(block))))
+    return _cap(b"".join(lines[:i]) + block * reps + b"".join(lines[i:]))
 
 
 def delete_lines(rng: random.Random, data: bytes) -> bytes:
@@ -198,10 +201,10 @@ def csv_wide(rng: random.Random, data: bytes) -> bytes:
     """The header (and maybe each row) widened by 1,000 to 100,000 columns (1.2 MB with 100k hung)."""
     n = rng.choice((1000, 100_000))
     lines = _lines(data)
-    head = lines[0].rstrip(b"\r\n") + b"".join(b",c%d" % k for k in range(n)) + b"\n"
+    head = lines[0][:MAX_SIZE // 4].rstrip(b"\r\n") + b"".join(b",c%d" % k for k in range(n)) + b"\n"
     rows = lines[1:]
     if rng.random() < 0.5 and rows:
-        rows = [r.rstrip(b"\r\n") + b",0" * n + b"\n" for r in rows[:20]]
+        rows = [r[:MAX_SIZE // 40].rstrip(b"\r\n") + b",0" * n + b"\n" for r in rows[:20]]
     return _cap(head + b"".join(rows))
 
 
@@ -358,6 +361,8 @@ def npy_header(rng: random.Random, data: bytes) -> bytes:
 def _npz_members(data: bytes) -> list[tuple[str, bytes]] | None:
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as z:
+            if sum(i.file_size for i in z.infolist()) > MAX_SIZE * 4:
+                return None  # a bomb from an earlier mutation: never expanded here
             return [(i.filename, z.read(i)) for i in z.infolist()]
     except Exception:  # noqa: BLE001 - a seed already damaged by an earlier mutation
         return None
