@@ -22,6 +22,7 @@ import re
 import sqlite3
 import struct
 import tempfile
+import warnings
 import zipfile
 import zlib
 from collections.abc import Callable
@@ -468,7 +469,8 @@ def npz_member(rng: random.Random, data: bytes) -> bytes:
     else:
         members.append(members[i])  # a duplicate member name
     out = io.BytesIO()
-    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+    with warnings.catch_warnings(), zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        warnings.simplefilter("ignore")  # "Duplicate name": that is the point of this mutation
         for n, r in members:
             z.writestr(n, r)
     return out.getvalue()
