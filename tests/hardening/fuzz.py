@@ -14,8 +14,9 @@ avatars and a .gltf made from one), the demo study (its WAVs, face CSVs, BVHs an
 by ``studyapp convert`` and a results database written by a scripted participant (``studyapp run --bot``).
 
 Each case runs in its own forked process (the parent has imported studyapp, so a case starts in
-milliseconds), in its own folder, under ``RLIMIT_AS`` (``--mem-mb``, 1536 by default) and a wall-clock cap
-(``--timeout``), calling ``studyapp.cli.main`` with the argument list a user types. Outcome:
+milliseconds), in its own folder, under ``RLIMIT_AS`` (``--mem-mb``, 1536 by default) and a time cap
+(``--timeout`` CPU seconds, and four times that in wall-clock time, since a shared machine may keep a
+case waiting), calling ``studyapp.cli.main`` with the argument list a user types. Outcome:
 
 * ``ok``: exit status 0;
 * ``error``: exit status not 0 and no traceback (the one-line messages of ``InputError``);
@@ -216,12 +217,18 @@ def _two_clip_demo() -> str:
     return "\n[".join(keep)
 
 
-def _child(argv: list[str], folder: Path, mem_mb: int) -> None:
+#: Wall-clock cap as a multiple of the CPU-time cap: on a shared, loaded machine a case may wait for a core.
+WALL_FACTOR = 4
+
+
+def _child(argv: list[str], folder: Path, mem_mb: int, cpu_s: float) -> None:
     """Runs in the forked process: caps, redirections, the command; never returns."""
     code = 70
     try:
         os.chdir(folder)
         resource.setrlimit(resource.RLIMIT_AS, (mem_mb << 20, mem_mb << 20))
+        # CPU seconds, not wall seconds, decide a hang: SIGXCPU ends a case that computes past the cap
+        resource.setrlimit(resource.RLIMIT_CPU, (int(cpu_s), int(cpu_s) + 5))
         resource.setrlimit(resource.RLIMIT_FSIZE, (256 << 20, 256 << 20))
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # an oversized output is an OSError, not a kill
@@ -252,7 +259,7 @@ _BLOWUP_MARKS = ("MemoryError", "Unable to allocate", "Cannot allocate memory", 
 
 def classify(status: int | None, stderr: str) -> str:
     """Outcome of a finished child from its wait status (``None``: killed at the time cap) and its stderr."""
-    if status is None:
+    if status is None or (os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGXCPU):
         return "hang"
     if any(m in stderr for m in _BLOWUP_MARKS):
         return "blowup"
@@ -289,7 +296,7 @@ def run_cases(seed: int, indices: list[int], corpus: dict[str, list[Seed]], work
             sys.stderr.flush()
             pid = os.fork()
             if pid == 0:
-                _child(argv, case.folder, mem_mb)
+                _child(argv, case.folder, mem_mb, timeout)
             running[pid] = (case, time.monotonic())
         pid, status, usage = os.wait4(-1, os.WNOHANG)
         now = time.monotonic()
@@ -297,7 +304,7 @@ def run_cases(seed: int, indices: list[int], corpus: dict[str, list[Seed]], work
         if pid:
             finished.append((pid, status, usage.ru_maxrss / 1024))
         for p, (case, t0) in list(running.items()):
-            if p != pid and now - t0 > timeout:
+            if p != pid and now - t0 > timeout * WALL_FACTOR:
                 os.kill(p, signal.SIGKILL)
                 _, _, usage = os.wait4(p, 0)
                 finished.append((p, None, usage.ru_maxrss / 1024))
@@ -307,7 +314,8 @@ def run_cases(seed: int, indices: list[int], corpus: dict[str, list[Seed]], work
             case.max_rss_mb = rss
             err = (case.folder / "stderr.txt").read_text(errors="replace") if (case.folder / "stderr.txt").exists() else ""
             case.outcome = classify(st, err)
-            case.detail = f"killed after {timeout:.0f} s" if st is None else _detail(case.folder)
+            case.detail = (f"killed after {timeout * WALL_FACTOR:.0f} s of wall time" if st is None else
+                           f"past {timeout:.0f} s of CPU time" if case.outcome == "hang" else _detail(case.folder))
             if not keep:
                 shutil.rmtree(case.folder, ignore_errors=True)
             done.append(case)
@@ -383,7 +391,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--case", type=int, action="append", help="run only this case index (repeatable), verbosely")
     ap.add_argument("--readers", default=None, help=f"comma-separated subset of {','.join(READERS)}")
     ap.add_argument("--jobs", type=int, default=2, help="cases run at once (default 2)")
-    ap.add_argument("--timeout", type=float, default=30.0, help="seconds before a case counts as a hang (default 30)")
+    ap.add_argument("--timeout", type=float, default=30.0,
+                    help=f"CPU seconds before a case counts as a hang (default 30; wall-clock cap {WALL_FACTOR}x that)")
     ap.add_argument("--mem-mb", type=int, default=1536, help="address-space cap of a case in MiB (default 1536)")
     ap.add_argument("--samples", type=Path, default=REPO / "tests/data/samples",
                     help="folder of real sample files (default tests/data/samples)")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -86,6 +87,7 @@ def test_classification_of_child_outcomes():
     assert classify(71 << 8, "Traceback (most recent call last):\nnumpy.core._exceptions._ArrayMemoryError: "
                              "Unable to allocate 7.28 TiB\n") == "blowup"
     assert classify(11, "") == "crash"  # killed by SIGSEGV
+    assert classify(int(signal.SIGXCPU), "") == "hang"  # past the CPU-time cap
 
 
 def test_mutations_reach_the_attacks_of_issue_16():
