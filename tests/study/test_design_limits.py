@@ -72,3 +72,16 @@ def test_a_nul_in_a_path_is_refused(tmp_path):
     assert proc.stdout.splitlines() == [
         f"{path}:{line}: stimuli[1].audio: contains a NUL character (\\u0000), which no file name or text may hold "
         "-- fix: delete it (a damaged file? check the rest of it too)"]
+
+
+def test_a_deeply_nested_name_map_file_is_one_message(tmp_path):
+    """``view --name-map FILE`` reads its TOML through the same reader (it used tomllib directly)."""
+    from studyapp.errors import InputError
+    from studyapp.study.preview import _name_map_file
+
+    path = tmp_path / "map.toml"
+    path.write_text("Hips = " + "[" * 5000 + "]" * 5000 + "\n", encoding="utf-8")
+    with pytest.raises(InputError) as err:
+        _name_map_file(path)
+    assert str(err.value) == (f"{path}: not a TOML name map: arrays and inline tables nest more than "
+                              f"{tomlfile.MAX_DEPTH} deep (at line 1, column {len('Hips = ') + tomlfile.MAX_DEPTH + 1})")
