@@ -16,6 +16,7 @@ int32); its writer cannot write 24-bit, so that one encoding is packed here by h
 """
 from __future__ import annotations
 
+import io
 import struct
 import warnings
 from dataclasses import dataclass
@@ -135,15 +136,17 @@ def _bits_per_sample(path: Path) -> int | None:
             f.seek(size + (size & 1), 1)
 
 
-def _check_chunks(path: Path, head: bytes) -> None:
+def _check_chunks(path: Path, head: bytes) -> tuple[int, int] | None:
     """Name the chunk a damaged file breaks in, before scipy fails on it with a bare struct/reshape error.
 
     Only sizes are checked (a chunk that claims more bytes than follow, a missing ``fmt `` or ``data``);
-    everything inside the chunks is left to scipy. Streaming writers put 0 or 0xFFFFFFFF in an unfinished
-    ``data`` size, and RF64 keeps the real sizes elsewhere, so those are not judged here.
+    everything inside the chunks is left to scipy. RF64 keeps the real sizes elsewhere, so it is not judged
+    here. Streaming writers put 0 or 0xFFFFFFFF in an unfinished ``data`` size: that claim is never trusted
+    (scipy would allocate 4 GiB for it); the returned ``(offset of the size field, bytes that follow)`` lets
+    the caller read the samples the file really holds.
     """
     if head[:4] == b"RF64":
-        return
+        return None
     endian = "<" if head[:4] == b"RIFF" else ">"
     size = path.stat().st_size
     seen: set[bytes] = set()
@@ -158,7 +161,7 @@ def _check_chunks(path: Path, head: bytes) -> None:
             name = cid.decode("latin-1").strip() or "?"
             left = size - pos - 8
             if cid == b"data" and n in (0, 0xFFFFFFFF):
-                return
+                return pos + 4, left
             if n > left:
                 if cid == b"data":
                     raise InputError(path, "data chunk", f"declares {n} bytes of samples but only {left} follow: "
@@ -181,7 +184,13 @@ def _read(path: Path) -> tuple[int, np.ndarray]:
         head = f.read(12)
     if len(head) < 12 or head[:4] not in (b"RIFF", b"RIFX", b"RF64") or head[8:12] != b"WAVE":
         raise InputError(path, "header", f"not a WAV file (starts with {head[:12]!r}, expected RIFF....WAVE)")
-    _check_chunks(path, head)
+    unfinished = _check_chunks(path, head)
+    source: Path | io.BytesIO = path
+    if unfinished is not None:  # the data chunk is the rest of the file, whatever its size field says
+        at, left = unfinished
+        raw = bytearray(path.read_bytes())
+        struct.pack_into(("<" if head[:4] == b"RIFF" else ">") + "I", raw, at, left)
+        source = io.BytesIO(bytes(raw))
     from scipy.io import wavfile  # here: scipy.io costs ~0.3-1 s, and most commands never read samples
 
     with warnings.catch_warnings():
@@ -189,14 +198,16 @@ def _read(path: Path) -> tuple[int, np.ndarray]:
         warnings.simplefilter("error", wavfile.WavFileWarning)
         try:
             try:
-                rate, data = wavfile.read(path, mmap=False)
+                rate, data = wavfile.read(source, mmap=False)
             except wavfile.WavFileWarning as exc:
                 if not ("Chunk" in str(exc) and "not understood" in str(exc)):
                     raise InputError(path, "data chunk", f"damaged or truncated WAV: {exc}") from None
                 # an unknown chunk (LIST, bext, ...) is fine; read again skipping it
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", wavfile.WavFileWarning)
-                    rate, data = wavfile.read(path, mmap=False)
+                    if isinstance(source, io.BytesIO):
+                        source.seek(0)
+                    rate, data = wavfile.read(source, mmap=False)
         except InputError:
             raise
         except Exception as exc:  # scipy's reader fails in many ways on damaged files (struct, Unbound..., EOF)

@@ -13,6 +13,12 @@ Formats (chosen by content first, extension second):
 * **NPZ** with ``weights`` ``(F, K)`` and ``names`` ``(K,)`` [+ ``fps``]; **bare NPY** ``(F, 52)`` in Apple order
   (needs ``fps``).
 
+Limits, checked before anything is sized from the file (each an :class:`~studyapp.errors.InputError`): a CSV
+has at most :data:`MAX_CSV_COLUMNS` columns (real files: 52 to 63 and a few extra), JSON nests at most
+:data:`MAX_JSON_DEPTH` deep (BEAT's is 3), and time stamps with a gap are resampled only while the regular
+grid they imply stays within a few times the rows the file has (a stamp of 10^9 s would otherwise ask for
+billions of frames).
+
 Columns are always mapped by name (case-insensitive, see :func:`~studyapp.face.arkit.match_arkit_name`),
 never by position. Shapes the source lacks are zero and reported with :func:`warnings.warn`; names that are
 not ARKit shapes are kept in ``FaceAnimation.unknown``. Every malformed input raises
@@ -49,6 +55,11 @@ _HEAD_COLUMNS = ("headyaw", "headpitch", "headroll")
 _LIVELINK_EYES = {f"{side}eye{angle}" for side in ("left", "right") for angle in ("yaw", "pitch", "roll")}
 # Timecode rates a Live Link Face (or any SMPTE) clock runs at; the file's frame field must stay below it.
 _TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 100, 120, 240)
+#: Most columns a face CSV may have (Live Link Face writes 63; ARKit names, time and head angles are 57).
+MAX_CSV_COLUMNS = 1024
+#: Deepest JSON nesting read (BEAT facial JSON nests 3 deep; Python's reader fails near 1,000).
+MAX_JSON_DEPTH = 64
+_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"')
 _TIMECODE = re.compile(r"^\s*(\d+):(\d{1,2}):(\d{1,2})[:;](\d+)(?:\.(\d+))?\s*$")
 
 
@@ -115,6 +126,9 @@ def _read_csv(path: Path, text: str) -> tuple[list[str], list[tuple[int, list[st
                 trailing = len(cells) > 1 and not cells[-1].strip()
                 header = [c.strip() for c in (cells[:-1] if trailing else cells)]
                 header_line = reader.line_num
+                if len(header) > MAX_CSV_COLUMNS:
+                    raise InputError(path, f"line {header_line}", f"the header has {len(header):,} columns; a face "
+                                     f"CSV has at most {MAX_CSV_COLUMNS:,} (52 ARKit shapes and a few more)")
                 continue
             if trailing and len(cells) == len(header) + 1 and not cells[-1].strip():
                 cells = cells[:-1]
@@ -132,6 +146,29 @@ def _read_csv(path: Path, text: str) -> tuple[list[str], list[tuple[int, list[st
     if empty:
         raise InputError(path, f"line 1, column {empty[0]}", "empty column name in the header")
     return header, rows
+
+
+def _json_depth_error(path: Path, text: str) -> InputError | None:
+    """The error for JSON nested deeper than :data:`MAX_JSON_DEPTH`, or ``None``; strings are skipped and the
+    depth is counted with numpy, so a large file costs one pass at C speed."""
+    raw = text.encode("utf-8")
+    if raw.count(b"[") + raw.count(b"{") <= MAX_JSON_DEPTH:
+        return None
+    # strings replaced by as many 'x' (same offsets), so brackets inside names do not count
+    bare = _JSON_STRING.sub(lambda m: b"x" * len(m.group(0)), raw)
+    arr = np.frombuffer(bare, dtype=np.uint8)
+    step = np.zeros(arr.size, dtype=np.int32)
+    step[(arr == ord("[")) | (arr == ord("{"))] = 1
+    step[(arr == ord("]")) | (arr == ord("}"))] = -1
+    depth = np.cumsum(step)
+    over = np.flatnonzero(depth > MAX_JSON_DEPTH)
+    if not over.size:
+        return None
+    at = int(over[0])
+    line = raw.count(b"\n", 0, at) + 1
+    col = at - (raw.rfind(b"\n", 0, at) + 1) + 1
+    return InputError(path, f"line {line}, column {col}", f"JSON nested more than {MAX_JSON_DEPTH} deep; BEAT facial "
+                                                          "JSON nests 3 deep")
 
 
 def _numeric(path: Path, header: list[str], rows: list[tuple[int, list[str]]], cols: list[int]) -> np.ndarray:
@@ -186,12 +223,27 @@ def _fps_from_times(path: Path, times: np.ndarray, lines: list[str]) -> tuple[fl
         fps = 1.0 / step
     else:
         fps = (times.size - 1) / float(times[-1] - times[0])
+    if not math.isfinite(fps) or fps > 10_000:
+        raise InputError(path, lines[1], f"time stamps {times[0]:g}, {times[1]:g}, ... imply {fps:g} frames per "
+                                         "second; are they in seconds?")
     return _snap_fps(fps), uneven
 
 
-def _regularize(path: Path, values: np.ndarray, times: np.ndarray, fps: float) -> np.ndarray:
-    """Resample rows stamped at uneven times (dropped frames) onto the regular ``fps`` grid."""
-    n = int(round((times[-1] - times[0]) * fps)) + 1
+def _regularize(path: Path, values: np.ndarray, times: np.ndarray, fps: float,
+                lines: list[str] | None = None) -> np.ndarray:
+    """Resample rows stamped at uneven times (dropped frames) onto the regular ``fps`` grid.
+
+    The grid's size comes from the stamps, so it is checked first: more than four times the rows (plus
+    1,000) is not dropped frames but a wrong stamp, reported at the largest gap.
+    """
+    span = float(times[-1] - times[0])
+    limit = 4 * times.size + 1000
+    if not span * fps < limit:
+        i = int(np.argmax(np.diff(times))) + 1
+        where = lines[i] if lines else None
+        raise InputError(path, where, f"time stamps jump from {times[i - 1]:g} to {times[i]:g} s: at {fps:g} fps the "
+                                      f"{times.size} rows would span {span * fps:.3g} frames (a wrong time stamp?)")
+    n = int(round(span * fps)) + 1
     grid = times[0] + np.arange(n) / fps
     warnings.warn(f"{path}: time stamps are uneven (dropped frames?); resampled {times.size} rows "
                   f"onto {n} frames at {fps:g} fps", stacklevel=5)
@@ -293,8 +345,8 @@ def _load_livelink(path: Path, header: list[str], rows, fps: float | None) -> Fa
         times = _timecode_seconds(path, tcs, lines)
         fps, uneven = _fps_from_times(path, times, lines)
         if uneven:
-            values = _regularize(path, values, times, fps)
-            head = None if head is None else _regularize(path, head, times, fps)
+            values = _regularize(path, values, times, fps, lines)
+            head = None if head is None else _regularize(path, head, times, fps, lines)
     return _assemble(path, names, values, fps, head,
                      lambda c: f"line 1, column {names[c]}", ignored=_LIVELINK_EYES)
 
@@ -323,12 +375,15 @@ def _load_plain_csv(path: Path, header: list[str], rows, fps: float | None) -> F
         times = _numeric(path, header, rows, [time_col])[:, 0]
         fps, uneven = _fps_from_times(path, times, lines)
         if uneven:
-            values = _regularize(path, values, times, fps)
-            head = None if head is None else _regularize(path, head, times, fps)
+            values = _regularize(path, values, times, fps, lines)
+            head = None if head is None else _regularize(path, head, times, fps, lines)
     return _assemble(path, names, values, fps, head, lambda c: f"line 1, column {names[c]}")
 
 
 def _load_beat_json(path: Path, text: str, fps: float | None) -> FaceAnimation:
+    too_deep = _json_depth_error(path, text)
+    if too_deep is not None:
+        raise too_deep
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -387,8 +442,8 @@ def _load_beat_json(path: Path, text: str, fps: float | None) -> FaceAnimation:
         lines = [f"key frames[{i}].time" for i in range(len(frames))]
         fps, uneven = _fps_from_times(path, times, lines)
         if uneven:
-            values = _regularize(path, values, times, fps)
-            head = None if head is None else _regularize(path, head, times, fps)
+            values = _regularize(path, values, times, fps, lines)
+            head = None if head is None else _regularize(path, head, times, fps, lines)
     return _assemble(path, names, values, fps, head, lambda c: f"key names[{c}]")
 
 

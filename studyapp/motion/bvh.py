@@ -16,6 +16,17 @@ Semantics used here (and by the writer, so round trips are exact):
 The frame data is parsed in one vectorized pass (pandas' C tokenizer); only when that pass finds
 something wrong does a line-by-line pass run, to name the offending line.
 
+Limits, checked before the parsers see the text, so that no file can make reading hang or exhaust
+memory (each is an :class:`~studyapp.errors.InputError` naming the line):
+
+* a HIERARCHY line is at most :data:`MAX_HEADER_LINE` characters;
+* a frame line is at most ``64`` characters per declared channel (plus 1,024): a file whose line breaks
+  were lost (10 MB on one line) is refused rather than handed to the tokenizer as millions of columns;
+* joints nest at most :data:`MAX_JOINT_DEPTH` deep (real skeletons: 7 to 14) and a file declares at most
+  :data:`MAX_JOINTS` joints;
+* a channel count is a whole number from 0 to 6 (``CHANNELS Infinity`` included);
+* the header's ``Frames:`` is never used to size anything: the data lines decide.
+
 >>> import tempfile, os
 >>> from studyapp.motion.beat import beat_skeleton
 >>> from studyapp.motion.skeleton import Motion
@@ -62,6 +73,16 @@ __all__ = [
 CHANNEL_NAMES: tuple[str, ...] = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _CANON = {c.lower(): c for c in CHANNEL_NAMES}
 _DANGLING_EXP = re.compile(r"^([-+]?(?:\d+\.?\d*|\.\d+))[eE][-+]?$")
+
+#: Longest HIERARCHY line read (names and offsets take well under 200 characters in real files).
+MAX_HEADER_LINE = 65_536
+#: Deepest joint nesting read (real skeletons from BEAT, CMU, Mixamo, ZEGGS, Truebones: 7 to 14).
+MAX_JOINT_DEPTH = 128
+#: Most joints read (real skeletons: 22 to 75; hand-and-face rigs a few hundred).
+MAX_JOINTS = 4096
+_MIN_FRAME_TIME = 1e-5
+#: Characters allowed per channel value on a frame line ("-1.2345678901234567e+308 " is 25).
+_CHARS_PER_CHANNEL = 64
 
 
 class BvhWarning(UserWarning):
@@ -197,6 +218,11 @@ def parse_bvh_bytes(raw: bytes, path: str = "<bytes>") -> BvhData:
     head, data = raw, b""
     m = _MOTION_RE.search(raw)
     ft = _FRAME_TIME_LINE_RE.search(raw, m.end()) if m else None
+    too_long = _first_long_line(raw[: ft.end()] if ft is not None else raw, MAX_HEADER_LINE)
+    if too_long is not None:
+        line, length = too_long
+        raise InputError(path, f"line {line + 1}", f"line is {length:,} characters long; a BVH header line has at "
+                                                   f"most {MAX_HEADER_LINE:,} (are the line breaks missing?)")
     if ft is not None:
         start = ft.end()
         start += 2 if raw.startswith(b"\r\n", start) else 1 if raw.startswith((b"\n", b"\r"), start) else 0
@@ -222,6 +248,31 @@ def parse_bvh_bytes(raw: bytes, path: str = "<bytes>") -> BvhData:
     for note in notes:
         warnings.warn(f"{path}: {note}", BvhWarning, stacklevel=3)
     return BvhData(skeleton, frame_time, channels, notes, frames, path)
+
+
+def _first_long_line(blob: bytes | memoryview, limit: int) -> tuple[int, int] | None:
+    """(0-based index, length) of the first line of ``blob`` longer than ``limit`` bytes, or ``None``.
+
+    Scans 16 MB at a time with numpy, so a large file costs a few MB and a fraction of a second.
+    """
+    if len(blob) <= limit:
+        return None
+    arr = np.frombuffer(blob, dtype=np.uint8)
+    last_newline = -1
+    lines_before = 0
+    step = 1 << 24
+    for a in range(0, arr.size, step):
+        newlines = np.flatnonzero(arr[a : a + step] == 10) + a
+        if newlines.size == 0:
+            continue
+        lengths = np.diff(newlines, prepend=last_newline) - 1
+        over = np.flatnonzero(lengths > limit)
+        if over.size:
+            return lines_before + int(over[0]), int(lengths[over[0]])
+        lines_before += newlines.size
+        last_newline = int(newlines[-1])
+    tail = arr.size - last_newline - 1
+    return (lines_before, tail) if tail > limit else None
 
 
 def _with_unit_guess(skeleton: Skeleton) -> Skeleton:
@@ -290,7 +341,12 @@ def _parse_hierarchy(lines: list[str], path: str) -> tuple[int, Skeleton]:
         take("OFFSET", f"'OFFSET' in {owner}")
         return [number(f"OFFSET of {owner}") for _ in range(3)]
 
-    def joint(parent: int, keyword_line: int) -> None:
+    def joint(parent: int, keyword_line: int, depth: int) -> None:
+        if depth > MAX_JOINT_DEPTH:
+            raise InputError(path, f"line {keyword_line}", f"joints nest more than {MAX_JOINT_DEPTH} deep; real "
+                                                           f"skeletons nest 7 to 14 (a '}}' missing?)")
+        if len(names) >= MAX_JOINTS:
+            raise InputError(path, f"line {keyword_line}", f"more than {MAX_JOINTS} joints; no real skeleton has that many")
         # the name may contain spaces: everything up to the opening brace
         parts = []
         while True:
@@ -316,11 +372,14 @@ def _parse_hierarchy(lines: list[str], path: str) -> tuple[int, Skeleton]:
             take()
             count_tok, cln = take(None, "channel count")
             try:
-                count = int(float(count_tok))
+                fcount = float(count_tok)
             except ValueError:
                 raise InputError(path, f"line {cln}", f"expected a channel count, found {count_tok!r}") from None
-            if count < 0 or count > 6:
-                raise InputError(path, f"line {cln}", f"joint {name!r} declares {count} channels; BVH allows 0 to 6")
+            # Infinity and NaN parse as floats; int() of them would raise, so the range is checked first
+            if not 0 <= fcount <= 6 or fcount != int(fcount):
+                raise InputError(path, f"line {cln}",
+                                 f"joint {name!r} declares {count_tok[:40]} channels; BVH allows a whole number 0 to 6")
+            count = int(fcount)
             got = []
             for _ in range(count):
                 ctok, cl = take(None, f"channel name of joint {name!r}")
@@ -350,7 +409,7 @@ def _parse_hierarchy(lines: list[str], path: str) -> tuple[int, Skeleton]:
                 return
             if up == "JOINT":
                 take()
-                joint(idx, ln)
+                joint(idx, ln, depth + 1)
             elif up == "END":
                 take()
                 take("SITE", "'Site' after 'End'")
@@ -366,7 +425,7 @@ def _parse_hierarchy(lines: list[str], path: str) -> tuple[int, Skeleton]:
         tok, ln = take()
         if tok.upper() != "ROOT":
             raise InputError(path, f"line {ln}", f"expected ROOT, found {tok!r}")
-        joint(-1, ln)
+        joint(-1, ln, 0)
     if not names:
         raise InputError(path, f"line {motion_line + 1}", "HIERARCHY has no ROOT joint")
     skeleton = Skeleton(tuple(names), np.array(parents), np.array(offsets, dtype=np.float64), tuple(chans), end_sites)
@@ -412,6 +471,9 @@ def _parse_motion_header(lines: list[str], motion_line: int, path: str) -> tuple
         raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)!r} is not a number") from None
     if not math.isfinite(frame_time) or frame_time < 0:
         raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)} must be a positive number of seconds")
+    if 0 < frame_time < _MIN_FRAME_TIME:  # 1 / frame_time must stay a frame rate (1e-300 gives infinity)
+        raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)} s is more than {1 / _MIN_FRAME_TIME:,.0f} "
+                                                "frames per second; is it in seconds?")
     return frames, frame_time, i + 1
 
 
@@ -421,6 +483,13 @@ def _parse_frames(data: bytes, start: int, n_channels: int, path: str) -> np.nda
         return np.zeros((0, n_channels))
     if n_channels == 0:
         raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
+    limit = n_channels * _CHARS_PER_CHANNEL + 1024
+    too_long = _first_long_line(data, limit)
+    if too_long is not None:
+        line, length = too_long
+        raise InputError(path, f"line {start + line + 1}",
+                         f"frame line is {length:,} characters long; {n_channels} channels take at most {limit:,} "
+                         "(are the line breaks missing?)")
     fast = _fast_frames(data, n_channels)
     if fast is not None:
         return fast

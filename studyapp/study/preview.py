@@ -16,10 +16,10 @@ lines.
 from __future__ import annotations
 
 import re
-import tomllib
 from pathlib import Path
 from typing import Any
 
+from studyapp import tomlfile
 from studyapp.errors import InputError
 from studyapp.motion.skeleton import Motion
 from studyapp.study.design import Condition, Design, Stimulus, condition_from_settings
@@ -47,8 +47,8 @@ def _name_map_file(path: Path) -> dict[str, str]:
     except OSError as exc:
         raise InputError(path, None, f"cannot read the name map ({exc.strerror or exc})") from None
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+        data = tomlfile.loads(text)
+    except tomlfile.TOMLDecodeError as exc:
         raise InputError(path, None, f"not a TOML name map: {exc}") from None
     table: Any = data
     if isinstance(data.get("conditions"), dict) and "name_map" in data["conditions"]:

@@ -79,6 +79,35 @@ def pattern_fields(pattern: str) -> list[str]:
         return ["<unbalanced braces>"]
 
 
+def pattern_problem(pattern: str) -> str | None:
+    """What makes a motion pattern unusable, or ``None``: placeholders are bare names (``{stimulus}``, a tag,
+    ``{sample}``), never a format specification, conversion, attribute, index or position, which would let a
+    design file run code paths of ``str.format`` (``{stimulus:>99999999}`` builds a 100 MB file name).
+
+    >>> pattern_problem("gen/{speaker}/{stimulus}_{sample}.bvh") is None
+    True
+    >>> pattern_problem("m/{stimulus:>99999999}.bvh")
+    "placeholder {stimulus:>99999999} has a format specification ':>99999999'; only bare names are allowed"
+    >>> pattern_problem("m/{stimulus.__class__}.bvh")
+    'placeholder {stimulus.__class__} is not a bare name; only bare names are allowed'
+    """
+    try:
+        parts = list(string.Formatter().parse(fill_sample(pattern, 1)))
+    except ValueError as exc:
+        return f"unbalanced braces ({exc}); write {{{{ and }}}} for a literal brace"
+    for _, name, spec, conversion in parts:
+        if name is None:
+            continue
+        shown = "{" + name + (f"!{conversion}" if conversion else "") + (f":{spec}" if spec else "") + "}"
+        if conversion:
+            return f"placeholder {shown[:60]} has a conversion '!{conversion}'; only bare names are allowed"
+        if spec:
+            return f"placeholder {shown[:60]} has a format specification {':' + spec[:40]!r}; only bare names are allowed"
+        if not name.isidentifier():
+            return f"placeholder {shown[:60]} is not a bare name; only bare names are allowed"
+    return None
+
+
 def motion_path(design: Design, condition: Condition | str, stimulus: Stimulus | str, sample: int = 1) -> Path:
     """The motion file of one condition for one stimulus and sample (the condition's pattern filled in).
 
@@ -90,6 +119,9 @@ def motion_path(design: Design, condition: Condition | str, stimulus: Stimulus |
         raise ValueError(f"condition {cond.id!r} is a live model ({cond.model}); it has no motion files")
     if not 1 <= sample <= max(1, cond.samples):
         raise ValueError(f"condition {cond.id!r} has samples 1..{cond.samples}, not {sample}")
+    problem = pattern_problem(cond.motion)
+    if problem is not None:
+        raise ValueError(f"condition {cond.id!r}: motion pattern {cond.motion!r}: {problem}")
     return resolve(design, fill_sample(cond.motion, sample).format(**{**stim.tags, "stimulus": stim.id}))
 
 
@@ -162,7 +194,8 @@ def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str
             files[f"conditions[{i}].template"] = resolve(design, c.template)
         if c.body_model is not None:
             files[f"conditions[{i}].body_model"] = resolve(design, c.body_model)
-        if c.motion is not None and pattern_fields(c.motion):
+        # a pattern with a problem (parse.py reports it) is never filled in: its files are unknown
+        if c.motion is not None and pattern_problem(c.motion) is None and pattern_fields(c.motion):
             for s in design.stimuli:
                 try:
                     for k in range(1, max(1, c.samples) + 1):

@@ -15,7 +15,8 @@ from studyapp import tomlfile
 from studyapp.motion.rotations import REPRESENTATIONS as _REPRESENTATION_WIDTHS
 from studyapp.study.design.blinding import visible_text_leaks
 from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
-from studyapp.study.design.files import design_hash, has_sample_field, pattern_fields, referenced_files, resolve
+from studyapp.study.design.files import (design_hash, has_sample_field, pattern_fields, pattern_problem, referenced_files,
+                                         resolve)
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design, Display,
                                              Playback, Problem, QuestionItem, Stimulus)
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
@@ -122,7 +123,11 @@ def parse_condition(col: Collector, key: str, e: dict, *, pattern: bool = True) 
         col.add(f"{key}.name_map.{k}", "must map a joint name to a bone name (a string)", f'{k} = "LeftHand"')
     if "motion" in e:
         fields = pattern_fields(e["motion"]) if pattern else ["stimulus"]
-        if not fields:
+        problem = pattern_problem(e["motion"]) if pattern else None
+        if problem is not None:
+            col.add(f"{key}.motion", f"pattern {e['motion'][:120]!r}: {problem}",
+                    'use only {stimulus}, {sample} and tag names in braces, e.g. motion = "motion/model_a/{stimulus}.bvh"')
+        elif not fields:
             col.add(f"{key}.motion", f"pattern {e['motion']!r} has no {{stimulus}} (or {{tag}}) placeholder, so "
                     "every stimulus would get the same motion file", 'e.g. motion = "motion/model_a/{stimulus}.bvh"')
         if not e["motion"].lower().endswith(MOTION_SUFFIXES):
@@ -422,6 +427,18 @@ def _read(path: Path) -> tuple[bytes, str, dict] | Problem:
                        "see https://toml.io; strings need quotes, tables [name], lists [a, b]", line)
 
 
+def _keys_with_nul(node: object, key: str = "") -> list[str]:
+    """Dotted keys (``stimuli[0].audio``) of every string or key in the TOML data that holds a NUL."""
+    if isinstance(node, str):
+        return [key or "<top>"] if "\0" in node else []
+    if isinstance(node, dict):
+        return [k for name, v in node.items()
+                for k in ([f"{key}.{name}".lstrip(".")] if "\0" in name else _keys_with_nul(v, f"{key}.{name}".lstrip(".")))]
+    if isinstance(node, list):
+        return [k for i, v in enumerate(node) for k in _keys_with_nul(v, f"{key}[{i}]")]
+    return []
+
+
 def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Problem]]:
     """The design in ``path`` (None when it cannot be read) and every problem found in it."""
     path = Path(path)
@@ -430,6 +447,11 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
         return None, [got]
     data, text, raw = got
     col = Collector(path, text)
+    for key in _keys_with_nul(raw):
+        col.add(key, "contains a NUL character (\\u0000), which no file name or text may hold",
+                "delete it (a damaged file? check the rest of it too)")
+    if col.problems:  # paths holding NUL cannot even be looked up: nothing below can be checked
+        return None, col.problems
     top = check_table(col, raw, DesignFile, "")
     conds = check_array(col, top, "conditions", Condition)
     stims = check_array(col, top, "stimuli", Stimulus)
