@@ -32,6 +32,10 @@ def _q(name: str) -> str:
     return '"' + name.replace('"', '""') + '"'
 
 
+def _s(value: object) -> str:
+    return bytes(value).decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+
+
 def _f(b: bytes) -> bytes:
     return len(b).to_bytes(4, "big") + b
 
@@ -67,12 +71,13 @@ def table_checksums(con: sqlite3.Connection, table: str) -> dict[int, str]:
 def damaged_rows(con: sqlite3.Connection) -> list[str]:
     """``table T, rowid N: what`` for every row that does not match its stored checksum, has none, or is
     missing; [] when all match or the database has no checksums."""
-    tables = [str(r[0]) for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
+    # everything read as bytes: a damaged name or checksum may not be valid UTF-8
+    tables = [_s(r[0]) for r in con.execute("SELECT CAST(name AS BLOB) FROM sqlite_master WHERE type = 'table'")]
     if CHECKSUM_TABLE not in tables:
         return []
     stored: dict[str, dict[int, str]] = {}
-    for table, rid, digest in con.execute(f"SELECT tbl, rid, sha256 FROM {CHECKSUM_TABLE}"):
-        stored.setdefault(str(table), {})[int(rid)] = str(digest)
+    for table, rid, digest in con.execute(f"SELECT CAST(tbl AS BLOB), rid, CAST(sha256 AS BLOB) FROM {CHECKSUM_TABLE}"):
+        stored.setdefault(_s(table), {})[rid if isinstance(rid, int) else -1] = _s(digest)
     problems = []
     for table in sorted(t for t in tables if not t.startswith("sqlite_") and t != CHECKSUM_TABLE):
         want = stored.pop(table, {})
@@ -96,7 +101,7 @@ def verify_database(con: sqlite3.Connection, path: str | Path) -> None:
                                                 if ln.strip() and not ln.startswith("*** in database")]
         if not problems:
             problems = damaged_rows(con)
-    except sqlite3.DatabaseError as exc:
+    except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
         problems = [f"cannot be read ({exc})"]
     if problems:
         shown = "; ".join(problems[:3]) + (f" (+{len(problems) - 3} more)" if len(problems) > 3 else "")

@@ -190,8 +190,9 @@ def _open_verified(path: Path) -> Iterator[sqlite3.Connection]:
     (:func:`results_analysis.integrity.verify_database`): a damaged file is reported, never analysed."""
     from results_analysis.integrity import verify_database
 
-    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True, isolation_level=None)
     try:
+        con.execute("BEGIN")  # one snapshot: what was verified is what is read
         verify_database(con, path)
         yield con
     finally:

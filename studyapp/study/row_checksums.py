@@ -54,10 +54,19 @@ def _value_bytes(kind: str, value: object) -> bytes:
     return bytes(value)  # type: ignore[arg-type]  # text (read as its stored bytes) and blob
 
 
+def _text(value: object) -> str:
+    return bytes(value).decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+
+
+def _int(value: object) -> int:
+    return value if isinstance(value, int) else -1  # a damaged rowid (stored as another type) matches no row
+
+
 def covered_tables(con: sqlite3.Connection) -> list[str]:
     """Every table whose rows carry a checksum: all but SQLite's own and the checksum table."""
-    return [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY name")
-            if not str(r[0]).startswith("sqlite_") and r[0] != TABLE]
+    names = [_text(r[0]) for r in con.execute("SELECT CAST(name AS BLOB) FROM sqlite_master WHERE type = 'table' "
+                                               "ORDER BY name")]
+    return [n for n in names if not n.startswith("sqlite_") and n != TABLE]
 
 
 def _quote(name: str) -> str:
@@ -178,8 +187,9 @@ def verify(con: sqlite3.Connection) -> list[str]:
     """
     problems: list[str] = []
     stored: dict[str, dict[int, str]] = {}
-    for table, rid, digest in con.execute(f"SELECT tbl, rid, sha256 FROM {TABLE}"):
-        stored.setdefault(str(table), {})[int(rid)] = str(digest)
+    # read as bytes: a damaged checksum row may not even be valid UTF-8
+    for table, rid, digest in con.execute(f"SELECT CAST(tbl AS BLOB), rid, CAST(sha256 AS BLOB) FROM {TABLE}"):
+        stored.setdefault(_text(table), {})[_int(rid)] = _text(digest)
     tables = covered_tables(con)
     for table in tables:
         expected = stored.pop(table, {})

@@ -24,7 +24,9 @@ from __future__ import annotations
 import errno
 import json
 import logging
+import os
 import platform
+import shutil
 import sqlite3
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -177,7 +179,7 @@ _log = logging.getLogger(__name__)
 _NOT_SAVED = "the last change (e.g. the answer just given) was not saved; everything saved before it is kept"
 
 
-def _kind(exc: sqlite3.Error) -> str:
+def _kind(exc: sqlite3.Error | UnicodeDecodeError) -> str:
     """What an SQLite error means for the user: full, readonly, busy, io, damaged or other."""
     name = str(getattr(exc, "sqlite_errorname", "") or "")
     text = str(exc).lower()
@@ -190,22 +192,37 @@ def _kind(exc: sqlite3.Error) -> str:
         return "busy"
     if name.startswith("SQLITE_IOERR") or "disk i/o error" in text:
         return "io"
-    if name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")) or "malformed" in text or "not a database" in text:
+    if name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")) or isinstance(exc, UnicodeDecodeError) \
+            or "malformed" in text or "not a database" in text:
         return "damaged"
     return "other"
 
 
-def sqlite_problem(path: Path, exc: sqlite3.Error, what: str) -> InputError:
+def _nearly_full(path: Path) -> bool:
+    # SQLite reports some writes on a full disk as I/O errors (e.g. growing the -shm file): ask the disk
+    try:
+        return shutil.disk_usage(path.parent).free < _NEARLY_FULL_BYTES
+    except OSError:
+        return False
+
+
+#: Free space under which an I/O error while writing is taken for a full disk.
+_NEARLY_FULL_BYTES = 1 << 20
+
+
+def sqlite_problem(path: Path, exc: sqlite3.Error | UnicodeDecodeError, what: str) -> InputError:
     """The one-line message for an SQLite error on the results database: a full disk, a read-only file or
     folder, a lock and a failing drive each say so and what to do, kept apart from a damaged file."""
     kind = _kind(exc)
+    if kind == "io" and _nearly_full(path):
+        kind = "full"
     if kind == "full":
         return InputError(path, None, f"the disk is full ({exc}): {what}. Free some disk space, then start again "
                           "(a session resumes where it stopped)")
     if kind == "readonly":
         return InputError(path, None, f"cannot write the results database or its folder ({exc}): {what}. studyapp "
                           "writes the file and its journal files (-wal, -shm) next to it: make the folder and the "
-                          "file writable, or copy the file to a writable folder. The file is not damaged")
+                          "file writable, or copy the file to a writable folder. Nothing in the file was changed")
     if kind == "busy":
         # Another program holds a lock (a database browser or notebook mid-write): the file is fine, and a
         # new --results file would split the study, so never advise that here.
@@ -349,6 +366,11 @@ class ResultsDB:
             raise InputError(self.path, None, "results database not found; check the path")
         if not exists and design_hash is None:
             raise InputError(self.path, None, "results database not found, and no design was given to create one")
+        if exists and design_hash is not None and not os.access(self.path, os.W_OK):
+            # a session is about to write; say why before the first answer rather than at it
+            raise InputError(self.path, None, "the results database is read-only: studyapp cannot save answers in "
+                             "it. Make the file (and its folder) writable, or copy it to a writable folder. Nothing "
+                             "in the file was changed")
         try:
             if exists:
                 self._check_header()
@@ -375,7 +397,7 @@ class ResultsDB:
                 self._check_rows()
             row_checksums.install_triggers(self._con)
             row = self._con.execute("SELECT design_hash, title FROM study WHERE id = 1").fetchone()
-        except sqlite3.Error as exc:
+        except (sqlite3.Error, UnicodeDecodeError) as exc:  # a damaged text in SQLite's own tables cannot decode
             self._con.close()
             raise sqlite_problem(self.path, exc, "the results database could not be created or opened") from None
         except BaseException:
@@ -458,7 +480,12 @@ class ResultsDB:
 
     def _check_rows(self) -> None:
         """Every row against its checksum: a damaged value is reported, never read as data."""
-        problems = row_checksums.verify(self._con)
+        # one read transaction: another station committing meanwhile must not look like a row without checksum
+        self._con.execute("BEGIN")
+        try:
+            problems = row_checksums.verify(self._con)
+        finally:
+            self._con.execute("COMMIT")
         if problems:
             shown = "; ".join(problems[:3]) + (f" (+{len(problems) - 3} more)" if len(problems) > 3 else "")
             raise InputError(self.path, "row checksums", f"the results database is damaged: {shown}. Nothing was "
