@@ -1,8 +1,9 @@
-"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 3).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 4).
 
 Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
-exactly the columns of ``studyapp export``.
+exactly the columns of ``studyapp export``. It reads what it is given: the loader proves the file intact first
+(:mod:`results_analysis.integrity`), as ``studyapp`` does when it opens a database.
 """
 from __future__ import annotations
 

@@ -5,9 +5,14 @@ a killed process or a power cut (the WAL is fsynced at commit), and a trial's ra
 transaction, so a crash leaves either the whole answer or none of it. Every result row carries the
 design hash and the app version, so rows stay attributable after files are merged or moved.
 
-The database checks itself when opened: not an SQLite file, a damaged file (``PRAGMA integrity_check``),
+The database checks itself when opened: not an SQLite file, a damaged file (``PRAGMA integrity_check``, a
+superset of ``quick_check``, and every row against its checksum, see :mod:`studyapp.study.row_checksums`),
 an unknown schema or a database made for another design each raise an :class:`InputError` that names the
-file and says what to do.
+file and says what to do. Every write transaction seals the checksums of the rows it wrote before it commits.
+A full disk, a read-only file or folder and a lock held longer than :attr:`ResultsDB.LOCK_TIMEOUT_S` are each
+their own one-line :class:`InputError` (:func:`sqlite_problem`), never "damaged": the change being written is
+not stored and everything committed before it is kept. The tables are created in one write transaction that
+first looks again for them, so two processes creating a new database at once both end up using it.
 
 Example
 -------
