@@ -508,7 +508,8 @@ class ResultsDB:
         while version in _MIGRATIONS:
             if self._has_table(row_checksums.TABLE):
                 self._check_rows()
-            with self.transaction() as con:
+            with self.transaction(f"upgrading the results database from schema version {version} was undone; "
+                                  "every result in it is kept") as con:
                 for stmt in _MIGRATIONS[version]:
                     con.execute(stmt)
                 version += 1
@@ -526,7 +527,7 @@ class ResultsDB:
         """
         if self._con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone():
             return False
-        with self.transaction() as con:
+        with self.transaction("the new results database could not be created (nothing was recorded yet)") as con:
             if con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone():
                 return False
             for stmt in _SCHEMA.split(";"):
@@ -555,9 +556,10 @@ class ResultsDB:
         return self._con
 
     class _Tx:
-        def __init__(self, con: sqlite3.Connection, path: Path) -> None:
+        def __init__(self, con: sqlite3.Connection, path: Path, what: str) -> None:
             self.con = con
             self.path = path
+            self.what = what
 
         def __enter__(self) -> sqlite3.Connection:
             # IMMEDIATE takes the write lock up front, so two processes on one database serialise
@@ -565,7 +567,7 @@ class ResultsDB:
             try:
                 self.con.execute("BEGIN IMMEDIATE")
             except sqlite3.Error as exc:
-                raise sqlite_problem(self.path, exc, _NOT_SAVED) from None
+                raise sqlite_problem(self.path, exc, self.what) from None
             return self.con
 
         def __exit__(self, exc_type, exc, tb) -> None:
@@ -580,7 +582,7 @@ class ResultsDB:
             self._rollback()
             if isinstance(exc, sqlite3.Error) and _kind(exc) != "other":
                 # a full disk, a read-only folder, a lock held too long: one line that says what to do
-                raise sqlite_problem(self.path, exc, _NOT_SAVED) from None
+                raise sqlite_problem(self.path, exc, self.what) from None
             if exc_type is None:
                 raise exc
 
@@ -592,11 +594,11 @@ class ResultsDB:
             except sqlite3.Error:
                 pass
 
-    def transaction(self) -> "ResultsDB._Tx":
+    def transaction(self, what: str = _NOT_SAVED) -> "ResultsDB._Tx":
         """``with db.transaction() as con:`` — all statements inside commit together or not at all, with the
         checksums of every row they wrote; a full disk, a read-only file or a lock held too long raise
-        :class:`InputError` (nothing of the transaction is stored)."""
-        return ResultsDB._Tx(self._con, self.path)
+        :class:`InputError` (nothing of the transaction is stored; ``what`` says so in the message)."""
+        return ResultsDB._Tx(self._con, self.path, what)
 
     def close(self) -> None:
         try:
