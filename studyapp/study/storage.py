@@ -510,6 +510,10 @@ class ResultsDB:
                 self._check_rows()
             with self.transaction(f"upgrading the results database from schema version {version} was undone; "
                                   "every result in it is kept") as con:
+                now = con.execute("SELECT version FROM schema_version").fetchone()
+                if now is None or now[0] != version:  # another process upgraded it while this one waited
+                    version = SCHEMA_VERSION if now is None else int(now[0])
+                    continue
                 for stmt in _MIGRATIONS[version]:
                     con.execute(stmt)
                 version += 1

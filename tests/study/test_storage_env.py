@@ -220,3 +220,31 @@ def test_two_participants_starting_at_once_on_a_new_database(design: Path, tmp_p
         with ResultsDB(db, create=False) as rdb:
             assert {p.id: p.status for p in rdb.participants()} == {"A": "done", "B": "done"}
             assert len(rdb.responses()) == 2 * (N_STIMULI + 1) * 3 * 3
+
+
+def test_two_processes_upgrading_an_old_database_at_once(tmp_path: Path) -> None:
+    """Two stations open a schema 3 database at the same moment: one upgrades it, the other uses the result."""
+    base = tmp_path / "base.sqlite"
+    with ResultsDB(base, design_hash="h", title="T") as db:
+        db.add_participant("P1", n_rows=2)
+    with sqlite3.connect(base) as con:  # what studyapp wrote before row checksums
+        con.execute("DROP TABLE row_checksums")
+        con.execute("UPDATE schema_version SET version = 3")
+    con.close()
+    code = ("import sys, time\n"
+            "from studyapp.study.storage import ResultsDB\n"
+            "t = float(sys.argv[2])\n"
+            "while time.time() < t: pass\n"
+            "with ResultsDB(sys.argv[1], design_hash='h') as db: db.add_participant(sys.argv[3], n_rows=2)\n")
+    for k in range(int(os.environ.get("STUDYAPP_START_RACES", "8"))):
+        db = tmp_path / f"r{k}.sqlite"
+        db.write_bytes(base.read_bytes())
+        start = time.time() + 1.0
+        procs = [subprocess.Popen([sys.executable, "-c", code, str(db), str(start), pid], stderr=subprocess.PIPE,
+                                  text=True, env=_env()) for pid in ("A", "B")]
+        results = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
+        for p in procs:
+            p.stderr.close()
+        assert [rc for rc, _ in results] == [0, 0], (k, [e[-300:] for _, e in results])
+        with ResultsDB(db, create=False) as rdb:
+            assert sorted(p.id for p in rdb.participants()) == ["A", "B", "P1"]
