@@ -29,7 +29,7 @@ from __future__ import annotations
 import hashlib
 import sqlite3
 import struct
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 #: The table holding the checksums (its own rows are not checksummed: a damaged one shows as a mismatch).
 TABLE = "row_checksums"
@@ -84,23 +84,35 @@ def _select(table: str, columns: list[str], where: str = "") -> str:
     return f"SELECT rowid, {', '.join(parts)} FROM {_quote(table)}{where}"
 
 
+_KINDS = {k: _field(k.encode("ascii")) for k in ("null", "integer", "real", "text", "blob")}
+
+
+def _digester(table: str, columns: list[str]) -> Callable[[tuple], str]:
+    """The checksum function of one table's rows (as :func:`_select` reads them); the parts that are the same
+    for every row (prefix, table, column names) are encoded once."""
+    head = _PREFIX + _field(table.encode("utf-8"))
+    names = [_field(c.encode("utf-8")) for c in columns]
+
+    def digest(row: tuple) -> str:
+        parts = [head, _field(str(int(row[0])).encode("ascii"))]
+        for i, name in enumerate(names):
+            kind = str(row[1 + 2 * i])
+            parts += (name, _KINDS.get(kind) or _field(kind.encode("ascii")),
+                      _field(_value_bytes(kind, row[2 + 2 * i])))
+        return hashlib.sha256(b"".join(parts)).hexdigest()
+    return digest
+
+
 def _digest(table: str, columns: list[str], row: tuple) -> str:
-    h = hashlib.sha256(_PREFIX)
-    h.update(_field(table.encode("utf-8")))
-    h.update(_field(str(int(row[0])).encode("ascii")))
-    for i, name in enumerate(columns):
-        kind = str(row[1 + 2 * i])
-        h.update(_field(name.encode("utf-8")))
-        h.update(_field(kind.encode("ascii")))
-        h.update(_field(_value_bytes(kind, row[2 + 2 * i])))
-    return h.hexdigest()
+    return _digester(table, columns)(row)
 
 
 def row_digests(con: sqlite3.Connection, table: str) -> Iterator[tuple[int, str]]:
     """``(rowid, checksum)`` of every row of ``table`` as it is stored now."""
     columns = _columns(con, table)
+    digest = _digester(table, columns)
     for row in con.execute(_select(table, columns)):
-        yield int(row[0]), _digest(table, columns, row)
+        yield int(row[0]), digest(row)
 
 
 # ------------------------------------------------------------------ writing

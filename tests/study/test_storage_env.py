@@ -192,33 +192,32 @@ def test_a_lock_held_too_long_mid_session_says_so(tmp_path: Path, monkeypatch) -
 
 
 def test_two_participants_starting_at_once_on_a_new_database(design: Path, tmp_path: Path) -> None:
-    """Two real processes create the same new database at the same moment, again and again: both sessions run
-    and both are stored, never "damaged"."""
-    rounds = int(os.environ.get("STUDYAPP_START_RACES", "8"))
+    """Two real processes create the same new database at the same moment, again and again (a new database
+    each round): both sessions run and both are stored, never "damaged"."""
+    rounds = int(os.environ.get("STUDYAPP_START_RACES", "20"))
+    # Each process runs every round itself (paying for its imports once); a round starts when both have
+    # said they are ready, so the two open the new file within a millisecond or so of each other.
     code = ("import sys, time\n"
+            "from pathlib import Path\n"
             "from studyapp.study.design import load_design\n"
             "from studyapp.study.storage import ResultsDB\n"
             "from studyapp.bots.session_driver import run_bot_session\n"
-            "design = load_design(sys.argv[1])\n"
-            "t = float(sys.argv[4])\n"
-            "while time.time() < t: pass\n"  # both start the same instant
-            "with ResultsDB(sys.argv[2], design) as db:\n"
-            "    run_bot_session(design, db, sys.argv[3], 'random', 0)\n")
-    from studyapp.cli import main as _unused  # noqa: F401  (the import the children pay for is warm on disk)
-
+            "design, folder, me, other = load_design(sys.argv[1]), Path(sys.argv[2]), sys.argv[3], sys.argv[4]\n"
+            "for k in range(int(sys.argv[5])):\n"
+            "    (folder / f'ready-{k}-{me}').touch()\n"
+            "    give_up = time.time() + 60\n"
+            "    while not (folder / f'ready-{k}-{other}').exists():\n"
+            "        if time.time() > give_up: sys.exit(f'round {k}: the other process stopped')\n"
+            "    with ResultsDB(folder / f'r{k}.sqlite', design) as db:\n"
+            "        run_bot_session(design, db, me, 'random', k)\n")
+    procs = [subprocess.Popen([sys.executable, "-c", code, str(design), str(tmp_path), me, other, str(rounds)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+             for me, other in (("A", "B"), ("B", "A"))]
+    results = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [err[-600:] for _, err in results]
     for k in range(rounds):
-        db = tmp_path / f"r{k}.sqlite"
-        start = time.time() + 1.5
-        procs = [subprocess.Popen([sys.executable, "-c", code, str(design), str(db), pid, str(start)],
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
-                 for pid in ("A", "B")]
-        results = [(p.wait(timeout=180), p.stderr.read()) for p in procs]
-        for p in procs:
-            p.stdout.close()
-            p.stderr.close()
-        assert [rc for rc, _ in results] == [0, 0], (k, [e[-400:] for _, e in results])
-        with ResultsDB(db, create=False) as rdb:
-            assert {p.id: p.status for p in rdb.participants()} == {"A": "done", "B": "done"}
+        with ResultsDB(tmp_path / f"r{k}.sqlite", create=False) as rdb:
+            assert {p.id: p.status for p in rdb.participants()} == {"A": "done", "B": "done"}, k
             assert len(rdb.responses()) == 2 * (N_STIMULI + 1) * 3 * 3
 
 
