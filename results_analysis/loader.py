@@ -8,7 +8,9 @@ CSV, ``responses id 5`` of a database) so validation errors can point at it.
 from __future__ import annotations
 
 import sqlite3
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import pandas as pd
@@ -123,10 +125,13 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
     if _is_sqlite(path):
         from results_analysis.sqlite_schema import questionnaire_from_connection
 
-        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as con:
-            if "questionnaire" not in _tables(con):
-                raise AnalysisInputError(path, "table questionnaire", "missing")
-            q = questionnaire_from_connection(con, path)
+        try:
+            with _open_verified(path) as con:
+                if "questionnaire" not in _tables(con):
+                    raise AnalysisInputError(path, "table questionnaire", "missing")
+                q = questionnaire_from_connection(con, path)
+        except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
+            raise AnalysisInputError(path, "table questionnaire", f"not readable ({exc})") from exc
     else:
         q = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
         q["_where"] = [f"line {i + 2}" for i in range(len(q))]
@@ -186,13 +191,28 @@ def load_study_title(path: str | Path) -> str | None:
     from results_analysis.sqlite_schema import study_title_from_connection
 
     try:
-        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as con:
+        with _open_verified(path) as con:
             return study_title_from_connection(con)
-    except sqlite3.DatabaseError as exc:
+    except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
         raise AnalysisInputError(path, "table study", f"not readable ({exc})") from exc
 
 
 # --- SQLite -------------------------------------------------------------------------------------------
+
+
+@contextmanager
+def _open_verified(path: Path) -> Iterator[sqlite3.Connection]:
+    """A read-only connection to a results database whose every row matched its checksum
+    (:func:`results_analysis.integrity.verify_database`): a damaged file is reported, never analysed."""
+    from results_analysis.integrity import verify_database
+
+    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True, isolation_level=None)
+    try:
+        con.execute("BEGIN")  # one snapshot: what was verified is what is read
+        verify_database(con, path)
+        yield con
+    finally:
+        con.close()
 
 
 def _tables(con: sqlite3.Connection) -> set[str]:
@@ -203,9 +223,9 @@ def _read_sqlite(path: Path) -> pd.DataFrame:
     from results_analysis.sqlite_schema import tidy_from_connection
 
     try:
-        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as con:
+        with _open_verified(path) as con:
             return tidy_from_connection(con, path)
-    except sqlite3.DatabaseError as exc:
+    except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
         raise AnalysisInputError(path, None, f"not a readable SQLite results database ({exc})") from exc
 
 

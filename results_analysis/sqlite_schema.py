@@ -1,4 +1,4 @@
-"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 4).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 5).
 
 Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
@@ -11,6 +11,8 @@ figures; empty for a pseudo-condition such as an attention check's frozen slot),
 report's title) and each participant's questionnaire answers, one column per rated (Likert) item named
 ``questionnaire:<scale>:<item>`` (see :data:`QUESTIONNAIRE_PREFIX`; the scale part is empty where none was
 stored). Free-text answers stay out of the table (``studyapp export --questionnaire-csv`` has them).
+It reads what it is given: the loader proves the file intact first
+(:mod:`results_analysis.integrity`), as ``studyapp`` does when it opens a database.
 """
 from __future__ import annotations
 

@@ -5,9 +5,14 @@ a killed process or a power cut (the WAL is fsynced at commit), and a trial's ra
 transaction, so a crash leaves either the whole answer or none of it. Every result row carries the
 design hash and the app version, so rows stay attributable after files are merged or moved.
 
-The database checks itself when opened: not an SQLite file, a damaged file (``PRAGMA integrity_check``),
+The database checks itself when opened: not an SQLite file, a damaged file (``PRAGMA integrity_check``, a
+superset of ``quick_check``, and every row against its checksum, see :mod:`studyapp.study.row_checksums`),
 an unknown schema or a database made for another design each raise an :class:`InputError` that names the
-file and says what to do.
+file and says what to do. Every write transaction seals the checksums of the rows it wrote before it commits.
+A full disk, a read-only file or folder and a lock held longer than :attr:`ResultsDB.LOCK_TIMEOUT_S` are each
+their own one-line :class:`InputError` (:func:`sqlite_problem`), never "damaged": the change being written is
+not stored and everything committed before it is kept. The tables are created in one write transaction that
+first looks again for them, so two processes creating a new database at once both end up using it.
 
 Example
 -------
@@ -21,8 +26,12 @@ Example
 """
 from __future__ import annotations
 
+import errno
 import json
+import logging
+import os
 import platform
+import shutil
 import sqlite3
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -31,20 +40,26 @@ from typing import Any, Iterable
 
 from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
+from studyapp.study import row_checksums
 
 #: Bumped whenever the tables change; a database with another version is refused, never guessed at.
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 #: Older schema versions this version upgrades in place when it opens them (see ``_MIGRATIONS``).
 #: Version 2 added ``trials.trial_duration_s``; a version 1 trial keeps it NULL (not recorded).
 #: Version 3 added ``trials.sample_left/middle/right`` (the sample each slot showed, see ``samples`` in
 #: :class:`~studyapp.study.design.Condition`); an older trial keeps them NULL (not recorded).
 #: Version 4 added ``conditions.label`` (the design's ``label``, NULL when the design gives none); an older
 #: database keeps it NULL, and the analysis names such a condition by its id.
+#: Version 5 added table ``row_checksums`` (see :mod:`studyapp.study.row_checksums`). A step needs no code
+#: besides its SQL: once the table exists, :meth:`ResultsDB._migrate` verifies every row before each later
+#: step and seals every row after it, so the upgrade that creates the table computes the checksums of the
+#: rows already there (they are trusted as the file holds them then, after ``PRAGMA integrity_check``).
 _MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",),
                2: ("ALTER TABLE trials ADD COLUMN sample_left INTEGER",
                    "ALTER TABLE trials ADD COLUMN sample_middle INTEGER",
                    "ALTER TABLE trials ADD COLUMN sample_right INTEGER"),
-               3: ("ALTER TABLE conditions ADD COLUMN label TEXT",)}
+               3: ("ALTER TABLE conditions ADD COLUMN label TEXT",),
+               4: (row_checksums.CREATE_TABLE,)}
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
@@ -160,13 +175,85 @@ CREATE TABLE bundles (
     created TEXT NOT NULL,
     key TEXT NOT NULL
 );
-"""
+-- The checksum of every row of every other table (see row_checksums.py).
+""" + row_checksums.CREATE_TABLE + ";\n"
 
 #: Tables (and their columns) a valid database must have; used to recognise a foreign schema.
 _EXPECTED_TABLES = {
     "schema_version", "study", "stimuli", "conditions", "participants", "sessions", "trials",
     "responses", "plays", "questionnaire", "bundles",
 }
+
+
+_log = logging.getLogger(__name__)
+
+_NOT_SAVED = "the last change (e.g. the answer just given) was not saved; everything saved before it is kept"
+
+
+def _kind(exc: sqlite3.Error | UnicodeDecodeError) -> str:
+    """What an SQLite error means for the user: full, readonly, busy, io, damaged or other."""
+    name = str(getattr(exc, "sqlite_errorname", "") or "")
+    text = str(exc).lower()
+    if name.startswith("SQLITE_FULL") or "disk is full" in text:
+        return "full"
+    if name.startswith(("SQLITE_READONLY", "SQLITE_CANTOPEN", "SQLITE_PERM", "SQLITE_AUTH")) or "readonly" in text \
+            or "unable to open" in text:
+        return "readonly"
+    if name.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")) or "locked" in text or "busy" in text:
+        return "busy"
+    if name.startswith("SQLITE_IOERR") or "disk i/o error" in text:
+        return "io"
+    if name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")) or isinstance(exc, UnicodeDecodeError) \
+            or "malformed" in text or "not a database" in text:
+        return "damaged"
+    return "other"
+
+
+def _nearly_full(path: Path) -> bool:
+    # SQLite reports some writes on a full disk as I/O errors (e.g. growing the -shm file): ask the disk
+    try:
+        return shutil.disk_usage(path.parent).free < _NEARLY_FULL_BYTES
+    except OSError:
+        return False
+
+
+#: Free space under which an I/O error while writing is taken for a full disk.
+_NEARLY_FULL_BYTES = 1 << 20
+
+
+def sqlite_problem(path: Path, exc: sqlite3.Error | UnicodeDecodeError, what: str) -> InputError:
+    """The one-line message for an SQLite error on the results database: a full disk, a read-only file or
+    folder, a lock and a failing drive each say so and what to do, kept apart from a damaged file."""
+    kind = _kind(exc)
+    if kind == "io" and _nearly_full(path):
+        kind = "full"
+    if kind == "full":
+        return InputError(path, None, f"the disk is full ({exc}): {what}. Free some disk space, then start again "
+                          "(a session resumes where it stopped)")
+    if kind == "readonly":
+        return InputError(path, None, f"cannot write the results database or its folder ({exc}): {what}. studyapp "
+                          "writes the file and its journal files (-wal, -shm) next to it: make the folder and the "
+                          "file writable, or copy the file to a writable folder. Nothing in the file was changed")
+    if kind == "busy":
+        # Another program holds a lock (a database browser or notebook mid-write): the file is fine, and a
+        # new --results file would split the study, so never advise that here.
+        return InputError(path, None, f"the results database is in use by another program ({exc}); {what}. "
+                          "Close that program (or let it finish) and start again")
+    if kind == "io":
+        return InputError(path, None, f"the drive reported an error ({exc}): {what}. Check the drive (a removed "
+                          "USB stick, a network drive gone away) and start again")
+    return InputError(path, None, f"the results database is damaged or not a studyapp database ({exc}); "
+                      "keep a copy of the file and start a new one with --results")
+
+
+def _os_problem(path: Path, exc: OSError) -> InputError:
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return InputError(path, None, f"the disk is full ({exc.strerror}): the results database could not be "
+                          "created. Free some disk space, then start again")
+    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return InputError(path, None, f"cannot write the results folder ({exc.strerror}): make it writable or "
+                          "choose another place with --results")
+    return InputError(path, None, f"cannot create or read the results database ({exc.strerror or exc})")
 
 
 def now_iso() -> str:
@@ -290,14 +377,22 @@ class ResultsDB:
             raise InputError(self.path, None, "results database not found; check the path")
         if not exists and design_hash is None:
             raise InputError(self.path, None, "results database not found, and no design was given to create one")
-        if exists:
-            self._check_header()
-        else:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
+        if exists and design_hash is not None and not os.access(self.path, os.W_OK):
+            # a session is about to write; say why before the first answer rather than at it
+            raise InputError(self.path, None, "the results database is read-only: studyapp cannot save answers in "
+                             "it. Make the file (and its folder) writable, or copy it to a writable folder. Nothing "
+                             "in the file was changed")
+        try:
+            if exists:
+                self._check_header()
+            else:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _os_problem(self.path, exc) from None
         try:
             self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=self.LOCK_TIMEOUT_S)
         except sqlite3.Error as exc:
-            raise InputError(self.path, None, f"cannot open the results database: {exc}") from None
+            raise sqlite_problem(self.path, exc, "the results database could not be opened") from None
         self._con.row_factory = sqlite3.Row
         try:
             self._configure()
@@ -305,23 +400,17 @@ class ResultsDB:
                 self._check_integrity()
             # A process killed while creating the database can leave a valid SQLite file with no tables
             # (the schema is one transaction): that is still a new database, not a foreign one.
-            empty = not self._con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone()
-            if exists and not empty:
+            if not (design_hash is not None and self._create_if_empty(design_hash, title or "")):
+                if not self._con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone():
+                    raise InputError(self.path, None, "the results database is empty, and no design was given to "
+                                     "create it")
                 self._check_schema()
-            elif design_hash is None:
-                raise InputError(self.path, None, "the results database is empty, and no design was given to create it")
-            else:
-                self._create_schema(design_hash, title or "")
+                self._check_rows()
+            row_checksums.install_triggers(self._con)
             row = self._con.execute("SELECT design_hash, title FROM study WHERE id = 1").fetchone()
-        except sqlite3.DatabaseError as exc:
+        except (sqlite3.Error, UnicodeDecodeError) as exc:  # a damaged text in SQLite's own tables cannot decode
             self._con.close()
-            if isinstance(exc, sqlite3.OperationalError) and ("locked" in str(exc) or "busy" in str(exc)):
-                # Another program holds a lock (a database browser or notebook mid-write): the file is fine,
-                # and a new --results file would split the study, so never advise that here.
-                raise InputError(self.path, None, f"the results database is in use by another program ({exc}); "
-                                 "close that program (or let it finish) and start again") from None
-            raise InputError(self.path, None, f"the results database is damaged or not a studyapp database ({exc}); "
-                             "keep a copy of the file and start a new one with --results") from None
+            raise sqlite_problem(self.path, exc, "the results database could not be created or opened") from None
         except BaseException:
             self._con.close()
             raise
@@ -340,7 +429,11 @@ class ResultsDB:
                 "Use a new results file (--results) or restore the original design",
             )
         if design is not None:
-            self._store_design_metadata(design)
+            try:
+                self._store_design_metadata(design)
+            except BaseException:
+                self._con.close()
+                raise
         #: Optional ``f(participant_id) -> Path`` called when a participant finishes (set by bundle runs).
         self.on_participant_finished: Any = None
 
@@ -360,6 +453,7 @@ class ResultsDB:
                              "is it on a read-only or network drive?")
         con.execute("PRAGMA synchronous=FULL")
         con.execute("PRAGMA foreign_keys=ON")
+        row_checksums.prepare(con)
 
     def _check_integrity(self) -> None:
         rows = [str(r[0]) for r in self._con.execute("PRAGMA integrity_check").fetchall()]
@@ -387,25 +481,73 @@ class ResultsDB:
             raise InputError(self.path, "schema_version", f"schema version {found} is not the version this "
                              f"studyapp {__version__} writes ({SCHEMA_VERSION}); use the studyapp version "
                              "that created the file")
+        if not self._has_table(row_checksums.TABLE):
+            raise InputError(self.path, "schema", f"table {row_checksums.TABLE} is missing: the file is damaged or "
+                             "not a complete studyapp results database. Keep a copy of it for recovery")
+
+    def _has_table(self, name: str) -> bool:
+        return self._con.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
+                                 (name,)).fetchone() is not None
+
+    def _check_rows(self) -> None:
+        """Every row against its checksum: a damaged value is reported, never read as data."""
+        # one read transaction: another station committing meanwhile must not look like a row without checksum
+        self._con.execute("BEGIN")
+        try:
+            problems = row_checksums.verify(self._con)
+        finally:
+            self._con.execute("COMMIT")
+        if problems:
+            shown = "; ".join(problems[:3]) + (f" (+{len(problems) - 3} more)" if len(problems) > 3 else "")
+            raise InputError(self.path, "row checksums", f"the results database is damaged: {shown}. Nothing was "
+                             "read from it; keep a copy of the file for recovery, and restore a backup or start a "
+                             "new one with --results")
 
     def _migrate(self, version: int) -> None:
         """Upgrade an older database in place, one version at a time, each step in one transaction (all of a
-        step or none of it), so old results stay readable and new answers can join them."""
+        step or none of it), so old results stay readable and new answers can join them.
+
+        Once the database has row checksums, every row is verified before a step and sealed after it (a new
+        column changes every row's checksum); the step that creates the checksum table seals the rows there.
+        """
+        start = version
         while version in _MIGRATIONS:
-            with self.transaction() as con:
+            if self._has_table(row_checksums.TABLE):
+                self._check_rows()
+            with self.transaction(f"upgrading the results database from schema version {version} was undone; "
+                                  "every result in it is kept") as con:
+                now = con.execute("SELECT version FROM schema_version").fetchone()
+                if now is None or now[0] != version:  # another process upgraded it while this one waited
+                    version = SCHEMA_VERSION if now is None else int(now[0])
+                    continue
                 for stmt in _MIGRATIONS[version]:
                     con.execute(stmt)
                 version += 1
                 con.execute("UPDATE schema_version SET version = ?", (version,))
+                if self._has_table(row_checksums.TABLE):
+                    row_checksums.seal_all(con)
+        _log.info("%s: upgraded the results database from schema version %d to %d in place; every row now "
+                  "carries a checksum (rows stored before are taken as the file held them)", self.path, start, version)
 
-    def _create_schema(self, design_hash: str, title: str) -> None:
-        with self.transaction() as con:
+    def _create_if_empty(self, design_hash: str, title: str) -> bool:
+        """Create the tables when the database has none; False (nothing done) when it has them.
+
+        The check and the creation are one write transaction: two participants starting at once on a new
+        database serialise on its lock, and the second finds the tables the first created.
+        """
+        if self._con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone():
+            return False
+        with self.transaction("the new results database could not be created (nothing was recorded yet)") as con:
+            if con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone():
+                return False
             for stmt in _SCHEMA.split(";"):
                 if stmt.strip():
                     con.execute(stmt)
             con.execute("INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,))
             con.execute("INSERT INTO study (id, design_hash, title, created, app_version) VALUES (1, ?, ?, ?, ?)",
                         (design_hash, title, now_iso(), __version__))
+            row_checksums.seal_all(con)
+        return True
 
     def _store_design_metadata(self, design: Any) -> None:
         stimuli = getattr(design, "stimuli", None) or []
@@ -425,31 +567,49 @@ class ResultsDB:
         return self._con
 
     class _Tx:
-        def __init__(self, con: sqlite3.Connection) -> None:
+        def __init__(self, con: sqlite3.Connection, path: Path, what: str) -> None:
             self.con = con
+            self.path = path
+            self.what = what
 
         def __enter__(self) -> sqlite3.Connection:
             # IMMEDIATE takes the write lock up front, so two processes on one database serialise
             # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
-            self.con.execute("BEGIN IMMEDIATE")
+            try:
+                self.con.execute("BEGIN IMMEDIATE")
+            except sqlite3.Error as exc:
+                raise sqlite_problem(self.path, exc, self.what) from None
             return self.con
 
         def __exit__(self, exc_type, exc, tb) -> None:
             if exc_type is None:
                 try:
+                    # the checksums of the rows this transaction wrote, in the same transaction
+                    row_checksums.seal_dirty(self.con)
                     self.con.execute("COMMIT")
                     return
-                except sqlite3.Error:
-                    # e.g. disk full: leave no half-open transaction behind, then report the failure
-                    if self.con.in_transaction:
-                        self.con.execute("ROLLBACK")
-                    raise
-            if self.con.in_transaction:
-                self.con.execute("ROLLBACK")
+                except sqlite3.Error as failed:
+                    exc = failed
+            self._rollback()
+            if isinstance(exc, sqlite3.Error) and _kind(exc) != "other":
+                # a full disk, a read-only folder, a lock held too long: one line that says what to do
+                raise sqlite_problem(self.path, exc, self.what) from None
+            if exc_type is None:
+                raise exc
 
-    def transaction(self) -> "ResultsDB._Tx":
-        """``with db.transaction() as con:`` — all statements inside commit together or not at all."""
-        return ResultsDB._Tx(self._con)
+        def _rollback(self) -> None:
+            # leave no half-open transaction behind; a failing ROLLBACK (the disk gone) changes nothing on disk
+            try:
+                if self.con.in_transaction:
+                    self.con.execute("ROLLBACK")
+            except sqlite3.Error:
+                pass
+
+    def transaction(self, what: str = _NOT_SAVED) -> "ResultsDB._Tx":
+        """``with db.transaction() as con:`` — all statements inside commit together or not at all, with the
+        checksums of every row they wrote; a full disk, a read-only file or a lock held too long raise
+        :class:`InputError` (nothing of the transaction is stored; ``what`` says so in the message)."""
+        return ResultsDB._Tx(self._con, self.path, what)
 
     def close(self) -> None:
         try:

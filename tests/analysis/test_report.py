@@ -262,8 +262,6 @@ def test_prose_and_tables_print_the_same_numbers(tmp_path: Path) -> None:
 
 
 def test_cli_title_comes_from_the_results_database(tmp_path: Path, study: pd.DataFrame) -> None:
-    import sqlite3
-
     storage = pytest.importorskip("studyapp.study.storage")  # the tests may use studyapp; the package never does
     from types import SimpleNamespace
 
@@ -296,7 +294,7 @@ def test_cli_title_comes_from_the_results_database(tmp_path: Path, study: pd.Dat
     assert heading("stored") == "# Gesture realism study 2026"
     assert heading("given", "--title", "Mine") == "# Mine"  # --title still wins
     # an untitled study (studyapp stores '') falls back to the file name, as does a CSV export
-    with sqlite3.connect(db_path) as con:
+    with storage.ResultsDB(db_path) as rdb, rdb.transaction() as con:  # through studyapp: the row stays sealed
         con.execute("UPDATE study SET title = ''")
     assert heading("untitled") == "# Results: study.results.sqlite"
     csv = tmp_path / "export.csv"
