@@ -193,8 +193,9 @@ def test_every_single_bit_flip_is_harmless_or_reported(bot_db: Path, tmp_path) -
 def test_a_schema_3_database_is_upgraded_in_place_with_checksums(bot_db: Path, tmp_path, caplog) -> None:
     path = tmp_path / "r.sqlite"
     shutil.copy(bot_db, path)
-    with sqlite3.connect(path) as con:  # what studyapp wrote before checksums
+    with sqlite3.connect(path) as con:  # what studyapp wrote before labels (4) and checksums (5)
         con.execute(f"DROP TABLE {row_checksums.TABLE}")
+        con.execute("ALTER TABLE conditions DROP COLUMN label")
         con.execute("UPDATE schema_version SET version = 3")
     con.close()
     before = export_dataframe_raw(path)
@@ -219,19 +220,19 @@ def export_dataframe_raw(path: Path) -> str:
 
 def test_a_column_added_by_a_later_migration_is_covered_with_no_code_change(bot_db: Path, tmp_path,
                                                                              monkeypatch) -> None:
-    """Like ``conditions.label``: the next migration adds a column; every row is resealed, and the new column
+    """Like ``conditions.label`` was: the next migration adds a column; every row is resealed, and the new column
     is inside the checksum (editing it is reported)."""
     path = tmp_path / "r.sqlite"
     shutil.copy(bot_db, path)
     v = storage.SCHEMA_VERSION
     monkeypatch.setattr(storage, "_MIGRATIONS", {**storage._MIGRATIONS,
-                                                 v: ("ALTER TABLE conditions ADD COLUMN label TEXT DEFAULT 'x'",)})
+                                                 v: ("ALTER TABLE conditions ADD COLUMN note TEXT DEFAULT 'x'",)})
     monkeypatch.setattr(storage, "SCHEMA_VERSION", v + 1)
     with ResultsDB(path, create=False) as db:
         assert row_checksums.verify(db.connection) == []
-        db.connection.execute("SELECT label FROM conditions").fetchall()
+        db.connection.execute("SELECT note FROM conditions").fetchall()
     with sqlite3.connect(path) as con:
-        con.execute("UPDATE conditions SET label = 'y' WHERE position = 0")
+        con.execute("UPDATE conditions SET note = 'y' WHERE position = 0")
     con.close()
     with pytest.raises(InputError, match="table conditions, row id '.+': the row does not match"):
         ResultsDB(path, create=False)

@@ -177,7 +177,7 @@ def test_concurrent_processes_keep_rows_balanced(tmp_path: Path) -> None:
 
 
 def test_conditions_keep_their_label_and_a_schema_3_database_is_upgraded_with_none(tmp_path: Path) -> None:
-    """Schema 4 stores each condition's design label; an older database gets the column, empty."""
+    """Schema 4 added each condition's design label; an older database gets the column, empty."""
     from types import SimpleNamespace as NS
 
     from studyapp.study.export import export_dataframe
@@ -191,12 +191,13 @@ def test_conditions_keep_their_label_and_a_schema_3_database_is_upgraded_with_no
         db.save_trial(_trial("P1", 0), _ranks())
         rows = db.connection.execute("SELECT id, position, label FROM conditions ORDER BY position").fetchall()
     assert [tuple(r) for r in rows] == [("b", 0, "Baseline"), ("a", 1, None), ("c", 2, "Ours")]
-    with sqlite3.connect(path) as con:  # what studyapp wrote before labels: schema 3
+    with sqlite3.connect(path) as con:  # what studyapp wrote before labels (4) and row checksums (5): schema 3
+        con.execute("DROP TABLE row_checksums")
         con.execute("ALTER TABLE conditions DROP COLUMN label")
         con.execute("UPDATE schema_version SET version = 3")
     df = export_dataframe(path)  # opening upgrades it in place
     with sqlite3.connect(path) as con:
-        assert con.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 4
+        assert con.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 5
         assert con.execute("SELECT id, label FROM conditions ORDER BY position").fetchall() == [
             ("b", None), ("a", None), ("c", None)]
     # no label recorded: the analysis's name is the id; the design order stays

@@ -226,8 +226,9 @@ def test_two_processes_upgrading_an_old_database_at_once(tmp_path: Path) -> None
     base = tmp_path / "base.sqlite"
     with ResultsDB(base, design_hash="h", title="T") as db:
         db.add_participant("P1", n_rows=2)
-    with sqlite3.connect(base) as con:  # what studyapp wrote before row checksums
+    with sqlite3.connect(base) as con:  # what studyapp wrote before labels (4) and row checksums (5)
         con.execute("DROP TABLE row_checksums")
+        con.execute("ALTER TABLE conditions DROP COLUMN label")
         con.execute("UPDATE schema_version SET version = 3")
     con.close()
     code = ("import sys, time\n"
