@@ -174,27 +174,24 @@ class PaletteBuffers:
 
 
 def rasterize_label(text: str, height_px: int) -> np.ndarray:
-    """White-on-black coverage image ``(H, W) uint8`` of ``text`` in DejaVu Sans Bold (bundled with matplotlib),
-    its ink centred.
+    """White-on-black coverage image ``(H, W) uint8`` of ``text`` in DejaVu Sans Bold, its ink centred.
 
-    FreeType through matplotlib's ``ft2font`` alone, the engine its Agg text uses: a figure and canvas would
-    import ``matplotlib.figure`` (about 2 s on a loaded 2-core machine, all of it before a participant's first
-    frame; issue 20).
+    FreeType through Pillow (which matplotlib brings) with the font file matplotlib ships, found without
+    importing matplotlib: its import alone cost 0.3-1 s of a participant's first frame on a loaded 2-core
+    machine (issue 20).
 
     >>> img = rasterize_label("A", 32); img.shape[0] == 32 and bool(img.max() > 200)
     True
     """
-    import matplotlib
-    from matplotlib.ft2font import FT2Font
+    from PIL import Image, ImageDraw, ImageFont
 
     height_px = max(8, int(height_px))
     width_px = max(height_px, int(height_px * (0.75 * len(text) + 0.6)))
-    font = FT2Font(str(Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"))
     # the em is ~1.4x the capital height: capitals fill about two thirds of the label height
-    font.set_size(height_px * 0.95, 72)  # points at 72 dpi: the em in pixels
-    font.set_text(text, 0.0)
-    font.draw_glyphs_to_bitmap(antialiased=True)
-    glyphs = np.asarray(font.get_image())
+    font = ImageFont.truetype(str(_label_font()), size=max(1, round(height_px * 0.95)))
+    canvas = Image.new("L", (2 * width_px + 2 * height_px, 3 * height_px), 0)
+    ImageDraw.Draw(canvas).text((height_px, height_px), text, fill=255, font=font)
+    glyphs = np.asarray(canvas)
     out = np.zeros((height_px, width_px), np.uint8)
     rows, cols = np.nonzero(glyphs)
     if rows.size:
@@ -202,3 +199,17 @@ def rasterize_label(text: str, height_px: int) -> np.ndarray:
         y, x = (height_px - ink.shape[0]) // 2, (width_px - ink.shape[1]) // 2
         out[y:y + ink.shape[0], x:x + ink.shape[1]] = ink
     return out
+
+
+def _label_font() -> Path:
+    """matplotlib's bundled DejaVu Sans Bold, located without importing matplotlib."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("matplotlib")
+    if spec is not None and spec.origin:
+        path = Path(spec.origin).parent / "mpl-data" / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"
+        if path.is_file():
+            return path
+    import matplotlib  # an unusual layout: ask matplotlib itself
+
+    return Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"
