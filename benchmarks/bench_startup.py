@@ -4,7 +4,10 @@
   validate`` of the demo design, each a cold process, the three alternating over the same number of runs;
 * the first trial frame of the demo, offscreen: from just before the process starts to the first frame of
   the first trial rendered at 1280x720 and read back, with the time of each step inside the process
-  (imports, design, trial media, GL context, renderer and scene, the frame itself; target: 1.5 s).
+  (imports, design, trial media, GL context, renderer and scene, the frame itself; target: 1.5 s). The
+  design is loaded as a session start loads it (``reuse_check=True``): the full file check is skipped only
+  because the ``validate`` runs of the same loop recorded it (:mod:`studyapp.study.design.validated`), as an
+  experimenter validates before the first participant.
 
 Medians with min-max; the load average is printed and recorded (``startup_help_ratio_vs_numpy``,
 ``first_trial_frame_s``) with :func:`figures.record` for ``run_all.py --json``.
@@ -37,7 +40,7 @@ from studyapp.study.schedule import participant_schedule
 from studyapp.study.stimuli import load_trial_media
 phases["imports"] = time.perf_counter() - t
 t = time.perf_counter()
-design = load_design(demo_design())
+design = load_design(demo_design(), reuse_check=True)  # as `studyapp demo` and `run` start a session
 plan = [p for p in participant_schedule(design, "P01", row=0) if not p.is_practice][0]
 phases["design + schedule"] = time.perf_counter() - t
 t = time.perf_counter()

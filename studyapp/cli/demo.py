@@ -60,7 +60,7 @@ def run_window_demo(design_path: Path, out: Path) -> int:
     from studyapp.study.storage import ResultsDB
     from studyapp.ui.app import run_window
 
-    design = load_design(design_path)
+    design = load_design(design_path, reuse_check=True)  # a session start: see study.design.validated
     tmp = Path(tempfile.mkdtemp(prefix="studyapp-demo-"))
     db = ResultsDB(tmp / "demo.results.sqlite", design)
     code = run_window(design, db, "demo")

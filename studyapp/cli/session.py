@@ -124,7 +124,8 @@ def parse_groups(items: list[str]) -> dict[str, str]:
 
 
 def load_design_for_run(design_path: Path, results: Path) -> Any:
-    """The design, fully validated (every stimulus file read and checked) before its first session.
+    """The design, fully validated (every stimulus file read and checked) before its first session, or found
+    recorded as validated with exactly the same files.
 
     Later sessions on the same results database skip re-reading the files: the design hash, which covers
     the bytes of every referenced file, must equal the one stored with the database, so the files are
@@ -135,7 +136,9 @@ def load_design_for_run(design_path: Path, results: Path) -> Any:
 
     if results.exists() and results.stat().st_size > 0:
         return load_design(design_path, check_files=False)  # ResultsDB compares the hash
-    return load_design(design_path)
+    # A design validated before (`studyapp validate`) with exactly these files is not read again
+    # (studyapp.study.design.validated); any changed file means a full check here.
+    return load_design(design_path, reuse_check=True)
 
 
 def _print_saved(plan: Any) -> None:

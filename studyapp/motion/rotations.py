@@ -232,7 +232,38 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     flat, lead = _flat(m, (3, 3))
     if flat.shape[0] == 0:
         return np.zeros(lead + (4,))
+    # Proper rotations (all retargeting and reader output) in numpy: scipy.spatial costs ~0.8 s to import
+    # before a participant's first frame (issue 20). Anything else goes through scipy's projection.
+    gram = np.einsum("nji,njk->nik", flat, flat) - np.eye(3)
+    if np.all(np.isfinite(flat)) and np.abs(gram).max() < 1e-9 and np.linalg.det(flat).min() > 0:
+        return _markley_quat(flat).reshape(lead + (4,))
     return _rotation_class().from_matrix(flat).as_quat(canonical=True).reshape(lead + (4,))
+
+
+def _markley_quat(m: np.ndarray) -> np.ndarray:
+    """``(N, 3, 3)`` rotation matrices to canonical ``(N, 4)`` xyzw quaternions (w >= 0; when w == 0 the first
+    non-zero of x, y, z positive) by Markley's method, as scipy computes them: built from the largest of the
+    diagonal and the trace, so no component is found by dividing by a small number."""
+    trace = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    choice = np.argmax(np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], trace], axis=1), axis=1)
+    q = np.empty((len(m), 4))
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = choice == i
+        q[s, i] = 1.0 - trace[s] + 2.0 * m[s, i, i]
+        q[s, j] = m[s, j, i] + m[s, i, j]
+        q[s, k] = m[s, k, i] + m[s, i, k]
+        q[s, 3] = m[s, k, j] - m[s, j, k]
+    s = choice == 3
+    q[s, 0] = m[s, 2, 1] - m[s, 1, 2]
+    q[s, 1] = m[s, 0, 2] - m[s, 2, 0]
+    q[s, 2] = m[s, 1, 0] - m[s, 0, 1]
+    q[s, 3] = 1.0 + trace[s]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    # canonical sign: the first non-zero of w, x, y, z positive
+    lead = np.take_along_axis(q[:, [3, 0, 1, 2]], np.argmax(q[:, [3, 0, 1, 2]] != 0, axis=1)[:, None], 1)[:, 0]
+    q[lead < 0] *= -1.0
+    return q
 
 
 def axis_angle_to_quat(v: np.ndarray) -> np.ndarray:

@@ -1,6 +1,8 @@
 """Thin wrappers around the GPU resources of one avatar, the bone palettes and the slot labels."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import moderngl
 
@@ -172,22 +174,42 @@ class PaletteBuffers:
 
 
 def rasterize_label(text: str, height_px: int) -> np.ndarray:
-    """White-on-black coverage image ``(H, W) uint8`` of ``text`` (matplotlib's Agg and bundled DejaVu Sans).
+    """White-on-black coverage image ``(H, W) uint8`` of ``text`` in DejaVu Sans Bold, its ink centred.
+
+    FreeType through Pillow (which matplotlib brings) with the font file matplotlib ships, found without
+    importing matplotlib: its import alone cost 0.3-1 s of a participant's first frame on a loaded 2-core
+    machine (issue 20).
 
     >>> img = rasterize_label("A", 32); img.shape[0] == 32 and bool(img.max() > 200)
     True
     """
-    from matplotlib.figure import Figure
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from PIL import Image, ImageDraw, ImageFont
 
     height_px = max(8, int(height_px))
     width_px = max(height_px, int(height_px * (0.75 * len(text) + 0.6)))
-    dpi = 100
-    fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, facecolor="black")
-    canvas = FigureCanvasAgg(fig)
     # the em is ~1.4x the capital height: capitals fill about two thirds of the label height
-    fig.text(0.5, 0.5, text, color="white", ha="center", va="center", fontsize=height_px * 0.95 * 72 / dpi,
-             family="DejaVu Sans", weight="bold")
-    canvas.draw()
-    rgba = np.asarray(canvas.buffer_rgba())
-    return np.ascontiguousarray(rgba[..., 0])
+    font = ImageFont.truetype(str(_label_font()), size=max(1, round(height_px * 0.95)))
+    canvas = Image.new("L", (2 * width_px + 2 * height_px, 3 * height_px), 0)
+    ImageDraw.Draw(canvas).text((height_px, height_px), text, fill=255, font=font)
+    glyphs = np.asarray(canvas)
+    out = np.zeros((height_px, width_px), np.uint8)
+    rows, cols = np.nonzero(glyphs)
+    if rows.size:
+        ink = glyphs[rows.min():rows.max() + 1, cols.min():cols.max() + 1][:height_px, :width_px]
+        y, x = (height_px - ink.shape[0]) // 2, (width_px - ink.shape[1]) // 2
+        out[y:y + ink.shape[0], x:x + ink.shape[1]] = ink
+    return out
+
+
+def _label_font() -> Path:
+    """matplotlib's bundled DejaVu Sans Bold, located without importing matplotlib."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("matplotlib")
+    if spec is not None and spec.origin:
+        path = Path(spec.origin).parent / "mpl-data" / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"
+        if path.is_file():
+            return path
+    import matplotlib  # an unusual layout: ask matplotlib itself
+
+    return Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"

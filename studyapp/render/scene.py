@@ -169,12 +169,19 @@ def _skin_box(slots: Sequence[SlotAnimation], avatar: Avatar, framing: str) -> t
     legs, hands, hips = _joint_sets(avatar)
     corners = _skin_corners(avatar)
     head_only = not legs.any() and not hands.any()
+    # A box moved by an affine map reaches, on each axis, exactly centre' -+ |A| half-size: two points per
+    # joint and frame give framing_box the same per-frame extent as the eight corners, at a quarter of the
+    # work (this runs before a participant's first frame; issue 20).
+    centre = (corners[:, 0, :3] + corners[:, 7, :3]) / 2  # corner 0 is the box's low end, 7 its high end
+    half = (corners[:, 7, :3] - corners[:, 0, :3]) / 2
     pts = []
     for s in slots:
         if s.n_frames:
             idx = np.unique(np.linspace(0, s.n_frames - 1, min(s.n_frames, FRAMING_SAMPLES)).round().astype(int))
-            pal = s.palettes[idx].astype(np.float64)
-            pts.append(np.einsum("fjab,jkb->fjka", pal[:, :, :3], corners))
+            pal = s.palettes[idx, :, :3].astype(np.float64)
+            mid = np.einsum("fjab,jb->fja", pal[..., :3], centre) + pal[..., 3]
+            reach = np.einsum("fjab,jb->fja", np.abs(pal[..., :3]), half)
+            pts.append(np.stack([mid - reach, mid + reach], axis=2))
     if not pts:
         pts = [corners[None, :, :, :3]]
     rest_hips_y = float(np.linalg.inv(avatar.inverse_bind[hips].astype(np.float64))[1, 3])

@@ -4,7 +4,9 @@
 goes through a small in-process LRU cache keyed by file identity (path, size, modification time) and
 loading options: a replay, or the attention-check repeat of a clip, costs a dictionary lookup. Validation
 (:func:`check_stimulus_files`, run by :func:`~studyapp.study.design.load_design`) reads the same files the
-same way, so it also warms the cache for the first trial.
+same way, so it also warms the cache for the first trial. A session start whose design passed the full check
+before (:mod:`studyapp.study.design.validated`: same design hash, same code) skips it and reads only each
+trial's own files, when the trial loads.
 
 Live conditions (``model = "x.onnx"``) run the model over the stimulus through
 :func:`studyapp.models.live.motion_for_stimulus`, which keeps its own disk cache.

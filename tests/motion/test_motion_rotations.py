@@ -181,3 +181,22 @@ def test_bad_input_raises():
     with pytest.raises(ValueError, match="zero first column"):
         R.sixd_to_matrix(np.zeros(6))
     assert R.representation_width("sixd_rows") == 6
+
+
+def test_matrix_to_quat_matches_scipy_without_importing_it() -> None:
+    """Proper rotations are converted in numpy (scipy.spatial costs ~0.8 s before a first frame), with
+    scipy's canonical quaternions; the half-turns, where the trace is smallest, included."""
+    import subprocess
+    import sys
+
+    from scipy.spatial.transform import Rotation
+
+    half_turns = [Rotation.from_rotvec(np.pi * np.asarray(a, float) / np.linalg.norm(a)).as_matrix()
+                  for a in ([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, -1, 1], [1, 1, 1])]
+    ms = np.concatenate([Rotation.random(5000, random_state=3).as_matrix(), np.eye(3)[None], half_turns])
+    np.testing.assert_allclose(R.matrix_to_quat(ms), Rotation.from_matrix(ms).as_quat(canonical=True), atol=1e-12)
+    skewed = ms[:3] * 1.01  # not a rotation: scipy's projection, as before
+    np.testing.assert_allclose(R.matrix_to_quat(skewed), Rotation.from_matrix(skewed).as_quat(canonical=True))
+    code = ("import sys, numpy as np; from studyapp.motion.rotations import matrix_to_quat; "
+            "matrix_to_quat(np.eye(3)[None].repeat(4, 0)); print('scipy.spatial' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "False"

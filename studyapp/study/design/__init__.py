@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from studyapp.study.design import validated
 from studyapp.study.design.blinding import conditions_named_in, visible_text_leaks
 from studyapp.study.design.files import (SAMPLE_FIELD, design_hash, fill_sample, has_sample_field, model_path, motion_key, motion_path,
                                          pattern_fields, referenced_files, resolve)
@@ -52,19 +53,33 @@ def validate_design(path: str | Path, *, check_files: bool = True) -> list[Probl
     """Every problem of a design file; an empty list means the design can run.
 
     ``check_files=False`` skips reading stimulus files (durations, skeletons) but still reports missing ones.
+    A full check that finds nothing is recorded (:mod:`.validated`) for sessions loaded with ``reuse_check``.
 
     >>> from studyapp.resources import demo_design
     >>> validate_design(demo_design())
     []
     """
-    return parse_design(Path(path), check_files)[1]
+    design, problems = parse_design(Path(path), check_files)
+    if check_files and not problems and design is not None:
+        validated.record(design.design_hash)
+    return problems
 
 
-def load_design(path: str | Path, *, check_files: bool = True) -> Design:
-    """Read and validate a design; raises :class:`DesignError` listing all problems."""
+def load_design(path: str | Path, *, check_files: bool = True, reuse_check: bool = False) -> Design:
+    """Read and validate a design; raises :class:`DesignError` listing all problems.
+
+    ``reuse_check=True`` (a session start) skips reading the stimulus files when a full check of exactly
+    these files already passed (:mod:`.validated`: keyed by the design hash); otherwise checks them in full.
+    """
+    if check_files and reuse_check:
+        design, problems = parse_design(Path(path), False)  # syntax, files present, the hash
+        if not problems and design is not None and validated.is_recorded(design.design_hash):
+            return design
     design, problems = parse_design(Path(path), check_files)
     if problems or design is None:
         raise DesignError(path, problems)
+    if check_files:
+        validated.record(design.design_hash)
     return design
 
 
