@@ -78,10 +78,12 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
     if block == "participant" and not complete_only:
         # an incomplete trial's ranks run over fewer places: they cannot be averaged with complete ones
         raise ValueError("incomplete blocks are kept for trial blocks only (the Skillings-Mack test)")
-    sub = df[df["criterion"] == criterion]
+    key = trial_key(df)
+    # only the columns the matrix needs are copied (a large study's frame has millions of cells)
+    sub = df.loc[df["criterion"].to_numpy(dtype=object) == criterion, [*key, "condition", "rank"]]
     if conditions is None:
         conditions = sorted(df["condition"].unique())
-    trials, raw = _wide(sub, trial_key(sub), list(conditions))
+    trials, raw = _wide(sub, key, list(conditions))
     # Blocks that lack a condition are dropped (listwise deletion) unless ``complete_only`` is false, for
     # the Skillings-Mack test, which reads the NaNs; validation decides whether incomplete blocks may exist.
     if complete_only:
