@@ -45,7 +45,7 @@ from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
-from results_analysis.validate import check_complete, validate_structure
+from results_analysis.validate import check_complete, trial_key, validate_structure
 
 
 @dataclass
@@ -159,7 +159,9 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
         raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
-    for level, sub in df.groupby(df[column].fillna("(none)").astype(str), sort=True):
+    levels = df[column].fillna("(none)").astype(str)
+    df = df[[*trial_key(df), "criterion", "condition", "rank"]]  # what rank_blocks reads: smaller copies per level
+    for level, sub in df.groupby(levels, sort=True):
         for crit in criteria:
             b = rank_blocks(sub, crit, block=block, conditions=conditions)
             row = {"group": column, "level": level, "criterion": crit, "n_blocks": b.n,
