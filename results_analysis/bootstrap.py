@@ -24,7 +24,9 @@ integer and half-integer sums the rank statistics use).
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Hashable, Iterator
+from concurrent.futures import Future
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -90,7 +92,7 @@ class BootstrapIntervals:
 
 
 #: (kind, clusters, seed) -> the largest weight matrix drawn so far; set only inside :func:`shared_resamples`.
-_SHARED: ContextVar[dict[Hashable, np.ndarray] | None] = ContextVar("results_analysis_shared_resamples",
+_SHARED: ContextVar[dict[Hashable, np.ndarray | _Draw] | None] = ContextVar("results_analysis_shared_resamples",
                                                                     default=None)
 
 
@@ -111,24 +113,62 @@ def shared_resamples() -> Iterator[None]:
     try:
         yield
     finally:
+        for got in _SHARED.get().values():  # no background draw outlives the block
+            if isinstance(got, _Draw):
+                got.thread.join()
         _SHARED.reset(token)
 
 
-def shared_draw(key: Hashable, n_boot: int, draw: Callable[[int], np.ndarray]) -> np.ndarray:
-    """``draw(n_boot)`` (an (n_boot, P) matrix whose rows are a seeded sequence), read-only, taken from (or
-    kept for) the enclosing :func:`shared_resamples` block."""
-    cache = _SHARED.get()
-    if cache is not None and key in cache and len(cache[key]) >= n_boot:
-        return cache[key][:n_boot]
+def _read_only(draw: Callable[[int], np.ndarray], n_boot: int) -> np.ndarray:
     w = draw(n_boot)
     w.flags.writeable = False
+    return w
+
+
+class _Draw(Future):
+    """A resample matrix being drawn by ``thread``."""
+
+    def __init__(self, fn: Callable[[], np.ndarray]) -> None:
+        super().__init__()
+        self.thread = threading.Thread(target=self._run, args=(fn,), name="results_analysis-resamples", daemon=True)
+        self.thread.start()
+
+    def _run(self, fn: Callable[[], np.ndarray]) -> None:
+        try:
+            self.set_result(fn())
+        except BaseException as exc:  # handed to whoever waits for the draw
+            self.set_exception(exc)
+
+
+def shared_draw(key: Hashable, n_boot: int, draw: Callable[[int], np.ndarray], *,
+                background: bool = False) -> np.ndarray | None:
+    """``draw(n_boot)`` (an (n_boot, P) matrix whose rows are a seeded sequence), read-only, taken from (or
+    kept for) the enclosing :func:`shared_resamples` block.
+
+    ``background=True`` (inside a block only) starts the draw in a thread and returns None: a later call for
+    the same key waits for it. numpy's generators release the GIL while drawing, so on two cores the draw
+    runs beside the analysis that does not need it yet; the matrix is the same as drawn in the foreground.
+    """
+    cache = _SHARED.get()
+    if cache is not None and key in cache:
+        got = cache[key]
+        if isinstance(got, _Draw):
+            got = cache[key] = got.result()
+        if len(got) >= n_boot:
+            return got[:n_boot]
+    if background:
+        if cache is not None and key not in cache:
+            cache[key] = _Draw(lambda: _read_only(draw, n_boot))
+        return None
+    w = _read_only(draw, n_boot)
     if cache is not None:
         cache[key] = w
     return w
 
 
-def resample_weights(n_clusters: int, n_boot: int, seed: int) -> np.ndarray:
-    """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes."""
+def resample_weights(n_clusters: int, n_boot: int, seed: int, *, background: bool = False) -> np.ndarray | None:
+    """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes
+    (``background``: see :func:`shared_draw`)."""
     def draw(n: int) -> np.ndarray:
         idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters))
         out = np.empty((n, n_clusters))
@@ -138,7 +178,7 @@ def resample_weights(n_clusters: int, n_boot: int, seed: int) -> np.ndarray:
             out[i:i + len(rows)] = np.bincount(flat, minlength=rows.size).reshape(len(rows), n_clusters)
         return out
 
-    return shared_draw(("index", n_clusters, seed), n_boot, draw)
+    return shared_draw(("index", n_clusters, seed), n_boot, draw, background=background)
 
 
 def _evaluate(stat: WeightedStatistic, w: np.ndarray) -> np.ndarray:
