@@ -25,6 +25,7 @@ import pandas as pd
 from results_analysis.adjust import ADJUSTMENT_NAMES, adjust_pvalues
 from results_analysis.friedman import friedman_ranks
 from results_analysis.ranks import rank_blocks
+from results_analysis.validate import trial_key
 
 AGREEMENT_COLUMNS = ["criterion", "stimulus", "n_raters", "kendall_w", "chi2", "df", "p", "p_adjusted",
                      "adjustment"]
@@ -46,7 +47,9 @@ def stimulus_agreement(df: pd.DataFrame, *, conditions: list[str], criteria: Seq
     k = len(conditions)
     rows = []
     for crit in criteria:
-        sub = df[df["criterion"] == crit]
+        # the columns rank_blocks reads: a stimulus's part is not a copy of every column of a large study
+        sub = df.loc[df["criterion"].to_numpy(dtype=object) == crit,
+                     [*trial_key(df), "stimulus", "criterion", "condition", "rank"]]
         first = len(rows)
         for stim, part in sub.groupby(sub["stimulus"].astype(str), sort=True):
             b = rank_blocks(part, crit, block="participant", conditions=conditions)

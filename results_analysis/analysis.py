@@ -29,9 +29,9 @@ import pandas as pd
 
 from results_analysis.adjust import ADJUSTMENTS
 from results_analysis.agreement import agreement_summary, stimulus_agreement
-from results_analysis.bootstrap import INTERVALS, shared_resamples
+from results_analysis.bootstrap import INTERVALS, resample_weights, shared_resamples
 from results_analysis.bradley_terry import bradley_terry
-from results_analysis.descriptives import condition_summary
+from results_analysis.descriptives import bootstrap_weights, condition_summary
 from results_analysis.effect_sizes import EffectSizes, effect_sizes
 from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions, attention_summary
@@ -45,7 +45,7 @@ from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
-from results_analysis.validate import check_complete, validate_structure
+from results_analysis.validate import check_complete, trial_key, validate_structure
 
 
 @dataclass
@@ -159,7 +159,9 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
         raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
-    for level, sub in df.groupby(df[column].fillna("(none)").astype(str), sort=True):
+    levels = df[column].fillna("(none)").astype(str)
+    df = df[[*trial_key(df), "criterion", "condition", "rank"]]  # what rank_blocks reads: smaller copies per level
+    for level, sub in df.groupby(levels, sort=True):
         for crit in criteria:
             b = rank_blocks(sub, crit, block=block, conditions=conditions)
             row = {"group": column, "level": level, "criterion": crit, "n_blocks": b.n,
@@ -237,19 +239,27 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         control = by_label[control]
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
-    # caught: e.g. a Bradley-Terry fit that did not converge; shared_resamples: the criteria and intervals
-    # resample the same participants with the same seed, so each resample matrix is drawn once
-    with warnings.catch_warnings(record=True) as caught, shared_resamples():
-        warnings.simplefilter("always")
-        results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha, conover=conover,
-                                        n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=sm,
-                                        sm_permutations=sm_permutations, adjust=adjust, control=control,
-                                        interval=interval) for c in criteria}
+    # shared_resamples: the criteria and intervals resample the same participants with the same seed, so each
+    # resample matrix is drawn once; the two large ones are drawn in the background (for every participant, as
+    # the criteria's blocks normally hold them all) while the breakdowns, which need none, are computed
+    with shared_resamples():
+        n_part = int(kept["participant"].nunique())
+        if n_boot > 0 and n_part >= 2:
+            bootstrap_weights(n_part, n_boot, seed, background=True)
+            resample_weights(n_part, n_boot, seed, background=True)
+        by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block)
+                    for g in groups}
+        agreement = stimulus_agreement(kept, conditions=conditions, criteria=criteria, adjust=adjust)
+        # caught: e.g. a Bradley-Terry fit that did not converge
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha,
+                                            conover=conover, n_boot=n_boot, ci=ci, seed=seed,
+                                            skillings_mack_test=sm, sm_permutations=sm_permutations,
+                                            adjust=adjust, control=control, interval=interval) for c in criteria}
     for w in caught:
         notes.append(str(w.message))
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block) for g in groups}
-    agreement = stimulus_agreement(kept, conditions=conditions, criteria=criteria, adjust=adjust)
     items = reliability = item_rel = None
     if questionnaire is not None and len(questionnaire):
         q = questionnaire[~questionnaire["participant"].astype(str).isin(set(excluded["participant"]))]

@@ -15,10 +15,18 @@ Resamples are drawn as scipy.stats.bootstrap draws them (``rng.integers(0, P, (B
   Phi(z0 + (z0 + z_q) / (1 - a (z0 + z_q))) quantiles for z_q = z_{alpha/2}, z_{1-alpha/2}. Where BCa is
   undefined (every bootstrap value on one side of the estimate, or a degenerate jackknife) the percentile
   interval is used and the row says so.
+
+A statistic that sees the weights only through weighted sums of per-cluster rows (counts, rank sums: a
+:class:`ClusterSums`) gets its jackknife from the column totals: leaving cluster i out is the totals minus
+row i, so all P leave-one-out values cost O(P m) instead of P evaluations of O(P m) each. The sums are the
+same numbers the weight-matrix product gives, up to the order of floating-point additions (exact for the
+integer and half-integer sums the rank statistics use).
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Hashable, Iterator
+from concurrent.futures import Future
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -36,6 +44,44 @@ WeightedStatistic = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
+class ClusterSums:
+    """A weighted statistic that depends on the weights w only through ``w @ sums``: ``sums`` is (P, m), one
+    row of m per-cluster sums per cluster, and ``of`` maps the (R, m) weighted sums to the R values (or an
+    (R, q) matrix) of the statistic. Calling it with w is ``of(w @ sums)``; :meth:`jackknife` is exact and O(P m).
+
+    >>> x = np.array([1.0, 2.0, 4.0, 7.0])
+    >>> mean = ClusterSums(np.column_stack([x, np.ones(4)]), lambda s: s[:, 0] / s[:, 1])
+    >>> mean(np.ones((1, 4))).tolist(), mean.jackknife().ravel().tolist()
+    ([3.5], [4.333333333333333, 4.0, 3.3333333333333335, 2.3333333333333335])
+    """
+
+    sums: np.ndarray
+    of: Callable[[np.ndarray], np.ndarray]
+
+    def __call__(self, w: np.ndarray) -> np.ndarray:
+        return self.of(w @ self.sums)
+
+    def jackknife(self) -> np.ndarray:
+        """(P, ...) values of the statistic with each cluster left out in turn: the totals minus its row."""
+        total = self.sums.sum(axis=0)
+        out = [np.asarray(self.of(total[None, :] - self.sums[i:i + _CHUNK]), dtype=float)
+               for i in range(0, len(self.sums), _CHUNK)]
+        res = np.concatenate(out, axis=0)
+        return res[:, None] if res.ndim == 1 else res
+
+    @staticmethod
+    def stack(parts: list[ClusterSums]) -> ClusterSums:
+        """One statistic whose columns are the parts' values (each a 1-D statistic), in order: one product
+        of the weights with every part's sums side by side."""
+        edges = np.cumsum([0] + [p.sums.shape[1] for p in parts])
+        sums = np.concatenate([p.sums for p in parts], axis=1)
+
+        def of(s: np.ndarray) -> np.ndarray:
+            return np.column_stack([p.of(s[:, a:b]) for p, a, b in zip(parts, edges[:-1], edges[1:])])
+        return ClusterSums(sums, of)
+
+
+@dataclass(frozen=True)
 class BootstrapIntervals:
     """Estimates and intervals of q statistics: arrays of shape (q,); ``method`` per statistic."""
 
@@ -46,7 +92,7 @@ class BootstrapIntervals:
 
 
 #: (kind, clusters, seed) -> the largest weight matrix drawn so far; set only inside :func:`shared_resamples`.
-_SHARED: ContextVar[dict[Hashable, np.ndarray] | None] = ContextVar("results_analysis_shared_resamples",
+_SHARED: ContextVar[dict[Hashable, np.ndarray | _Draw] | None] = ContextVar("results_analysis_shared_resamples",
                                                                     default=None)
 
 
@@ -67,24 +113,62 @@ def shared_resamples() -> Iterator[None]:
     try:
         yield
     finally:
+        for got in _SHARED.get().values():  # no background draw outlives the block
+            if isinstance(got, _Draw):
+                got.thread.join()
         _SHARED.reset(token)
 
 
-def shared_draw(key: Hashable, n_boot: int, draw: Callable[[int], np.ndarray]) -> np.ndarray:
-    """``draw(n_boot)`` (an (n_boot, P) matrix whose rows are a seeded sequence), read-only, taken from (or
-    kept for) the enclosing :func:`shared_resamples` block."""
-    cache = _SHARED.get()
-    if cache is not None and key in cache and len(cache[key]) >= n_boot:
-        return cache[key][:n_boot]
+def _read_only(draw: Callable[[int], np.ndarray], n_boot: int) -> np.ndarray:
     w = draw(n_boot)
     w.flags.writeable = False
+    return w
+
+
+class _Draw(Future):
+    """A resample matrix being drawn by ``thread``."""
+
+    def __init__(self, fn: Callable[[], np.ndarray]) -> None:
+        super().__init__()
+        self.thread = threading.Thread(target=self._run, args=(fn,), name="results_analysis-resamples", daemon=True)
+        self.thread.start()
+
+    def _run(self, fn: Callable[[], np.ndarray]) -> None:
+        try:
+            self.set_result(fn())
+        except BaseException as exc:  # handed to whoever waits for the draw
+            self.set_exception(exc)
+
+
+def shared_draw(key: Hashable, n_boot: int, draw: Callable[[int], np.ndarray], *,
+                background: bool = False) -> np.ndarray | None:
+    """``draw(n_boot)`` (an (n_boot, P) matrix whose rows are a seeded sequence), read-only, taken from (or
+    kept for) the enclosing :func:`shared_resamples` block.
+
+    ``background=True`` (inside a block only) starts the draw in a thread and returns None: a later call for
+    the same key waits for it. numpy's generators release the GIL while drawing, so on two cores the draw
+    runs beside the analysis that does not need it yet; the matrix is the same as drawn in the foreground.
+    """
+    cache = _SHARED.get()
+    if cache is not None and key in cache:
+        got = cache[key]
+        if isinstance(got, _Draw):
+            got = cache[key] = got.result()
+        if len(got) >= n_boot:
+            return got[:n_boot]
+    if background:
+        if cache is not None and key not in cache:
+            cache[key] = _Draw(lambda: _read_only(draw, n_boot))
+        return None
+    w = _read_only(draw, n_boot)
     if cache is not None:
         cache[key] = w
     return w
 
 
-def resample_weights(n_clusters: int, n_boot: int, seed: int) -> np.ndarray:
-    """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes."""
+def resample_weights(n_clusters: int, n_boot: int, seed: int, *, background: bool = False) -> np.ndarray | None:
+    """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes
+    (``background``: see :func:`shared_draw`)."""
     def draw(n: int) -> np.ndarray:
         idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters))
         out = np.empty((n, n_clusters))
@@ -94,7 +178,7 @@ def resample_weights(n_clusters: int, n_boot: int, seed: int) -> np.ndarray:
             out[i:i + len(rows)] = np.bincount(flat, minlength=rows.size).reshape(len(rows), n_clusters)
         return out
 
-    return shared_draw(("index", n_clusters, seed), n_boot, draw)
+    return shared_draw(("index", n_clusters, seed), n_boot, draw, background=background)
 
 
 def _evaluate(stat: WeightedStatistic, w: np.ndarray) -> np.ndarray:
@@ -104,8 +188,11 @@ def _evaluate(stat: WeightedStatistic, w: np.ndarray) -> np.ndarray:
 
 
 def _jackknife(stat: WeightedStatistic, n_clusters: int) -> np.ndarray:
-    """The statistic with each cluster left out in turn, the weight rows built a chunk at a time (a P x P
-    matrix of a large study would not fit in memory)."""
+    """The statistic with each cluster left out in turn: from the column totals for a :class:`ClusterSums`,
+    else by evaluating it on weight rows built a chunk at a time (a P x P matrix of a large study would not
+    fit in memory)."""
+    if isinstance(stat, ClusterSums):
+        return stat.jackknife()
     out = []
     for i in range(0, n_clusters, _CHUNK):
         w = np.ones((min(_CHUNK, n_clusters - i), n_clusters))

@@ -10,9 +10,10 @@ from results_analysis.bootstrap import shared_draw
 from results_analysis.ranks import RankBlocks, as_blocks, place_shares
 
 
-def bootstrap_weights(n_participants: int, n_boot: int, seed: int) -> np.ndarray:
+def bootstrap_weights(n_participants: int, n_boot: int, seed: int, *, background: bool = False) -> np.ndarray | None:
     """(n_boot, n_participants) multiplicities (as floats, read-only) of each participant in each resample
-    (drawn with replacement; shared within :func:`results_analysis.bootstrap.shared_resamples`).
+    (drawn with replacement; shared within :func:`results_analysis.bootstrap.shared_resamples`; ``background``:
+    see :func:`results_analysis.bootstrap.shared_draw`).
 
     Resampling whole participants keeps a participant's correlated trials together.
     """
@@ -20,7 +21,7 @@ def bootstrap_weights(n_participants: int, n_boot: int, seed: int) -> np.ndarray
         rng = np.random.default_rng(seed)
         return rng.multinomial(n_participants, np.full(n_participants, 1.0 / n_participants), size=n).astype(float)
 
-    return shared_draw(("multinomial", n_participants, seed), n_boot, draw)
+    return shared_draw(("multinomial", n_participants, seed), n_boot, draw, background=background)
 
 
 def per_participant_sums(blocks: RankBlocks, values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -18,7 +18,10 @@ Hodges-Lehmann estimate of a pair's difference of ranks.
   blocks, so it is used with participant blocks; with trial blocks (several per participant) the
   Hodges-Lehmann interval is a participant-cluster bootstrap like the others.
 
-Bootstrap intervals resample participants (:mod:`results_analysis.bootstrap`), BCa by default.
+Bootstrap intervals resample participants (:mod:`results_analysis.bootstrap`), BCa by default. Each
+statistic is a :class:`~results_analysis.bootstrap.ClusterSums` (per-participant counts and rank sums), so
+one product of the resample weights with all of them gives every resample's values, and the BCa jackknife
+comes from the totals minus each participant's row.
 """
 from __future__ import annotations
 
@@ -28,7 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from results_analysis.bootstrap import cluster_bootstrap
+from results_analysis.bootstrap import ClusterSums, cluster_bootstrap
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, pairs
 from results_analysis.ranks import RankBlocks
 
@@ -205,26 +208,28 @@ def _per_cluster(cluster: np.ndarray, n_clusters: int, values: np.ndarray) -> np
     return out
 
 
-def _kendall_w_stat(blocks: RankBlocks, cluster: np.ndarray, n_clusters: int):
+def _tie_sums(r: np.ndarray) -> np.ndarray:
+    """Per block (row) the sum of t^3 - t over its tied groups: sum over its values of (t_i^2 - 1), t_i the
+    size of value i's group (integers, so exact whatever the order)."""
+    r = np.round(r, _DECIMALS)
+    t = (r[:, :, None] == r[:, None, :]).sum(axis=2).astype(float)
+    return (t * t - 1.0).sum(axis=1)
+
+
+def _kendall_w_stat(blocks: RankBlocks, cluster: np.ndarray, n_clusters: int) -> ClusterSums:
     r = blocks.ranks
     n, k = r.shape
-    tie = np.zeros(n)
-    for row in range(n):  # sum of t^3 - t over the tied groups of each block
-        _, t = np.unique(np.round(r[row], _DECIMALS), return_counts=True)
-        tie[row] = float(np.sum(t ** 3 - t))
-    rank_sums = _per_cluster(cluster, n_clusters, r)
-    tie_sums = _per_cluster(cluster, n_clusters, tie)
-    counts = _per_cluster(cluster, n_clusters, np.ones(n))
+    # per cluster: blocks, rank sums (k), tie sums
+    sums = _per_cluster(cluster, n_clusters, np.column_stack([np.ones(n), r, _tie_sums(r)]))
 
-    def stat(w: np.ndarray) -> np.ndarray:
-        nb = w @ counts
-        sums = w @ rank_sums
-        chi2 = 12.0 / (nb * k * (k + 1)) * (sums ** 2).sum(axis=1) - 3.0 * nb * (k + 1)
-        c = 1.0 - (w @ tie_sums) / (nb * k * (k * k - 1))
+    def of(s: np.ndarray) -> np.ndarray:
+        nb, rank_sums, ties = s[:, 0], s[:, 1:1 + k], s[:, 1 + k]
+        chi2 = 12.0 / (nb * k * (k + 1)) * (rank_sums ** 2).sum(axis=1) - 3.0 * nb * (k + 1)
+        c = 1.0 - ties / (nb * k * (k * k - 1))
         safe = c > 1e-12
         chi2 = np.where(safe, np.maximum(chi2 / np.where(safe, c, 1.0), 0.0), 0.0)
         return chi2 / (nb * (k - 1))
-    return stat
+    return ClusterSums(sums, of)
 
 
 def _distinct_counts(d: np.ndarray, cluster: np.ndarray, n_clusters: int, key: np.ndarray):
@@ -236,21 +241,22 @@ def _distinct_counts(d: np.ndarray, cluster: np.ndarray, n_clusters: int, key: n
     return u, keep, onehot, _per_cluster(cluster[keep], n_clusters, onehot)
 
 
-def _rank_biserial_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int):
+def _rank_biserial_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int) -> ClusterSums:
     _, keep, onehot, counts = _distinct_counts(d, cluster, n_clusters, np.abs(d))
     positive = _per_cluster(cluster[keep], n_clusters, onehot * (d[keep] > 0)[:, None])
+    u = counts.shape[1]
 
-    def stat(w: np.ndarray) -> np.ndarray:
-        cnt = w @ counts                                    # (R, U) resampled count of each |d|
+    def of(s: np.ndarray) -> np.ndarray:
+        cnt = s[:, :u]                                      # (R, U) resampled count of each |d|
         avg_rank = np.cumsum(cnt, axis=1) - cnt + (cnt + 1.0) / 2.0
-        v = ((w @ positive) * avg_rank).sum(axis=1)
+        v = (s[:, u:] * avg_rank).sum(axis=1)
         nn = cnt.sum(axis=1)
         total = nn * (nn + 1.0) / 2.0
         return np.where(nn > 0, (2.0 * v - np.where(nn > 0, total, 1.0)) / np.where(nn > 0, total, 1.0), 0.0)
-    return stat
+    return ClusterSums(np.concatenate([counts, positive], axis=1), of)
 
 
-def _hodges_lehmann_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int):
+def _hodges_lehmann_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int) -> ClusterSums:
     # A resample's Walsh averages depend only on how often each distinct difference occurs in it: values
     # e_l and e_m (l < m) give n_l n_m averages (e_l + e_m)/2, and e_l with itself n_l (n_l + 1)/2.
     e, _, _, counts = _distinct_counts(d, cluster, n_clusters, d)
@@ -261,12 +267,12 @@ def _hodges_lehmann_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int):
     same = li == mi
     step = max(1, _WALSH_CELLS // max(walsh.size, 1))
 
-    def stat(w: np.ndarray) -> np.ndarray:
-        out = np.zeros(len(w))
+    def of(s: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(s))
         if walsh.size == 0:
             return out
-        for start in range(0, len(w), step):
-            n = w[start:start + step] @ counts               # (R, U)
+        for start in range(0, len(s), step):
+            n = s[start:start + step]                        # (R, U) resampled count of each difference
             pw = np.where(same, n[:, li] * (n[:, li] + 1.0) / 2.0, n[:, li] * n[:, mi])
             cum = np.cumsum(pw, axis=1)
             total = cum[:, -1]
@@ -276,7 +282,7 @@ def _hodges_lehmann_stat(d: np.ndarray, cluster: np.ndarray, n_clusters: int):
             b = np.minimum((cum < hi[:, None]).sum(axis=1), walsh.size - 1)
             out[start:start + len(n)] = np.where(total > 0, (walsh[a] + walsh[b]) / 2.0, 0.0)
         return out
-    return stat
+    return ClusterSums(counts, of)
 
 
 def _bootstrap_name(method: str) -> str:
@@ -303,7 +309,7 @@ def effect_sizes(blocks: RankBlocks, *, n_boot: int = 2000, ci: float = 0.95, se
     parts = [_kendall_w_stat(blocks, cluster, n_clusters)]
     parts += [_rank_biserial_stat(d, cluster, n_clusters) for d in diffs]
     parts += [_hodges_lehmann_stat(d, cluster, n_clusters) for d in diffs] if boot_hl else []
-    res = cluster_bootstrap(lambda w: np.column_stack([f(w) for f in parts]), n_clusters, n_boot=n_boot, ci=ci,
+    res = cluster_bootstrap(ClusterSums.stack(parts), n_clusters, n_boot=n_boot, ci=ci,
                             seed=seed, method=interval)
     w_table = pd.DataFrame([{"estimate": res.estimate[0], "ci_low": res.low[0], "ci_high": res.high[0],
                              "interval": _bootstrap_name(res.method[0])}])

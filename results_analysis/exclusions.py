@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+import numpy as np
 import pandas as pd
 
 from results_analysis.validate import trial_key
@@ -28,7 +29,10 @@ def apply_exclusions(df: pd.DataFrame, *, exclude_failed_attention: bool = False
     attrs = dict(df.attrs)
     exclude = [str(p).strip() for p in exclude if str(p).strip()]
     reasons: dict[str, list[str]] = {}
-    known = set(df["participant"].astype(str))
+    # per distinct participant, not per row: a large study has a million rows and ten thousand participants
+    codes, names = pd.factorize(df["participant"], use_na_sentinel=True)
+    names = [str(p) for p in names]
+    known = set(names)
     for p in exclude:
         reasons.setdefault(p, []).append("excluded by name (--exclude)" if p in known
                                          else "excluded by name (--exclude), but has no answers")
@@ -37,11 +41,13 @@ def apply_exclusions(df: pd.DataFrame, *, exclude_failed_attention: bool = False
         # One verdict per attention-check trial: a trial failed when any of its rows says so.
         per_trial = checks.groupby(trial_key(checks))["attention_passed"].all().reset_index()
         summary = per_trial.groupby("participant")["attention_passed"].agg(["size", "sum"])
-        for p, row in summary.iterrows():
-            failed = int(row["size"] - row["sum"])
-            if failed and exclude_failed_attention:
-                reasons.setdefault(str(p), []).append(f"failed {failed} of {int(row['size'])} attention check(s)")
-    out = df["participant"].astype(str).isin(reasons)
+        if exclude_failed_attention:
+            size, passed = summary["size"].to_numpy(), summary["sum"].to_numpy()
+            for i in np.flatnonzero(size - passed):
+                reasons.setdefault(str(summary.index[i]), []).append(
+                    f"failed {int(size[i] - passed[i])} of {int(size[i])} attention check(s)")
+    named = np.array([p in reasons for p in names] + [False], dtype=bool)  # code -1 (missing): last entry
+    out = pd.Series(named[codes], index=df.index)
     if "is_practice" in df.columns:
         out |= df["is_practice"].astype(bool)
     if "is_attention_check" in df.columns:

@@ -8,6 +8,7 @@ CSV, ``responses id 5`` of a database) so validation errors can point at it.
 from __future__ import annotations
 
 import sqlite3
+from collections import defaultdict
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -29,6 +30,12 @@ CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
 #: Columns the loader adds for its own use (``_where``: where a row came from, for messages); never shown
 #: to users as one of their columns.
 INTERNAL_COLUMNS = ("_where",)
+
+#: Columns :func:`normalize_results` makes text (object: str or None) and numbers (float).
+_TEXT_COLUMNS = ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version",
+                 "condition_label", "study_title")
+_NUMBER_COLUMNS = ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample",
+                   "condition_position")
 
 _TRUE = {"1", "true", "t", "yes", "y"}
 _FALSE = {"0", "false", "f", "no", "n", ""}
@@ -58,7 +65,10 @@ def load_results(path: str | Path) -> pd.DataFrame:
         df = _read_sqlite(path)
     else:
         try:
-            df = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+            # every cell as the text written; the columns normalize_results converts are read as object
+            # (pandas' str dtype is slower per operation and would become object text or numbers anyway)
+            dtype = defaultdict(lambda: str, {c: object for c in _TEXT_COLUMNS + _NUMBER_COLUMNS + FLAG_COLUMNS})
+            df = pd.read_csv(path, dtype=dtype, keep_default_na=False, na_values=[""])
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
             raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
         # Line numbers as a text editor shows them: the header is line 1.
@@ -81,8 +91,7 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         found = [str(c) for c in df.columns if c not in INTERNAL_COLUMNS]
         raise AnalysisInputError(src, f"column(s) {', '.join(missing)}",
                                  f"missing required column(s); found: {', '.join(found) or 'no columns'}")
-    for col in ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version",
-                "condition_label", "study_title"):
+    for col in _TEXT_COLUMNS:
         if col in df.columns:
             df[col] = _as_text(df[col])
     for col in ("participant", "stimulus", "criterion", "condition"):
@@ -90,10 +99,9 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if bad.any():
             raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
                                      "empty value")
-    for col in ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample",
-                "condition_position"):
+    for col in _NUMBER_COLUMNS:
         if col in df.columns:
-            num = pd.to_numeric(df[col], errors="coerce")
+            num = _to_number(df[col])
             bad = num.isna() & df[col].notna()
             if col in ("rank", "trial_index"):
                 bad |= num.isna()
@@ -251,6 +259,17 @@ def _as_text(col: pd.Series) -> pd.Series:
     if col.dtype.kind in "iub":  # no missing values possible; numpy's str of an integer is Python's
         return pd.Series(col.astype(str).to_numpy(dtype=object), index=col.index, dtype=object)
     return col.map(lambda v: None if _isna(v) else str(v)).astype(object)
+
+
+def _to_number(col: pd.Series) -> pd.Series:
+    """``pd.to_numeric(col, errors="coerce")`` as floats. A text column of a large study holds few distinct
+    values (ranks, trial numbers, slots) in millions of cells: each distinct text is parsed once."""
+    if col.dtype.kind in "iufb":
+        return pd.to_numeric(col, errors="coerce").astype(float)
+    codes, uniques = pd.factorize(col.to_numpy(dtype=object), use_na_sentinel=True)
+    parsed = pd.to_numeric(pd.Series(uniques, dtype=object), errors="coerce").to_numpy(dtype=float)
+    out = np.append(parsed, np.nan)[codes]  # code -1 (missing) picks the appended NaN
+    return pd.Series(out, index=col.index)
 
 
 def _flag_value(v, default: bool) -> bool | None:

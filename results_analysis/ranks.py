@@ -78,33 +78,71 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
     if block == "participant" and not complete_only:
         # an incomplete trial's ranks run over fewer places: they cannot be averaged with complete ones
         raise ValueError("incomplete blocks are kept for trial blocks only (the Skillings-Mack test)")
-    sub = df[df["criterion"] == criterion]
+    key = trial_key(df)
+    # only the columns the matrix needs are copied (a large study's frame has millions of cells)
+    sub = df.loc[df["criterion"].to_numpy(dtype=object) == criterion, [*key, "condition", "rank"]]
     if conditions is None:
         conditions = sorted(df["condition"].unique())
-    key = trial_key(sub)
-    wide = sub.pivot_table(index=key, columns="condition", values="rank", aggfunc="first", observed=True)
-    wide = wide.reindex(columns=conditions)
+    trials, raw = _wide(sub, key, list(conditions))
     # Blocks that lack a condition are dropped (listwise deletion) unless ``complete_only`` is false, for
     # the Skillings-Mack test, which reads the NaNs; validation decides whether incomplete blocks may exist.
     if complete_only:
-        wide = wide.dropna(axis=0, how="any")
+        complete = ~np.isnan(raw).any(axis=1)
+        trials, raw = [t[complete] for t in trials], raw[complete]
     # Within-trial average ranks first: the tie coding (1,1,3 or 1.5,1.5,3) is gone from here on.
-    raw = wide.to_numpy(dtype=float)
     missing = np.isnan(raw)
-    trial_ranks = np.where(missing, np.nan, rankdata(np.where(missing, np.inf, raw), axis=1, method="average")) \
+    values = np.where(missing, np.nan, rankdata(np.where(missing, np.inf, raw), axis=1, method="average")) \
         if raw.size else raw
-    trial_ranks = pd.DataFrame(trial_ranks, index=wide.index, columns=wide.columns)
+    owner = trials[0]
     if block == "participant":
-        trial_ranks = trial_ranks.groupby(level="participant", sort=True).mean()
-        trial_ranks = trial_ranks.set_index(pd.Index(trial_ranks.index, name="participant"))
-    values = trial_ranks.to_numpy(dtype=float)
-    participants = trial_ranks.index.get_level_values("participant").astype(str).to_numpy()
+        # a participant's mean of its trials' ranks (trials are sorted by participant); the sums of average
+        # ranks (multiples of 1/2) are exact, so this is the number a pandas group mean gives
+        first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]) if len(owner) else np.zeros(0, dtype=int)
+        per = np.diff(np.r_[first, len(owner)])
+        owner = owner[first]
+        values = np.add.reduceat(values, first, axis=0) / per[:, None] if len(values) else values
+    participants = pd.Index(owner).astype(str).to_numpy()
     ranks = values
     if len(values) and block == "participant":
         ranks = within_block_ranks(values) if complete_only else np.where(
             np.isnan(values), np.nan, rankdata(np.where(np.isnan(values), np.inf, values), axis=1, method="average"))
     return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants,
                       block=block)
+
+
+def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str]) -> tuple[list[np.ndarray], np.ndarray]:
+    """The trials x conditions matrix of ranks that ``sub.pivot_table(index=key, columns="condition",
+    values="rank", aggfunc="first", observed=True).reindex(columns=conditions)`` gives, without pandas' group
+    machinery (a 10,000-participant study builds dozens of these): trials sorted by ``key``, each trial's
+    first non-missing rank per condition, trials with no rank at all (in any condition) left out.
+
+    Returns the trials' key values (one array per key column, aligned with the rows) and the matrix.
+    """
+    rank = sub["rank"].to_numpy(dtype=float)
+    codes, uniques = zip(*(pd.factorize(sub[c], sort=True) for c in key)) if len(sub) else ((), ())
+    cond_codes, cond_names = pd.factorize(sub["condition"], sort=True)
+    ok = ~np.isnan(rank) & (cond_codes >= 0)
+    for c in codes:
+        ok &= c >= 0
+    trial = np.zeros(len(sub), dtype=np.int64)
+    for c, u in zip(codes, uniques):  # lexicographic code of the key, in the key's sort order
+        trial = trial * max(len(u), 1) + c
+    rows, row_of = np.unique(trial[ok], return_inverse=True)
+    column = {name: i for i, name in enumerate(conditions)}
+    col_of = np.array([column.get(name, -1) for name in cond_names], dtype=np.int64)[cond_codes[ok]] \
+        if len(cond_names) else np.zeros(0, dtype=np.int64)
+    out = np.full((rows.size, len(conditions)), np.nan)
+    inside = col_of >= 0
+    cell = row_of[inside] * len(conditions) + col_of[inside]
+    _, first = np.unique(cell, return_index=True)  # the first answer of each trial x condition
+    out.flat[cell[first]] = rank[ok][inside][first]
+    keys = []
+    for c, u in zip(codes[::-1], uniques[::-1]):  # undo the lexicographic code, last column first
+        size = max(len(u), 1)
+        keys.append(np.asarray(u)[rows % size])
+        rows = rows // size
+    keys = keys[::-1] or [np.zeros(0, dtype=object) for _ in key]
+    return keys, out
 
 
 def as_blocks(data: RankBlocks | pd.DataFrame, criterion: str | None = None, *, block: str = "trial") -> RankBlocks:
