@@ -9,6 +9,13 @@ window call :func:`gather`, so the experimenter's pre-flight check and the in-ap
 ...               audio_latency_ms=40.0, render_fps=45.0)
 >>> [c.status for c in evaluate(r)], verdict(evaluate(r))[0]
 (['pass', 'pass', 'pass', 'pass'], True)
+
+Participants see the same checks in plain words (:func:`plain`, :func:`plain_verdict`): no renderer
+names, frame rates or API versions; those stay in the experimenter's ``doctor`` output and in what the
+session records (``env_check`` in the results database).
+
+>>> [plain(c) for c in evaluate(r)][0], plain_verdict(evaluate(r))
+(('Graphics', 'The figures can be shown.'), 'Everything is ready.')
 """
 from __future__ import annotations
 
@@ -118,6 +125,39 @@ def verdict(checks: list[Check]) -> tuple[bool, str]:
     if warns:
         return True, "This computer can run the study (check: " + "; ".join(c.name for c in warns) + ")."
     return True, "This computer can run the study."
+
+
+#: What a participant reads for each check: its name, then a sentence per status.
+PLAIN = {
+    "OpenGL": ("Graphics", {"pass": "The figures can be shown.",
+                            "warn": "The figures can be shown.",
+                            "fail": "This computer cannot show the figures."}),
+    "Display": ("Screen", {"pass": "The screen is fine.",
+                           "warn": "The screen may show movement less smoothly.",
+                           "fail": "No screen was found."}),
+    "Audio": ("Sound", {"pass": "Sound works.",
+                        "warn": "Sound works, a little late; wired headphones are better.",
+                        "fail": "No sound output was found: the clips would be silent."}),
+    "Rendering": ("Animation", {"pass": "The figures move smoothly.",
+                                "warn": "The figures may move a little less smoothly.",
+                                "fail": "The figures would move too jerkily."}),
+}
+PLAIN_VERDICT = {"pass": "Everything is ready.",
+                 "warn": "Ready. Something marked \"Check\" may be a little worse than ideal.",
+                 "fail": "There is a problem with this computer (see above)."}
+
+
+def plain(check: Check) -> tuple[str, str]:
+    """(name, sentence) of ``check`` for a participant: no technical details (they stay in the record)."""
+    name, sentences = PLAIN.get(check.name, (check.name, PLAIN["Display"][1]))
+    return name, sentences[check.status]
+
+
+def plain_verdict(checks: list[Check]) -> str:
+    """The verdict for a participant, in one plain sentence."""
+    worst = "fail" if any(c.status == "fail" for c in checks) else (
+        "warn" if any(c.status == "warn" for c in checks) else "pass")
+    return PLAIN_VERDICT[worst]
 
 
 # -- measuring ---------------------------------------------------------------------------------------

@@ -1,7 +1,8 @@
 """Environment check: graphics, display, audio output (+ a sound check) before the first clip.
 
 Runs :func:`studyapp.ui.envcheck.gather` -- the same measurement as ``studyapp doctor`` -- with the
-app's own GL context and audio clock, shows the results, and stores them with the session.
+app's own GL context and audio clock, shows the results in plain words (:func:`~studyapp.ui.envcheck.plain`:
+no renderer names or frame rates), and stores the full measurement with the session.
 """
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from studyapp.ui.envcheck import evaluate, verdict
+from studyapp.ui.envcheck import evaluate, plain, plain_verdict
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
 if TYPE_CHECKING:
@@ -31,20 +32,22 @@ def draw(app: ScreenApp) -> None:
         page_end()
         return
     checks = evaluate(report)
-    ok, summary = verdict(checks)
+    ok = not any(c.status == "fail" for c in checks)
+    summary = plain_verdict(checks)
     s = app.scale
     if imgui.begin_table("##checks", 3, imgui.TableFlags_.row_bg | imgui.TableFlags_.borders_inner_h):
-        imgui.table_setup_column("what", imgui.TableColumnFlags_.width_fixed, 130 * s)
+        imgui.table_setup_column("what", imgui.TableColumnFlags_.width_fixed, 140 * s)
         imgui.table_setup_column("status", imgui.TableColumnFlags_.width_fixed, 100 * s)
         imgui.table_setup_column("detail", imgui.TableColumnFlags_.width_stretch)
         for c in checks:
             imgui.table_next_row()
             imgui.table_next_column()
-            ui.text(c.name)
+            name, sentence = plain(c)
+            ui.text(name)
             imgui.table_next_column()
             ui.text(_STATUS_WORD[c.status], color=_STATUS_COLOR[c.status])
             imgui.table_next_column()
-            ui.wrapped(c.detail)
+            ui.wrapped(sentence)
         imgui.end_table()
     imgui.spacing()
     ui.wrapped(summary)
@@ -61,8 +64,7 @@ def draw(app: ScreenApp) -> None:
     label = "Continue" if ok else "Continue anyway"
     if not ok:
         ui.text("")
-        ui.wrapped("Something on this computer may spoil the clips (see above). Please tell the experimenter "
-                   "before you continue.")
+        ui.wrapped("Please tell the experimenter before you continue.")
     if primary_row(app, label, "continue", hint="or press Enter"):
         app.session.record_env_check(app.env_info())
     page_end()

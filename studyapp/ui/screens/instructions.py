@@ -13,8 +13,10 @@ if TYPE_CHECKING:
 HOW_TO_RANK = (
     "After a clip has played to the end, a panel opens below the figures. For each question, put the three "
     "figures in order from best (1st) to worst (3rd): drag a figure's letter into a box, or click the letters "
-    "in order from best to worst. Keyboard: press {keys} to place a figure, Up/Down to change question, "
-    "Backspace to clear a question, Enter for the next clip. Space pauses and resumes the clip."
+    "in order from best to worst. Keyboard: the number keys choose a figure, not a rank: {keys} puts that "
+    "figure in the next free box, so pressing them in your order from best to worst ranks the question. "
+    "Up/Down change question, Backspace clears a question, Enter goes to the next clip. Space pauses and "
+    "resumes the clip."
 )
 HOW_TO_TIE = (
     "If two or three figures seem equally good, you may rank them as equal: click the > sign between their "
@@ -39,7 +41,7 @@ def draw(app: ScreenApp) -> None:
         imgui.unindent()
     imgui.spacing()
     ui.heading("How to rank", 1.3)
-    keys = " / ".join(f"{i + 1} ({label})" for i, label in enumerate(app.slot_names))
+    keys = ", ".join(f"{i + 1} = {label}" for i, label in enumerate(app.slot_names))
     ui.wrapped(HOW_TO_RANK.format(keys=keys))
     if getattr(app.design.playback, "allow_ties", False):
         imgui.spacing()

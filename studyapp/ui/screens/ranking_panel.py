@@ -4,8 +4,13 @@ Three ways to rank, all through :class:`studyapp.ui.ranking.RankingState`:
 
 * drag a chip onto a place (ImGui drag and drop; dropping on a filled place swaps);
 * click chips in order from best to worst (clicking a filled place empties it);
-* keyboard: 1 / 2 / 3 place the left / middle / right figure in the highlighted question, Up / Down move
-  the highlight, Backspace clears it, Enter goes to the next clip when everything is ranked.
+* keyboard: 1 / 2 / 3 put figure A / B / C (left / middle / right) into the next free place of the
+  highlighted question, Up / Down move the highlight, Backspace clears it, Enter goes to the next clip
+  when everything is ranked. The digits choose a *figure*, never a rank, and the screen says so: each
+  chip shows its key under its letter, and a line above the questions spells the scheme out.
+
+Hovering a place box only lightens it a little (ImGui's default hover colour is the blue of a selected
+control, which made an empty box look chosen); a filled box is green whatever the mouse does.
 
 When the design allows ties, a small button between neighbouring places shows ``>`` ("better than");
 clicking it turns it into an amber ``=`` and the two places become equal: their captions then read, e.g.,
@@ -42,6 +47,26 @@ TIE_COLOR = (0.93, 0.68, 0.22, 1.0)
 TIE_HINT = "Click > to tie two."
 PLACE_PX = 132.0
 CHIP_PX = 60.0
+#: Empty and filled place boxes; hovering lightens them by HOVER_LIFT, never to another hue.
+EMPTY_COLOR = (0.24, 0.25, 0.29, 1.0)
+FILLED_COLOR = (0.18, 0.46, 0.36, 1.0)
+HOVER_LIFT = 0.04
+#: Height of the keyboard line above the questions (at scale 1).
+KEYS_PX = 26.0
+
+
+def keys_line(names: tuple[str, ...] | list[str]) -> str:
+    """The keyboard scheme in one line: digits pick a figure, not a rank.
+
+    >>> keys_line(("A", "B", "C"))
+    'Keys: 1 = A, 2 = B, 3 = C puts that figure in the next free box (best first). Up/Down: question. Backspace: clear.'
+    """
+    figures = ", ".join(f"{i + 1} = {n}" for i, n in enumerate(names))
+    return f"Keys: {figures} puts that figure in the next free box (best first). Up/Down: question. Backspace: clear."
+
+
+def _lift(rgba: tuple[float, float, float, float], d: float) -> tuple[float, float, float, float]:
+    return (min(1.0, rgba[0] + d), min(1.0, rgba[1] + d), min(1.0, rgba[2] + d), rgba[3])
 
 
 def _text_width(app: ScreenApp, avail_w: float) -> float:
@@ -81,7 +106,8 @@ def row_heights(app: ScreenApp, avail_w: float | None = None) -> list[float]:
 
 def height(app: ScreenApp) -> float:
     """Pixels the ranking rows need below the transport row."""
-    return sum(row_heights(app)) + GAP_PX * len(app.design.criteria) * app.scale + 8 * app.scale
+    return (sum(row_heights(app)) + GAP_PX * len(app.design.criteria) * app.scale + 8 * app.scale
+            + KEYS_PX * app.scale)
 
 
 def _box_text(app: ScreenApp, caption: str, value: str, filled: bool) -> None:
@@ -172,6 +198,7 @@ def draw(app: ScreenApp, view: TrialView) -> None:
     avail_w = imgui.get_content_region_avail().x
     text_w = _text_width(app, avail_w)
     heights = row_heights(app, avail_w)
+    ui.muted(keys_line(names), size=0.9)
     if r.allow_ties:
         # Narrower places and the two links fit in the room of the three places without ties, so the
         # questions keep their width and still fit their row.
@@ -209,11 +236,13 @@ def draw(app: ScreenApp, view: TrialView) -> None:
             elif p:
                 imgui.same_line()
             slot = r.order[crit.id][p]
-            color = (0.18, 0.46, 0.36, 1.0) if slot is not None else (0.24, 0.25, 0.29, 1.0)
+            color = FILLED_COLOR if slot is not None else EMPTY_COLOR
             imgui.push_style_color(imgui.Col_.button, imgui.ImVec4(*color))
+            imgui.push_style_color(imgui.Col_.button_hovered, imgui.ImVec4(*_lift(color, HOVER_LIFT)))
+            imgui.push_style_color(imgui.Col_.button_active, imgui.ImVec4(*_lift(color, 2 * HOVER_LIFT)))
             if ui.button(f"##place{ci}{p}", key=("place", crit.id, p), size=(place_w, box_h)) and slot is not None:
                 r.click(crit.id, slot)  # take it out again
-            imgui.pop_style_color()
+            imgui.pop_style_color(3)
             _box_text(app, _caption(r, crit.id, p), names[slot] if slot is not None else "drop here", slot is not None)
             if r.is_tied(crit.id, p):
                 imgui.get_window_draw_list().add_rect(imgui.get_item_rect_min(), imgui.get_item_rect_max(),
@@ -237,9 +266,10 @@ def draw(app: ScreenApp, view: TrialView) -> None:
             if r.place_of(crit.id, slot) is not None:
                 imgui.dummy(imgui.ImVec2(chip_w, box_h))
                 continue
-            if ui.button(f"{names[slot]}##chip{ci}{slot}", key=("chip", crit.id, slot), size=(chip_w, box_h)):
+            if ui.button(f"##chip{ci}{slot}", key=("chip", crit.id, slot), size=(chip_w, box_h)):
                 r.click(crit.id, slot)
                 r.active = ci
+            _box_text(app, f"key {slot + 1}", names[slot], True)
             if imgui.begin_drag_drop_source():
                 imgui.set_drag_drop_payload_py_id(f"slot{ci}", slot)
                 ui.text(names[slot])
@@ -267,9 +297,9 @@ def next_button(app: ScreenApp, view: TrialView) -> None:
     elif view.in_play:
         why = "Available when the clip has finished."
     elif not any(slot is not None for places in r.order.values() for slot in places):
-        why = "Drag the letters into the boxes, best first; or click them in order."
-        if r.allow_ties:  # the same in fewer words, so the tie hint still fits on one line
-            why = "Drag or click the letters into the boxes, best first. " + TIE_HINT
+        why = "Drag or click the letters into the boxes, best first."
+        if r.allow_ties:
+            why += " " + TIE_HINT
     else:
         why = "Still to rank: " + ", ".join(c.label for c in app.design.criteria if not r.is_complete(c.id))
     bw = 210 * s
@@ -278,7 +308,11 @@ def next_button(app: ScreenApp, view: TrialView) -> None:
     x_text = imgui.get_cursor_pos_x()
     x_button = imgui.get_window_width() - imgui.get_style().window_padding.x - bw
     imgui.set_cursor_pos_y(row_y + 10 * s)
-    ui.muted(why, wrap_x=x_button - 16 * s)
+    # One line only: a second line would run into the first question's row below. Long hints (a design's
+    # long criterion labels, a wide progress label) are drawn smaller until they fit.
+    room = max(1.0, x_button - 16 * s - x_text)
+    size = max(0.7, min(1.0, room / max(1.0, imgui.calc_text_size(why).x)))
+    ui.muted(why, wrap_x=x_button - 16 * s, size=round(size - 0.005, 3) if size < 1.0 else 1.0)
     imgui.set_cursor_pos(imgui.ImVec2(max(x_button, x_text), row_y))
     if ui.button(label, key="next", enabled=enabled, size=(bw, 44 * s), primary=True):
         view.submit()
