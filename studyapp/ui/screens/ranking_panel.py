@@ -7,7 +7,7 @@ Three ways to rank, all through :class:`studyapp.ui.ranking.RankingState`:
 * keyboard: 1 / 2 / 3 put figure A / B / C (left / middle / right) into the next free place of the
   highlighted question, Up / Down move the highlight, Backspace clears it, Enter goes to the next clip
   when everything is ranked. The digits choose a *figure*, never a rank, and the screen says so: each
-  chip shows its key under its letter, and a line above the questions spells the scheme out.
+  chip shows its key above its letter, and the hint beside "Next clip" spells the scheme out.
 
 Hovering a place box only lightens it a little (ImGui's default hover colour is the blue of a selected
 control, which made an empty box look chosen); a filled box is green whatever the mouse does.
@@ -51,18 +51,16 @@ CHIP_PX = 60.0
 EMPTY_COLOR = (0.24, 0.25, 0.29, 1.0)
 FILLED_COLOR = (0.18, 0.46, 0.36, 1.0)
 HOVER_LIFT = 0.04
-#: Height of the keyboard line above the questions (at scale 1).
-KEYS_PX = 26.0
 
 
 def keys_line(names: tuple[str, ...] | list[str]) -> str:
-    """The keyboard scheme in one line: digits pick a figure, not a rank.
+    """How to start ranking, mouse and keyboard: the digits pick a figure, not a rank.
 
     >>> keys_line(("A", "B", "C"))
-    'Keys: 1 = A, 2 = B, 3 = C puts that figure in the next free box (best first). Up/Down: question. Backspace: clear.'
+    'Drag or click the letters into the boxes, best first; or press 1 = A, 2 = B, 3 = C.'
     """
     figures = ", ".join(f"{i + 1} = {n}" for i, n in enumerate(names))
-    return f"Keys: {figures} puts that figure in the next free box (best first). Up/Down: question. Backspace: clear."
+    return f"Drag or click the letters into the boxes, best first; or press {figures}."
 
 
 def _lift(rgba: tuple[float, float, float, float], d: float) -> tuple[float, float, float, float]:
@@ -106,8 +104,7 @@ def row_heights(app: ScreenApp, avail_w: float | None = None) -> list[float]:
 
 def height(app: ScreenApp) -> float:
     """Pixels the ranking rows need below the transport row."""
-    return (sum(row_heights(app)) + GAP_PX * len(app.design.criteria) * app.scale + 8 * app.scale
-            + KEYS_PX * app.scale)
+    return sum(row_heights(app)) + GAP_PX * len(app.design.criteria) * app.scale + 8 * app.scale
 
 
 def _box_text(app: ScreenApp, caption: str, value: str, filled: bool) -> None:
@@ -198,7 +195,6 @@ def draw(app: ScreenApp, view: TrialView) -> None:
     avail_w = imgui.get_content_region_avail().x
     text_w = _text_width(app, avail_w)
     heights = row_heights(app, avail_w)
-    ui.muted(keys_line(names), size=0.9)
     if r.allow_ties:
         # Narrower places and the two links fit in the room of the three places without ties, so the
         # questions keep their width and still fit their row.
@@ -297,7 +293,7 @@ def next_button(app: ScreenApp, view: TrialView) -> None:
     elif view.in_play:
         why = "Available when the clip has finished."
     elif not any(slot is not None for places in r.order.values() for slot in places):
-        why = "Drag or click the letters into the boxes, best first."
+        why = keys_line(app.slot_names)
         if r.allow_ties:
             why += " " + TIE_HINT
     else:
