@@ -103,6 +103,7 @@ class StudyApp:
         self.question_moved = False   # the keyboard picked another questionnaire item: scroll it into view
         self.focus_text = False
         self.typing = False
+        self.declining = False        # the welcome page asks "end without taking part?" before it does
         self.quit = False
         self.fullscreen_toggle = False
         self.error: str | None = None
@@ -236,7 +237,7 @@ class StudyApp:
         screens = {
             State.WELCOME: welcome.draw, State.INSTRUCTIONS: instructions.draw, State.ENV_CHECK: env_check.draw,
             State.PRACTICE: trial.draw, State.TRIALS: trial.draw, State.QUESTIONNAIRE: questionnaire.draw,
-            State.DONE: final.draw, State.ENDED_EARLY: final.draw,
+            State.DONE: final.draw, State.ENDED_EARLY: final.draw, State.DECLINED: final.draw,
         }
         try:
             screens[self.session.state](self)

@@ -237,6 +237,14 @@ class Painter:
         self._item_rect(key)
         return value
 
+    def input_line(self, label: str, value: str, width: float, *, key: Any = None) -> str:
+        """A one-line text box ``width`` pixels wide (a number's answer); Enter leaves it."""
+        self.record(value)
+        self.imgui.set_next_item_width(width)
+        _, value = self.imgui.input_text(label, value)
+        self._item_rect(key)
+        return value
+
     # -- checks --------------------------------------------------------------------------------
     def leaks(self, secrets: Iterable[str]) -> list[tuple[str, str]]:
         """``(secret, drawn string)`` pairs where a secret (condition id, model name, file name) was drawn.

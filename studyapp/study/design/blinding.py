@@ -28,11 +28,12 @@ def visible_text_leaks(design: Design) -> list[tuple[str, str]]:
     >>> visible_text_leaks(load_design(demo_design(), check_files=False))
     []
     """
-    texts = {"title": design.title, "instructions": design.instructions}
+    texts = {"title": design.title, "instructions": design.instructions, "consent": design.consent,
+             "completion": design.completion}
     for i, c in enumerate(design.criteria):
         texts[f"criteria[{i}]"] = " ".join((c.label, c.question, c.explanation))
     for i, q in enumerate(design.questionnaire):
-        texts[f"questionnaire[{i}]"] = " ".join((q.text, *q.anchors))
+        texts[f"questionnaire[{i}]"] = " ".join((q.text, *q.anchors, *q.options))
     return [(key, cid) for key, text in texts.items() for cid in conditions_named_in(design, text)]
 
 

@@ -360,18 +360,46 @@ def _questionnaire(col: Collector, questions: list[tuple[int, dict]]) -> list[Qu
         key = f"questionnaire[{i}]"
         kind = e.get("kind", "likert")
         if kind not in QUESTION_KINDS:
-            col.add(f"{key}.kind", f"unknown item kind {kind!r}", 'use "likert" or "text"')
+            col.add(f"{key}.kind", f"unknown item kind {kind!r}", "use " + " or ".join(f'"{k}"' for k in QUESTION_KINDS))
+        # keys that belong to another kind are a mistake worth one message each (they would do nothing)
+        for name, kinds in (("points", ("likert",)), ("anchors", ("likert",)), ("options", ("choice",)),
+                            ("multiple", ("choice",)), ("min", ("number",)), ("max", ("number",)),
+                            ("integer", ("number",))):
+            if name in e and kind in QUESTION_KINDS and kind not in kinds:
+                col.add(f"{key}.{name}", f"only {' and '.join(kinds)} items have {name}", f"remove {name}, or "
+                        f'set kind = "{kinds[0]}"')
         points = e.get("points", key_default(QuestionItem, "points") if kind == "likert" else 0)
         if kind == "likert" and not 2 <= points <= 11:
             col.add(f"{key}.points", f"a Likert item needs 2..11 points, got {points}", "e.g. points = 7")
         anchors = e.get("anchors", list(key_default(QuestionItem, "anchors")) if kind == "likert" else ["", ""])
-        if len(anchors) != 2 or not all(isinstance(a, str) for a in anchors):
+        if kind == "likert" and (len(anchors) != 2 or not all(isinstance(a, str) for a in anchors)):
             col.add(f"{key}.anchors", "must be two strings: the labels of the lowest and highest point",
                     'anchors = ["Strongly disagree", "Strongly agree"]')
+        if len(anchors) != 2 or not all(isinstance(a, str) for a in anchors):
             anchors = ["", ""]
+        options = e.get("options", [])
+        if kind == "choice":
+            if not all(isinstance(o, str) and o.strip() for o in options) or len(options) < 2:
+                col.add(f"{key}.options", "a choice item needs a list of at least two non-empty strings",
+                        'options = ["Yes", "No"]')
+                options = []
+            elif len(set(options)) != len(options):
+                col.add(f"{key}.options", "the same option is listed twice", "list each option once")
+                options = []
+        lo, hi = e.get("min"), e.get("max")
+        if kind == "number":
+            if lo is None or hi is None:
+                col.add(f"{key}.{'min' if lo is None else 'max'}", "a number item needs a range: min and max",
+                        "e.g. min = 18, max = 99")
+            elif not lo < hi:
+                col.add(f"{key}.max", f"max ({hi}) must be larger than min ({lo})", "swap them")
+            elif e.get("integer") and int(lo) != lo:
+                col.add(f"{key}.min", "an integer item's range must start at a whole number", f"min = {math.ceil(lo)}")
         if e.get("id") and "text" in e:
             items.append(QuestionItem(e["id"], kind, e["text"], e.get("scale"), points if kind == "likert" else 0,
-                                      (anchors[0], anchors[1])))
+                                      (anchors[0], anchors[1]), tuple(str(o) for o in options),
+                                      bool(e.get("multiple", False)), None if lo is None else float(lo),
+                                      None if hi is None else float(hi), bool(e.get("integer", False))))
     return items
 
 
@@ -471,6 +499,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
 
     design = Design(
         path=path.resolve(), title=top.get("title", ""), instructions=top.get("instructions", "").strip(),
+        consent=top.get("consent", "").strip(), completion=top.get("completion", "").strip(),
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
         avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=ordering.method, slot_assignment=slots.assignment,
         slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
