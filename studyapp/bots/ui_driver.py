@@ -24,6 +24,7 @@ from studyapp.bots import policies
 from studyapp.errors import StudyappError
 from studyapp.ui.app import StudyApp
 from studyapp.ui.input import digit_key
+from studyapp.ui.screens.common import FOOTER_PX
 
 if TYPE_CHECKING:
     import moderngl
@@ -174,13 +175,16 @@ class UIBot:
 
         def step(left: int = tries) -> None:
             x0, y0, x1, y1 = self._rect(key)
-            if left <= 0 or (y0 >= 0 and y1 <= h):
+            # on a full page, the fixed footer (its main button) covers the body's last pixels
+            page = self.app.screen_key().split(":")[0] not in ("practice", "trials") and isinstance(key, tuple)
+            bottom = h - (FOOTER_PX * self.app.scale if page else 0.0)
+            if left <= 0 or (y0 >= 0 and y1 <= bottom):
                 return
             # The wheel scrolls the window under the mouse: alternate between the item's edge of the
             # screen (bottom panels) and the middle of the screen (scrolling page bodies).
             y = min(max(y0, 2), h - 2) if left % 2 else h / 2
             q.mouse_move(min(max((x0 + x1) / 2, 2), w - 2), y)
-            q.scroll(0.0, -1.0 if y1 > h else 1.0)
+            q.scroll(0.0, -1.0 if y1 > bottom else 1.0)
             self.steps.appendleft(lambda: step(left - 1))
             self.steps.appendleft(lambda: None)
         return step
