@@ -48,6 +48,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
+from studyapp.study.design.texts import EN as EN_TEXTS
+from studyapp.study.design.texts import text as design_text
 from studyapp.study.storage import (
     ParticipantRecord,
     Response,
@@ -92,15 +94,11 @@ class PlayStats:
     worst_av_offset_ms: float | None = None
 
 
-ENDED_EARLY_MESSAGE = (
-    # It must not say "nothing more is needed": a remote participant is still asked to send the results file.
-    "Thank you for your time. The study has ended early because check questions were not answered as "
-    "expected. This can happen to anyone, and your participation is appreciated. Your answers so far have "
-    "been saved."
-)
-DONE_MESSAGE = "Thank you! You have completed the study. Your answers have been saved."
-DECLINED_MESSAGE = ("You have chosen not to take part. Thank you for considering it. Nothing about you has been "
-                    "recorded apart from that choice.")
+# The English texts; a design's language and [texts] choose what participants read (design.texts).
+# ENDED_EARLY_MESSAGE must not say "nothing more is needed": a remote participant still sends the results file.
+ENDED_EARLY_MESSAGE = EN_TEXTS["final.ended_early_text"]
+DONE_MESSAGE = EN_TEXTS["final.done_text"]
+DECLINED_MESSAGE = EN_TEXTS["final.declined_text"]
 
 
 @dataclass(frozen=True)
@@ -467,8 +465,8 @@ class Session:
         plan = self.current_trial()
         if plan is None:
             return ""
-        prefix = "Practice clip" if plan.is_practice else "Clip"
-        return f"{prefix} {self.trial_number()} of {self.phase_total()}"
+        key = "progress.practice" if plan.is_practice else "progress.clip"
+        return design_text(self.design, key, k=self.trial_number(), n=self.phase_total())
 
     @property
     def answered(self) -> int:
@@ -618,11 +616,11 @@ class Session:
     @property
     def end_message(self) -> str:
         if self.state is State.ENDED_EARLY:
-            return ENDED_EARLY_MESSAGE
+            return design_text(self.design, "final.ended_early_text")
         if self.state is State.DECLINED:
-            return DECLINED_MESSAGE
+            return design_text(self.design, "final.declined_text")
         if self.state is State.DONE:
-            return getattr(self.design, "completion", "") or DONE_MESSAGE
+            return getattr(self.design, "completion", "") or design_text(self.design, "final.done_text")
         return ""
 
     def close(self) -> None:

@@ -78,7 +78,10 @@ class StudyApp:
         self.display = display
         self.bench_frames = bench_frames
         self.db_path = db_path if db_path is not None else getattr(getattr(session, "db", None), "path", None)
-        self.layer = ImGuiLayer(ctx)
+        from studyapp.study.design.fonts import design_fallback_font
+
+        # a system font for the characters of the design's texts the UI's font lacks (e.g. Chinese)
+        self.layer = ImGuiLayer(ctx, extra_font=design_fallback_font(design)[0])
         self.ui = Painter()
         self.ui.layer = self.layer
         self.input = queue if queue is not None else InputQueue()

@@ -21,9 +21,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from studyapp.study.design.texts import EN as EN_TEXTS
 
 if TYPE_CHECKING:
     import moderngl
@@ -127,37 +130,25 @@ def verdict(checks: list[Check]) -> tuple[bool, str]:
     return True, "This computer can run the study."
 
 
-#: What a participant reads for each check: its name, then a sentence per status.
-PLAIN = {
-    "OpenGL": ("Graphics", {"pass": "The figures can be shown.",
-                            "warn": "The figures can be shown.",
-                            "fail": "This computer cannot show the figures."}),
-    "Display": ("Screen", {"pass": "The screen is fine.",
-                           "warn": "The screen may show movement less smoothly.",
-                           "fail": "No screen was found."}),
-    "Audio": ("Sound", {"pass": "Sound works.",
-                        "warn": "Sound works, a little late; wired headphones are better.",
-                        "fail": "No sound output was found: the clips would be silent."}),
-    "Rendering": ("Animation", {"pass": "The figures move smoothly.",
-                                "warn": "The figures may move a little less smoothly.",
-                                "fail": "The figures would move too jerkily."}),
-}
-PLAIN_VERDICT = {"pass": "Everything is ready.",
-                 "warn": "Ready. Something marked \"Check\" may be a little worse than ideal.",
-                 "fail": "There is a problem with this computer (see above)."}
+#: The participant texts (:mod:`studyapp.study.design.texts`) naming each check; its sentence is
+#: ``<key>.<status>``, or the nearest one a check of that kind can have.
+PLAIN = {"OpenGL": "env.graphics", "Display": "env.screen", "Audio": "env.sound", "Rendering": "env.animation"}
+_NEAREST = {"pass": ("pass",), "warn": ("warn", "pass"), "fail": ("fail", "warn")}
 
 
-def plain(check: Check) -> tuple[str, str]:
-    """(name, sentence) of ``check`` for a participant: no technical details (they stay in the record)."""
-    name, sentences = PLAIN.get(check.name, (check.name, PLAIN["Display"][1]))
-    return name, sentences[check.status]
+def plain(check: Check, texts: Mapping[str, str] = EN_TEXTS) -> tuple[str, str]:
+    """(name, sentence) of ``check`` for a participant, from ``texts`` (a design's): no technical details
+    (they stay in the record)."""
+    base = PLAIN.get(check.name, "env.screen")
+    sentence = next(texts[k] for k in (f"{base}.{s}" for s in _NEAREST[check.status]) if k in texts)
+    return texts[base], sentence
 
 
-def plain_verdict(checks: list[Check]) -> str:
+def plain_verdict(checks: list[Check], texts: Mapping[str, str] = EN_TEXTS) -> str:
     """The verdict for a participant, in one plain sentence."""
     worst = "fail" if any(c.status == "fail" for c in checks) else (
         "warn" if any(c.status == "warn" for c in checks) else "pass")
-    return PLAIN_VERDICT[worst]
+    return texts[f"env.verdict.{worst}"]
 
 
 # -- measuring ---------------------------------------------------------------------------------------

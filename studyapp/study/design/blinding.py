@@ -13,6 +13,8 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING
 
+from studyapp.study.design.texts import LANGUAGES as BUILTIN
+
 if TYPE_CHECKING:
     from studyapp.study.design.model import Design
 
@@ -30,6 +32,7 @@ def visible_text_leaks(design: Design) -> list[tuple[str, str]]:
     """
     texts = {"title": design.title, "instructions": design.instructions, "consent": design.consent,
              "completion": design.completion}
+    texts.update({f"texts.{k}": v for k, v in design.texts.items() if v != BUILTIN.get(design.language, {}).get(k)})
     for i, c in enumerate(design.criteria):
         texts[f"criteria[{i}]"] = " ".join((c.label, c.question, c.explanation))
     for i, q in enumerate(design.questionnaire):

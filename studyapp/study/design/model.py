@@ -11,6 +11,8 @@ from typing import Mapping, Sequence
 from studyapp.errors import InputError
 from studyapp.render.camera import DEFAULT_FRAMING
 from studyapp.study.design.files import resolve
+from studyapp.study.design.texts import EN as EN_TEXTS
+from studyapp.study.design.texts import fill
 from studyapp.study.design.schema import BOOL, FROZEN_PREFIX, INT, LIST, NUM, STR, TABLE, key
 
 # ---------------------------------------------------------------------------------------------------------
@@ -241,7 +243,7 @@ class QuestionItem:
     @property
     def range_text(self) -> str:
         """A number item's range as a participant reads it: ``"from 18 to 99"``."""
-        return f"from {_num(self.min)} to {_num(self.max)}"
+        return f"from {plain_number(self.min)} to {plain_number(self.max)}"
 
     def check_answer(self, value: object) -> tuple[str | None, str | None]:
         """``(stored value, None)`` for a valid answer, else ``(None, message for the participant)``.
@@ -283,11 +285,11 @@ class QuestionItem:
                 return str(int(x)), None
             return None, f"{self.text}: enter a whole number {span}"
         if math.isfinite(x) and lo <= x <= hi:  # type: ignore[operator]
-            return _num(x), None
+            return plain_number(x), None
         return None, f"{self.text}: enter a number {span}"
 
 
-def _num(x: float | None) -> str:
+def plain_number(x: float | None) -> str:
     """A number as a participant reads it: ``18`` not ``18.0``."""
     return "" if x is None else (str(int(x)) if float(x) == int(x) else repr(float(x)))
 
@@ -321,6 +323,13 @@ class Design:
     #: the first page's consent text and the last page's text after a completed study ("" = built-in)
     consent: str = ""
     completion: str = ""
+    #: ``language`` and every built-in participant text after the design's ``[texts]`` (see :mod:`.texts`)
+    language: str = "en"
+    texts: dict[str, str] = field(default_factory=lambda: dict(EN_TEXTS))
+
+    def text(self, key: str, **values: object) -> str:
+        """The participant text ``key`` in this design's language, its ``{fields}`` filled from ``values``."""
+        return fill(self.texts.get(key, EN_TEXTS[key]), **values)
 
     def condition(self, cid: str) -> Condition:
         for c in self.conditions:

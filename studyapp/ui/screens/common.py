@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
+from studyapp.study.design.texts import EN as EN_TEXTS
+
 if TYPE_CHECKING:
     from studyapp.ui.seams import ScreenApp
 
@@ -26,7 +28,7 @@ _arrow_scroll = True
 #: Set when the last page body closed with text still below the visible part.
 _more_below = False
 # Page Down, not the arrows: the questionnaire uses Up/Down to move between its questions.
-MORE_BELOW_HINT = "More text below: scroll down (mouse wheel or Page Down)."
+MORE_BELOW_HINT = EN_TEXTS["page.more_below"]  # in English; pages show design.text("page.more_below")
 
 
 def page_begin(app: ScreenApp, name: str, *, arrow_scroll: bool = True) -> float:
@@ -102,7 +104,7 @@ def primary_row(app: ScreenApp, label: str, key: str, *, enabled: bool = True, h
     if _more_below:
         imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
-        app.ui.text(MORE_BELOW_HINT, color=(1.0, 0.80, 0.35, 1.0), key="more_below")
+        app.ui.text(app.design.text("page.more_below"), color=(1.0, 0.80, 0.35, 1.0), key="more_below")
     elif hint:  # the page's own hint (e.g. what is still unanswered) stays visible beside it
         imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)

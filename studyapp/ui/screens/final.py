@@ -9,31 +9,30 @@ from studyapp.ui.screens.common import page_begin, page_end, primary_row
 if TYPE_CHECKING:
     from studyapp.ui.seams import ScreenApp
 
-HEADINGS = {"done": "Study complete", "ended_early": "The study has ended", "declined": "Thank you"}
 
 
 def draw(app: ScreenApp) -> None:
     ui = app.ui
     session = app.session
     page_begin(app, "final")
+    t = app.design.text
     state = session.state.value
-    ui.heading(HEADINGS.get(state, HEADINGS["done"]), 2.0)
+    ui.heading(t(f"final.{state}" if state in ("ended_early", "declined") else "final.done"), 2.0)
     ui.text("")
     ui.paragraphs(session.end_message)
     ui.text("")
     if state == "declined":
         pass  # nothing to send, nothing saved but the choice
     elif app.results_file:
-        ui.heading("Your results file", 1.3)
+        ui.heading(t("final.file_title"), 1.3)
         ui.wrapped(str(app.results_file))
-        ui.wrapped("Please send this file to the experimenter (for example as an e-mail attachment). "
-                   "It contains only your answers and your participant code.")
+        ui.wrapped(t("final.file_text"))
     else:
-        ui.heading("Your answers are saved", 1.3)
-        ui.wrapped(f"Results database: {app.db_path}")
-        ui.wrapped("Nothing more is needed from you. Please let the experimenter know that you have finished.")
+        ui.heading(t("final.saved_title"), 1.3)
+        ui.wrapped(t("final.saved_db", path=app.db_path))
+        ui.wrapped(t("final.saved_text"))
     ui.text("")
-    ui.wrapped("You can now close this window.")
-    if primary_row(app, "Close", "close", hint="or press Enter"):
+    ui.wrapped(t("final.close_window"))
+    if primary_row(app, t("final.close"), "close", hint=t("page.press_enter")):
         app.quit = True
     page_end()

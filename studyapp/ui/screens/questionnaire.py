@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from imgui_bundle import imgui
 
+from studyapp.study.design.model import plain_number
 from studyapp.ui.input import digit_key
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
@@ -93,26 +94,26 @@ def _typed(app: ScreenApp, qi: int, q: QuestionItem, active: bool) -> None:
         app.typing = True
     app.answers[q.id] = new
     if q.kind == "number" and str(new).strip():
-        problem = q.check_answer(new)[1]
-        if problem is not None:
-            ui.text(problem.split(": ", 1)[-1].capitalize() + ".", color=WARN)
+        if q.check_answer(new)[1] is not None:
+            ui.text(app.design.text("questionnaire.out_of_range", min=plain_number(q.min), max=plain_number(q.max)), color=WARN)
 
 
-def _hint(q: QuestionItem) -> str:
+def _hint(app: ScreenApp, q: QuestionItem) -> str:
+    t = app.design.text
     if q.kind == "likert":
-        return f"Keyboard: press 1-{min(9, int(q.points))} to answer, Up/Down arrows for another question"
+        return t("questionnaire.keys_likert", n=min(9, int(q.points)))
     if q.kind == "choice":
-        what = "to tick or untick an option" if q.multiple else "to choose"
-        return f"Keyboard: press 1-{min(9, len(q.options))} {what}, Up/Down arrows for another question"
-    return "Keyboard: type your answer, then press Enter"
+        return t("questionnaire.keys_choices" if q.multiple else "questionnaire.keys_choice", n=min(9, len(q.options)))
+    return t("questionnaire.keys_text")
 
 
 def draw(app: ScreenApp) -> None:
     ui = app.ui
+    t = app.design.text
     items = app.session.questionnaire_items
     page_begin(app, "questionnaire", arrow_scroll=False)  # Up/Down pick the item
-    ui.heading("A few last questions", 2.0)
-    ui.wrapped("Please tell us about your experience. Answer every question (written comments are optional).")
+    ui.heading(t("questionnaire.title"), 2.0)
+    ui.wrapped(t("questionnaire.intro"))
     ui.text("")
     _keys(app, items)
     for qi, q in enumerate(items):
@@ -125,18 +126,19 @@ def draw(app: ScreenApp) -> None:
             _likert(app, qi, q)
         elif q.kind == "choice":
             if q.multiple:
-                ui.muted("Choose all that apply.")
+                ui.muted(t("questionnaire.all_that_apply"))
             _choice(app, qi, q)
         else:
             if q.kind == "number":
-                ui.muted(f"A {'whole ' if q.integer else ''}number {q.range_text}.")
+                ui.muted(t("questionnaire.whole_number" if q.integer else "questionnaire.number", min=plain_number(q.min),
+                           max=plain_number(q.max)))
             _typed(app, qi, q, active)
         if active:
-            ui.muted(_hint(q))
+            ui.muted(_hint(app, q))
         imgui.spacing()
     ok = complete(items, app.answers)
-    if primary_row(app, "Submit answers", "submit", enabled=ok,
-                   hint="" if ok else "Please answer every question (written comments are optional)."):
+    if primary_row(app, t("questionnaire.submit"), "submit", enabled=ok,
+                   hint="" if ok else t("questionnaire.missing")):
         app.session.submit_questionnaire({q.id: app.answers.get(q.id) for q in items})
     page_end()
 

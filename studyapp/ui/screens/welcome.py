@@ -10,50 +10,46 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from studyapp.study.design.texts import EN as EN_TEXTS
+from studyapp.study.design.texts import fill
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
 if TYPE_CHECKING:
     from studyapp.ui.seams import ScreenApp
 
-CONSENT_TEXT = (
-    "In this study you will watch short clips of three animated figures talking and rank them on a few "
-    "questions. It takes about {minutes} minutes. Your answers are saved as you go, under a participant "
-    "code, without your name. You can stop at any time by closing the window; nothing else is recorded."
-)
-AGREE_NOTE = ("By pressing \"I agree, start\" you agree to take part and to your anonymous answers being used "
-              "for research. If you do not want to take part, press \"I do not agree\".")
-
-KEYS_TIP = ("Tip: everything works with the keyboard too (Enter continues on every page), and F11 switches "
-            "full screen on and off.")
+# The English texts (tests read them); participants read design.text(...) in the design's language.
+CONSENT_TEXT = EN_TEXTS["welcome.consent"]
+KEYS_TIP = EN_TEXTS["welcome.keys_tip"]
 
 
 def _consent(app: ScreenApp) -> None:
     ui = app.ui
     s = app.scale
+    t = app.design.text
     page_begin(app, "welcome")
-    ui.heading("Welcome", 2.0)
+    ui.heading(t("welcome.title"), 2.0)
     ui.heading(app.design.title, 1.25)
     ui.text("")
     # replace, not str.format: a design's own text may hold other braces
-    ui.paragraphs((app.design.consent or CONSENT_TEXT).replace("{minutes}", str(app.estimated_minutes())))
-    ui.wrapped(AGREE_NOTE)
+    ui.paragraphs(fill(app.design.consent or t("welcome.consent"), minutes=app.estimated_minutes()))
+    ui.wrapped(t("welcome.agree_note"))
     ui.text("")
     if not app.declining:
-        if ui.button("I do not agree", key="decline", size=(260 * s, 0)):
+        if ui.button(t("welcome.decline"), key="decline", size=(260 * s, 0)):
             app.declining = True
     else:
-        ui.wrapped("End the study now, without taking part? Only that choice is recorded.")
-        if ui.button("Yes, end without taking part", key="decline_confirm", size=(320 * s, 0)):
+        ui.wrapped(t("welcome.decline_ask"))
+        if ui.button(t("welcome.decline_confirm"), key="decline_confirm", size=(320 * s, 0)):
             app.session.decline_consent()
             app.declining = False
             page_end()
             return
         app.ui.imgui.same_line()
-        if ui.button("No, go back", key="decline_back", size=(200 * s, 0)):
+        if ui.button(t("welcome.decline_back"), key="decline_back", size=(200 * s, 0)):
             app.declining = False
     ui.text("")
-    ui.muted(KEYS_TIP)
-    if primary_row(app, "I agree, start", "consent", hint="or press Enter"):
+    ui.muted(t("welcome.keys_tip"))
+    if primary_row(app, t("welcome.agree"), "consent", hint=t("page.press_enter")):
         app.declining = False
         app.session.accept_consent()
     page_end()
@@ -61,20 +57,19 @@ def _consent(app: ScreenApp) -> None:
 
 def _welcome_back(app: ScreenApp) -> None:
     ui = app.ui
+    t = app.design.text
     rp = app.session.resume_point
     page_begin(app, "welcome")
-    ui.heading("Welcome back", 2.0)
+    ui.heading(t("welcome.back_title"), 2.0)
     ui.heading(app.design.title, 1.25)
     ui.text("")
     if rp is not None:
-        what = "practice clip" if rp.practice else "clip"
-        ui.wrapped(f"You are continuing at {what} {rp.k} of {rp.n}. Your earlier answers are saved.")
+        ui.wrapped(t("welcome.back_practice" if rp.practice else "welcome.back_clip", k=rp.k, n=rp.n))
         if rp.dropped:
-            ui.wrapped("Last time you had started this clip but not finished your answer. That unfinished "
-                       "answer was not saved; you will see the clip again from the start.")
+            ui.wrapped(t("welcome.back_dropped"))
     ui.text("")
-    ui.muted(KEYS_TIP)
-    if primary_row(app, "Continue", "consent", hint="or press Enter"):
+    ui.muted(t("welcome.keys_tip"))
+    if primary_row(app, t("page.continue"), "consent", hint=t("page.press_enter")):
         app.session.accept_consent()
     page_end()
 
