@@ -187,3 +187,17 @@ def test_resume_says_where_and_whether_a_half_answer_was_dropped(tmp_path):
         assert (rp.k, rp.n, rp.dropped) == (2, 2, True)
     finally:
         db.close()
+
+
+def test_merge_checks_choice_and_number_answers(tmp_path):
+    """A returned results file whose choice or number answers were edited is flagged, one finding each."""
+    from studyapp.study.returned import check_questionnaire
+
+    d = _design(tmp_path)
+    good = [{"item": "device", "value": "Speakers"}, {"item": "hobbies", "value": '["Dance"]'},
+            {"item": "age", "value": "34"}]
+    assert check_questionnaire(good, d, "active") == []
+    bad = [{"item": "device", "value": "Radio"}, {"item": "hobbies", "value": "Dance"},
+           {"item": "age", "value": "150"}]
+    found = check_questionnaire(bad, d, "active")
+    assert sorted(f.where for f in found) == ["questionnaire age", "questionnaire device", "questionnaire hobbies"]
