@@ -21,11 +21,26 @@ from matplotlib.figure import Figure
 # Figures are built with the object-oriented API (no pyplot), so importing this package never switches
 # the matplotlib backend of the caller (a notebook, or the app's own UI) and works headless.
 
+#: Families that have CJK glyphs, tried in order after DejaVu Sans for characters it lacks (Chinese
+#: condition labels, criteria and titles); matplotlib >= 3.6 falls back glyph by glyph along the list.
+CJK_FAMILIES = ("Noto Sans CJK SC", "Noto Sans CJK JP", "Source Han Sans SC", "WenQuanYi Micro Hei",
+                "WenQuanYi Zen Hei", "Microsoft YaHei", "SimHei", "PingFang SC", "Hiragino Sans GB",
+                "Heiti SC", "Arial Unicode MS")
+
+
+def font_families() -> list[str]:
+    """DejaVu Sans, then the installed CJK families (only installed ones: others make matplotlib warn)."""
+    from matplotlib import font_manager
+
+    installed = {e.name for e in font_manager.fontManager.ttflist}
+    return ["DejaVu Sans", *(f for f in CJK_FAMILIES if f in installed)]
+
+
 _STYLE = {
     "font.size": 9, "axes.titlesize": 10, "axes.titleweight": "bold", "axes.labelsize": 9,
     "xtick.labelsize": 8.5, "ytick.labelsize": 8.5, "legend.fontsize": 8.5, "axes.spines.top": False,
     "axes.spines.right": False, "svg.fonttype": "none", "figure.dpi": 100, "savefig.dpi": 200,
-    "font.family": "DejaVu Sans",
+    "font.family": font_families(),
 }
 #: Colour-blind-safe qualitative colours (Okabe-Ito) for conditions.
 CONDITION_COLORS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")

@@ -150,8 +150,9 @@ def normalize_questionnaire(q: pd.DataFrame, path: str | Path | None) -> pd.Data
     """Questionnaire answers as the analysis reads them (see :func:`load_questionnaire`): rated items only,
     ``scale`` filled in, ``value`` a number, unanswered items dropped; ``path`` names the source in errors."""
     if "kind" in q.columns:
-        # Free-text answers have no number to summarise.
-        q = q[q["kind"].fillna("likert").astype(str).str.lower() != "text"].copy()
+        # Only rated (Likert) items are summarised as numbers: text, choice and number items (e.g. age) are
+        # descriptive answers, not points on a scale.
+        q = q[q["kind"].fillna("likert").astype(str).str.lower() == "likert"].copy()
     missing = [c for c in ("participant", "item", "value") if c not in q.columns]
     if missing:
         raise AnalysisInputError(path, f"column(s) {', '.join(missing)}", "missing required column(s)")

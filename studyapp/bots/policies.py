@@ -26,6 +26,7 @@ Example
 """
 from __future__ import annotations
 
+import math
 import zlib
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -137,6 +138,22 @@ def trial_rng(seed: int, participant_id: str, trial_index: int) -> np.random.Gen
 
 
 def questionnaire_answers(items: Sequence[Any], rng: np.random.Generator) -> dict[str, Any]:
-    """Bot answers: a random point on each Likert item, a fixed note on text items."""
-    return {q.id: int(rng.integers(1, int(q.points) + 1)) if q.kind == "likert" else "(scripted participant)"
-            for q in items}
+    """Bot answers, one per item kind: a random point on a Likert item, a random option (one to all of them
+    when several may be chosen), a random number in range (whole when the item asks so; as typed text),
+    a fixed note on text items."""
+    out: dict[str, Any] = {}
+    for q in items:
+        if q.kind == "likert":
+            out[q.id] = int(rng.integers(1, int(q.points) + 1))
+        elif q.kind == "choice" and q.multiple:
+            k = int(rng.integers(1, len(q.options) + 1))
+            picked = set(rng.choice(len(q.options), size=k, replace=False).tolist())
+            out[q.id] = [o for i, o in enumerate(q.options) if i in picked]
+        elif q.kind == "choice":
+            out[q.id] = q.options[int(rng.integers(0, len(q.options)))]
+        elif q.kind == "number":
+            x = float(rng.uniform(q.min, q.max))
+            out[q.id] = str(int(round(min(max(x, math.ceil(q.min)), math.floor(q.max))))) if q.integer else repr(min(max(round(x, 1), q.min), q.max))
+        else:
+            out[q.id] = "(scripted participant)"
+    return out

@@ -34,9 +34,11 @@ def run_bot_session(
     pace_s: float = 0.0,
     plans: Sequence[TrialPlan] | None = None,
     n_rows: int | None = None,
+    consent: bool = True,
 ) -> Session:
     """Run (or resume) one participant with a scripted policy; returns the finished :class:`Session`.
 
+    ``consent = False`` plays a participant who does not consent on the first page (the session ends there).
     ``on_trial(plan)`` is called after each answer is committed. ``pace_s`` waits that long per clip as
     if watching it (kill tests use it to land kills between commits).
     """
@@ -45,6 +47,9 @@ def run_bot_session(
     session = Session(design, db, participant, row=row, groups=groups, allow_rerun=allow_rerun, plans=plans,
                       n_rows=n_rows, on_saved=on_trial)
     try:
+        if not consent and not session.resumed:  # a participant who does not consent: recorded, nothing else
+            session.decline_consent()
+            return session
         session.accept_consent()
         session.finish_instructions()
         session.record_env_check({"bot": policy, "bot_seed": int(seed)})

@@ -24,6 +24,7 @@ from studyapp.bots import policies
 from studyapp.errors import StudyappError
 from studyapp.ui.app import StudyApp
 from studyapp.ui.input import digit_key
+from studyapp.ui.screens.common import FOOTER_PX
 
 if TYPE_CHECKING:
     import moderngl
@@ -58,7 +59,7 @@ class UIBot:
     def __init__(self, design: Design, db: ResultsDB, participant_id: str, policy: str, seed: int, *,
                  size: tuple[int, int] = (1280, 720), out_dir: Path | str | None = None,
                  max_frames_per_trial: int = 400, session: ParticipantSession | None = None, fps: float = 60.0,
-                 frames_per_play: int | None = FRAMES_PER_PLAY) -> None:
+                 frames_per_play: int | None = FRAMES_PER_PLAY, consent: bool = True) -> None:
         from studyapp.render.context import create_offscreen_context
         from studyapp.render.loop import FrameLoop, OffscreenFrames, VirtualTimer
         from studyapp.study.session import Session
@@ -68,6 +69,8 @@ class UIBot:
         self.design = design
         self.policy = policy
         self.seed = int(seed)
+        #: False: the participant does not consent ("I do not agree", then confirms), which ends the session
+        self.consent = bool(consent)
         self.size = (int(size[0]), int(size[1]))
         self.out_dir = Path(out_dir) if out_dir is not None else None
         self.max_frames_per_trial = int(max_frames_per_trial)
@@ -172,13 +175,16 @@ class UIBot:
 
         def step(left: int = tries) -> None:
             x0, y0, x1, y1 = self._rect(key)
-            if left <= 0 or (y0 >= 0 and y1 <= h):
+            # on a full page, the fixed footer (its main button) covers the body's last pixels
+            page = self.app.screen_key().split(":")[0] not in ("practice", "trials") and isinstance(key, tuple)
+            bottom = h - (FOOTER_PX * self.app.scale if page else 0.0)
+            if left <= 0 or (y0 >= 0 and y1 <= bottom):
                 return
             # The wheel scrolls the window under the mouse: alternate between the item's edge of the
             # screen (bottom panels) and the middle of the screen (scrolling page bodies).
             y = min(max(y0, 2), h - 2) if left % 2 else h / 2
             q.mouse_move(min(max((x0 + x1) / 2, 2), w - 2), y)
-            q.scroll(0.0, -1.0 if y1 > h else 1.0)
+            q.scroll(0.0, -1.0 if y1 > bottom else 1.0)
             self.steps.appendleft(lambda: step(left - 1))
             self.steps.appendleft(lambda: None)
         return step
@@ -235,7 +241,12 @@ class UIBot:
     def _plan(self, key: str) -> None:
         state = key.split(":")[0]
         if state == "welcome":
-            self.click("consent")
+            if self.consent or self.session.resume_point is not None:
+                self.click("consent")
+            else:
+                self.click("decline")
+                self.wait(2)
+                self.click("decline_confirm")
         elif state == "instructions":
             self.click("continue")
         elif state == "env_check":
@@ -248,7 +259,7 @@ class UIBot:
             self._plan_trial(key)
         elif state == "questionnaire":
             self._plan_questionnaire()
-        elif state in ("done", "ended_early"):
+        elif state in ("done", "ended_early", "declined"):
             self.click("close")
         else:
             self.wait()
@@ -306,11 +317,16 @@ class UIBot:
         rng = policies.trial_rng(self.seed, self.session.participant_id, 10**6)
         answers = policies.questionnaire_answers(items, rng)
         for q in items:
+            answer = answers[q.id]
             if q.kind == "likert":
-                self.click(("likert", q.id, int(answers[q.id])))
+                self.click(("likert", q.id, int(answer)))
+            elif q.kind == "choice":
+                for k, option in enumerate(q.options):
+                    if option == answer or (q.multiple and option in answer):
+                        self.click(("choice", q.id, k))
             else:
-                self.click(("text", q.id))
-                text = str(answers[q.id])
+                self.click((q.kind, q.id))  # the number or text box
+                text = str(answer)
                 q_input = self.app.input
                 self.steps.append(lambda t=text: q_input.type_text(t))
                 self.wait(len(text) + 2)

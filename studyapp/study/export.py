@@ -56,8 +56,9 @@ def export_dataframe(db: str | Path | ResultsDB, *, include_practice: bool = Tru
 
 
 def questionnaire_dataframe(db: str | Path | ResultsDB) -> pd.DataFrame:
-    """Questionnaire answers: participant, item, scale, kind, value (Likert points; empty for text items),
-    text (the answer to text items), design_hash, app_version."""
+    """Questionnaire answers: participant, item, scale, kind, value (Likert points and number answers;
+    empty for the rest), text (the answer to text and choice items; a JSON list when several may be
+    chosen), design_hash, app_version."""
     rdb, owned = _open(db)
     try:
         rows = rdb.questionnaire()
@@ -66,7 +67,7 @@ def questionnaire_dataframe(db: str | Path | ResultsDB) -> pd.DataFrame:
             rdb.close()
     out = []
     for r in rows:
-        likert = r.get("kind", "likert") != "text"
+        likert = (r.get("kind") or "likert") in ("likert", "number")  # numeric answers
         out.append({
             "participant": r["participant"], "item": r["item"], "scale": r.get("scale") or "",
             "kind": r.get("kind") or "likert",

@@ -43,6 +43,8 @@ is indistinguishable from one they could have answered.
 """
 from __future__ import annotations
 
+import json
+
 import math
 from dataclasses import dataclass
 from datetime import datetime
@@ -347,7 +349,8 @@ def check_answers(trials: Sequence[Row], responses: Sequence[Row], plans: Sequen
 
 
 def check_questionnaire(rows: Sequence[Row], design: Design, status: Any) -> list[Finding]:
-    """Answers to the design's items only; Likert answers whole numbers in 1..points."""
+    """Answers to the design's items only; Likert answers whole numbers in 1..points; choice and number
+    answers what the session stores for them (:meth:`~studyapp.study.design.QuestionItem.check_answer`)."""
     out = []
     items = {q.id: q for q in design.questionnaire}
     seen = set()
@@ -366,6 +369,15 @@ def check_questionnaire(rows: Sequence[Row], design: Design, status: Any) -> lis
                 ok = False
             if not ok:
                 out.append(Finding(f"questionnaire {qid}", f"answer {r.get('value')!r} is not one of 1..{q.points}"))
+        elif q.kind in ("choice", "number"):
+            value = r.get("value")
+            try:
+                given = json.loads(value) if q.kind == "choice" and q.multiple else value
+            except (TypeError, ValueError):
+                given = None
+            stored, problem = q.check_answer(given)
+            if problem is not None or stored != value:
+                out.append(Finding(f"questionnaire {qid}", f"answer {value!r} is not a valid {q.kind} answer"))
     if status == "done" and rows and set(items) - seen:
         out.append(Finding("questionnaire", f"items {sorted(set(items) - seen)} unanswered in a finished study"))
     return out

@@ -1,8 +1,17 @@
 """The participant's session as a state machine, drivable without a window.
 
 States, in order: ``WELCOME`` (consent) -> ``INSTRUCTIONS`` -> ``ENV_CHECK`` -> ``PRACTICE`` -> ``TRIALS``
--> ``QUESTIONNAIRE`` -> ``DONE``; ``ENDED_EARLY`` replaces the rest after too many failed attention checks.
-Phases with nothing to do (no practice clips, no questionnaire) are skipped.
+-> ``QUESTIONNAIRE`` -> ``DONE``; ``ENDED_EARLY`` replaces the rest after too many failed attention checks,
+``DECLINED`` when the participant does not consent (:meth:`Session.decline_consent`). Phases with nothing
+to do (no practice clips, no questionnaire) are skipped.
+
+Not consenting ends the session at once and is recorded: the participant's status becomes ``ended_early``
+(the results schema has no other status for it) and the session's ``machine`` record gets
+``"consent": "declined"`` with the time; nothing else is stored, no trial is ever shown, so the export and
+the analysis have no answers of that participant, and a merge sees an ended-early participant with none.
+A resumed participant (one with stored answers) is greeted with :attr:`Session.resume_point`
+("welcome back, continuing at clip k of n"), which also says whether a clip was played but left
+unanswered last time: that half-finished answer was dropped, and the clip is shown again.
 
 The UI's screens call the methods; bots and tests call the same methods, so what is tested is what
 participants run. Rules the machine enforces:
@@ -39,6 +48,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
+from studyapp.study.design.texts import EN as EN_TEXTS
+from studyapp.study.design.texts import text as design_text
 from studyapp.study.storage import (
     ParticipantRecord,
     Response,
@@ -58,6 +69,7 @@ class State(str, enum.Enum):
     QUESTIONNAIRE = "questionnaire"
     DONE = "done"
     ENDED_EARLY = "ended_early"
+    DECLINED = "declined"
 
 
 class SessionError(StudyappError):
@@ -82,13 +94,22 @@ class PlayStats:
     worst_av_offset_ms: float | None = None
 
 
-ENDED_EARLY_MESSAGE = (
-    # It must not say "nothing more is needed": a remote participant is still asked to send the results file.
-    "Thank you for your time. The study has ended early because check questions were not answered as "
-    "expected. This can happen to anyone, and your participation is appreciated. Your answers so far have "
-    "been saved."
-)
-DONE_MESSAGE = "Thank you! You have completed the study. Your answers have been saved."
+# The English texts; a design's language and [texts] choose what participants read (design.texts).
+# ENDED_EARLY_MESSAGE must not say "nothing more is needed": a remote participant still sends the results file.
+ENDED_EARLY_MESSAGE = EN_TEXTS["final.ended_early_text"]
+DONE_MESSAGE = EN_TEXTS["final.done_text"]
+DECLINED_MESSAGE = EN_TEXTS["final.declined_text"]
+
+
+@dataclass(frozen=True)
+class ResumePoint:
+    """Where a resumed participant continues: clip ``k`` of ``n`` (of the practice clips when ``practice``);
+    ``dropped``: a clip was played last time but not answered, so that half-finished answer was dropped."""
+
+    k: int
+    n: int
+    practice: bool
+    dropped: bool
 
 
 def _stats_dict(stats: PlayStats | Mapping[str, Any] | None) -> dict[str, Any]:
@@ -352,9 +373,30 @@ class Session:
     def accept_consent(self) -> State:
         """The participant agreed on the welcome screen."""
         self._expect(State.WELCOME)
-        self.db.update_session_machine(self.session_id, {"consent_at": now_iso()})
+        self.db.update_session_machine(self.session_id, {"resumed_at" if self.resumed else "consent_at": now_iso()})
         self.state = State.INSTRUCTIONS
         return self.state
+
+    def decline_consent(self) -> State:
+        """The participant does not consent: the session ends here, recorded as declined (see the module)."""
+        self._expect(State.WELCOME)
+        self.db.update_session_machine(self.session_id, {"consent": "declined", "consent_declined_at": now_iso()})
+        self.state = State.DECLINED
+        self._finish("ended_early")
+        return self.state
+
+    @property
+    def resume_point(self) -> ResumePoint | None:
+        """None for a new participant; else where this participant continues (see :class:`ResumePoint`)."""
+        if not self.resumed:
+            return None
+        if self._pos >= len(self.plans):
+            return ResumePoint(self.n_trials, self.n_trials, False, False)
+        plan = self.plans[self._pos]
+        k = sum(1 for p in self.plans[: self._pos + 1] if p.is_practice == plan.is_practice)
+        n = self.n_practice if plan.is_practice else self.n_trials
+        dropped = any(p["trial_index"] == plan.trial_index for p in self.db.plays(self.participant_id))
+        return ResumePoint(k, n, bool(plan.is_practice), dropped)
 
     def finish_instructions(self) -> State:
         self._expect(State.INSTRUCTIONS)
@@ -423,8 +465,8 @@ class Session:
         plan = self.current_trial()
         if plan is None:
             return ""
-        prefix = "Practice clip" if plan.is_practice else "Clip"
-        return f"{prefix} {self.trial_number()} of {self.phase_total()}"
+        key = "progress.practice" if plan.is_practice else "progress.clip"
+        return design_text(self.design, key, k=self.trial_number(), n=self.phase_total())
 
     @property
     def answered(self) -> int:
@@ -547,7 +589,8 @@ class Session:
         return list(getattr(self.design, "questionnaire", None) or [])
 
     def submit_questionnaire(self, answers: Mapping[str, Any]) -> State:
-        """Store the questionnaire (likert items must be answered with 1..points; text items may be empty)."""
+        """Store the questionnaire: every item but ``text`` must be answered (see
+        :meth:`~studyapp.study.design.QuestionItem.check_answer` for what each kind accepts and stores)."""
         self._expect(State.QUESTIONNAIRE)
         items = {q.id: q for q in self.questionnaire_items}
         unknown = sorted(set(answers) - set(items))
@@ -555,17 +598,10 @@ class Session:
             raise RankingError(f"unknown question(s): {', '.join(unknown)}")
         clean: dict[str, Any] = {}
         for qid, q in items.items():
-            v = answers.get(qid)
-            if q.kind == "likert":
-                try:
-                    iv = int(v)
-                except (TypeError, ValueError):
-                    raise RankingError(f"Please answer: {q.text}") from None
-                if not (1 <= iv <= int(q.points)) or float(v) != iv:
-                    raise RankingError(f"'{q.text}': choose a value from 1 to {q.points}")
-                clean[qid] = iv
-            else:
-                clean[qid] = "" if v is None else str(v)
+            value, problem = q.check_answer(answers.get(qid))
+            if problem is not None:
+                raise RankingError(problem)
+            clean[qid] = int(value) if q.kind == "likert" else value
         self.db.save_questionnaire(self.participant_id, clean,
                                    {q.id: (q.kind, getattr(q, "scale", None)) for q in items.values()})
         self.state = State.DONE
@@ -575,14 +611,16 @@ class Session:
     # ------------------------------------------------------------------ the end
     @property
     def finished(self) -> bool:
-        return self.state in (State.DONE, State.ENDED_EARLY)
+        return self.state in (State.DONE, State.ENDED_EARLY, State.DECLINED)
 
     @property
     def end_message(self) -> str:
         if self.state is State.ENDED_EARLY:
-            return ENDED_EARLY_MESSAGE
+            return design_text(self.design, "final.ended_early_text")
+        if self.state is State.DECLINED:
+            return design_text(self.design, "final.declined_text")
         if self.state is State.DONE:
-            return DONE_MESSAGE
+            return getattr(self.design, "completion", "") or design_text(self.design, "final.done_text")
         return ""
 
     def close(self) -> None:

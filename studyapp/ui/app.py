@@ -78,7 +78,10 @@ class StudyApp:
         self.display = display
         self.bench_frames = bench_frames
         self.db_path = db_path if db_path is not None else getattr(getattr(session, "db", None), "path", None)
-        self.layer = ImGuiLayer(ctx)
+        from studyapp.study.design.fonts import design_fallback_font
+
+        # a system font for the characters of the design's texts the UI's font lacks (e.g. Chinese)
+        self.layer = ImGuiLayer(ctx, extra_font=design_fallback_font(design)[0])
         self.ui = Painter()
         self.ui.layer = self.layer
         self.input = queue if queue is not None else InputQueue()
@@ -103,6 +106,7 @@ class StudyApp:
         self.question_moved = False   # the keyboard picked another questionnaire item: scroll it into view
         self.focus_text = False
         self.typing = False
+        self.declining = False        # the welcome page asks "end without taking part?" before it does
         self.quit = False
         self.fullscreen_toggle = False
         self.error: str | None = None
@@ -236,7 +240,7 @@ class StudyApp:
         screens = {
             State.WELCOME: welcome.draw, State.INSTRUCTIONS: instructions.draw, State.ENV_CHECK: env_check.draw,
             State.PRACTICE: trial.draw, State.TRIALS: trial.draw, State.QUESTIONNAIRE: questionnaire.draw,
-            State.DONE: final.draw, State.ENDED_EARLY: final.draw,
+            State.DONE: final.draw, State.ENDED_EARLY: final.draw, State.DECLINED: final.draw,
         }
         try:
             screens[self.session.state](self)

@@ -9,14 +9,24 @@ window call :func:`gather`, so the experimenter's pre-flight check and the in-ap
 ...               audio_latency_ms=40.0, render_fps=45.0)
 >>> [c.status for c in evaluate(r)], verdict(evaluate(r))[0]
 (['pass', 'pass', 'pass', 'pass'], True)
+
+Participants see the same checks in plain words (:func:`plain`, :func:`plain_verdict`): no renderer
+names, frame rates or API versions; those stay in the experimenter's ``doctor`` output and in what the
+session records (``env_check`` in the results database).
+
+>>> [plain(c) for c in evaluate(r)][0], plain_verdict(evaluate(r))
+(('Graphics', 'The figures can be shown.'), 'Everything is ready.')
 """
 from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from studyapp.study.design.texts import EN as EN_TEXTS
 
 if TYPE_CHECKING:
     import moderngl
@@ -118,6 +128,27 @@ def verdict(checks: list[Check]) -> tuple[bool, str]:
     if warns:
         return True, "This computer can run the study (check: " + "; ".join(c.name for c in warns) + ")."
     return True, "This computer can run the study."
+
+
+#: The participant texts (:mod:`studyapp.study.design.texts`) naming each check; its sentence is
+#: ``<key>.<status>``, or the nearest one a check of that kind can have.
+PLAIN = {"OpenGL": "env.graphics", "Display": "env.screen", "Audio": "env.sound", "Rendering": "env.animation"}
+_NEAREST = {"pass": ("pass",), "warn": ("warn", "pass"), "fail": ("fail", "warn")}
+
+
+def plain(check: Check, texts: Mapping[str, str] = EN_TEXTS) -> tuple[str, str]:
+    """(name, sentence) of ``check`` for a participant, from ``texts`` (a design's): no technical details
+    (they stay in the record)."""
+    base = PLAIN.get(check.name, "env.screen")
+    sentence = next(texts[k] for k in (f"{base}.{s}" for s in _NEAREST[check.status]) if k in texts)
+    return texts[base], sentence
+
+
+def plain_verdict(checks: list[Check], texts: Mapping[str, str] = EN_TEXTS) -> str:
+    """The verdict for a participant, in one plain sentence."""
+    worst = "fail" if any(c.status == "fail" for c in checks) else (
+        "warn" if any(c.status == "warn" for c in checks) else "pass")
+    return texts[f"env.verdict.{worst}"]
 
 
 # -- measuring ---------------------------------------------------------------------------------------

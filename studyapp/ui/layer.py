@@ -8,6 +8,10 @@ drawn, so large text stays sharp.
 
 Rendering uses imgui-bundle's compiled OpenGL3 backend, which draws into whatever framebuffer is
 bound (the window's, or an FBO offscreen) and restores the GL state it touches.
+
+``extra_font``: a system font merged into both UI fonts for the characters Roboto lacks (a design in
+Chinese; see :mod:`studyapp.study.design.fonts`). ImGui 1.92 loads glyphs as they are first drawn, so
+only the characters the texts use are rasterised, from Roboto when it has them, else from this font.
 """
 from __future__ import annotations
 
@@ -73,7 +77,7 @@ class ImGuiLayer:
     :meth:`render` with the target framebuffer bound.
     """
 
-    def __init__(self, ctx: moderngl.Context) -> None:
+    def __init__(self, ctx: moderngl.Context, extra_font: Path | None = None) -> None:
         from imgui_bundle import imgui
 
         self.ctx = ctx
@@ -88,11 +92,23 @@ class ImGuiLayer:
         regular = _font_dir() / "Roboto" / "Roboto-Regular.ttf"
         bold = _font_dir() / "Roboto" / "Roboto-Bold.ttf"
         self.font = fonts.add_font_from_file_ttf(str(regular), BASE_FONT_PX)
+        if extra_font is not None:
+            self._merge(extra_font)
         self.font_bold = fonts.add_font_from_file_ttf(str(bold), BASE_FONT_PX)
+        if extra_font is not None:
+            self._merge(extra_font)
+        self.extra_font = extra_font
         self.scale = 0.0
         self._apply_style(1.0)
         imgui.backends.opengl3_init("#version 330")
         self._time = 0.0
+
+    def _merge(self, path: Path) -> None:
+        """Merge ``path`` into the font added last: its glyphs fill in the characters that one lacks."""
+        cfg = self.imgui.ImFontConfig()
+        cfg.merge_mode = True
+        cfg.font_no = 0  # the first face of a collection (.ttc)
+        self.imgui.get_io().fonts.add_font_from_file_ttf(str(path), BASE_FONT_PX, cfg)
 
     def _apply_style(self, scale: float) -> None:
         imgui = self.imgui

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from studyapp.render.scene import TrialScene
     from studyapp.study.design import Design, QuestionItem
     from studyapp.study.schedule import TrialPlan
-    from studyapp.study.session import PlayStats, State
+    from studyapp.study.session import PlayStats, ResumePoint, State
     from studyapp.ui.envcheck import EnvReport
     from studyapp.ui.layer import ImGuiLayer
     from studyapp.ui.trial import TrialView
@@ -54,8 +54,11 @@ class ParticipantSession(Protocol):
     def finished(self) -> bool: ...
     @property
     def end_message(self) -> str: ...
+    @property
+    def resume_point(self) -> ResumePoint | None: ...
 
     def accept_consent(self) -> State: ...
+    def decline_consent(self) -> State: ...
     def finish_instructions(self) -> State: ...
     def record_env_check(self, info: Mapping[str, Any] | None = None) -> State: ...
     def current_trial(self) -> TrialPlan | None: ...
@@ -97,6 +100,7 @@ class ScreenApp(Protocol):
     question_moved: bool
     focus_text: bool
     typing: bool
+    declining: bool
     quit: bool
     page_pad_x: float | None   # the page's side margin, set by the page, read by its bottom row
 

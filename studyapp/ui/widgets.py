@@ -14,6 +14,40 @@ from typing import Any
 
 Rect = tuple[float, float, float, float]  # x0, y0, x1, y1 in framebuffer pixels
 
+#: A line that starts a list item keeps its own line inside a paragraph.
+_LIST_ITEM = re.compile(r"^\s*(?:[-*\u2022\u00b7]|\d+[.)]|\(\w\))\s")
+#: Scripts written without spaces between words: lines are joined with no space between two of these.
+_NO_SPACE = re.compile(r"[\u2e80-\u9fff\uac00-\ud7af\uf900-\ufaff\uff00-\uffef\u3000-\u303f]")
+
+
+def reflow(text: str) -> list[str]:
+    r"""Paragraphs of a design's text, each one flowing line (wrapped to the window when drawn).
+
+    Blank lines separate paragraphs. Single line breaks inside a paragraph are where the author's editor
+    wrapped the TOML, so they join into one line (no space between Chinese or Japanese characters);
+    lines that start a list item (``-``, ``*``, ``1.``, ``(a)``) keep their own line.
+
+    >>> reflow("Watch each clip\nto the end.\n\nThen:\n- rank\n- go on")
+    ['Watch each clip to the end.', 'Then:\n- rank\n- go on']
+    >>> reflow("\u8bf7\u89c2\u770b\n\u6bcf\u4e2a\u7247\u6bb5")
+    ['请观看每个片段']
+    """
+    out = []
+    for para in re.split(r"\n\s*\n", text.strip()):
+        lines = [ln.strip() for ln in para.strip().splitlines() if ln.strip()]
+        if not lines:
+            continue
+        joined = lines[0]
+        for ln in lines[1:]:
+            if _LIST_ITEM.match(ln):
+                joined += "\n" + ln
+            elif _NO_SPACE.match(joined[-1]) and _NO_SPACE.match(ln[0]):
+                joined += ln
+            else:
+                joined += " " + ln
+        out.append(joined)
+    return out
+
 
 def visible_label(label: str) -> str:
     """The part of an ImGui label that is drawn (``"Next##trial"`` -> ``"Next"``; ``"###x"`` -> ``""``)."""
@@ -147,9 +181,9 @@ class Painter:
         self._item_rect(key)
 
     def paragraphs(self, s: str) -> None:
-        """Text from a design (blank lines separate paragraphs; single newlines are kept)."""
-        for para in re.split(r"\n\s*\n", s.strip()):
-            self.wrapped(para.strip())
+        """Text from a design, as :func:`reflow` reads it: paragraphs that wrap to the window's width."""
+        for para in reflow(s):
+            self.wrapped(para)
             self.imgui.spacing()
 
     def tooltip(self, s: str) -> None:
@@ -200,6 +234,14 @@ class Painter:
         self.record(value)
         flags = self.imgui.InputTextFlags_.ctrl_enter_for_new_line
         _, value = self.imgui.input_text_multiline(label, value, self.imgui.ImVec2(*size), flags)
+        self._item_rect(key)
+        return value
+
+    def input_line(self, label: str, value: str, width: float, *, key: Any = None) -> str:
+        """A one-line text box ``width`` pixels wide (a number's answer); Enter leaves it."""
+        self.record(value)
+        self.imgui.set_next_item_width(width)
+        _, value = self.imgui.input_text(label, value)
         self._item_rect(key)
         return value
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING
 
+from studyapp.study.design.texts import LANGUAGES as BUILTIN
+
 if TYPE_CHECKING:
     from studyapp.study.design.model import Design
 
@@ -28,11 +30,13 @@ def visible_text_leaks(design: Design) -> list[tuple[str, str]]:
     >>> visible_text_leaks(load_design(demo_design(), check_files=False))
     []
     """
-    texts = {"title": design.title, "instructions": design.instructions}
+    texts = {"title": design.title, "instructions": design.instructions, "consent": design.consent,
+             "completion": design.completion}
+    texts.update({f"texts.{k}": v for k, v in design.texts.items() if v != BUILTIN.get(design.language, {}).get(k)})
     for i, c in enumerate(design.criteria):
         texts[f"criteria[{i}]"] = " ".join((c.label, c.question, c.explanation))
     for i, q in enumerate(design.questionnaire):
-        texts[f"questionnaire[{i}]"] = " ".join((q.text, *q.anchors))
+        texts[f"questionnaire[{i}]"] = " ".join((q.text, *q.anchors, *q.options))
     return [(key, cid) for key, text in texts.items() for cid in conditions_named_in(design, text)]
 
 

@@ -11,6 +11,8 @@ from typing import Mapping, Sequence
 from studyapp.errors import InputError
 from studyapp.render.camera import DEFAULT_FRAMING
 from studyapp.study.design.files import resolve
+from studyapp.study.design.texts import EN as EN_TEXTS
+from studyapp.study.design.texts import fill
 from studyapp.study.design.schema import BOOL, FROZEN_PREFIX, INT, LIST, NUM, STR, TABLE, key
 
 # ---------------------------------------------------------------------------------------------------------
@@ -214,16 +216,82 @@ class AttentionCheck:
 class QuestionItem:
     """One questionnaire item, asked after the last trial.
 
-    ``scale`` groups Likert items into one construct (Cronbach's alpha is computed per scale);
-    ``anchors`` label the lowest and highest point.
+    Kinds (``kind``), and what each stores in the ``value`` column of the results' questionnaire table:
+
+    * ``likert`` (default): ``points`` radio buttons between two ``anchors``; the chosen point 1..points.
+      Must be answered. Only these are analysed as numbers; ``scale`` groups them into one construct
+      (Cronbach's alpha is computed per scale).
+    * ``choice``: one of ``options`` (radio buttons), or with ``multiple = true`` any of them (check
+      boxes, at least one); the chosen option's text, or a JSON list of the chosen texts. Must be answered.
+    * ``number``: a number typed in, from ``min`` to ``max`` (both required), a whole number when
+      ``integer = true`` (e.g. age); the number as text. Must be answered.
+    * ``text``: free text, may be left empty.
     """
 
     id: str = key(STR, required=True)
-    kind: str = key(STR)  # "likert" (the default) or "text"
+    kind: str = key(STR)  # one of schema.QUESTION_KINDS; default "likert"
     text: str = key(STR, required=True)
     scale: str | None = key(STR, default=None)
     points: int = key(INT, default=7)
     anchors: tuple[str, str] = key(LIST, default=("Strongly disagree", "Strongly agree"))
+    options: tuple[str, ...] = key(LIST, default=())
+    multiple: bool = key(BOOL, default=False)
+    min: float | None = key(NUM, default=None)
+    max: float | None = key(NUM, default=None)
+    integer: bool = key(BOOL, default=False)
+
+    @property
+    def range_text(self) -> str:
+        """A number item's range as a participant reads it: ``"from 18 to 99"``."""
+        return f"from {plain_number(self.min)} to {plain_number(self.max)}"
+
+    def check_answer(self, value: object) -> tuple[str | None, str | None]:
+        """``(stored value, None)`` for a valid answer, else ``(None, message for the participant)``.
+
+        >>> QuestionItem("age", "number", "Your age?", min=18, max=99, integer=True).check_answer("34")
+        ('34', None)
+        >>> QuestionItem("age", "number", "Your age?", min=18, max=99, integer=True).check_answer("3.5")[1]
+        'Your age?: enter a whole number from 18 to 99'
+        >>> QuestionItem("os", "choice", "Which?", options=("a", "b"), multiple=True).check_answer(["b", "a"])
+        ('["a", "b"]', None)
+        """
+        import json
+        import math
+
+        if self.kind == "text":
+            return ("" if value is None else str(value)), None
+        if self.kind == "likert":
+            try:
+                iv = int(value)  # type: ignore[arg-type]
+                ok = float(value) == iv and 1 <= iv <= int(self.points)  # type: ignore[arg-type]
+            except (TypeError, ValueError):
+                ok = False
+            return (str(iv), None) if ok else (None, f"{self.text}: choose a value from 1 to {self.points}")
+        if self.kind == "choice":
+            if self.multiple:
+                chosen = [value] if isinstance(value, str) else list(value or [])
+                if chosen and all(c in self.options for c in chosen):
+                    return json.dumps([o for o in self.options if o in chosen], ensure_ascii=False), None
+                return None, f"{self.text}: choose at least one option"
+            return (str(value), None) if value in self.options else (None, f"{self.text}: choose one option")
+        lo, hi = self.min, self.max
+        span = self.range_text
+        try:
+            x = float(str(value).strip().replace(",", "."))
+        except (TypeError, ValueError):
+            x = math.nan
+        if self.integer:
+            if math.isfinite(x) and x == int(x) and lo <= x <= hi:  # type: ignore[operator]
+                return str(int(x)), None
+            return None, f"{self.text}: enter a whole number {span}"
+        if math.isfinite(x) and lo <= x <= hi:  # type: ignore[operator]
+            return plain_number(x), None
+        return None, f"{self.text}: enter a number {span}"
+
+
+def plain_number(x: float | None) -> str:
+    """A number as a participant reads it: ``18`` not ``18.0``."""
+    return "" if x is None else (str(int(x)) if float(x) == int(x) else repr(float(x)))
 
 
 @dataclass
@@ -252,6 +320,16 @@ class Design:
     seed: int = 1
     design_hash: str = ""
     groups: dict[str, str] = field(default_factory=dict)
+    #: the first page's consent text and the last page's text after a completed study ("" = built-in)
+    consent: str = ""
+    completion: str = ""
+    #: ``language`` and every built-in participant text after the design's ``[texts]`` (see :mod:`.texts`)
+    language: str = "en"
+    texts: dict[str, str] = field(default_factory=lambda: dict(EN_TEXTS))
+
+    def text(self, key: str, **values: object) -> str:
+        """The participant text ``key`` in this design's language, its ``{fields}`` filled from ``values``."""
+        return fill(self.texts.get(key, EN_TEXTS[key]), **values)
 
     def condition(self, cid: str) -> Condition:
         for c in self.conditions:

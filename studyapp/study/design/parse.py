@@ -24,6 +24,9 @@ from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUIL
                                               SLOT_LABELS, AttentionCheckTable, AvatarTable,
                                               DesignFile, OrderingTable, ParticipantsTable, SlotsTable,
                                               key_default)
+from studyapp.study.design.texts import LANGUAGES
+from studyapp.study.design.texts import fields as text_fields
+from studyapp.study.design.texts import table as texts_table
 from studyapp.study.timeline import MOTION_END_CHOICES
 
 #: Rotation representations of NPZ/NPY arrays (those :mod:`studyapp.motion.rotations` reads).
@@ -262,7 +265,34 @@ def _stimuli(col: Collector, top: dict, stims: list[tuple[int, dict]], path: Pat
     return stimuli
 
 
-def _criteria(col: Collector, top: dict, crits: list[tuple[int, dict]]) -> list[Criterion]:
+def _texts(col: Collector, language: str, overrides: dict) -> dict[str, str]:
+    """The design's participant texts: its language's table with ``[texts]`` laid over it (checked)."""
+    if language not in LANGUAGES:
+        col.add("language", f"no built-in texts for language {language!r}",
+                "use " + " or ".join(f'"{k}"' for k in LANGUAGES) + " (and [texts] for anything else)")
+    base = texts_table(language)
+    out = {}
+    for k, v in overrides.items():
+        if k not in base:
+            col.add(f"texts.{k}", f"unknown text key {k!r}",
+                    did_you_mean(k, list(base)).replace("allowed keys", "text keys"))
+        elif not isinstance(v, str):
+            col.add(f"texts.{k}", "must be a string", f'"{k}" = "..."')
+        elif text_fields(v) != text_fields(base[k]):
+            want = ", ".join(f"{{{f}}}" for f in sorted(text_fields(base[k]))) or "no {fields}"
+            col.add(f"texts.{k}", f"must hold the same fields as the built-in text ({want})",
+                    f"the built-in text is: {base[k]!r}")
+        else:
+            out[k] = v
+    return {**base, **out}
+
+
+def _criteria(col: Collector, top: dict, crits: list[tuple[int, dict]],
+              texts: dict[str, str] | None = None) -> list[Criterion]:
+    if "criteria" not in top and texts is not None:
+        # the default three, worded in the design's language
+        return [Criterion(c.id, texts[f"criteria.{c.id}.label"], texts[f"criteria.{c.id}.question"],
+                          texts[f"criteria.{c.id}.explanation"]) for c in DEFAULT_CRITERIA]
     if "criteria" in top:
         criteria = [Criterion(e["id"], e.get("label", e["id"].capitalize()), e["question"],
                               e.get("explanation", key_default(Criterion, "explanation")))
@@ -365,18 +395,46 @@ def _questionnaire(col: Collector, questions: list[tuple[int, dict]]) -> list[Qu
         key = f"questionnaire[{i}]"
         kind = e.get("kind", "likert")
         if kind not in QUESTION_KINDS:
-            col.add(f"{key}.kind", f"unknown item kind {kind!r}", 'use "likert" or "text"')
+            col.add(f"{key}.kind", f"unknown item kind {kind!r}", "use " + " or ".join(f'"{k}"' for k in QUESTION_KINDS))
+        # keys that belong to another kind are a mistake worth one message each (they would do nothing)
+        for name, kinds in (("points", ("likert",)), ("anchors", ("likert",)), ("options", ("choice",)),
+                            ("multiple", ("choice",)), ("min", ("number",)), ("max", ("number",)),
+                            ("integer", ("number",))):
+            if name in e and kind in QUESTION_KINDS and kind not in kinds:
+                col.add(f"{key}.{name}", f"only {' and '.join(kinds)} items have {name}", f"remove {name}, or "
+                        f'set kind = "{kinds[0]}"')
         points = e.get("points", key_default(QuestionItem, "points") if kind == "likert" else 0)
         if kind == "likert" and not 2 <= points <= 11:
             col.add(f"{key}.points", f"a Likert item needs 2..11 points, got {points}", "e.g. points = 7")
         anchors = e.get("anchors", list(key_default(QuestionItem, "anchors")) if kind == "likert" else ["", ""])
-        if len(anchors) != 2 or not all(isinstance(a, str) for a in anchors):
+        if kind == "likert" and (len(anchors) != 2 or not all(isinstance(a, str) for a in anchors)):
             col.add(f"{key}.anchors", "must be two strings: the labels of the lowest and highest point",
                     'anchors = ["Strongly disagree", "Strongly agree"]')
+        if len(anchors) != 2 or not all(isinstance(a, str) for a in anchors):
             anchors = ["", ""]
+        options = e.get("options", [])
+        if kind == "choice":
+            if not all(isinstance(o, str) and o.strip() for o in options) or len(options) < 2:
+                col.add(f"{key}.options", "a choice item needs a list of at least two non-empty strings",
+                        'options = ["Yes", "No"]')
+                options = []
+            elif len(set(options)) != len(options):
+                col.add(f"{key}.options", "the same option is listed twice", "list each option once")
+                options = []
+        lo, hi = e.get("min"), e.get("max")
+        if kind == "number":
+            if lo is None or hi is None:
+                col.add(f"{key}.{'min' if lo is None else 'max'}", "a number item needs a range: min and max",
+                        "e.g. min = 18, max = 99")
+            elif not lo < hi:
+                col.add(f"{key}.max", f"max ({hi}) must be larger than min ({lo})", "swap them")
+            elif e.get("integer") and int(lo) != lo:
+                col.add(f"{key}.min", "an integer item's range must start at a whole number", f"min = {math.ceil(lo)}")
         if e.get("id") and "text" in e:
             items.append(QuestionItem(e["id"], kind, e["text"], e.get("scale"), points if kind == "likert" else 0,
-                                      (anchors[0], anchors[1])))
+                                      (anchors[0], anchors[1]), tuple(str(o) for o in options),
+                                      bool(e.get("multiple", False)), None if lo is None else float(lo),
+                                      None if hi is None else float(hi), bool(e.get("integer", False))))
     return items
 
 
@@ -476,7 +534,9 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     # Every stimulus that has an id counts as known, even one with another problem (say, no audio): a
     # reference to it from `practice` or an attention check is not a second problem.
     stim_ids = [e["id"] for _, e in stims if e.get("id")]
-    criteria = _criteria(col, top, crits)
+    language = top.get("language", key_default(DesignFile, "language"))
+    texts = _texts(col, language, top.get("texts", {}))
+    criteria = _criteria(col, top, crits, texts)
     # As for stimuli: a criterion with a problem of its own is still known by its id to attention checks.
     crit_ids = [e["id"] for _, e in crits if e.get("id")] if "criteria" in top else [c.id for c in criteria]
     avatar_default, by_speaker = _avatar(col, avatar, stims)
@@ -493,6 +553,8 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
 
     design = Design(
         path=path.resolve(), title=top.get("title", ""), instructions=top.get("instructions", "").strip(),
+        consent=top.get("consent", "").strip(), completion=top.get("completion", "").strip(),
+        language=language, texts=texts,
         conditions=conditions, stimuli=stimuli, criteria=criteria, avatar=avatar_default,
         avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=ordering.method, slot_assignment=slots.assignment,
         slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
@@ -504,6 +566,11 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
                 "reword the text, or give the condition another id or label")
     files = referenced_files(design, col)
     if check_files:
+        from studyapp.study.design.fonts import font_problem
+
+        no_font = font_problem(design)
+        if no_font is not None:
+            col.add(*no_font)
         from studyapp.study.stimuli import check_stimulus_files
 
         # File contents are checked even when the design has other problems, so one run reports them all.

@@ -25,7 +25,8 @@ ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 ORDERINGS = ("balanced-latin-square", "random", "fixed")
 SLOT_ASSIGNMENTS = ("balanced", "random")
 SLOT_LABELS = {"ABC": ("A", "B", "C"), "LMR": ("L", "M", "R"), "123": ("1", "2", "3"), "none": None}
-QUESTION_KINDS = ("likert", "text")
+#: Questionnaire item kinds (see :class:`~.model.QuestionItem`); only ``likert`` answers are analysed as numbers.
+QUESTION_KINDS = ("likert", "choice", "number", "text")
 MOTION_SUFFIXES = (".bvh", ".npz", ".npy")
 AVATAR_SUFFIXES = (".glb", ".gltf", ".vrm")
 #: Attention-check kinds and what they show (see :class:`~.model.AttentionCheck`).
@@ -64,6 +65,14 @@ class DesignFile:
 
     title: str = key(STR, required=True, default="")
     instructions: str = key(STR, default="")
+    #: what participants agree to on the first page ("" = the built-in text); ``{minutes}`` is replaced
+    consent: str = key(STR, default="")
+    #: the last page's text after a completed study: thanks, debriefing ("" = the built-in thanks)
+    completion: str = key(STR, default="")
+    #: the built-in texts' language (see :mod:`.texts`): "en" or "zh" (Simplified Chinese)
+    language: str = key(STR, default="en")
+    #: overrides of built-in texts by key (see :mod:`.texts`)
+    texts: dict = key(TABLE, default_factory=dict)
     practice: list = key(LIST, default_factory=list)
     conditions: list = key(LIST, required=True, default_factory=list)
     stimuli: list = key(LIST, required=True, default_factory=list)

@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
+from studyapp.study.design.texts import EN as EN_TEXTS
+
 if TYPE_CHECKING:
     from studyapp.ui.seams import ScreenApp
 
@@ -26,7 +28,7 @@ _arrow_scroll = True
 #: Set when the last page body closed with text still below the visible part.
 _more_below = False
 # Page Down, not the arrows: the questionnaire uses Up/Down to move between its questions.
-MORE_BELOW_HINT = "More text below: scroll down (mouse wheel or Page Down)."
+MORE_BELOW_HINT = EN_TEXTS["page.more_below"]  # in English; pages show design.text("page.more_below")
 
 
 def page_begin(app: ScreenApp, name: str, *, arrow_scroll: bool = True) -> float:
@@ -97,11 +99,13 @@ def primary_row(app: ScreenApp, label: str, key: str, *, enabled: bool = True, h
     pad_x = app.page_pad_x if app.page_pad_x is not None else 24 * s
     imgui.set_cursor_pos(imgui.ImVec2(pad_x, imgui.get_cursor_pos_y() + 14 * s))
     pressed = app.ui.button(label, key=key, enabled=enabled, size=(260 * s, 48 * s), primary=True)
+    # One hint beside the button, so it fits the row: "more below" while text is hidden (the page's own hint
+    # is read once the participant has scrolled there), else the page's hint.
     if _more_below:
         imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
-        app.ui.text(MORE_BELOW_HINT, color=(1.0, 0.80, 0.35, 1.0), key="more_below")
-    if hint:  # the page's own hint (e.g. what is still unanswered) stays visible beside it
+        app.ui.text(app.design.text("page.more_below"), color=(1.0, 0.80, 0.35, 1.0), key="more_below")
+    elif hint:  # the page's own hint (e.g. what is still unanswered) stays visible beside it
         imgui.same_line(0, 16 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 12 * s)
         app.ui.muted(hint)

@@ -1,4 +1,5 @@
-"""The last screen: thanks, where the results are, what to do next (also for an early end)."""
+"""The last screen: thanks (the design's ``completion`` text after a finished study), where the results are,
+what to do next; also for an early end and for a participant who did not consent."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -9,26 +10,29 @@ if TYPE_CHECKING:
     from studyapp.ui.seams import ScreenApp
 
 
+
 def draw(app: ScreenApp) -> None:
     ui = app.ui
     session = app.session
     page_begin(app, "final")
-    early = session.state.value == "ended_early"
-    ui.heading("The study has ended" if early else "Study complete", 2.0)
+    t = app.design.text
+    state = session.state.value
+    ui.heading(t(f"final.{state}" if state in ("ended_early", "declined") else "final.done"), 2.0)
     ui.text("")
-    ui.wrapped(session.end_message)
+    ui.paragraphs(session.end_message)
     ui.text("")
-    if app.results_file:
-        ui.heading("Your results file", 1.3)
+    if state == "declined":
+        pass  # nothing to send, nothing saved but the choice
+    elif app.results_file:
+        ui.heading(t("final.file_title"), 1.3)
         ui.wrapped(str(app.results_file))
-        ui.wrapped("Please send this file to the experimenter (for example as an e-mail attachment). "
-                   "It contains only your answers and your participant code.")
+        ui.wrapped(t("final.file_text"))
     else:
-        ui.heading("Your answers are saved", 1.3)
-        ui.wrapped(f"Results database: {app.db_path}")
-        ui.wrapped("Nothing more is needed from you. Please let the experimenter know that you have finished.")
+        ui.heading(t("final.saved_title"), 1.3)
+        ui.wrapped(t("final.saved_db", path=app.db_path))
+        ui.wrapped(t("final.saved_text"))
     ui.text("")
-    ui.wrapped("You can now close this window.")
-    if primary_row(app, "Close", "close", hint="or press Enter"):
+    ui.wrapped(t("final.close_window"))
+    if primary_row(app, t("final.close"), "close", hint=t("page.press_enter")):
         app.quit = True
     page_end()

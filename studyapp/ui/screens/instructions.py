@@ -5,31 +5,25 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
+from studyapp.study.design.texts import EN as EN_TEXTS
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
 if TYPE_CHECKING:
     from studyapp.ui.seams import ScreenApp
 
-HOW_TO_RANK = (
-    "After a clip has played to the end, a panel opens below the figures. For each question, put the three "
-    "figures in order from best (1st) to worst (3rd): drag a figure's letter into a box, or click the letters "
-    "in order from best to worst. Keyboard: press {keys} to place a figure, Up/Down to change question, "
-    "Backspace to clear a question, Enter for the next clip. Space pauses and resumes the clip."
-)
-HOW_TO_TIE = (
-    "If two or three figures seem equally good, you may rank them as equal: click the > sign between their "
-    "boxes so that it shows = (keyboard: press = before placing the next figure, e.g. 1 = 2 3). Equal figures "
-    "share the better place: two equal best figures are both 1st, and the other one is 3rd."
-)
+# English (tests read them); participants read design.text(...) in the design's language
+HOW_TO_RANK = EN_TEXTS["instructions.how"]
+HOW_TO_TIE = EN_TEXTS["instructions.ties"]
 
 
 def draw(app: ScreenApp) -> None:
     ui = app.ui
+    t = app.design.text
     page_begin(app, "instructions")
-    ui.heading("Instructions", 2.0)
+    ui.heading(t("instructions.title"), 2.0)
     ui.text("")
     ui.paragraphs(app.design.instructions or "")
-    ui.heading("The questions", 1.3)
+    ui.heading(t("instructions.questions"), 1.3)
     for crit in app.design.criteria:
         ui.heading(crit.label, 1.1)
         imgui.indent()
@@ -38,12 +32,12 @@ def draw(app: ScreenApp) -> None:
             ui.muted(crit.explanation)
         imgui.unindent()
     imgui.spacing()
-    ui.heading("How to rank", 1.3)
-    keys = " / ".join(f"{i + 1} ({label})" for i, label in enumerate(app.slot_names))
-    ui.wrapped(HOW_TO_RANK.format(keys=keys))
+    ui.heading(t("instructions.how_title"), 1.3)
+    keys = ", ".join(f"{i + 1} = {label}" for i, label in enumerate(app.slot_names))
+    ui.wrapped(t("instructions.how", keys=keys))
     if getattr(app.design.playback, "allow_ties", False):
         imgui.spacing()
-        ui.wrapped(HOW_TO_TIE)
-    if primary_row(app, "Continue", "continue", hint="or press Enter"):
+        ui.wrapped(t("instructions.ties"))
+    if primary_row(app, t("page.continue"), "continue", hint=t("page.press_enter")):
         app.session.finish_instructions()
     page_end()

@@ -4,8 +4,13 @@ Three ways to rank, all through :class:`studyapp.ui.ranking.RankingState`:
 
 * drag a chip onto a place (ImGui drag and drop; dropping on a filled place swaps);
 * click chips in order from best to worst (clicking a filled place empties it);
-* keyboard: 1 / 2 / 3 place the left / middle / right figure in the highlighted question, Up / Down move
-  the highlight, Backspace clears it, Enter goes to the next clip when everything is ranked.
+* keyboard: 1 / 2 / 3 put figure A / B / C (left / middle / right) into the next free place of the
+  highlighted question, Up / Down move the highlight, Backspace clears it, Enter goes to the next clip
+  when everything is ranked. The digits choose a *figure*, never a rank, and the screen says so: each
+  chip shows its key above its letter, and the hint beside "Next clip" spells the scheme out.
+
+Hovering a place box only lightens it a little (ImGui's default hover colour is the blue of a selected
+control, which made an empty box look chosen); a filled box is green whatever the mouse does.
 
 When the design allows ties, a small button between neighbouring places shows ``>`` ("better than");
 clicking it turns it into an amber ``=`` and the two places become equal: their captions then read, e.g.,
@@ -19,8 +24,10 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
+from studyapp.study.design.texts import EN as EN_TEXTS
+from studyapp.study.design.texts import fill
 from studyapp.ui.input import digit_key
-from studyapp.ui.ranking import ORDINALS, RankingState
+from studyapp.ui.ranking import RankingState
 
 if TYPE_CHECKING:
     from studyapp.study.design import Criterion
@@ -33,15 +40,32 @@ GAP_PX = 6.0
 #: Inner padding of a row (at scale 1) and the height of the place boxes and chips.
 ROW_PAD_PX = (12.0, 8.0)
 BOX_PX = 54.0
-PLACE_NAMES = ("1st (best)", "2nd", "3rd (worst)")
+PLACE_KEYS = ("rank.first", "rank.second", "rank.third")
 #: Width of the ``>`` / ``=`` button between two places (designs with ties only).
 LINK_PX = 28.0
 #: Width of a place with ties: three of them and the two links take the room of three places without.
 TIE_PLACE_PX = 112.0
 TIE_COLOR = (0.93, 0.68, 0.22, 1.0)
-TIE_HINT = "Click > to tie two."
+TIE_HINT = EN_TEXTS["rank.tie_hint"]  # English; participants read design.text(...)
 PLACE_PX = 132.0
 CHIP_PX = 60.0
+#: Empty and filled place boxes; hovering lightens them by HOVER_LIFT, never to another hue.
+EMPTY_COLOR = (0.24, 0.25, 0.29, 1.0)
+FILLED_COLOR = (0.18, 0.46, 0.36, 1.0)
+HOVER_LIFT = 0.04
+
+
+def keys_line(names: tuple[str, ...] | list[str], template: str = EN_TEXTS["rank.start_hint"]) -> str:
+    """How to start ranking, mouse and keyboard: the digits pick a figure, not a rank.
+
+    >>> keys_line(("A", "B", "C"))
+    'Drag or click the letters into the boxes, best first; or press 1 = A, 2 = B, 3 = C.'
+    """
+    return fill(template, keys=", ".join(f"{i + 1} = {n}" for i, n in enumerate(names)))
+
+
+def _lift(rgba: tuple[float, float, float, float], d: float) -> tuple[float, float, float, float]:
+    return (min(1.0, rgba[0] + d), min(1.0, rgba[1] + d), min(1.0, rgba[2] + d), rgba[3])
 
 
 def _text_width(app: ScreenApp, avail_w: float) -> float:
@@ -110,10 +134,11 @@ def _box_text(app: ScreenApp, caption: str, value: str, filled: bool) -> None:
     dl.add_text(bold, val_size, imgui.ImVec2(cx - vw / 2, top + cap_size + 2), white, value)
 
 
-def _caption(r: RankingState, crit_id: str, place: int) -> str:
+def _caption(app: ScreenApp, r: RankingState, crit_id: str, place: int) -> str:
+    t = app.design.text
     if not r.is_tied(crit_id, place):
-        return PLACE_NAMES[place]
-    return f"{ORDINALS[r.place_rank(crit_id, place) - 1]} (tied)"
+        return t(PLACE_KEYS[place])
+    return t("rank.tied", ordinal=t(f"rank.ordinal{r.place_rank(crit_id, place)}"))
 
 
 def _tie_link(app: ScreenApp, r: RankingState, ci: int, crit_id: str, link: int,
@@ -131,7 +156,7 @@ def _tie_link(app: ScreenApp, r: RankingState, ci: int, crit_id: str, link: int,
         r.active = ci
     imgui.pop_font()
     imgui.pop_style_color(2)
-    ui.tooltip("Equal. Click to make them different again." if tied else "Click to make these two equal.")
+    ui.tooltip(app.design.text("rank.tie_on" if tied else "rank.tie_off"))
 
 
 def _keys(app: ScreenApp, view: TrialView) -> None:
@@ -209,12 +234,15 @@ def draw(app: ScreenApp, view: TrialView) -> None:
             elif p:
                 imgui.same_line()
             slot = r.order[crit.id][p]
-            color = (0.18, 0.46, 0.36, 1.0) if slot is not None else (0.24, 0.25, 0.29, 1.0)
+            color = FILLED_COLOR if slot is not None else EMPTY_COLOR
             imgui.push_style_color(imgui.Col_.button, imgui.ImVec4(*color))
+            imgui.push_style_color(imgui.Col_.button_hovered, imgui.ImVec4(*_lift(color, HOVER_LIFT)))
+            imgui.push_style_color(imgui.Col_.button_active, imgui.ImVec4(*_lift(color, 2 * HOVER_LIFT)))
             if ui.button(f"##place{ci}{p}", key=("place", crit.id, p), size=(place_w, box_h)) and slot is not None:
                 r.click(crit.id, slot)  # take it out again
-            imgui.pop_style_color()
-            _box_text(app, _caption(r, crit.id, p), names[slot] if slot is not None else "drop here", slot is not None)
+            imgui.pop_style_color(3)
+            _box_text(app, _caption(app, r, crit.id, p), names[slot] if slot is not None else app.design.text("rank.drop_here"),
+                      slot is not None)
             if r.is_tied(crit.id, p):
                 imgui.get_window_draw_list().add_rect(imgui.get_item_rect_min(), imgui.get_item_rect_max(),
                                                       imgui.get_color_u32(imgui.ImVec4(*TIE_COLOR)), 4 * s, 3 * s)
@@ -237,16 +265,17 @@ def draw(app: ScreenApp, view: TrialView) -> None:
             if r.place_of(crit.id, slot) is not None:
                 imgui.dummy(imgui.ImVec2(chip_w, box_h))
                 continue
-            if ui.button(f"{names[slot]}##chip{ci}{slot}", key=("chip", crit.id, slot), size=(chip_w, box_h)):
+            if ui.button(f"##chip{ci}{slot}", key=("chip", crit.id, slot), size=(chip_w, box_h)):
                 r.click(crit.id, slot)
                 r.active = ci
+            _box_text(app, app.design.text("rank.key", n=slot + 1), names[slot], True)
             if imgui.begin_drag_drop_source():
                 imgui.set_drag_drop_payload_py_id(f"slot{ci}", slot)
                 ui.text(names[slot])
                 imgui.end_drag_drop_source()
         if r.is_complete(crit.id):
             imgui.set_cursor_pos(imgui.ImVec2(chips_x, top + mid - imgui.get_font_size() / 2))
-            ui.muted("Done. Click a box to change it.", size=0.9)
+            ui.muted(app.design.text("rank.done"), size=0.9)
         imgui.end_child()
     _keys(app, view)
 
@@ -256,29 +285,34 @@ def next_button(app: ScreenApp, view: TrialView) -> None:
     ui = app.ui
     s = app.scale
     r = view.ranking
+    t = app.design.text
     last = app.session.trial_number() >= app.session.phase_total()
     if view.plan.is_practice:
-        label = "Start the study" if last else "Next practice clip"
+        label = t("rank.start_study" if last else "rank.next_practice")
     else:
-        label = "Finish" if last else "Next clip"
+        label = t("rank.finish" if last else "rank.next")
     enabled = view.can_submit()
     if enabled:
-        why = "Enter = next. You cannot come back to this clip."
+        why = t("rank.next_ok")
     elif view.in_play:
-        why = "Available when the clip has finished."
+        why = t("rank.wait")
     elif not any(slot is not None for places in r.order.values() for slot in places):
-        why = "Drag the letters into the boxes, best first; or click them in order."
-        if r.allow_ties:  # the same in fewer words, so the tie hint still fits on one line
-            why = "Drag or click the letters into the boxes, best first. " + TIE_HINT
+        why = keys_line(app.slot_names, t("rank.start_hint"))
+        if r.allow_ties:
+            why += " " + t("rank.tie_hint")
     else:
-        why = "Still to rank: " + ", ".join(c.label for c in app.design.criteria if not r.is_complete(c.id))
+        why = t("rank.still", criteria=", ".join(c.label for c in app.design.criteria if not r.is_complete(c.id)))
     bw = 210 * s
     imgui.same_line(0, 20 * s)
     row_y = imgui.get_cursor_pos_y()
     x_text = imgui.get_cursor_pos_x()
     x_button = imgui.get_window_width() - imgui.get_style().window_padding.x - bw
     imgui.set_cursor_pos_y(row_y + 10 * s)
-    ui.muted(why, wrap_x=x_button - 16 * s)
+    # One line only: a second line would run into the first question's row below. Long hints (a design's
+    # long criterion labels, a wide progress label) are drawn smaller until they fit.
+    room = max(1.0, x_button - 16 * s - x_text)
+    size = max(0.7, min(1.0, room / max(1.0, imgui.calc_text_size(why).x)))
+    ui.muted(why, wrap_x=x_button - 16 * s, size=round(size - 0.005, 3) if size < 1.0 else 1.0)
     imgui.set_cursor_pos(imgui.ImVec2(max(x_button, x_text), row_y))
     if ui.button(label, key="next", enabled=enabled, size=(bw, 44 * s), primary=True):
         view.submit()

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
+from studyapp.study.design.texts import EN as EN_TEXTS
 from studyapp.ui.screens import ranking_panel
 from studyapp.ui.screens.common import PAGE_FLAGS
 
@@ -21,7 +22,7 @@ if TYPE_CHECKING:
 
 CONTROLS_PX = 68.0
 PRACTICE_COLOR = (1.0, 0.80, 0.35, 1.0)
-PRACTICE_NOTE = "Practice: its answers are not analysed."
+PRACTICE_NOTE = EN_TEXTS["trial.practice_note"]  # English; participants read design.text(...)
 
 
 def _fmt(t: float) -> str:
@@ -83,7 +84,7 @@ def _progress(app: ScreenApp, view: TrialView) -> None:
     app.ui.heading(app.session.progress_label(), 1.25, key="progress")
     if view.plan.is_practice:
         imgui.pop_style_color()
-        app.ui.tooltip(PRACTICE_NOTE)
+        app.ui.tooltip(app.design.text("trial.practice_note"))
     # the transport starts a new line at the row's top (a same_line here would put it 9 px lower)
     end_x = imgui.get_item_rect_max().x - imgui.get_window_pos().x
     imgui.set_cursor_pos(imgui.ImVec2(end_x + 24 * s, row.y))
@@ -94,7 +95,7 @@ def _loading(app: ScreenApp) -> None:
 
     page_begin(app, "loading")
     app.ui.heading(app.session.progress_label(), 1.4)
-    app.ui.wrapped("Loading the next clip...")
+    app.ui.wrapped(app.design.text("trial.loading"))
     page_end()
     app.request_trial_load()
 
@@ -102,24 +103,25 @@ def _loading(app: ScreenApp) -> None:
 def _transport(app: ScreenApp, view: TrialView, t: float) -> None:
     ui = app.ui
     s = app.scale
+    tx = app.design.text
     state = view.state
     bw = 150 * s
     bh = 44 * s
     if state == "ready":
-        if ui.button("Play", key="play", size=(bw, bh), primary=True, enabled=view.can_play()):
+        if ui.button(tx("trial.play"), key="play", size=(bw, bh), primary=True, enabled=view.can_play()):
             view.play()
     elif state == "playing":
-        if ui.button("Pause", key="pause", size=(bw, bh)):
+        if ui.button(tx("trial.pause"), key="pause", size=(bw, bh)):
             view.toggle_pause()
     elif state == "paused":
-        if ui.button("Resume", key="resume", size=(bw, bh), primary=True):
+        if ui.button(tx("trial.resume"), key="resume", size=(bw, bh), primary=True):
             view.toggle_pause()
     else:
-        if ui.button("Replay", key="replay", size=(bw, bh), enabled=view.can_play()):
+        if ui.button(tx("trial.replay"), key="replay", size=(bw, bh), enabled=view.can_play()):
             view.play()
     if view.in_play and view.watched:
         imgui.same_line()
-        if ui.button("Stop", key="stop", size=(110 * s, bh)):
+        if ui.button(tx("trial.stop"), key="stop", size=(110 * s, bh)):
             view.stop()
     imgui.same_line(0, 20 * s)
     frac = 0.0 if view.duration_s <= 0 else min(1.0, t / view.duration_s)
@@ -131,21 +133,22 @@ def _transport(app: ScreenApp, view: TrialView, t: float) -> None:
         imgui.same_line(0, 20 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
         status = _status_text(app, view, state)
-        ui.muted(f"{PRACTICE_NOTE} {status}" if view.plan.is_practice and state == "ready" else status)
+        ui.muted(f"{tx('trial.practice_note')} {status}" if view.plan.is_practice and state == "ready" else status)
 
 
 def _status_text(app: ScreenApp, view: TrialView, state: str) -> str:
+    t = app.design.text
     if state == "ready":
-        return "Press Play (or Space) to watch the clip with sound."
+        return t("trial.ready")
     if state == "paused":
-        return "Paused. Press Resume or Space to continue."
+        return t("trial.paused")
     if state == "playing" and not view.ranking_open():
-        return "Watch to the end; the questions appear afterwards. Space pauses."
+        return t("trial.watch")
     if state == "playing":
-        return "Replaying. Space pauses."
+        return t("trial.replaying")
     if not view.app.session.can_play():
-        return "Now rank the three figures below."
-    return "Rank the three figures below. You may replay the clip as often as you like."
+        return t("trial.rank_now")
+    return t("trial.rank_replay")
 
 
 def _keys(app: ScreenApp, view: TrialView) -> None:

@@ -1,0 +1,129 @@
+"""Which font shows a design's participant texts: the UI's own (Roboto), plus a system font for the rest.
+
+The UI draws with Roboto, which has Latin, Greek and Cyrillic but no CJK glyphs. :func:`needed_chars`
+collects every character of the texts a design shows participants; :func:`fallback_font` finds an
+installed font (through matplotlib's font manager, already a dependency) whose character map has every
+one Roboto lacks, preferring well-known CJK families. The UI merges that font into its own
+(:mod:`studyapp.ui.layer`); Dear ImGui 1.92 rasterises glyphs when they are first drawn, so only the
+characters actually used are loaded. When no font covers the texts, ``validate`` says so
+(:func:`font_problem`). On Debian/Ubuntu ``apt install fonts-noto-cjk`` (or ``fonts-wqy-microhei``)
+provides one; Windows and macOS ship CJK fonts.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from studyapp.study.design.model import Design
+
+#: Families tried first, in order (the ones Debian, Windows and macOS ship for Chinese and Japanese).
+PREFERRED = ("Noto Sans CJK SC", "Noto Sans CJK JP", "Noto Sans SC", "Source Han Sans SC", "WenQuanYi Micro Hei",
+             "WenQuanYi Zen Hei", "Microsoft YaHei", "SimHei", "PingFang SC", "Hiragino Sans GB", "Heiti SC",
+             "Droid Sans Fallback", "Arial Unicode MS")
+
+
+def ui_font_path(bold: bool = False) -> Path:
+    """The UI's own font (Roboto, shipped with imgui-bundle)."""
+    import imgui_bundle
+
+    name = "Roboto-Bold.ttf" if bold else "Roboto-Regular.ttf"
+    return Path(imgui_bundle.__file__).resolve().parent / "assets" / "fonts" / "Roboto" / name
+
+
+@lru_cache(maxsize=None)
+def charmap(path: str) -> frozenset[int]:
+    """The code points a font file has glyphs for (empty when it cannot be read)."""
+    from matplotlib.ft2font import FT2Font
+
+    try:
+        return frozenset(FT2Font(path).get_charmap())
+    except Exception:  # a broken or unsupported font file is just not a candidate
+        return frozenset()
+
+
+def participant_texts(design: Design) -> list[str]:
+    """Every text of ``design`` a participant may read (built-in texts in its language included)."""
+    out = [design.title, design.instructions, design.consent, design.completion, *design.texts.values()]
+    for c in design.criteria:
+        out += [c.label, c.question, c.explanation]
+    for q in design.questionnaire:
+        out += [q.text, *q.anchors, *q.options]
+    out += list(design.slot_labels or ())
+    return [t for t in out if t]
+
+
+def needed_chars(texts: list[str]) -> set[str]:
+    """The characters of ``texts`` that need a glyph (not spaces or control characters)."""
+    return {ch for t in texts for ch in t if ch.isprintable() and not ch.isspace()}
+
+
+def missing_from_ui_font(chars: set[str]) -> set[str]:
+    """The characters the UI's own font has no glyph for."""
+    have = charmap(str(ui_font_path()))
+    return {ch for ch in chars if ord(ch) not in have}
+
+
+def fallback_font(chars: set[str]) -> Path | None:
+    """An installed font with every character of ``chars`` (None when none has them all, or none is needed).
+
+    >>> fallback_font(set()) is None
+    True
+    """
+    if not chars:
+        return None
+    want = {ord(c) for c in chars}
+    found = _search(want, _font_entries(rescan=False))
+    # matplotlib caches its font list: a font installed since (apt install fonts-noto-cjk) needs a rescan
+    return found if found is not None else _search(want, _font_entries(rescan=True))
+
+
+def _font_entries(rescan: bool) -> list:
+    from matplotlib import font_manager
+
+    if rescan:
+        font_manager.fontManager = font_manager._load_fontmanager(try_read_cache=False)
+    return list(font_manager.fontManager.ttflist)
+
+
+def _search(want: set[int], entries: list) -> Path | None:
+    entries = sorted(entries,
+                     key=lambda e: (PREFERRED.index(e.name) if e.name in PREFERRED else len(PREFERRED),
+                                    e.weight not in (400, "normal", "regular"), e.fname))
+    for e in entries:
+        # "Last Resort" fonts map every code point to a placeholder box: that is what must not be shown
+        if "lastresort" in Path(e.fname).name.lower().replace(" ", ""):
+            continue
+        if want <= charmap(e.fname):
+            return Path(e.fname)
+    return None
+
+
+def design_fallback_font(design: Design) -> tuple[Path | None, set[str]]:
+    """(font to merge into the UI's, characters no installed font covers) for a design's texts."""
+    missing = missing_from_ui_font(needed_chars(participant_texts(design)))
+    if not missing:
+        return None, set()
+    font = fallback_font(missing)
+    if font is not None:
+        return font, set()
+    # name what is uncovered: the characters that no single font could add
+    covered: set[int] = set()
+    for e in _font_entries(rescan=False):
+        if "lastresort" not in Path(e.fname).name.lower():
+            covered |= charmap(e.fname) & {ord(c) for c in missing}
+    return None, {c for c in missing if ord(c) not in covered} or missing
+
+
+def font_problem(design: Design) -> tuple[str, str, str] | None:
+    """``(key, message, fix)`` when no installed font shows every character of the design's texts."""
+    font, uncovered = design_fallback_font(design)
+    if not uncovered:
+        return None
+    sample = "".join(sorted(uncovered)[:12])
+    key = "language" if design.language != "en" else "texts"
+    return (key, f"no installed font has all the characters participants would read ({len(uncovered)} missing, "
+                 f"e.g. {sample!r}); they would show as boxes",
+            "install a font that has them (Debian/Ubuntu: apt install fonts-noto-cjk; Windows and macOS ship "
+            "CJK fonts)")

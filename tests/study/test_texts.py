@@ -1,0 +1,73 @@
+"""Built-in participant texts per language, a design's language and [texts] (issue 18, item 6)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fixtures.synthetic import write_synthetic_study
+from studyapp.study.design import DesignError, load_design, validate_design
+from studyapp.study.design import texts as T
+
+
+def test_every_language_has_exactly_the_english_keys_and_fields():
+    for code, table in T.LANGUAGES.items():
+        assert set(table) == set(T.EN), (code, set(table) ^ set(T.EN))
+        assert [k for k in T.EN if T.fields(T.EN[k]) != T.fields(table[k])] == [], code
+
+
+def _study(tmp_path: Path, top: str):
+    path = write_synthetic_study(tmp_path / "s", n_stimuli=1, seconds=1.0, practice=False)
+    # top-level keys before the first table, the [texts] table at the end
+    head, _, table = top.partition("[texts]")
+    path.write_text(head + "\n" + path.read_text() + ("\n[texts]" + table if table else "") + "\n")
+    return path
+
+
+def test_language_picks_the_table_and_texts_override_it(tmp_path):
+    d = load_design(_study(tmp_path, 'language = "zh"\n[texts]\n"page.continue" = "下一步"\n'))
+    assert d.text("page.continue") == "下一步"
+    assert d.text("progress.clip", k=2, n=5) == "第 2 / 5 个片段"
+    # a design without criteria gets the default three in its language
+    assert [c.label for c in d.criteria] == ["真实感", "同步性", "多样性"]
+
+
+@pytest.mark.parametrize("top,key,words", [
+    ('[texts]\n"page.contineu" = "Go"', "texts.page.contineu", "unknown text key"),
+    ('[texts]\n"progress.clip" = "Clip {k}"', "texts.progress.clip", "same fields"),
+    ('[texts]\n"page.continue" = 3', "texts.page.continue", "string"),
+    ('language = "fr"', "language", "no built-in texts"),
+])
+def test_each_texts_problem_is_one_message(tmp_path, top, key, words):
+    probs = validate_design(_study(tmp_path, top), check_files=False)
+    assert [p.key for p in probs] == [key], probs
+    assert words in probs[0].message
+    if "contineu" in top:
+        assert "page.continue" in probs[0].fix  # did you mean
+
+
+def test_several_unknown_keys_are_one_message_each(tmp_path):
+    probs = validate_design(_study(tmp_path, '[texts]\n"a.b" = "x"\n"c.d" = "y"'), check_files=False)
+    assert sorted(p.key for p in probs) == ["texts.a.b", "texts.c.d"]
+
+
+def test_an_override_naming_a_condition_unblinds_and_is_refused(tmp_path):
+    with pytest.raises(DesignError) as err:
+        load_design(_study(tmp_path, '[texts]\n"page.continue" = "On to synced"'))
+    assert any(p.key == "texts.page.continue" and "unblinds" in p.message for p in err.value.problems)
+
+
+def test_validate_says_when_no_installed_font_has_the_characters(tmp_path, monkeypatch):
+    from studyapp.study.design import fonts
+
+    path = _study(tmp_path, 'language = "zh"')
+    monkeypatch.setattr(fonts, "fallback_font", lambda chars: None)
+    probs = validate_design(path)
+    assert [p.key for p in probs] == ["language"]
+    assert "no installed font" in probs[0].message and "fonts-noto-cjk" in probs[0].fix
+
+
+def test_an_english_design_needs_no_extra_font(tmp_path):
+    from studyapp.study.design.fonts import design_fallback_font
+
+    assert design_fallback_font(load_design(_study(tmp_path, ""))) == (None, set())
