@@ -251,6 +251,15 @@ def _entry(name: str) -> zipfile.ZipInfo:
 
 
 # ------------------------------------------------------------------------------------------ the key, atomically
+def _write_synced(fh: BinaryIO, write: Callable[[BinaryIO], None]) -> str:
+    """Write the zip into ``fh``, make it durable, and return its sha256 (read back from the disk's copy)."""
+    write(fh)
+    fh.flush()
+    os.fsync(fh.fileno())
+    fh.seek(0)
+    return _sha256_stream(fh)
+
+
 def _publish(output: Path, write: Callable[[BinaryIO], None], record_pending: Callable[[str], None]) -> None:
     """Write ``output`` so that a kill at any moment leaves either the old state or the finished zip with
     its key (see :func:`settle_pending_keys`), and never a half-written file beside it.
@@ -270,12 +279,7 @@ def _publish(output: Path, write: Callable[[BinaryIO], None], record_pending: Ca
             fd = -1  # the file system has no anonymous files: fall back to a named .part
     if fd >= 0:
         with os.fdopen(fd, "w+b") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-            fh.seek(0)
-            digest = _sha256_stream(fh)
-            record_pending(digest)
+            record_pending(_write_synced(fh, write))
             # A link cannot replace: an older bundle of the same name goes first. A kill in between leaves
             # no zip and a pending key without its zip, which counts as never made.
             output.unlink(missing_ok=True)
@@ -289,11 +293,7 @@ def _publish(output: Path, write: Callable[[BinaryIO], None], record_pending: Ca
     else:
         part = output.with_name(output.name + ".part")
         with open(part, "w+b") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-            fh.seek(0)
-            digest = _sha256_stream(fh)
+            digest = _write_synced(fh, write)
         record_pending(digest)
         os.replace(part, output)
     _fsync_dir(folder)

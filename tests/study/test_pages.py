@@ -14,6 +14,7 @@ from studyapp.study.design import DesignError, load_design
 from studyapp.study.export import export_dataframe, questionnaire_dataframe
 from studyapp.study.session import ParticipantFinishedError, RankingError, Session, State
 from studyapp.study.storage import ResultsDB
+from fixtures.questionnaire_kinds import CHOICE_AND_NUMBER_ITEMS
 
 TOP = '''
 consent = """
@@ -21,28 +22,7 @@ We study gestures. It takes about {minutes} minutes.
 Your answers are anonymous."""
 completion = "Thanks! This study compared gesture models. Write to study@example.org with questions."
 '''
-PAGES = '''
-[[questionnaire]]
-id = "device"
-kind = "choice"
-text = "What did you listen with?"
-options = ["Headphones", "Speakers", "Laptop"]
-
-[[questionnaire]]
-id = "hobbies"
-kind = "choice"
-text = "Which do you do?"
-options = ["Dance", "Theatre", "Sign language"]
-multiple = true
-
-[[questionnaire]]
-id = "age"
-kind = "number"
-text = "Your age"
-min = 18
-max = 99
-integer = true
-'''
+PAGES = CHOICE_AND_NUMBER_ITEMS
 
 
 def _design(tmp_path: Path, extra: str = PAGES, top: str = TOP):

@@ -8,6 +8,7 @@ import json
 import pytest
 
 from studyapp.bots.ui_driver import UIBot
+from fixtures.questionnaire_kinds import CHOICE_AND_NUMBER_ITEMS
 
 pytestmark = pytest.mark.gl
 
@@ -16,28 +17,7 @@ We study gestures.
 It takes about {minutes} minutes."""
 completion = "Thanks! This study compared gesture models."
 '''
-ITEMS = '''
-[[questionnaire]]
-id = "device"
-kind = "choice"
-text = "What did you listen with?"
-options = ["Headphones", "Speakers", "Laptop"]
-
-[[questionnaire]]
-id = "hobbies"
-kind = "choice"
-text = "Which do you do?"
-options = ["Dance", "Theatre", "Sign language"]
-multiple = true
-
-[[questionnaire]]
-id = "age"
-kind = "number"
-text = "Your age"
-min = 18
-max = 99
-integer = true
-'''
+ITEMS = CHOICE_AND_NUMBER_ITEMS
 
 
 def _study(tmp_path):
