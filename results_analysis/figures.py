@@ -30,7 +30,13 @@ CJK_FAMILIES = ("Noto Sans CJK SC", "Noto Sans CJK JP", "Source Han Sans SC", "W
 
 def font_families() -> list[str]:
     """DejaVu Sans, then the installed CJK families (only installed ones: others make matplotlib warn)."""
+    import logging
+
     from matplotlib import font_manager
+
+    # A CJK fallback family with no bold face makes matplotlib log "findfont: Failed to find font weight
+    # bold" for every bold title, even of an English report; the regular face it then uses is what we want.
+    logging.getLogger("matplotlib.font_manager").setLevel(logging.ERROR)
 
     installed = {e.name for e in font_manager.fontManager.ttflist}
     return ["DejaVu Sans", *(f for f in CJK_FAMILIES if f in installed)]

@@ -404,6 +404,23 @@ def methods_paragraph(a: Analysis) -> str:
         f"(scipy {scipy.__version__}).")
 
 
+def _percentages(shares: list[float]) -> list[str]:
+    """Whole percentages of shares that sum to 1, rounded so the printed row sums to 100 % too (largest
+    remainder: rounding each alone can print 12 + 83 + 4 = 99).
+
+    >>> _percentages([0.125, 0.8333333, 0.0416667])
+    ['13%', '83%', '4%']
+    """
+    raw = [100.0 * float(x) if np.isfinite(x) else 0.0 for x in shares]
+    whole = [int(np.floor(v)) for v in raw]
+    if abs(sum(raw) - 100.0) < 1e-6:  # shares of all places: hand out the missing points by remainder
+        for i in sorted(range(len(raw)), key=lambda i: raw[i] - whole[i], reverse=True)[:100 - sum(whole)]:
+            whole[i] += 1
+    else:
+        whole = [int(round(v)) for v in raw]
+    return [f"{w}%" for w in whole]
+
+
 def build_document(a: Analysis, title: str) -> Document:
     doc = Document(title)
     if a.warnings:
@@ -431,7 +448,8 @@ def build_document(a: Analysis, title: str) -> Document:
         for r in c.summary.itertuples():
             rows.append({"criterion": crit, "condition": r.condition, "n": r.n, "mean rank": _num(r.mean_rank),
                          f"{a.ci:.0%} CI": f"{_num(r.ci_low)}–{_num(r.ci_high)}", "median": f"{r.median_rank:g}",
-                         **{f"rank {i}": f"{getattr(r, f'share_rank_{i}'):.0%}" for i in range(1, len(a.conditions) + 1)}})
+                         **dict(zip((f"rank {i}" for i in range(1, len(a.conditions) + 1)), _percentages(
+                             [getattr(r, f"share_rank_{i}") for i in range(1, len(a.conditions) + 1)])))})
     doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
               "interval, median, and share of answers at each rank (a tied answer shared between the places it "
               "spans, so each row sums to 100 %).")

@@ -125,6 +125,10 @@ def questionnaire_from_results(df: pd.DataFrame) -> pd.DataFrame | None:
     return pd.DataFrame(rows, columns=["participant", "item", "scale", "value", "_where"])
 
 
+#: Dataclass fields that hold a single condition id (a lone string is otherwise never relabelled).
+_CONDITION_FIELDS = frozenset({"control"})
+
+
 def relabel(obj: T, labels: Mapping[str, str]) -> T:
     """A copy of ``obj`` (an analysis, or any of its dataclasses, frames, lists and dicts) with every condition
     id replaced by its label, for display: frame columns whose values are all condition ids, frame columns
@@ -162,7 +166,10 @@ def relabel(obj: T, labels: Mapping[str, str]) -> T:
         if dataclasses.is_dataclass(x) and not isinstance(x, type):
             new = copy.copy(x)
             for f in dataclasses.fields(x):
-                object.__setattr__(new, f.name, walk(getattr(x, f.name)))
+                value = getattr(x, f.name)
+                # a field that names one condition (the analysis's ``control``) is shown by its label too
+                shown = labels[value] if f.name in _CONDITION_FIELDS and value in ids else walk(value)
+                object.__setattr__(new, f.name, shown)
             return new
         if isinstance(x, dict):
             keys = all_ids(x)

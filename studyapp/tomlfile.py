@@ -29,8 +29,14 @@ dumps = tomli_w.dumps
 #: Deepest nesting of arrays / inline tables read (study designs nest 2 deep).
 MAX_DEPTH = 32
 
-# what cannot hold a structural bracket: strings (multi-line first) and comments
-_OPAQUE = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
+#: Largest TOML text read (characters): a study design with thousands of stimuli is a few hundred kB.
+MAX_CHARS = 4 << 20
+
+# what cannot hold a structural bracket: strings (multi-line first) and comments. Written as unrolled
+# loops (runs of plain characters matched at once), not a lazy per-character alternation, whose
+# backtracking state grows with the string (a 10 MB line took 1.5 GB).
+_OPAQUE = re.compile(r'"""[^"\\]*(?:(?:\\.|"(?!""))[^"\\]*)*"""|\'\'\'[^\']*(?:\'(?!\'\')[^\']*)*\'\'\''
+                     r'|"[^"\\\n]*(?:\\.[^"\\\n]*)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
 
 
 def _too_deep(text: str) -> int | None:
@@ -59,6 +65,9 @@ def _scan(text: str, start: int, stop: int, depth: int) -> int | tuple[int]:
 
 def loads(text: str) -> dict:
     """The TOML document in ``text`` (see the module docstring for the nesting limit)."""
+    if len(text) > MAX_CHARS:
+        raise TOMLDecodeError(f"the file holds {len(text):,} characters; a TOML file read here has at most "
+                              f"{MAX_CHARS:,}")
     at = _too_deep(text)
     if at is not None:
         line = text.count("\n", 0, at) + 1
@@ -67,4 +76,4 @@ def loads(text: str) -> dict:
     return _reader.loads(text)
 
 
-__all__ = ["loads", "dumps", "TOMLDecodeError", "MAX_DEPTH"]
+__all__ = ["loads", "dumps", "TOMLDecodeError", "MAX_DEPTH", "MAX_CHARS"]

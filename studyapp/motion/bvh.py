@@ -81,6 +81,9 @@ MAX_JOINT_DEPTH = 128
 #: Most joints read (real skeletons: 22 to 75; hand-and-face rigs a few hundred).
 MAX_JOINTS = 4096
 _MIN_FRAME_TIME = 1e-5
+#: Longest frame time read (s): motion at under one frame a minute is not motion, and its duration
+#: (frames x frame time) would turn into billions of frames at any playback rate.
+_MAX_FRAME_TIME = 60.0
 #: Characters allowed per channel value on a frame line ("-1.2345678901234567e+308 " is 25).
 _CHARS_PER_CHANNEL = 64
 
@@ -474,6 +477,9 @@ def _parse_motion_header(lines: list[str], motion_line: int, path: str) -> tuple
     if 0 < frame_time < _MIN_FRAME_TIME:  # 1 / frame_time must stay a frame rate (1e-300 gives infinity)
         raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)} s is more than {1 / _MIN_FRAME_TIME:,.0f} "
                                                 "frames per second; is it in seconds?")
+    if frame_time > _MAX_FRAME_TIME:
+        raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)} s is longer than {_MAX_FRAME_TIME:g} s per "
+                                                "frame; is it in seconds?")
     return frames, frame_time, i + 1
 
 

@@ -668,20 +668,27 @@ def remote_plan(opened: OpenedBundle, participant_id: str) -> RemotePlan | None:
     if not path.is_file():
         return None
     where = f"{opened.zip_path.name}:{SCHEDULE_FILE}"
+    def unreadable(exc: Exception) -> InputError:
+        return InputError(where, None, f"the participants' trials cannot be read ({exc}); ask the experimenter "
+                          "for the file again")
+
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         people = data["participants"]
-        if participant_id not in people:
-            raise InputError(None, "--participant", f"{participant_id!r} is not one of the participant ids this "
-                             f"study file was made for; use the id your experimenter gave you (this file has "
-                             f"{', '.join(sorted(people)) or 'none'})")
+        known = participant_id in people
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise unreadable(exc) from None
+    if not known:  # outside the try: InputError is a ValueError, and this one is the participant's, not the file's
+        raise InputError(None, "--participant", f"{participant_id!r} is not one of the participant ids this "
+                         f"study file was made for; use the id your experimenter gave you (this file has "
+                         f"{', '.join(sorted(map(str, people))) or 'none'})")
+    try:
         mine = people[participant_id]
         row, rows = int(mine["row"]), int(data["rows"])
         plans = [TrialPlan(i, str(sid), (str(slots[0]), str(slots[1]), str(slots[2])), bool(prac), bool(check), row)
                  for i, (sid, slots, prac, check) in enumerate(mine["trials"])]
-    except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
-        raise InputError(where, None, f"the participants' trials cannot be read ({exc}); ask the experimenter "
-                         "for the file again") from None
+    except (ValueError, KeyError, TypeError, IndexError) as exc:
+        raise unreadable(exc) from None
     return RemotePlan(row=row, n_rows=rows, plans=plans)
 
 
@@ -945,7 +952,7 @@ def _merge_one(db: Any, design: Any, path: Path, got: _Returned, batch: dict[str
     payload, pid = got.payload, got.pid
     if isinstance(pid, str) and db.participant(pid) is not None:
         if _same_as_stored(db, pid, payload):
-            return MergeReport(path, True, f"participant {pid}: already merged, nothing to do", pid, already=True)
+            return MergeReport(path, True, f"participant {pid}: nothing to do", pid, already=True)
         raise StudyappError(f"participant {pid!r} is already in the database with other answers (two participants "
                             "used the same id, or the file changed since it was merged); it was not imported")
     others: dict[str, list[dict[str, Any]]] = {}

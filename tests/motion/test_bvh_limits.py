@@ -90,3 +90,14 @@ def test_a_header_frame_count_far_beyond_the_data_is_only_a_note(tmp_path):
     with pytest.warns(UserWarning, match=f"header says Frames: 1000000000000 but the file has {n} data lines"):
         motion = read_bvh(path)
     assert motion.n_frames == n
+
+
+@pytest.mark.parametrize("frame_time", ["9223372036854775807", "61"])
+def test_a_frame_time_of_more_than_a_minute_is_refused(tmp_path, frame_time):
+    """Fuzz case 2255 (seed 16): a huge frame time made `convert --fps 30` ask numpy for ~10^20 frames."""
+    src = _sample()
+    path = tmp_path / "slow.bvh"
+    path.write_bytes(re.sub(rb"Frame Time:\s*[0-9.eE+-]+", b"Frame Time: " + frame_time.encode(), src))
+    line = src[:src.index(b"Frame Time:")].count(b"\n") + 1
+    with pytest.raises(InputError, match=f"line {line}: frame time {frame_time} s is longer than 60 s per frame"):
+        read_bvh(path)

@@ -171,6 +171,7 @@ def test_remote_round_trip_gives_the_rows_of_a_lab_session(tmp_path: Path) -> No
     refused = subprocess.run([*CLI, "run", str(tmp_path / "send" / "study.zip"), "--participant", "ME", "--no-render",
                               "--bot", "random"], capture_output=True, text=True, timeout=600, env=env, cwd=home)
     assert refused.returncode == 2 and "not one of the participant ids" in refused.stderr, refused.stderr
+    assert "cannot be read" not in refused.stderr and "schedule.json" not in refused.stderr, refused.stderr
     reports = merge_results(results, [returned])
     assert reports[0].ok, reports[0].problems
     remote = export_dataframe(results)

@@ -49,6 +49,29 @@ def test_nesting_inside_strings_and_comments_does_not_count():
     assert tomlfile.loads(text)["c"] == [[1], [2]]
 
 
+def test_a_ten_megabyte_design_is_refused_with_bounded_memory(tmp_path):
+    """Fuzz case 3848 (seed 16): a 10 MB line of quotes and brackets took `validate --quick` past 1.5 GB."""
+    line = ('x = """' + "[a\\" * 2_500_000)[:10_000_000]
+    path = _design(tmp_path, DEMO.read_text(encoding="utf-8") + "\n" + line + "\n")
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30)); "
+            "from studyapp.cli import main; sys.exit(main(sys.argv[1:]))")
+    proc = subprocess.run([sys.executable, "-c", code, "validate", "--quick", str(path)], capture_output=True,
+                          text=True, timeout=120, cwd=REPO)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr + proc.stdout, proc.stderr[-2000:]
+    assert f"a TOML file read here has at most {tomlfile.MAX_CHARS:,}" in proc.stdout + proc.stderr
+
+
+def test_strings_of_megabytes_are_skipped_in_linear_memory():
+    """The bracket scan's string pattern matches runs at once (no per-character backtracking state): a
+    3.5 MB string reads within 300 MB of address space (a lazy per-character pattern needed about 400 MB)."""
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (300 << 20, 300 << 20)); "
+            "from studyapp import tomlfile; "
+            "text = 'a = \"\"\"' + 'x[y' * 1_150_000 + '\"\"\"\\nb = [[1]]\\n'; "
+            "assert len(text) < tomlfile.MAX_CHARS; print(tomlfile.loads(text)['b'])")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert proc.returncode == 0 and proc.stdout.strip() == "[[1]]", proc.stderr[-1500:]
+
+
 @pytest.mark.parametrize("spec", ["{stimulus:>99999999}", "{stimulus!r}", "{stimulus.__class__}", "{0}"])
 def test_a_format_specification_in_a_motion_pattern_is_refused(tmp_path, spec):
     text = DEMO.read_text(encoding="utf-8").replace("synced/{stimulus}.bvh", f"synced/{spec}.bvh")
