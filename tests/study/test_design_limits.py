@@ -61,6 +61,20 @@ def test_a_ten_megabyte_design_is_refused_with_bounded_memory(tmp_path):
     assert f"a TOML file read here has at most {tomlfile.MAX_CHARS:,}" in proc.stdout + proc.stderr
 
 
+def test_thousands_of_problems_are_placed_in_one_pass(tmp_path):
+    """Fuzz case 4244 (seed 16): 10,000 copies of a broken condition made `validate --quick` spend more than
+    30 s of CPU finding each problem's line (a scan of every line per problem); now one pass serves all."""
+    block = '\n[[conditions]]\nid = "c"\nmotion = "demo/motion/static/{}.bvh"\n'
+    path = _design(tmp_path, DEMO.read_text(encoding="utf-8") + block * 10_000)
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_CPU, (20, 20)); "
+            "from studyapp.cli import main; sys.exit(main(sys.argv[1:]))")
+    proc = subprocess.run([sys.executable, "-c", code, "validate", "--quick", str(path)], capture_output=True,
+                          text=True, timeout=120, cwd=REPO)
+    assert proc.returncode == 1, proc.stderr[-1500:]
+    first = DEMO.read_text(encoding="utf-8").count("\n") + 4  # the motion line of the first copy
+    assert f"design.toml:{first}: conditions[3].motion: pattern" in proc.stdout, proc.stdout[:1500]
+
+
 def test_strings_of_megabytes_are_skipped_in_linear_memory():
     """The bracket scan's string pattern matches runs at once (no per-character backtracking state): a
     3.5 MB string reads within 300 MB of address space (a lazy per-character pattern needed about 400 MB)."""

@@ -5,6 +5,7 @@ Every problem is collected with the line of its key (tomllib reports no position
 """
 from __future__ import annotations
 
+import bisect
 import difflib
 import re
 from pathlib import Path
@@ -23,6 +24,7 @@ class Collector:
         self.path = str(path)
         self.lines = text.splitlines()
         self.problems: list[Problem] = []
+        self._index: _LineIndex | None = None
 
     def add(self, key: str, message: str, fix: str = "") -> None:
         self.problems.append(Problem(self.path, key, message, fix, self._line_of(key)))
@@ -32,29 +34,30 @@ class Collector:
         parts = re.findall(r"([A-Za-z0-9_\-]+)(?:\[(\d+)\])?", key)
         if not parts:
             return None
+        if self._index is None:  # one pass over the file for all problems (a design may have thousands)
+            self._index = _LineIndex(self.lines)
+        ix = self._index
         start, end = 0, len(self.lines)
         head, idx = parts[0]
         if idx:  # array of tables: find the idx-th "[[head]]"
-            hits = [i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)]
+            hits = ix.arrays.get(head, [])
             if not hits:  # an inline list (practice = [...]): its element sits on the key's line
-                hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
+                hit = ix.assignments.get(head)
                 return None if hit is None else hit + 1
             if len(hits) <= int(idx):
                 return None
             start = hits[int(idx)]
-            nxt = [i for i, ln in enumerate(self.lines) if i > start and re.match(r"^\s*\[\[", ln)]
-            end = nxt[0] if nxt else end
+            end = _after(ix.array_headers, start, end)
             if len(parts) == 1:
                 return start + 1
             rest = parts[1:]
         else:
-            hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*\[\s*{re.escape(head)}\s*\]", ln)), None)
+            hit = ix.tables.get(head)
             if hit is None:
-                hit = next((i for i, ln in enumerate(self.lines) if re.match(rf"^\s*{re.escape(head)}\s*=", ln)), None)
+                hit = ix.assignments.get(head)
             if hit is None:  # a problem with a whole array of tables: point at its first block
-                hit = next((i for i, ln in enumerate(self.lines)
-                            if re.match(rf"^\s*\[\[\s*{re.escape(head)}\s*\]\]", ln)), None)
-                return None if hit is None else hit + 1
+                first = ix.arrays.get(head)
+                return None if not first else first[0] + 1
             if not re.match(r"^\s*\[", self.lines[hit]):
                 return hit + 1
             start = hit
@@ -62,18 +65,54 @@ class Collector:
                 return start + 1
             rest = parts[1:]
             # The table ends at the next header that is not one of its own sub-tables.
-            nxt = [i for i, ln in enumerate(self.lines) if i > start and re.match(r"^\s*\[", ln)
-                   and not re.match(rf"^\s*\[\s*{re.escape(head)}\.", ln)]
-            end = nxt[0] if nxt else end
+            own = re.compile(rf"^\s*\[\s*{re.escape(head)}\.")
+            end = next((i for i in ix.headers[bisect.bisect_right(ix.headers, start):]
+                        if not own.match(self.lines[i])), end)
         found = start
         for name, _ in rest:  # each deeper part is searched for after the line of the one before
+            deeper = re.compile(rf"^\s*\[?\s*[\w.\-\[]*?{re.escape(name)}\s*[=\]]")
             for i in range(found, end):
-                if re.match(rf"^\s*\[?\s*[\w.\-\[]*?{re.escape(name)}\s*[=\]]", self.lines[i]):
+                if deeper.match(self.lines[i]):
                     found = i
                     break
             else:
                 break
         return found + 1
+
+
+class _LineIndex:
+    """Where the headers and keys of a design's text are, found in one pass (0-based line numbers)."""
+
+    def __init__(self, lines: Sequence[str]) -> None:
+        self.arrays: dict[str, list[int]] = {}     # "[[name]]" -> its lines, in order
+        self.tables: dict[str, int] = {}           # "[name]" -> its first line
+        self.assignments: dict[str, int] = {}      # "name = " -> its first line
+        self.headers: list[int] = []               # every line starting with "["
+        self.array_headers: list[int] = []         # every line starting with "[["
+        for i, ln in enumerate(lines):
+            if m := _ARRAY_HEADER.match(ln):
+                self.arrays.setdefault(m.group(1), []).append(i)
+            elif m := _TABLE_HEADER.match(ln):
+                self.tables.setdefault(m.group(1), i)
+            if m := _ASSIGNMENT.match(ln):
+                self.assignments.setdefault(m.group(1), i)
+            if _ANY_HEADER.match(ln):
+                self.headers.append(i)
+                if _ANY_ARRAY.match(ln):
+                    self.array_headers.append(i)
+
+
+_ARRAY_HEADER = re.compile(r"^\s*\[\[\s*([A-Za-z0-9_\-]+)\s*\]\]")
+_TABLE_HEADER = re.compile(r"^\s*\[\s*([A-Za-z0-9_\-]+)\s*\]")
+_ASSIGNMENT = re.compile(r"^\s*([A-Za-z0-9_\-]+)\s*=")
+_ANY_HEADER = re.compile(r"^\s*\[")
+_ANY_ARRAY = re.compile(r"^\s*\[\[")
+
+
+def _after(sorted_lines: list[int], start: int, default: int) -> int:
+    """The first of ``sorted_lines`` after ``start``, else ``default``."""
+    k = bisect.bisect_right(sorted_lines, start)
+    return sorted_lines[k] if k < len(sorted_lines) else default
 
 
 def did_you_mean(word: str, options: Sequence[str]) -> str:
