@@ -31,8 +31,10 @@ import json
 import logging
 import os
 import platform
+import random
 import shutil
 import sqlite3
+import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -394,26 +396,23 @@ class ResultsDB:
         except sqlite3.Error as exc:
             raise sqlite_problem(self.path, exc, "the results database could not be opened") from None
         self._con.row_factory = sqlite3.Row
-        try:
-            self._configure()
-            if exists:
-                self._check_integrity()
-            # A process killed while creating the database can leave a valid SQLite file with no tables
-            # (the schema is one transaction): that is still a new database, not a foreign one.
-            if not (design_hash is not None and self._create_if_empty(design_hash, title or "")):
-                if not self._con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone():
-                    raise InputError(self.path, None, "the results database is empty, and no design was given to "
-                                     "create it")
-                self._check_schema()
-                self._check_rows()
-            row_checksums.install_triggers(self._con)
-            row = self._con.execute("SELECT design_hash, title FROM study WHERE id = 1").fetchone()
-        except (sqlite3.Error, UnicodeDecodeError) as exc:  # a damaged text in SQLite's own tables cannot decode
-            self._con.close()
-            raise sqlite_problem(self.path, exc, "the results database could not be created or opened") from None
-        except BaseException:
-            self._con.close()
-            raise
+        # Some lock conflicts of a brand-new file (switching it to WAL while another process creates it) are
+        # reported at once, without SQLite's busy wait: every step below is safe to repeat, so wait and retry
+        # for as long as a held lock may take, then say it is locked.
+        give_up = time.monotonic() + self.LOCK_TIMEOUT_S
+        while True:
+            try:
+                row = self._open_steps(exists, design_hash, title)
+                break
+            except (sqlite3.Error, UnicodeDecodeError) as exc:  # damaged text in SQLite's own tables cannot decode
+                if isinstance(exc, sqlite3.Error) and _kind(exc) == "busy" and time.monotonic() < give_up:
+                    time.sleep(0.05 + 0.05 * random.random())
+                    continue
+                self._con.close()
+                raise sqlite_problem(self.path, exc, "the results database could not be created or opened") from None
+            except BaseException:
+                self._con.close()
+                raise
         if row is None:
             self._con.close()
             raise InputError(self.path, "table study", "the study record is missing; the file is not a complete "
@@ -438,6 +437,22 @@ class ResultsDB:
         self.on_participant_finished: Any = None
 
     # ------------------------------------------------------------------ opening and checking
+    def _open_steps(self, exists: bool, design_hash: str | None, title: str | None) -> Any:
+        """Configure, check (or create) the database and return its study row; each step may be repeated."""
+        self._configure()
+        if exists:
+            self._check_integrity()
+        # A process killed while creating the database can leave a valid SQLite file with no tables
+        # (the schema is one transaction): that is still a new database, not a foreign one.
+        if not (design_hash is not None and self._create_if_empty(design_hash, title or "")):
+            if not self._con.execute("SELECT 1 FROM sqlite_master LIMIT 1").fetchone():
+                raise InputError(self.path, None, "the results database is empty, and no design was given to "
+                                 "create it")
+            self._check_schema()
+            self._check_rows()
+        row_checksums.install_triggers(self._con)
+        return self._con.execute("SELECT design_hash, title FROM study WHERE id = 1").fetchone()
+
     def _check_header(self) -> None:
         with open(self.path, "rb") as fh:
             head = fh.read(len(_SQLITE_MAGIC))

@@ -71,3 +71,11 @@ def test_an_english_design_needs_no_extra_font(tmp_path):
     from studyapp.study.design.fonts import design_fallback_font
 
     assert design_fallback_font(load_design(_study(tmp_path, ""))) == (None, set())
+
+
+def test_the_characters_taken_on_trust_are_in_the_ui_font():
+    """validate skips loading the UI font for texts made only of these: each must really be in Roboto."""
+    from studyapp.study.design.fonts import SURELY_IN_UI_FONT, charmap, ui_font_path
+
+    have = charmap(str(ui_font_path()))
+    assert have and sorted(c for c in SURELY_IN_UI_FONT if ord(c) not in have) == []

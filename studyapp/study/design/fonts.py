@@ -59,10 +59,20 @@ def needed_chars(texts: list[str]) -> set[str]:
     return {ch for t in texts for ch in t if ch.isprintable() and not ch.isspace()}
 
 
+#: Characters Roboto certainly has (ASCII, Latin-1, Latin Extended-A and common punctuation; a test checks
+#: them against the font): texts made only of these need neither imgui-bundle nor matplotlib loaded, which
+#: keeps ``validate`` of an English design free of GUI and plotting imports.
+SURELY_IN_UI_FONT = frozenset(chr(c) for c in [*range(0x20, 0x7F), *range(0xA0, 0x180), 0x2013, 0x2014, 0x2018,
+                                                0x2019, 0x201C, 0x201D, 0x2026, 0x2022, 0x2212, 0x2264, 0x2265])
+
+
 def missing_from_ui_font(chars: set[str]) -> set[str]:
     """The characters the UI's own font has no glyph for."""
+    rest = {ch for ch in chars if ch not in SURELY_IN_UI_FONT}
+    if not rest:
+        return set()
     have = charmap(str(ui_font_path()))
-    return {ch for ch in chars if ord(ch) not in have}
+    return {ch for ch in rest if ord(ch) not in have}
 
 
 def fallback_font(chars: set[str]) -> Path | None:
