@@ -312,7 +312,8 @@ def _cmd_merge(args: argparse.Namespace) -> int:
     reports = merge_results(args.db, args.files, key_file=args.key, design=args.design,
                             allow_unlisted=args.allow_unlisted)
     for r in reports:
-        print(("already merged: " if r.already else "imported: " if r.ok else "REFUSED: ") + f"{r.file}: {r.message}")
+        # an already-merged file's message says so itself
+        print(("" if r.already else "imported: " if r.ok else "REFUSED: ") + f"{r.file}: {r.message}")
         for problem in r.problems:  # one line per problem: the file, the place in it, what is wrong
             print(f"  {r.file}: {problem}")
     bad = sum(not r.ok for r in reports)

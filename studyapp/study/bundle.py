@@ -952,7 +952,7 @@ def _merge_one(db: Any, design: Any, path: Path, got: _Returned, batch: dict[str
     payload, pid = got.payload, got.pid
     if isinstance(pid, str) and db.participant(pid) is not None:
         if _same_as_stored(db, pid, payload):
-            return MergeReport(path, True, f"participant {pid}: nothing to do", pid, already=True)
+            return MergeReport(path, True, f"participant {pid}: already merged, nothing to do", pid, already=True)
         raise StudyappError(f"participant {pid!r} is already in the database with other answers (two participants "
                             "used the same id, or the file changed since it was merged); it was not imported")
     others: dict[str, list[dict[str, Any]]] = {}

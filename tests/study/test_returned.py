@@ -184,7 +184,7 @@ def test_untouched_file_merges_once_then_already_merged_and_a_copy_under_a_new_i
     assert first.returncode == 0 and f"imported: {good}: participant R01" in first.stdout, first.stdout + first.stderr
     twice = _run("merge", db, good)
     assert twice.returncode == 0, twice.stdout
-    assert f"already merged: {good}: participant R01: nothing to do" in twice.stdout and "REFUSED" not in twice.stdout
+    assert f"{good}: participant R01: already merged, nothing to do" in twice.stdout and "REFUSED" not in twice.stdout
 
     # the whole file under another roster id: another row (schedule) and R01's answers (copy)
     r02 = _edited(good, tmp_path / "results-R02.zip", _rename("R02"))
