@@ -148,6 +148,42 @@ def test_three_rigs_validate_run_render_and_record_the_trial_duration(study: Pat
     assert df["trial_duration_s"].tolist() == [TRIAL_S] * len(df) and len(df) == 2 * 3 * 3
 
 
+def test_render_shows_the_row_the_results_database_gave_the_participant(study: Path, tmp_path: Path) -> None:
+    """Rows are given in order of arrival, so ``render --participant`` must read the participant's row from the
+    results database: derived from the id it showed another clip order than the participant saw."""
+    from studyapp.study.design import load_design
+    from studyapp.study.schedule import default_row
+
+    design = study / "design.toml"
+    db = tmp_path / "r.sqlite"
+    loaded = load_design(design)
+    pids = [f"P{k:02d}" for k in range(1, 5)]
+    for pid in pids:
+        done = run("run", design, "--participant", pid, "--no-render", "--bot", "ordered", "--results", db)
+        assert done.returncode == 0, done.stdout + done.stderr
+    rows = dict(zip(pids, range(len(pids))))  # first come, first row
+    pid = next(p for p in pids if default_row(loaded, p) != rows[p])
+    cwd_db = design.with_name("design.results.sqlite")
+    assert not cwd_db.exists()
+
+    def png(name: str, *extra) -> bytes:
+        out = tmp_path / name
+        done = run("render", design, "--participant", pid, "--trial", "0", "--time", "0.6", "--out", out,
+                   "--size", "240x135", *extra)
+        assert done.returncode == 0, done.stdout + done.stderr
+        return out.read_bytes()
+
+    recorded = png("db.png", "--results", db)
+    assert recorded == png("row.png", "--row", rows[pid])  # no database: the row asked for
+    assert recorded != png("id.png")  # no database, no row: the id's row, which is not the one it got
+    wrong = run("render", design, "--participant", pid, "--trial", "0", "--time", "0.6", "--out",
+                tmp_path / "x.png", "--results", db, "--row", (rows[pid] + 1) % 6)
+    assert wrong.returncode == 2 and f"follows row {rows[pid]}" in wrong.stderr
+    missing = run("render", design, "--participant", "Z99", "--trial", "0", "--time", "0.6", "--out",
+                  tmp_path / "x.png", "--results", db)
+    assert missing.returncode == 2 and "no participant 'Z99'" in missing.stderr
+
+
 def test_scene_per_slot_maps_and_timeline(study: Path) -> None:
     """The scene a participant gets: each slot retargeted with its own condition's map, 1.2 s long, the
     short CMU motion playing to its own 1.3 s (not frozen) and the 10 s one cut."""

@@ -7,8 +7,12 @@ import os
 import sys
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from studyapp.errors import InputError, StudyappError
+
+if TYPE_CHECKING:
+    from studyapp.study.design import Design
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +96,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--out", required=True, help="FRAME.png (with --time) or CLIP.mp4")
     r.add_argument("--size", type=_size, default=(1280, 720), help="image size, e.g. 1280x720")
     r.add_argument("--fps", type=int, default=30, help="video frame rate")
+    r.add_argument("--results", type=Path, help="results database holding the participant's Latin-square row "
+                   "(default: <design>.results.sqlite next to the design)")
+    r.add_argument("--row", type=int, help="Latin-square row of a participant not (yet) in the results database "
+                   "(default: the row derived from the id, as without a database)")
     r.set_defaults(func=cmd_render)
 
 
@@ -219,6 +227,30 @@ def _refresh_hz(win) -> float | None:
     return float(mode.refresh_rate) if mode and mode.refresh_rate else None
 
 
+def _participant_row(args: argparse.Namespace, design: "Design") -> int | None:
+    """The row the participant follows: the one the results database gave them (rows are assigned in order of
+    arrival, so the id alone does not tell it), else ``--row``, else None (the row derived from the id)."""
+    from studyapp.cli.session import default_results_path
+    from studyapp.study.storage import ResultsDB
+
+    results = args.results or default_results_path(Path(args.design))
+    record = None
+    if results.is_file() and results.stat().st_size > 0:
+        db = ResultsDB(results, create=False)
+        try:
+            record = db.participant(args.participant)
+        finally:
+            db.close()
+    if record is not None:
+        if args.row is not None and args.row != record.latin_row:
+            raise InputError(results, f"participant {args.participant}", f"follows row {record.latin_row}, not "
+                             f"--row {args.row}; drop --row")
+        return int(record.latin_row)
+    if args.results is not None and args.row is None:
+        raise InputError(results, None, f"no participant {args.participant!r} in this results database")
+    return args.row
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from studyapp.study.design import load_design
     from studyapp.study.schedule import participant_schedule
@@ -227,7 +259,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from studyapp.render.video import render_still, render_video
 
     design = load_design(args.design)
-    plans = participant_schedule(design, args.participant)
+    plans = participant_schedule(design, args.participant, row=_participant_row(args, design))
     match = [p for p in plans if p.trial_index == args.trial]
     if not match:
         raise InputError(args.design, f"--trial {args.trial}",
