@@ -292,8 +292,8 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
     if info.small_seed:
-        print("Note: the design's seed is small. The schedule is a function of the seed, so someone holding the "
-              "bundle could try every small seed to tell the models apart; for a remote study set `seed` to a large "
+        print("Note: the design's seed is small. With random ordering or slots the schedule is drawn from the seed, so "
+              "someone holding the bundle could try every small seed to tell the models apart; set `seed` to a large "
               "random number (python -c \"import secrets; print(secrets.randbits(62))\") before the first participant.")
     return 0
 

@@ -146,7 +146,7 @@ def make_bundle(
     """
     from studyapp.study.design import conditions_named_in, load_design
     from studyapp.study.schedule import n_rows
-    from studyapp.study.shipped import SAFE_SEED, converter, ship_design
+    from studyapp.study.shipped import SAFE_SEED, converter, seed_matters, ship_design
     from studyapp.study.storage import ResultsDB
 
     design_path = Path(design_path)
@@ -239,7 +239,7 @@ def make_bundle(
     return BundleInfo(path=output, key_path=key_path, bundle_hash=bundle_hash, n_files=len(entries),
                       size_bytes=output.stat().st_size, roster=roster,
                       n_media=sum(n.startswith("media/") for n in entries), key=key,
-                      small_seed=design.seed < SAFE_SEED)
+                      small_seed=seed_matters(design) and design.seed < SAFE_SEED)
 
 
 def _entry(name: str) -> zipfile.ZipInfo:

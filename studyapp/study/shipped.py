@@ -32,12 +32,13 @@ maps it back (kept by the experimenter):
   ``practice`` or stimulus order (stimuli are listed by opaque id); attention checks name their shipped
   trial and, for a ``known-worst`` check, that trial's token of the known-worst condition.
 
-What this does not hide, stated plainly: the real schedule is a function of the lab design's ``seed``, the
-participant id and the row (the roster in the manifest). Someone holding the bundle, studyapp's source and
-the seed could recompute which design position sits in which slot; the shipped design leaves the seed out,
-but a small seed can be guessed by trying them all and checking the guesses against the files that several
-participants' trials share. For a remote study, give the design a large random ``seed`` (``python -c "import
-secrets; print(secrets.randbits(62))"``) before its first participant; ``bundle`` says so when it is small.
+What this does not hide, stated plainly: which design position sits in which slot is public arithmetic of
+the row and the trial's place (:mod:`studyapp.study.ordering`), and the row is in ``schedule.json``; the seed
+enters only with ``random`` ordering or slot assignment. Someone who reads studyapp's source and that file can
+group the figures of one model across their own trials (not name the model). A secret row would not help:
+motion files shared by several participants' trials give it away once two of them are compared. With random
+ordering or slots a small seed can be found by trying every one; ``bundle`` says so then (see
+:func:`seed_matters`).
 A ``known-worst`` attention check tells which file of that one check clip is the known-worst condition, as
 the session must score it.
 """
@@ -58,6 +59,12 @@ _DROPPED = ("conditions", "stimuli", "practice", "attention_checks", "seed", "or
             "slot_assignment")
 #: A seed below this can be found by trying every one (see the module notes).
 SAFE_SEED = 2 ** 40
+
+
+def seed_matters(design: Design) -> bool:
+    """Whether the design's seed enters the schedule: only ``random`` ordering or slot assignment draw from it
+    (balanced ones are arithmetic of the row, see :mod:`studyapp.study.ordering`)."""
+    return design.ordering == "random" or design.slot_assignment == "random"
 
 
 @dataclass

@@ -65,6 +65,8 @@ def test_key_is_kept_in_the_database_and_exported_only_on_request(tmp_path: Path
 
 def test_key_command_and_merge_with_the_exported_key(tmp_path: Path) -> None:
     design_path = write_synthetic_study(tmp_path / "study", n_stimuli=2, practice=False)
+    with design_path.open("a") as fh:  # the seed matters only to random draws
+        fh.write('\n[slots]\nassignment = "random"\n')
     results = tmp_path / "lab.sqlite"
     out = subprocess.run([*CLI, "bundle", str(design_path), "-o", str(tmp_path / "s.zip"), "--participants", "1",
                           "--results", str(results)], capture_output=True, text=True, timeout=300)
@@ -82,10 +84,42 @@ def test_key_command_and_merge_with_the_exported_key(tmp_path: Path) -> None:
 
 
 def test_bundle_says_when_the_seed_is_small_enough_to_guess(tmp_path: Path) -> None:
-    small = write_synthetic_study(tmp_path / "small", n_stimuli=2, practice=False, seed=2026)
-    large = write_synthetic_study(tmp_path / "large", n_stimuli=2, practice=False, seed=2 ** 61 + 12345)
-    assert make_bundle(small, tmp_path / "a.zip", participants=1, results=tmp_path / "a.sqlite").small_seed
-    assert not make_bundle(large, tmp_path / "b.zip", participants=1, results=tmp_path / "b.sqlite").small_seed
+    """Only random ordering or slots draw from the seed; balanced ones are arithmetic of the row, which the
+    bundle ships (the README says what that allows), so a small seed is noted only with random draws."""
+    def study(name: str, seed: int, random_slots: bool) -> Path:
+        path = write_synthetic_study(tmp_path / name, n_stimuli=2, practice=False, seed=seed)
+        if random_slots:
+            with path.open("a") as fh:
+                fh.write('\n[slots]\nassignment = "random"\n')
+        return path
+
+    def small(path: Path) -> bool:
+        return make_bundle(path, path.with_suffix(".zip"), participants=1,
+                           results=path.with_suffix(".sqlite")).small_seed
+
+    assert small(study("small", 2026, random_slots=True))
+    assert not small(study("large", 2 ** 61 + 12345, random_slots=True))
+    assert not small(study("balanced", 2026, random_slots=False))
+
+
+def test_balanced_slots_follow_from_the_shipped_row_alone(tmp_path: Path) -> None:
+    """The limit the README states: with balanced ordering and slots, the design position in each slot of a
+    remote participant's trials is public arithmetic of the row in schedule.json, whatever the seed."""
+    import zipfile
+
+    from studyapp.study.design import load_design
+    from studyapp.study.schedule import participant_schedule
+
+    path = write_synthetic_study(tmp_path / "s", n_stimuli=3, practice=False, seed=2 ** 61 + 5)
+    info = make_bundle(path, tmp_path / "s.zip", participants=2, results=tmp_path / "s.sqlite")
+    with zipfile.ZipFile(info.path) as z:
+        shipped = json.loads(next(z.read(n) for n in z.namelist() if n.endswith("schedule.json")))
+    design = load_design(path)
+    other = load_design(write_synthetic_study(tmp_path / "t", n_stimuli=3, practice=False, seed=3))
+    for pid, entry in shipped.items() if "R01" in shipped else shipped["participants"].items():
+        row = entry["row"]
+        real = [p.slots for p in participant_schedule(design, pid, row)]
+        assert [p.slots for p in participant_schedule(other, pid, row)] == real  # the seed plays no part
 
 
 def test_merge_on_another_machine_with_the_exported_key(tmp_path: Path) -> None:
