@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from fixtures.ui_steps import until_screen
 from studyapp.bots.ui_driver import UIBot
 
 pytestmark = pytest.mark.gl
@@ -39,18 +40,7 @@ def _gesture_study(tmp_path: Path, framing: str | None = None):
 
 
 def _until(bot: UIBot, screen: str, limit: int = 200) -> None:
-    """Run the bot (its own plan: consent, instructions, play ...) until ``screen`` is on screen, stable."""
-    for _ in range(limit):
-        bot.frame()
-        key = bot.app.screen_key()
-        if key == screen and bot._prev_key == key:
-            return
-        bot._prev_key = key
-        if bot.steps:
-            bot.steps.popleft()()
-        else:
-            bot._plan(key)
-    raise AssertionError(f"never reached {screen!r} (last: {bot.app.screen_key()!r})")
+    until_screen(bot, screen, limit)
 
 
 def _hand_joints(avatar, side: str) -> list[int]:

@@ -16,23 +16,14 @@ import sqlite3
 import numpy as np
 import pytest
 
+from fixtures.ui_steps import until_screen
 from studyapp.bots.ui_driver import UIBot
 
 pytestmark = pytest.mark.gl
 
 
 def _until(bot: UIBot, screen: str, limit: int = 300) -> None:
-    for _ in range(limit):
-        bot.frame()
-        key = bot.app.screen_key()
-        if key == screen and bot._prev_key == key:
-            return
-        bot._prev_key = key
-        if bot.steps:
-            bot.steps.popleft()()
-        else:
-            bot._plan(key)
-    raise AssertionError(f"never reached {screen!r} (last: {bot.app.screen_key()!r})")
+    until_screen(bot, screen, limit)
 
 
 def _study(tmp_path, extra: str = "", instructions: str | None = None):
