@@ -214,7 +214,7 @@ class OrderFrames:
     """
 
     def __init__(self, renderer: Renderer, scene, orders: Sequence[Sequence[int]], target) -> None:
-        self.renderer = renderer
+        self.renderer = renderer  # ``target`` only gives the size: the pictures are read from the renderer
         self.orders = [tuple(int(k) for k in o) for o in orders]
         n = scene.n_slots
         for o in self.orders:
@@ -231,10 +231,10 @@ class OrderFrames:
         self.buffers = [np.empty((h, w, 4), np.uint8) for _ in self.drawn]
 
     def draw(self, t: float) -> None:
-        fbo = self.target.fbo
         for scene, buf in zip(self.drawn, self.buffers):
-            self.renderer.draw_trial(scene, t, fbo, (0, 0, *self.target.size))
-            fbo.read_into(buf, components=4, alignment=1)
+            # the renderer's finished picture, read where it lies (what draw_trial would copy into a target)
+            tex = self.renderer.render_texture(scene, t, self.target.size)
+            tex.read_into(buf, alignment=1)
 
     def compose(self, j: int, out: np.ndarray) -> None:
         if not self.rotated:
