@@ -1,0 +1,225 @@
+"""The MOTION block of a BVH file: lines of numbers -> one ``(frames, channels)`` array, in bounded memory.
+
+The block is read in pieces of whole lines (:data:`CHUNK_BYTES`, a few MB) and each piece is parsed by
+numpy's C text reader (:func:`numpy.loadtxt`), which converts every number exactly as Python's
+``float()`` does (correctly rounded) and refuses a line whose count of values differs from the first's.
+Each piece's values are copied into one array allocated up front, so reading never holds the whole text,
+nor a Python string of it, nor a second copy of the numbers: an hour of 120 fps motion costs its array plus
+a few pieces. No pandas (a second's import on a participant's first trial).
+
+Checks, each an :class:`~studyapp.errors.InputError` naming the file line:
+
+* a line is at most :func:`line_limit` characters (64 per channel plus 1,024): a file whose line breaks
+  were lost is refused before any parser sees it;
+* every non-blank line has exactly as many values as the hierarchy declares channels; every value is a
+  finite number. A piece that fails either check is read again line by line (:func:`slow_frames`), which
+  names the first bad line; that pass also accepts a number whose exponent's last digit a writer cut off
+  (``1.5e+`` reads as ``1.5``).
+* the header's ``Frames:`` only sizes the first allocation, and only when the bytes left in the file could
+  hold that many lines; the data lines decide the count (the array grows, or is trimmed, to fit them).
+"""
+from __future__ import annotations
+
+import io
+import math
+import re
+import warnings
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+from studyapp.errors import InputError
+
+__all__ = ["CHUNK_BYTES", "line_limit", "first_long_line", "parse_frames", "slow_frames"]
+
+#: Bytes of frame text parsed at a time (whole lines; a piece grows to hold at least two of the longest lines).
+CHUNK_BYTES = 4 << 20
+#: Characters allowed per channel value on a frame line ("-1.2345678901234567e+308 " is 25).
+CHARS_PER_CHANNEL = 64
+_DANGLING_EXP = re.compile(r"^([-+]?(?:\d+\.?\d*|\.\d+))[eE][-+]?$")
+_NON_SPACE = re.compile(rb"\S")
+
+Reader = Callable[[int], bytes]
+
+
+def line_limit(n_channels: int) -> int:
+    """Longest frame line accepted for ``n_channels`` values."""
+    return n_channels * CHARS_PER_CHANNEL + 1024
+
+
+def first_long_line(blob: bytes | memoryview, limit: int) -> tuple[int, int] | None:
+    """(0-based index, length) of the first line of ``blob`` longer than ``limit`` bytes, or ``None``.
+
+    Scans 16 MB at a time with numpy, so a large block costs a few MB and a fraction of a second.
+    """
+    if len(blob) <= limit:
+        return None
+    arr = np.frombuffer(blob, dtype=np.uint8)
+    last_newline = -1
+    lines_before = 0
+    step = 1 << 24
+    for a in range(0, arr.size, step):
+        newlines = np.flatnonzero(arr[a : a + step] == 10) + a
+        if newlines.size == 0:
+            continue
+        lengths = np.diff(newlines, prepend=last_newline) - 1
+        over = np.flatnonzero(lengths > limit)
+        if over.size:
+            return lines_before + int(over[0]), int(lengths[over[0]])
+        lines_before += newlines.size
+        last_newline = int(newlines[-1])
+    tail = arr.size - last_newline - 1
+    return (lines_before, tail) if tail > limit else None
+
+
+def _pieces(first: bytes, read: Reader, chunk: int) -> Iterator[bytes]:
+    """The text ``first`` + whatever ``read`` returns, cut after line ends into pieces of about ``chunk``
+    bytes (the last piece may lack its line end; a piece with no line end at all is one overlong line)."""
+    buf = first
+    eof = False
+    while True:
+        while not eof and len(buf) < chunk:
+            more = read(chunk)
+            if more:
+                buf += more
+            else:
+                eof = True
+        if eof:
+            if buf:
+                yield buf
+            return
+        cut = buf.rfind(b"\n") + 1
+        if cut == 0:
+            yield buf  # one line longer than a piece: the caller's length check reports it
+            return
+        yield buf[:cut]
+        buf = buf[cut:]
+
+
+def _rest_of_line(read: Reader, chunk: int) -> int:
+    """Bytes ``read`` gives before its next line end (or its end), read and dropped ``chunk`` at a time."""
+    extra = 0
+    while more := read(chunk):
+        end = more.find(b"\n")
+        if end >= 0:
+            return extra + end
+        extra += len(more)
+    return extra
+
+
+def _decode(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _fast_piece(piece: bytes, n_channels: int) -> np.ndarray | None:
+    """``(n, n_channels)`` values of a piece of whole lines, ``None`` when anything looks wrong."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "input contained no data" for blank pieces: shape says it
+            values = np.loadtxt(io.BytesIO(piece), dtype=np.float64, comments=None, ndmin=2, encoding="latin-1")
+    except ValueError:
+        return None
+    if values.shape[1] != n_channels or not np.isfinite(values).all():
+        return None
+    return values
+
+
+def slow_frames(body: list[str], start: int, n_channels: int, path: str, first_frame: int = 0,
+                last: bool = True) -> np.ndarray:
+    """Line-by-line parse of frame lines ``body`` (the first is file line ``start + 1`` and frame
+    ``first_frame + 1``), raising an :class:`InputError` naming the first bad line; ``last`` says the
+    lines end the file (a short last line is then called truncated)."""
+    rows = []
+    nonempty = [(i, ln) for i, ln in enumerate(body) if ln.strip()]
+    for k, (i, ln) in enumerate(nonempty):
+        lineno = start + i + 1
+        toks = ln.split()
+        if len(toks) != n_channels:
+            hint = " (the file looks truncated)" if last and k == len(nonempty) - 1 and len(toks) < n_channels else ""
+            raise InputError(
+                path, f"line {lineno}",
+                f"frame {first_frame + k + 1} has {len(toks)} values but the hierarchy declares {n_channels} channels{hint}",
+            )
+        vals = []
+        for col, tok in enumerate(toks):
+            try:
+                v = float(tok)
+            except ValueError:
+                m = _DANGLING_EXP.match(tok)
+                if not m:
+                    raise InputError(path, f"line {lineno}", f"value {col + 1} is not a number: {tok[:40]!r}") from None
+                # a writer cut the exponent's last digit ("1.5e+"): the mantissa is the best reading
+                v = float(m.group(1))
+            if not math.isfinite(v):
+                raise InputError(path, f"line {lineno}", f"value {col + 1} is {tok}; channel values must be finite")
+            vals.append(v)
+        rows.append(vals)
+    return np.array(rows, dtype=np.float64).reshape(len(rows), n_channels)
+
+
+def _first_capacity(header_frames: int | None, first_piece: bytes, first_rows: int, bytes_left: int,
+                    n_channels: int) -> int:
+    """Rows to allocate: the header's claim when the file's size allows it, else an estimate from the first
+    piece's bytes per line (a line of ``C`` values takes at least ``2 C`` bytes, which bounds any claim)."""
+    most = first_rows + bytes_left // (2 * n_channels) + 1
+    if header_frames is not None and first_rows <= header_frames <= most:
+        return header_frames
+    if first_rows == 0:
+        return 0
+    per_line = max(len(first_piece) / first_rows, 2 * n_channels)
+    return min(most, first_rows + int(bytes_left / per_line * 1.05) + 1)
+
+
+def parse_frames(first: bytes, read: Reader, bytes_left: int, start: int, n_channels: int, path: str,
+                 header_frames: int | None = None, dtype: type = np.float64) -> np.ndarray:
+    """Frame values ``(F, n_channels)`` of a MOTION block whose first line is file line ``start + 1``.
+
+    ``first`` is the block's text already read, ``read(n)`` returns up to ``n`` more bytes (``b""`` at the
+    end) and ``bytes_left`` says how many it will return in all (the file's size minus what was read: it
+    bounds the rows allocated). ``dtype`` is the array's type: float64 keeps every value exactly as
+    written; float32 halves the memory (each value is the float64 one rounded to float32).
+    """
+    limit = line_limit(n_channels)
+    out = np.empty((0, n_channels), dtype=dtype)
+    n = 0
+    line = start
+    pieces = _pieces(first, read, max(CHUNK_BYTES, 2 * limit))
+    piece = next(pieces, b"")
+    consumed = 0
+    while piece:
+        nxt = next(pieces, b"")
+        too_long = first_long_line(piece, limit)
+        if too_long is not None:
+            at, length = too_long
+            if not nxt and at == piece.count(b"\n"):
+                length += _rest_of_line(read, CHUNK_BYTES)  # the message gives the whole line's length
+            raise InputError(path, f"line {line + at + 1}",
+                             f"frame line is {length:,} characters long; {n_channels} channels take at most {limit:,} "
+                             "(are the line breaks missing?)")
+        if _NON_SPACE.search(piece):
+            if n_channels == 0:
+                raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
+            values = _fast_piece(piece, n_channels)
+            if values is None:
+                values = slow_frames(_decode(piece).splitlines(), line, n_channels, path, n, last=not nxt)
+            consumed += len(piece)
+            if n == 0 and out.shape[0] == 0:
+                left = max(len(first) + bytes_left - consumed, 0)
+                out = np.empty((_first_capacity(header_frames, piece, len(values), left, n_channels), n_channels), dtype)
+            if n + len(values) > out.shape[0]:
+                grown = np.empty((max(n + len(values), out.shape[0] + out.shape[0] // 2), n_channels), dtype)
+                grown[:n] = out[:n]
+                out = grown
+            out[n : n + len(values)] = values
+            n += len(values)
+        else:
+            consumed += len(piece)
+        line += piece.count(b"\n")
+        piece = nxt
+    if n == out.shape[0]:
+        return out
+    # trimmed by a copy when a real share would be wasted (a header claiming far more frames than sent)
+    return out[:n].copy() if n < out.shape[0] * 7 // 8 else out[:n]
