@@ -249,10 +249,24 @@ def parse_bvh_bytes(raw: bytes, path: str = "<bytes>", dtype: type = np.float64)
     return _parse(raw, lambda n: b"", 0, path, dtype)
 
 
+def _chain(first: memoryview, read: Callable[[int], bytes]) -> Callable[[int], bytes]:
+    """A ``read(n)`` that returns ``first`` (in copies of at most ``n`` bytes), then what ``read`` returns."""
+    pos = 0
+
+    def chained(n: int) -> bytes:
+        nonlocal pos
+        if pos < len(first):
+            pos += n
+            return bytes(first[pos - n : pos])
+        return read(n)
+
+    return chained
+
+
 def _parse(raw: bytes, read: Callable[[int], bytes], bytes_left: int, path: str, dtype: type) -> BvhData:
     """Parse a file whose first bytes are ``raw`` (the whole header, or the whole file) and whose remaining
     ``bytes_left`` bytes ``read(n)`` returns."""
-    head, data = raw, b""
+    data = b""
     ft = _frame_time_line(raw)
     too_long = first_long_line(raw[: ft.end()] if ft is not None else raw, MAX_HEADER_LINE)
     if too_long is not None:
@@ -262,8 +276,9 @@ def _parse(raw: bytes, read: Callable[[int], bytes], bytes_left: int, path: str,
     if ft is not None:
         start = ft.end()
         start += 2 if raw.startswith(b"\r\n", start) else 1 if raw.startswith((b"\n", b"\r"), start) else 0
-        head, data = raw[: ft.end()], raw[start:]
+        head = raw[: ft.end()]
         lines = _decode(head).splitlines()
+        read, bytes_left = _chain(memoryview(raw)[start:], read), len(raw) - start + bytes_left
     else:
         # no well-formed header: the line-based parser below reports what is missing where
         rest = read(bytes_left) if bytes_left else b""

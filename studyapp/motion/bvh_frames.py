@@ -74,26 +74,37 @@ def first_long_line(blob: bytes | memoryview, limit: int) -> tuple[int, int] | N
 
 def _pieces(first: bytes, read: Reader, chunk: int) -> Iterator[bytes]:
     """The text ``first`` + whatever ``read`` returns, cut after line ends into pieces of about ``chunk``
-    bytes (the last piece may lack its line end; a piece with no line end at all is one overlong line)."""
-    buf = first
-    eof = False
+    bytes (the last piece may lack its line end; a piece over ``chunk`` bytes with no line end at all is
+    one overlong line, and the last piece given)."""
+    carry = first
     while True:
-        while not eof and len(buf) < chunk:
-            more = read(chunk)
-            if more:
-                buf += more
-            else:
-                eof = True
-        if eof:
-            if buf:
-                yield buf
+        more = read(chunk)
+        if not more:
+            if carry:
+                yield carry
             return
-        cut = buf.rfind(b"\n") + 1
+        cut = more.rfind(b"\n") + 1
         if cut == 0:
-            yield buf  # one line longer than a piece: the caller's length check reports it
-            return
-        yield buf[:cut]
-        buf = buf[cut:]
+            carry += more
+            if len(carry) > chunk:
+                yield carry  # the caller's length check reports it
+                return
+            continue
+        # one copy per piece: a fresh bytes object that io.BytesIO then shares instead of copying
+        yield b"".join((carry, memoryview(more)[:cut])) if carry else more[:cut] if cut < len(more) else more
+        carry = more[cut:]
+
+
+def _has_long_line(piece: bytes, limit: int) -> bool:
+    """Whether a line of ``piece`` is longer than ``limit`` bytes: one backward search per ``limit`` bytes
+    (every line inside a window of ``limit + 1`` bytes is short enough), not one pass per byte."""
+    pos, end = 0, len(piece)
+    while end - pos > limit:
+        last = piece.rfind(b"\n", pos, pos + limit + 1)
+        if last < 0:
+            return True
+        pos = last + 1
+    return False
 
 
 def _rest_of_line(read: Reader, chunk: int) -> int:
@@ -191,7 +202,7 @@ def parse_frames(first: bytes, read: Reader, bytes_left: int, start: int, n_chan
     consumed = 0
     while piece:
         nxt = next(pieces, b"")
-        too_long = first_long_line(piece, limit)
+        too_long = first_long_line(piece, limit) if _has_long_line(piece, limit) else None
         if too_long is not None:
             at, length = too_long
             if not nxt and at == piece.count(b"\n"):
