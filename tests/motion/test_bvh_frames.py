@@ -147,3 +147,16 @@ def test_a_line_without_its_break_is_measured_whole(tmp_path, small_pieces):
     assert err.value.where == f"line {HEADER.count(chr(10)) + 3 + 5}"
     assert re.fullmatch(rf"frame line is {length:,} characters long; {N_CH} channels take at most {limit:,} "
                         r"\(are the line breaks missing\?\)", err.value.problem)
+
+
+def test_values_whose_sum_overflows_are_still_read_exactly(tmp_path):
+    """The fast pass checks finiteness by one sum; a piece of huge finite values overflows it and is read by the
+    careful pass, with the same numbers."""
+    rows, expected = _rows(4)
+    toks = rows[2].split()
+    toks[:3] = ["1.7e308", "1.7e308", "-1.7976931348623157e308"]
+    rows[2] = " ".join(toks) + "\n"
+    expected[2, :3] = [1.7e308, 1.7e308, -1.7976931348623157e308]
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    assert np.array_equal(read_bvh_channels(p).channels, expected)
