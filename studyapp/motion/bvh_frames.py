@@ -135,7 +135,9 @@ def _fast_piece(piece: bytes, n_channels: int) -> np.ndarray | None:
         return None
     # a finite sum means every value is finite (an inf or NaN makes the sum one); a sum that overflows only
     # sends the piece to the careful pass, which reads it right
-    if values.shape[1] != n_channels or not math.isfinite(float(values.sum())):
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = float(values.sum())
+    if values.shape[1] != n_channels or not math.isfinite(total):
         return None
     return values
 
