@@ -212,7 +212,11 @@ def read_bvh_channels(path: str | Path, dtype: type = np.float64) -> BvhData:
                 if not more:
                     break
                 head += more
-            return _parse(head, fh.read, max(size - len(head), 0), path, dtype)
+            def data_from(offset: int) -> Callable[[int], bytes]:
+                fh.seek(offset)
+                return fh.read
+
+            return _parse(head, data_from, size, path, dtype)
         except OSError as exc:
             raise InputError(path, None, f"cannot read file: {exc.strerror or exc}") from None
 
@@ -246,27 +250,25 @@ def parse_bvh_bytes(raw: bytes, path: str = "<bytes>", dtype: type = np.float64)
     Only the header (up to the ``Frame Time`` line) is decoded and split into lines; the frame data
     goes to the frame parser in pieces, which is what keeps large files fast and small in memory.
     """
-    return _parse(raw, lambda n: b"", 0, path, dtype)
+    return _parse(raw, lambda offset: _reader(memoryview(raw)[offset:]), len(raw), path, dtype)
 
 
-def _chain(first: memoryview, read: Callable[[int], bytes]) -> Callable[[int], bytes]:
-    """A ``read(n)`` that returns ``first`` (in copies of at most ``n`` bytes), then what ``read`` returns."""
+def _reader(blob: memoryview) -> Callable[[int], bytes]:
+    """A ``read(n)`` over ``blob``: copies of at most ``n`` bytes, then ``b""``."""
     pos = 0
 
-    def chained(n: int) -> bytes:
+    def read(n: int) -> bytes:
         nonlocal pos
-        if pos < len(first):
-            pos += n
-            return bytes(first[pos - n : pos])
-        return read(n)
+        pos += n
+        return bytes(blob[pos - n : pos])
 
-    return chained
+    return read
 
 
-def _parse(raw: bytes, read: Callable[[int], bytes], bytes_left: int, path: str, dtype: type) -> BvhData:
-    """Parse a file whose first bytes are ``raw`` (the whole header, or the whole file) and whose remaining
-    ``bytes_left`` bytes ``read(n)`` returns."""
-    data = b""
+def _parse(raw: bytes, data_from: Callable[[int], Callable[[int], bytes]], size: int, path: str,
+           dtype: type) -> BvhData:
+    """Parse a file of ``size`` bytes whose first bytes are ``raw`` (the whole header, or the whole file);
+    ``data_from(offset)`` reads the file from that byte on."""
     ft = _frame_time_line(raw)
     too_long = first_long_line(raw[: ft.end()] if ft is not None else raw, MAX_HEADER_LINE)
     if too_long is not None:
@@ -278,18 +280,18 @@ def _parse(raw: bytes, read: Callable[[int], bytes], bytes_left: int, path: str,
         start += 2 if raw.startswith(b"\r\n", start) else 1 if raw.startswith((b"\n", b"\r"), start) else 0
         head = raw[: ft.end()]
         lines = _decode(head).splitlines()
-        read, bytes_left = _chain(memoryview(raw)[start:], read), len(raw) - start + bytes_left
+        open_data, data_size = (lambda: data_from(start)), size - start
     else:
         # no well-formed header: the line-based parser below reports what is missing where
-        rest = read(bytes_left) if bytes_left else b""
+        rest = data_from(len(raw))(size - len(raw)) if size > len(raw) else b""
         lines = _decode(raw + rest).splitlines()
-        read, bytes_left = (lambda n: b""), 0
     motion_line, skeleton = _parse_hierarchy(lines, path)
     frames, frame_time, data_start = _parse_motion_header(lines, motion_line, path)
     n_channels = sum(len(c) for c in skeleton.channels)
     if ft is None:
-        data = "\n".join(lines[data_start:]).encode("utf-8")
-    channels = parse_frames(data, read, bytes_left, data_start, n_channels, path, frames, dtype)
+        data = memoryview("\n".join(lines[data_start:]).encode("utf-8"))
+        open_data, data_size = (lambda: _reader(data)), len(data)
+    channels = parse_frames(open_data, data_size, data_start, n_channels, path, frames, dtype)
     notes: list[str] = []
     if frames is not None and frames != channels.shape[0]:
         notes.append(

@@ -30,7 +30,7 @@ import numpy as np
 
 from studyapp.errors import InputError
 
-__all__ = ["CHUNK_BYTES", "line_limit", "first_long_line", "parse_frames", "slow_frames"]
+__all__ = ["CHUNK_BYTES", "STREAM_MAX_BYTES", "line_limit", "first_long_line", "parse_frames", "slow_frames"]
 
 #: Bytes of frame text parsed at a time (whole lines; a piece grows to hold at least two of the longest lines).
 CHUNK_BYTES = 4 << 20
@@ -40,6 +40,37 @@ _DANGLING_EXP = re.compile(r"^([-+]?(?:\d+\.?\d*|\.\d+))[eE][-+]?$")
 _NON_SPACE = re.compile(rb"\S")
 
 Reader = Callable[[int], bytes]
+
+#: Blocks of frame text up to this size are parsed as one stream (faster: no Python object per line); the
+#: reader's array then grows as it goes, so longer blocks (an hour of motion is ~1 GB) go piece by piece
+#: into one array allocated once.
+STREAM_MAX_BYTES = 64 << 20
+
+# numpy's C text reader in file mode, which np.loadtxt uses for a path but not for an in-memory stream;
+# private, so it is optional: without it every block goes piece by piece through np.loadtxt.
+try:
+    from numpy._core._multiarray_umath import _load_from_filelike as _C_READER
+except ImportError:  # pragma: no cover - other numpy layouts
+    _C_READER = None
+
+
+class _LineTooLong(Exception):
+    """A line over the limit reached the stream: the piece-by-piece pass reports it."""
+
+
+class _CheckedText:
+    """A file-like ``read`` over the block that hands out whole-line pieces, each checked for overlong
+    lines before the C reader sees it."""
+
+    def __init__(self, read: Reader, limit: int) -> None:
+        self._pieces = _pieces(b"", read, max(CHUNK_BYTES, 2 * limit))
+        self._limit = limit
+
+    def read(self, size: int = -1) -> bytes:
+        piece = next(self._pieces, b"")
+        if _has_long_line(piece, self._limit):
+            raise _LineTooLong
+        return piece
 
 
 def line_limit(n_channels: int) -> int:
@@ -188,15 +219,49 @@ def _first_capacity(header_frames: int | None, first_piece: bytes, first_rows: i
     return min(most, first_rows + int(bytes_left / per_line * 1.05) + 1)
 
 
-def parse_frames(first: bytes, read: Reader, bytes_left: int, start: int, n_channels: int, path: str,
+def parse_frames(open_data: Callable[[], Reader], size: int, start: int, n_channels: int, path: str,
                  header_frames: int | None = None, dtype: type = np.float64) -> np.ndarray:
     """Frame values ``(F, n_channels)`` of a MOTION block whose first line is file line ``start + 1``.
 
-    ``first`` is the block's text already read, ``read(n)`` returns up to ``n`` more bytes (``b""`` at the
-    end) and ``bytes_left`` says how many it will return in all (the file's size minus what was read: it
-    bounds the rows allocated). ``dtype`` is the array's type: float64 keeps every value exactly as
-    written; float32 halves the memory (each value is the float64 one rounded to float32).
+    ``open_data()`` gives a ``read(n)`` that returns the block's next (up to) ``n`` bytes, ``b""`` at its end,
+    from its start each time it is called (a second pass names a bad line); ``size`` is the block's length in
+    bytes (it bounds the rows allocated). ``dtype`` is the array's type: float64 keeps every value exactly
+    as written; float32 halves the memory (each value is the float64 one rounded to float32).
+
+    Blocks up to :data:`STREAM_MAX_BYTES` go to numpy's C reader as one stream (its array grows as it reads;
+    no Python object per line); longer ones, float32 and any block that stream refuses are read piece by
+    piece into one array allocated up front.
     """
+    if np.dtype(dtype) == np.float64 and n_channels > 0 and size <= STREAM_MAX_BYTES:
+        values = _stream(open_data(), n_channels)
+        if values is not None:
+            return values
+    return _in_pieces(b"", open_data(), size, start, n_channels, path, header_frames, dtype)
+
+
+def _stream(read: Reader, n_channels: int) -> np.ndarray | None:
+    """The whole block through numpy's C reader in file mode, ``None`` when anything looks wrong (an
+    overlong line, a count of values or a value it refuses, a non-finite value) or numpy lacks that reader."""
+    if _C_READER is None:
+        return None
+    try:
+        values = _C_READER(_CheckedText(read, line_limit(n_channels)), delimiter=None, comment=None, quote=None,
+                           imaginary_unit="j", usecols=None, skiplines=0, max_rows=-1, converters=None,
+                           dtype=np.dtype(np.float64), encoding="latin-1", filelike=True, byte_converters=False)
+    except (ValueError, TypeError, _LineTooLong):
+        return None
+    if values.ndim != 2 or values.shape[0] == 0 or values.shape[1] != n_channels:
+        return None
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = float(values.sum())
+    return values if math.isfinite(total) else None
+
+
+def _in_pieces(first: bytes, read: Reader, bytes_left: int, start: int, n_channels: int, path: str,
+               header_frames: int | None, dtype: type) -> np.ndarray:
+    """:func:`parse_frames` piece by piece: ``first`` (text already read) then what ``read`` returns, at
+    most ``bytes_left`` bytes, into one array allocated up front; a piece that numpy refuses is read line by
+    line, which names the bad line."""
     limit = line_limit(n_channels)
     out = np.empty((0, n_channels), dtype=dtype)
     n = 0

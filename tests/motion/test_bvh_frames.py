@@ -44,9 +44,14 @@ def _rows(n: int, seed: int = 0) -> tuple[list[str], np.ndarray]:
     return rows, expected
 
 
-@pytest.fixture
-def small_pieces(monkeypatch):
-    monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 40_000)  # ~10 frame lines a piece
+@pytest.fixture(params=["stream", "pieces"])
+def small_pieces(monkeypatch, request):
+    """Both paths: the C reader's one stream (fed ~10 frame lines a read) and the piece-by-piece reading
+    into one allocated array (which the stream hands over to on any problem, and which long files take)."""
+    monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 40_000)
+    if request.param == "pieces":
+        monkeypatch.setattr(bvh_frames, "STREAM_MAX_BYTES", -1)
+    return request.param
 
 
 def test_values_equal_pythons_float_across_pieces(tmp_path, small_pieces):
@@ -106,9 +111,12 @@ def test_the_header_claim_only_sizes_the_first_allocation(tmp_path, small_pieces
     assert d.channels.base is None or d.channels.base.shape[0] < 2 * 120  # no 10^12-row (or grown, unused) buffer
 
 
-def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch):
+@pytest.mark.parametrize("path", ["stream", "pieces"])
+def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch, path):
     """4,000 frames (~12 MB of text, ~7 MB of float64) read in 256 KB pieces: the peak stays near the array."""
     monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 256 << 10)
+    if path == "pieces":
+        monkeypatch.setattr(bvh_frames, "STREAM_MAX_BYTES", -1)
     rng = np.random.default_rng(2)
     vals = rng.normal(scale=50.0, size=(4000, N_CH))
     line = "  ".join(["%e"] * N_CH) + " \n"
@@ -124,7 +132,9 @@ def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch):
     finally:
         tracemalloc.stop()
     assert d.channels.shape == (4000, N_CH)
-    assert peak < d.channels.nbytes + 3 * (256 << 10) + (1 << 20), (peak, d.channels.nbytes, text_bytes)
+    # the stream's array grows as it reads (numpy's reader over-allocates by up to a quarter, then trims)
+    slack = d.channels.nbytes // 4 if path == "stream" else 0
+    assert peak < d.channels.nbytes + slack + 3 * (256 << 10) + (1 << 20), (peak, d.channels.nbytes, text_bytes)
     assert peak < text_bytes  # holding the text alone would pass this bound
 
 
@@ -160,3 +170,21 @@ def test_values_whose_sum_overflows_are_still_read_exactly(tmp_path):
     p = tmp_path / "m.bvh"
     p.write_text(_text(rows), newline="")
     assert np.array_equal(read_bvh_channels(p).channels, expected)
+
+
+def test_the_stream_takes_a_clean_block_and_hands_a_bad_one_over(tmp_path, small_pieces, monkeypatch):
+    """A clean 60-frame block is read by the C reader's stream when that path is on; a block with one short
+    line is refused by it and read piece by piece, which names the line."""
+    taken = []
+    real = bvh_frames._in_pieces
+    monkeypatch.setattr(bvh_frames, "_in_pieces", lambda *a, **k: taken.append(1) or real(*a, **k))
+    rows, expected = _rows(60)
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    assert np.array_equal(read_bvh_channels(p).channels, expected)
+    assert len(taken) == (0 if small_pieces == "stream" else 1)
+    rows[30] = rows[30].rstrip().rsplit(None, 1)[0] + "\n"
+    p.write_text(_text(rows), newline="")
+    with pytest.raises(InputError, match=f"frame 31 has {N_CH - 1} values"):
+        read_bvh_channels(p)
+    assert len(taken) == (1 if small_pieces == "stream" else 2)
