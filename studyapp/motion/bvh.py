@@ -13,9 +13,10 @@ Semantics used here (and by the writer, so round trips are exact):
 * Position channels *replace* the joint's OFFSET on the axes they name (axes without a position
   channel keep the OFFSET value); that is how the root's ``Xposition..Zposition`` is read too.
 
-The frame data is parsed piece by piece by numpy's C text reader into one preallocated array
-(:mod:`studyapp.motion.bvh_frames`: bounded memory, no pandas); only a piece in which that pass finds
-something wrong is read again line by line, to name the offending line.
+The frame data is parsed by numpy's C text reader (:mod:`studyapp.motion.bvh_frames`: values exactly as
+``float()`` reads them, bounded memory, no pandas), as one stream up to 64 MB and piece by piece into one
+preallocated array beyond; only a piece in which that pass finds something wrong is read again line by
+line, to name the offending line.
 
 Limits, checked before the parsers see the text, so that no file can make reading hang or exhaust
 memory (each is an :class:`~studyapp.errors.InputError` naming the line):
@@ -212,6 +213,7 @@ def read_bvh_channels(path: str | Path, dtype: type = np.float64) -> BvhData:
                 if not more:
                     break
                 head += more
+
             def data_from(offset: int) -> Callable[[int], bytes]:
                 fh.seek(offset)
                 return fh.read

@@ -40,7 +40,8 @@ FLOAT32_TOLERANCE = 1e-5
 # Frames are processed in blocks of this many: each block's work arrays (about 1 MB) stay in cache
 # between the ~40 vector operations per block instead of streaming 7,200-frame rows through memory
 # each time. 256 balances that against the per-block Python overhead (~90 numpy calls a block): on
-# BEAT's 75 joints it measured 58 ms against 66 ms for 128 and 85 ms for 512 (bench_motion.py).
+# BEAT's 75 joints it measured 58 ms against 66 ms for 128 and 85 ms for 512 (bench_motion.py, float64;
+# float32 measured the same from 256 to 1,024).
 _FRAME_BLOCK = 256
 
 
