@@ -4,8 +4,9 @@ Samples are held as ``(N, C)`` float32 in ``[-1, 1]`` whatever the file's encodi
 full-scale of each encoding (8-bit unsigned centred at 128, signed integers divided by ``2**(bits-1)``), so
 a file written at one depth and read back differs from the original by at most one quantization step.
 
-scipy's reader handles 8/16/24/32-bit integer and 32/64-bit float WAVs (24-bit arrives left-justified in
-int32); its writer cannot write 24-bit, so that one encoding is packed here by hand.
+:mod:`studyapp.audio.wav_decode` reads 8/16/24/32-bit integer and 32/64-bit float WAVs (24-bit arrives
+left-justified in int32) without importing scipy; scipy's writer cannot write 24-bit, so that one encoding is
+packed here by hand.
 
 >>> import tempfile, pathlib
 >>> clip = AudioClip(np.array([[0.0], [0.5], [-0.5]], np.float32), 16000)
@@ -16,15 +17,14 @@ int32); its writer cannot write 24-bit, so that one encoding is packed here by h
 """
 from __future__ import annotations
 
-import io
 import struct
-import warnings
 from dataclasses import dataclass
 from math import gcd
 from pathlib import Path
 
 import numpy as np
 
+from studyapp.audio.wav_decode import decode_wav
 from studyapp.errors import InputError
 
 #: Encodings :func:`save_wav` writes: name -> (numpy dtype of the stored samples, bits per sample).
@@ -137,12 +137,12 @@ def _bits_per_sample(path: Path) -> int | None:
 
 
 def _check_chunks(path: Path, head: bytes) -> tuple[int, int] | None:
-    """Name the chunk a damaged file breaks in, before scipy fails on it with a bare struct/reshape error.
+    """Name the chunk a damaged file breaks in, before the decoder meets it.
 
     Only sizes are checked (a chunk that claims more bytes than follow, a missing ``fmt `` or ``data``);
-    everything inside the chunks is left to scipy. RF64 keeps the real sizes elsewhere, so it is not judged
+    everything inside the chunks is left to :func:`~studyapp.audio.wav_decode.decode_wav`. RF64 keeps the real sizes elsewhere, so it is not judged
     here. Streaming writers put 0 or 0xFFFFFFFF in an unfinished ``data`` size: that claim is never trusted
-    (scipy would allocate 4 GiB for it); the returned ``(offset of the size field, bytes that follow)`` lets
+    (a reader trusting it would allocate 4 GiB); the returned ``(offset of the size field, bytes that follow)`` lets
     the caller read the samples the file really holds.
     """
     if head[:4] == b"RF64":
@@ -185,33 +185,13 @@ def _read(path: Path) -> tuple[int, np.ndarray]:
     if len(head) < 12 or head[:4] not in (b"RIFF", b"RIFX", b"RF64") or head[8:12] != b"WAVE":
         raise InputError(path, "header", f"not a WAV file (starts with {head[:12]!r}, expected RIFF....WAVE)")
     unfinished = _check_chunks(path, head)
-    source: Path | io.BytesIO = path
+    raw = path.read_bytes()
     if unfinished is not None:  # the data chunk is the rest of the file, whatever its size field says
         at, left = unfinished
-        raw = bytearray(path.read_bytes())
-        struct.pack_into(("<" if head[:4] == b"RIFF" else ">") + "I", raw, at, left)
-        source = io.BytesIO(bytes(raw))
-    from scipy.io import wavfile  # here: scipy.io costs ~0.3-1 s, and most commands never read samples
-
-    with warnings.catch_warnings():
-        # scipy warns (rather than fails) on chunks it skips and on data cut short; a short file is an error here.
-        warnings.simplefilter("error", wavfile.WavFileWarning)
-        try:
-            try:
-                rate, data = wavfile.read(source, mmap=False)
-            except wavfile.WavFileWarning as exc:
-                if not ("Chunk" in str(exc) and "not understood" in str(exc)):
-                    raise InputError(path, "data chunk", f"damaged or truncated WAV: {exc}") from None
-                # an unknown chunk (LIST, bext, ...) is fine; read again skipping it
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", wavfile.WavFileWarning)
-                    if isinstance(source, io.BytesIO):
-                        source.seek(0)
-                    rate, data = wavfile.read(source, mmap=False)
-        except InputError:
-            raise
-        except Exception as exc:  # scipy's reader fails in many ways on damaged files (struct, Unbound..., EOF)
-            raise InputError(path, "header", f"damaged or truncated WAV: {exc or type(exc).__name__}") from None
+        patched = bytearray(raw)
+        struct.pack_into(("<" if head[:4] == b"RIFF" else ">") + "I", patched, at, left)
+        raw = patched
+    rate, data = decode_wav(raw, path)
     if data.ndim == 1:
         data = data[:, None]
     if data.shape[0] == 0:

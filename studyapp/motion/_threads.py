@@ -1,8 +1,7 @@
 """One small thread pool for the motion layer's big batched jobs.
 
-pandas' C tokenizer and numpy's ufuncs (``sin``/``cos`` above all, which run at libm speed in
-float64) release the GIL, so cutting a long recording in two lets a second core do half of a
-one-off load. Small inputs (the viewer's per-frame calls) never touch the pool.
+numpy's ufuncs (``sin``/``cos`` above all, which run at libm speed in float64) release the GIL, so
+cutting a long recording in two lets a second core do half of its Euler conversion. Small inputs (the viewer's per-frame calls) never touch the pool.
 """
 from __future__ import annotations
 

@@ -13,8 +13,10 @@ Semantics used here (and by the writer, so round trips are exact):
 * Position channels *replace* the joint's OFFSET on the axes they name (axes without a position
   channel keep the OFFSET value); that is how the root's ``Xposition..Zposition`` is read too.
 
-The frame data is parsed in one vectorized pass (pandas' C tokenizer); only when that pass finds
-something wrong does a line-by-line pass run, to name the offending line.
+The frame data is parsed by numpy's C text reader (:mod:`studyapp.motion.bvh_frames`: values exactly as
+``float()`` reads them, bounded memory, no pandas), as one stream up to 64 MB and piece by piece into one
+preallocated array beyond; only a piece in which that pass finds something wrong is read again line by
+line, to name the offending line.
 
 Limits, checked before the parsers see the text, so that no file can make reading hang or exhaust
 memory (each is an :class:`~studyapp.errors.InputError` naming the line):
@@ -25,7 +27,8 @@ memory (each is an :class:`~studyapp.errors.InputError` naming the line):
 * joints nest at most :data:`MAX_JOINT_DEPTH` deep (real skeletons: 7 to 14) and a file declares at most
   :data:`MAX_JOINTS` joints;
 * a channel count is a whole number from 0 to 6 (``CHANNELS Infinity`` included);
-* the header's ``Frames:`` is never used to size anything: the data lines decide.
+* the header's ``Frames:`` sizes the first allocation only when the file's size could hold that many
+  lines; the data lines decide the count.
 
 >>> import tempfile, os
 >>> from studyapp.motion.beat import beat_skeleton
@@ -38,18 +41,20 @@ memory (each is an :class:`~studyapp.errors.InputError` naming the line):
 """
 from __future__ import annotations
 
-import io
 import math
+import os
 import re
 import warnings
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from studyapp.errors import InputError
-from studyapp.motion._threads import map_rows, pool
+from studyapp.motion._threads import map_rows
+from studyapp.motion.bvh_frames import first_long_line, parse_frames
 from studyapp.motion.fk import figure_height, guess_unit_scale
 from studyapp.motion.rotations import euler_to_quat, quat_to_euler
 from studyapp.motion.skeleton import Motion, Skeleton
@@ -72,7 +77,6 @@ __all__ = [
 #: Canonical spelling of the six BVH channel names (matched case-insensitively on reading).
 CHANNEL_NAMES: tuple[str, ...] = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _CANON = {c.lower(): c for c in CHANNEL_NAMES}
-_DANGLING_EXP = re.compile(r"^([-+]?(?:\d+\.?\d*|\.\d+))[eE][-+]?$")
 
 #: Longest HIERARCHY line read (names and offsets take well under 200 characters in real files).
 MAX_HEADER_LINE = 65_536
@@ -84,8 +88,6 @@ _MIN_FRAME_TIME = 1e-5
 #: Longest frame time read (s): motion at under one frame a minute is not motion, and its duration
 #: (frames x frame time) would turn into billions of frames at any playback rate.
 _MAX_FRAME_TIME = 60.0
-#: Characters allowed per channel value on a frame line ("-1.2345678901234567e+308 " is 25).
-_CHARS_PER_CHANNEL = 64
 
 
 class BvhWarning(UserWarning):
@@ -184,16 +186,41 @@ def read_bvh(path: str | Path, fps: float | None = None) -> Motion:
     return read_bvh_channels(path).to_motion(fps)
 
 
-def read_bvh_channels(path: str | Path) -> BvhData:
-    """Read a BVH file's hierarchy and raw channel values without converting rotations."""
+def read_bvh_channels(path: str | Path, dtype: type = np.float64) -> BvhData:
+    """Read a BVH file's hierarchy and raw channel values without converting rotations.
+
+    The file is read in pieces (:mod:`studyapp.motion.bvh_frames`): memory is the channel array plus a few
+    MB, whatever the file's length. ``dtype=np.float32`` halves that array (values rounded to float32).
+    """
     path = str(path)
     try:
-        raw = Path(path).read_bytes()
+        fh = open(path, "rb")
     except OSError as exc:
         raise InputError(path, None, f"cannot read file: {exc.strerror or exc}") from None
-    if b"\x00" in raw[:4096]:
-        raise InputError(path, "line 1", "not a BVH file (binary data); expected text starting with HIERARCHY")
-    return parse_bvh_bytes(raw, path)
+    with fh:
+        try:
+            size = os.fstat(fh.fileno()).st_size
+            head = fh.read(_HEAD_BYTES)
+            if b"\x00" in head[:4096]:
+                raise InputError(path, "line 1", "not a BVH file (binary data); expected text starting with HIERARCHY")
+            # the header grows until its Frame Time line is complete (or the file ends): the frame lines
+            # after it are read piece by piece by the frame parser
+            while True:
+                ft = _frame_time_line(head)
+                if ft is not None and ft.end() < len(head):
+                    break
+                more = fh.read(max(len(head), _HEAD_BYTES))
+                if not more:
+                    break
+                head += more
+
+            def data_from(offset: int) -> Callable[[int], bytes]:
+                fh.seek(offset)
+                return fh.read
+
+            return _parse(head, data_from, size, path, dtype)
+        except OSError as exc:
+            raise InputError(path, None, f"cannot read file: {exc.strerror or exc}") from None
 
 
 def parse_bvh_text(text: str, path: str = "<string>") -> BvhData:
@@ -203,6 +230,13 @@ def parse_bvh_text(text: str, path: str = "<string>") -> BvhData:
 
 _MOTION_RE = re.compile(rb"(?m)^[ \t]*MOTION[ \t]*\r?$")
 _FRAME_TIME_LINE_RE = re.compile(rb"(?im)^[ \t]*Frame[ \t]*Time\b[^\n]*$")
+#: Bytes of a file read first: a real header (75 joints) takes about 10 KB.
+_HEAD_BYTES = 1 << 16
+
+
+def _frame_time_line(raw: bytes) -> re.Match | None:
+    m = _MOTION_RE.search(raw)
+    return _FRAME_TIME_LINE_RE.search(raw, m.end()) if m else None
 
 
 def _decode(raw: bytes) -> str:
@@ -212,16 +246,33 @@ def _decode(raw: bytes) -> str:
         return raw.decode("latin-1")
 
 
-def parse_bvh_bytes(raw: bytes, path: str = "<bytes>") -> BvhData:
+def parse_bvh_bytes(raw: bytes, path: str = "<bytes>", dtype: type = np.float64) -> BvhData:
     """Parse the bytes of a BVH file.
 
     Only the header (up to the ``Frame Time`` line) is decoded and split into lines; the frame data
-    goes to the vectorized parser as one block, which is what keeps large files fast.
+    goes to the frame parser in pieces, which is what keeps large files fast and small in memory.
     """
-    head, data = raw, b""
-    m = _MOTION_RE.search(raw)
-    ft = _FRAME_TIME_LINE_RE.search(raw, m.end()) if m else None
-    too_long = _first_long_line(raw[: ft.end()] if ft is not None else raw, MAX_HEADER_LINE)
+    return _parse(raw, lambda offset: _reader(memoryview(raw)[offset:]), len(raw), path, dtype)
+
+
+def _reader(blob: memoryview) -> Callable[[int], bytes]:
+    """A ``read(n)`` over ``blob``: copies of at most ``n`` bytes, then ``b""``."""
+    pos = 0
+
+    def read(n: int) -> bytes:
+        nonlocal pos
+        pos += n
+        return bytes(blob[pos - n : pos])
+
+    return read
+
+
+def _parse(raw: bytes, data_from: Callable[[int], Callable[[int], bytes]], size: int, path: str,
+           dtype: type) -> BvhData:
+    """Parse a file of ``size`` bytes whose first bytes are ``raw`` (the whole header, or the whole file);
+    ``data_from(offset)`` reads the file from that byte on."""
+    ft = _frame_time_line(raw)
+    too_long = first_long_line(raw[: ft.end()] if ft is not None else raw, MAX_HEADER_LINE)
     if too_long is not None:
         line, length = too_long
         raise InputError(path, f"line {line + 1}", f"line is {length:,} characters long; a BVH header line has at "
@@ -229,17 +280,20 @@ def parse_bvh_bytes(raw: bytes, path: str = "<bytes>") -> BvhData:
     if ft is not None:
         start = ft.end()
         start += 2 if raw.startswith(b"\r\n", start) else 1 if raw.startswith((b"\n", b"\r"), start) else 0
-        head, data = raw[: ft.end()], raw[start:]  # the one copy of the frame data
+        head = raw[: ft.end()]
         lines = _decode(head).splitlines()
+        open_data, data_size = (lambda: data_from(start)), size - start
     else:
         # no well-formed header: the line-based parser below reports what is missing where
-        lines = _decode(raw).splitlines()
+        rest = data_from(len(raw))(size - len(raw)) if size > len(raw) else b""
+        lines = _decode(raw + rest).splitlines()
     motion_line, skeleton = _parse_hierarchy(lines, path)
     frames, frame_time, data_start = _parse_motion_header(lines, motion_line, path)
     n_channels = sum(len(c) for c in skeleton.channels)
     if ft is None:
-        data = "\n".join(lines[data_start:]).encode("utf-8")
-    channels = _parse_frames(data, data_start, n_channels, path)
+        data = memoryview("\n".join(lines[data_start:]).encode("utf-8"))
+        open_data, data_size = (lambda: _reader(data)), len(data)
+    channels = parse_frames(open_data, data_size, data_start, n_channels, path, frames, dtype)
     notes: list[str] = []
     if frames is not None and frames != channels.shape[0]:
         notes.append(
@@ -251,31 +305,6 @@ def parse_bvh_bytes(raw: bytes, path: str = "<bytes>") -> BvhData:
     for note in notes:
         warnings.warn(f"{path}: {note}", BvhWarning, stacklevel=3)
     return BvhData(skeleton, frame_time, channels, notes, frames, path)
-
-
-def _first_long_line(blob: bytes | memoryview, limit: int) -> tuple[int, int] | None:
-    """(0-based index, length) of the first line of ``blob`` longer than ``limit`` bytes, or ``None``.
-
-    Scans 16 MB at a time with numpy, so a large file costs a few MB and a fraction of a second.
-    """
-    if len(blob) <= limit:
-        return None
-    arr = np.frombuffer(blob, dtype=np.uint8)
-    last_newline = -1
-    lines_before = 0
-    step = 1 << 24
-    for a in range(0, arr.size, step):
-        newlines = np.flatnonzero(arr[a : a + step] == 10) + a
-        if newlines.size == 0:
-            continue
-        lengths = np.diff(newlines, prepend=last_newline) - 1
-        over = np.flatnonzero(lengths > limit)
-        if over.size:
-            return lines_before + int(over[0]), int(lengths[over[0]])
-        lines_before += newlines.size
-        last_newline = int(newlines[-1])
-    tail = arr.size - last_newline - 1
-    return (lines_before, tail) if tail > limit else None
 
 
 def _with_unit_guess(skeleton: Skeleton) -> Skeleton:
@@ -481,108 +510,6 @@ def _parse_motion_header(lines: list[str], motion_line: int, path: str) -> tuple
         raise InputError(path, f"line {i + 1}", f"frame time {m.group(1)} s is longer than {_MAX_FRAME_TIME:g} s per "
                                                 "frame; is it in seconds?")
     return frames, frame_time, i + 1
-
-
-def _parse_frames(data: bytes, start: int, n_channels: int, path: str) -> np.ndarray:
-    """Frame values ``(F, C)`` from the data block whose first line is file line ``start + 1``."""
-    if not data.strip():
-        return np.zeros((0, n_channels))
-    if n_channels == 0:
-        raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
-    limit = n_channels * _CHARS_PER_CHANNEL + 1024
-    too_long = _first_long_line(data, limit)
-    if too_long is not None:
-        line, length = too_long
-        raise InputError(path, f"line {start + line + 1}",
-                         f"frame line is {length:,} characters long; {n_channels} channels take at most {limit:,} "
-                         "(are the line breaks missing?)")
-    fast = _fast_frames(data, n_channels)
-    if fast is not None:
-        return fast
-    return _slow_frames(_decode(data).splitlines(), start, n_channels, path)
-
-
-# Blocks larger than this are cut at line ends into pieces parsed on a small thread pool: pandas' C
-# tokenizer and float conversion release the GIL for most of their work.
-_PARALLEL_MIN_BYTES = 4 << 20
-_NON_SPACE = re.compile(rb"\S")
-
-
-def _parse_block(blob, n_channels: int, kwargs: dict) -> np.ndarray | None:
-    """One block of whole lines as ``(F, n_channels)`` numbers, ``None`` when anything looks wrong."""
-    import pandas as pd
-
-    try:
-        frame = pd.read_csv(io.BytesIO(blob), **kwargs)
-    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
-        return None
-    if frame.shape[1] != n_channels:
-        return None
-    # no dtype is forced: inferring is faster, and any non-numeric column shows up as a non-number
-    # dtype here (integer columns, e.g. all-zero channels, convert exactly)
-    if not all(dt.kind in "fiu" for dt in frame.dtypes):
-        return None
-    return frame.to_numpy(dtype=np.float64)
-
-
-def _fast_frames(blob: bytes, n_channels: int) -> np.ndarray | None:
-    """Vectorized parse; ``None`` when anything looks wrong (the slow pass then names the line)."""
-    import pandas as pd  # imported here: pandas is slow to import and only this function needs it  # noqa: F401
-
-    kwargs = dict(sep=r"\s+", header=None, engine="c", na_filter=False)
-    if b"\r" not in blob:
-        kwargs["lineterminator"] = "\n"  # a faster tokenizer path; CR line ends need the default one
-    pieces = [blob]
-    if len(blob) >= _PARALLEL_MIN_BYTES:
-        n = 4  # more pieces than threads evens out the uneven finishing times
-        cuts = [0]
-        for k in range(1, n):
-            c = blob.find(b"\n", max(cuts[-1], len(blob) * k // n))
-            if c < 0:
-                break
-            cuts.append(c + 1)
-        cuts.append(len(blob))
-        view = memoryview(blob)
-        pieces = [view[a:b] for a, b in zip(cuts, cuts[1:]) if _NON_SPACE.search(blob, a, b)]
-    if len(pieces) > 1:
-        parts = list(pool().map(lambda b: _parse_block(b, n_channels, kwargs), pieces))
-    else:
-        parts = [_parse_block(pieces[0], n_channels, kwargs)]
-    if any(p is None for p in parts):
-        return None
-    data = parts[0] if len(parts) == 1 else np.concatenate(parts)
-    if not np.isfinite(data).all():
-        return None
-    return data
-
-
-def _slow_frames(body: list[str], start: int, n_channels: int, path: str) -> np.ndarray:
-    rows = []
-    nonempty = [(i, ln) for i, ln in enumerate(body) if ln.strip()]
-    for k, (i, ln) in enumerate(nonempty):
-        lineno = start + i + 1
-        toks = ln.split()
-        if len(toks) != n_channels:
-            hint = " (the file looks truncated)" if k == len(nonempty) - 1 and len(toks) < n_channels else ""
-            raise InputError(
-                path, f"line {lineno}",
-                f"frame {k + 1} has {len(toks)} values but the hierarchy declares {n_channels} channels{hint}",
-            )
-        vals = []
-        for col, tok in enumerate(toks):
-            try:
-                v = float(tok)
-            except ValueError:
-                m = _DANGLING_EXP.match(tok)
-                if not m:
-                    raise InputError(path, f"line {lineno}", f"value {col + 1} is not a number: {tok[:40]!r}") from None
-                # a writer cut the exponent's last digit ("1.5e+"): the mantissa is the best reading
-                v = float(m.group(1))
-            if not math.isfinite(v):
-                raise InputError(path, f"line {lineno}", f"value {col + 1} is {tok}; channel values must be finite")
-            vals.append(v)
-        rows.append(vals)
-    return np.array(rows, dtype=np.float64).reshape(len(rows), n_channels)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -33,10 +33,15 @@ __all__ = [
 
 
 _LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+#: How far float32 forward kinematics may put a joint from the float64 result, as a fraction of the figure's
+#: height (measured on BEAT's 75 joints, 15 levels deep: under 5e-7, i.e. a thousandth of a millimetre on a
+#: 1.8 m figure; a GPU vertex is float32 anyway). Rotation matrix entries agree within the same figure.
+FLOAT32_TOLERANCE = 1e-5
 # Frames are processed in blocks of this many: each block's work arrays (about 1 MB) stay in cache
 # between the ~40 vector operations per block instead of streaming 7,200-frame rows through memory
 # each time. 256 balances that against the per-block Python overhead (~90 numpy calls a block): on
-# BEAT's 75 joints it measured 58 ms against 66 ms for 128 and 85 ms for 512 (bench_motion.py).
+# BEAT's 75 joints it measured 58 ms against 66 ms for 128 and 85 ms for 512 (bench_motion.py, float64;
+# float32 measured the same from 256 to 1,024).
 _FRAME_BLOCK = 256
 
 
@@ -62,7 +67,7 @@ def _matrix_components(q: np.ndarray) -> np.ndarray:
     Motion rotations are unit by contract, so no normalisation pass here (this is the hot loop).
     """
     x, y, z, w = q
-    m = np.empty((3, 3) + q.shape[1:])
+    m = np.empty((3, 3) + q.shape[1:], dtype=q.dtype)
     x2, y2, z2 = x + x, y + y, z + z
     xx, yy, zz = x * x2, y * y2, z * z2
     np.subtract(1.0, yy + zz, out=m[0, 0])
@@ -89,19 +94,21 @@ def _global_rt(parents: np.ndarray, rotations: np.ndarray, translations: np.ndar
 
 
 def _global_rows(parents: np.ndarray, rotations: np.ndarray, translations: np.ndarray,
-                 g: np.ndarray | None = None) -> np.ndarray:
+                 g: np.ndarray | None = None, dtype: type = np.float64) -> np.ndarray:
     """World ``[R | t]`` rows ``(3, 4, J, F)`` from local ``(F, J, 4)`` / ``(F, J, 3)``.
 
     Component-first, frame-last layout with all joints of one depth handled together: numpy's
     ``matmul`` on stacks of 3x3 matrices is slow (one tiny product at a time), while an ``einsum``
     over long contiguous frame rows is two vector operations per tree level (15 levels for BEAT).
     Rotation and translation share one array so the (F, J, 4, 4) output is one strided copy.
-    ``g``, when given, is a ``(4 or more, 4, J, F)`` array whose first three rows are filled in.
+    ``g``, when given, is a ``(4 or more, 4, J, F)`` array whose first three rows are filled in; the
+    arithmetic is done in ``g``'s type (else ``dtype``).
     """
-    local_r = _matrix_components(np.ascontiguousarray(rotations.transpose(2, 1, 0)))
-    local_t = np.ascontiguousarray(translations.transpose(2, 1, 0))
+    dtype = g.dtype if g is not None else dtype
+    local_r = _matrix_components(np.ascontiguousarray(rotations.transpose(2, 1, 0), dtype=dtype))
+    local_t = np.ascontiguousarray(translations.transpose(2, 1, 0), dtype=dtype)
     if g is None:
-        g = np.empty((3, 4) + local_r.shape[2:])
+        g = np.empty((3, 4) + local_r.shape[2:], dtype=dtype)
     g_r, g_t = g[:3, :3], g[:3, 3]
     for level in _depth_levels(parents):
         par = parents[level]
@@ -115,27 +122,32 @@ def _global_rows(parents: np.ndarray, rotations: np.ndarray, translations: np.nd
     return g[:3]
 
 
-def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray) -> np.ndarray:
+def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+                      dtype: type = np.float64) -> np.ndarray:
     """World 4x4 transforms ``(F, J, 4, 4)`` from local quaternions ``(F, J, 4)`` and translations ``(F, J, 3)``.
 
     Each joint's transform maps points from that joint's frame to world space; its last column is the
-    joint's world position.
+    joint's world position. ``dtype=np.float32`` computes and returns float32 (half the memory traffic, what
+    the GPU takes): positions then agree with float64 within :data:`FLOAT32_TOLERANCE` of the figure's size.
     """
-    rotations = np.asarray(rotations, dtype=np.float64)
-    translations = np.asarray(translations, dtype=np.float64)
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError(f"dtype must be float32 or float64, got {dtype}")
+    rotations = np.asarray(rotations)
+    translations = np.asarray(translations)
     j = skeleton.n_joints
     if rotations.ndim != 3 or rotations.shape[1:] != (j, 4):
         raise ValueError(f"rotations must be (frames, {j}, 4), got {rotations.shape}")
     if translations.shape != rotations.shape[:2] + (3,):
         raise ValueError(f"translations must be (frames, {j}, 3), got {translations.shape}")
     f = rotations.shape[0]
-    out = np.empty((f, j, 4, 4))
+    out = np.empty((f, j, 4, 4), dtype=dtype)
     block = min(_FRAME_BLOCK, max(f, 1))
-    g = np.empty((4, 4, j, block))
+    g = np.empty((4, 4, j, block), dtype=dtype)
     g[3] = _LAST_ROW[:, None, None]
     # The (16, J, n) -> (n, J, 16) reorder goes through a (J, n, 16) buffer: a plain 2-D transpose
     # and then a copy of whole 128-byte matrices, about twice as fast as one 4-D strided copy.
-    staging = np.empty((j, block, 16))
+    staging = np.empty((j, block, 16), dtype=dtype)
     for a in range(0, f, block):
         b = min(a + block, f)
         n = b - a
@@ -147,9 +159,10 @@ def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: n
     return out
 
 
-def forward_kinematics(motion: Motion) -> np.ndarray:
-    """World 4x4 transforms ``(F, J, 4, 4)`` of every joint in every frame of ``motion``."""
-    return global_transforms(motion.skeleton, motion.rotations, motion.translations)
+def forward_kinematics(motion: Motion, dtype: type = np.float64) -> np.ndarray:
+    """World 4x4 transforms ``(F, J, 4, 4)`` of every joint in every frame of ``motion`` (see
+    :func:`global_transforms` for ``dtype``)."""
+    return global_transforms(motion.skeleton, motion.rotations, motion.translations, dtype)
 
 
 def joint_positions(motion: Motion) -> np.ndarray:

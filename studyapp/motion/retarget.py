@@ -46,6 +46,33 @@ def _rest_points(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     return g[:, :3, 3], g
 
 
+#: Rest-pose results per rig content, so that a trial's three slots (three files on one skeleton, one avatar)
+#: measure each rig once. Small and bounded: a study shows a handful of rigs.
+_REST_CACHE: dict[tuple, tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray]] = {}
+_REST_CACHE_SIZE = 16
+
+
+def _rest_frames(skeleton: Skeleton, bone: dict[str, int], axes) -> tuple[dict[str, np.ndarray], np.ndarray,
+                                                                          np.ndarray, np.ndarray]:
+    """(bone axes, forward direction, rest positions, rest transforms) of a standing rest pose, computed once
+    per rig (names, hierarchy, offsets, rest rotations) and bone rules; the arrays are read-only."""
+    key = (skeleton.names, skeleton.parents.tobytes(), np.asarray(skeleton.offsets, np.float64).tobytes(),
+           np.asarray(skeleton.rest_rotations, np.float64).tobytes(), tuple(sorted(bone.items())),
+           tuple(sorted(axes.primary.items())), tuple(sorted(axes.secondary.items())))
+    hit = _REST_CACHE.get(key)
+    if hit is None:
+        pos, g = _rest_points(skeleton)
+        x = bone_axes(g[None, :, :3, :3], pos[None], bone, axes, from_motion=False)
+        fwd = body_forward(pos[None], bone)[0]
+        for a in (pos, g, fwd, *x.values()):
+            a.flags.writeable = False
+        if len(_REST_CACHE) >= _REST_CACHE_SIZE:
+            _REST_CACHE.pop(next(iter(_REST_CACHE)))
+        hit = _REST_CACHE[key] = (x, fwd, pos, g)
+    x, fwd, pos, g = hit
+    return dict(x), fwd, pos, g
+
+
 def hip_height(skeleton: Skeleton, hips: int) -> float:
     """Height of the hips above the lowest joint of the rest pose (file units)."""
     pos, _ = _rest_points(skeleton)
@@ -162,19 +189,16 @@ def retarget(
 
     s_glob = global_transforms(source.skeleton, source.rotations, source.translations)
     s_pos0, s_g0 = _rest_points(source.skeleton)
-    t_pos0, t_g0 = _rest_points(target)
     standing = is_standing(s_pos0, s_bone)
     if standing:
-        x_s = bone_axes(s_g0[None, :, :3, :3], s_pos0[None], s_bone, axes, from_motion=False)
-        s_fwd = body_forward(s_pos0[None], s_bone)[0]
+        x_s, s_fwd, _, _ = _rest_frames(source.skeleton, s_bone, axes)
         if not _same_rig(source.skeleton, target):
             x_s.update(_clip_hinges(s_glob, s_bone, axes))
     else:  # the zero pose carries no anatomy: read it from the animation
         x_s = bone_axes(s_glob[..., :3, :3], s_glob[..., :3, 3], s_bone, axes, from_motion=True,
                         head_top=_head_top(source.skeleton, s_glob, s_bone["Head"]))
         s_fwd = body_forward(s_glob[..., :3, 3], s_bone).mean(axis=0)
-    x_t = bone_axes(t_g0[None, :, :3, :3], t_pos0[None], t_bone, axes, from_motion=False)
-    t_fwd = body_forward(t_pos0[None], t_bone)[0]
+    x_t, t_fwd, t_pos0, t_g0 = _rest_frames(target, t_bone, axes)
     yaw = _yaw_between(s_fwd, t_fwd)
     yaw_m = quat_to_matrix(yaw)
 

@@ -61,3 +61,37 @@ def test_unit_guess():
     assert fk.guess_unit_scale(181.5) == 0.01
     assert fk.guess_unit_scale(1.75) == 1.0
     assert fk.guess_unit_scale(63.0) is None
+
+
+def _reference_transforms(sk: Skeleton, rot: np.ndarray, trans: np.ndarray) -> np.ndarray:
+    """Float64, one joint at a time over all frames with plain 4x4 products (no levels, no blocks)."""
+    f = rot.shape[0]
+    local = np.zeros((f, sk.n_joints, 4, 4))
+    local[..., :3, :3] = quat_to_matrix(rot)
+    local[..., :3, 3] = trans
+    local[..., 3, 3] = 1.0
+    ref = np.empty_like(local)
+    for j, p in enumerate(sk.parents):
+        ref[:, j] = local[:, j] if p < 0 else ref[:, p] @ local[:, j]
+    return ref
+
+
+def test_float32_agrees_with_the_float64_reference_within_the_documented_tolerance():
+    """700 frames cross the frame blocks (256) twice; BEAT-like angles (tens of degrees), hips moving by metres."""
+    sk = beat_skeleton()
+    rng = np.random.default_rng(5)
+    f = 700
+    rot = euler_to_quat(rng.normal(scale=30.0, size=(f, sk.n_joints, 3)), "XYZ")
+    trans = np.broadcast_to(sk.offsets, (f, sk.n_joints, 3)).copy()
+    trans[:, 0] += rng.normal(scale=100.0, size=(f, 3))
+    ref = _reference_transforms(sk, rot, trans)
+    got64 = fk.forward_kinematics(Motion(sk, 120, rot, trans))
+    got32 = fk.forward_kinematics(Motion(sk, 120, rot, trans), dtype=np.float32)
+    assert got64.dtype == np.float64 and got32.dtype == np.float32
+    np.testing.assert_allclose(got64, ref, rtol=0, atol=1e-9)
+    height = fk.figure_height(sk)
+    pos_err = np.abs(got32[..., :3, 3] - ref[..., :3, 3]).max()
+    rot_err = np.abs(got32[..., :3, :3] - ref[..., :3, :3]).max()
+    assert pos_err <= fk.FLOAT32_TOLERANCE * height, pos_err / height
+    assert rot_err <= fk.FLOAT32_TOLERANCE, rot_err
+    np.testing.assert_array_equal(got32[..., 3, :], np.broadcast_to([0, 0, 0, 1], (f, sk.n_joints, 4)))

@@ -167,3 +167,32 @@ def test_partial_name_map_overrides_builtin_and_missing_bones_are_listed():
         retarget(arm_raise(), beat_skeleton(), name_map={"Spine2": "Ribcage"})
     with pytest.raises(InputError, match="NoSuchJoint"):
         retarget(arm_raise(), beat_skeleton(), name_map={"NoSuchJoint": "Chest"})
+
+
+def test_rest_frames_are_measured_once_per_rig_and_change_no_result(monkeypatch):
+    """A trial's three slots share a source rig and an avatar: the second retarget onto it reuses the rest-pose
+    frames (fewer bone_axes calls) and gives the same arrays as a fresh computation, bit for bit."""
+    import importlib
+
+    rt = importlib.import_module("studyapp.motion.retarget")
+    target = read_bvh(MIXAMO_SAMPLE).skeleton
+    a = read_bvh(BEAT_SAMPLE, fps=15)
+    rng = np.random.default_rng(11)
+    other = read_bvh(BEAT_SAMPLE, fps=15).skeleton  # another file of the same rig: another object
+    assert other is not a.skeleton
+    b = Motion(other, a.fps, quat_normalize(a.rotations + rng.normal(scale=0.05, size=a.rotations.shape)),
+               a.translations + rng.normal(size=a.translations.shape))
+    calls = []
+    real = rt.bone_axes
+    monkeypatch.setattr(rt, "bone_axes", lambda *args, **kw: calls.append(1) or real(*args, **kw))
+
+    rt._REST_CACHE.clear()
+    fresh_b = retarget(b, target)  # rest frames measured for b's rig and the target
+    rt._REST_CACHE.clear()
+    first_a = retarget(a, target)
+    n_first = len(calls)
+    again_b = retarget(b, target)  # both rigs' rest frames reused (a different skeleton object, same rig)
+    assert len(calls) - n_first < n_first
+    np.testing.assert_array_equal(again_b.rotations, fresh_b.rotations)
+    np.testing.assert_array_equal(again_b.translations, fresh_b.translations)
+    np.testing.assert_array_equal(retarget(a, target).rotations, first_a.rotations)

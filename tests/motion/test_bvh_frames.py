@@ -1,0 +1,190 @@
+"""The MOTION block parser (studyapp.motion.bvh_frames): exact values, one InputError naming the line, bounded
+memory, no pandas.
+
+Pieces are made small (``CHUNK_BYTES`` patched down) so that a few hundred frames cross many piece boundaries,
+which is where line numbers, frame numbers and the allocation could go wrong.
+"""
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from motion_helpers import BEAT_SAMPLE
+from studyapp.errors import InputError
+from studyapp.motion import bvh_frames
+from studyapp.motion.bvh import format_bvh, parse_bvh_bytes, read_bvh_channels
+from studyapp.motion.beat import beat_skeleton
+
+SK = beat_skeleton()
+N_CH = sum(len(c) for c in SK.channels)
+HEADER = format_bvh(SK, np.zeros((1, N_CH)), 1 / 120).split("Frames:")[0]
+
+
+def _text(rows: list[str], frames: int | None = None) -> str:
+    return f"{HEADER}Frames: {len(rows) if frames is None else frames}\nFrame Time: 0.008333\n" + "".join(rows)
+
+
+def _rows(n: int, seed: int = 0) -> tuple[list[str], np.ndarray]:
+    """Frame lines in the layouts real writers use (``%e`` with double spaces and a trailing space, ``%.6f``,
+    17-digit ``repr``, tabs, CRLF) and, independently, the values Python's float() reads from them."""
+    rng = np.random.default_rng(seed)
+    vals = rng.normal(scale=30.0, size=(n, N_CH)) * 10.0 ** rng.integers(-8, 8, size=(n, N_CH))
+    styles = [("  ", "%e", " \n"), (" ", "%.6f", "\n"), ("\t", "%r", "\r\n"), (" \t ", "%.9g", "\n")]
+    rows = []
+    for k, r in enumerate(vals.tolist()):
+        sep, fmt, end = styles[k % len(styles)]
+        rows.append(sep.join((repr(v) if fmt == "%r" else fmt % v) for v in r) + end)
+    expected = np.array([[float(t) for t in row.split()] for row in rows])
+    return rows, expected
+
+
+@pytest.fixture(params=["stream", "pieces"])
+def small_pieces(monkeypatch, request):
+    """Both paths: the C reader's one stream (fed ~10 frame lines a read) and the piece-by-piece reading
+    into one allocated array (which the stream hands over to on any problem, and which long files take)."""
+    monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 40_000)
+    if request.param == "pieces":
+        monkeypatch.setattr(bvh_frames, "STREAM_MAX_BYTES", -1)
+    return request.param
+
+
+def test_values_equal_pythons_float_across_pieces(tmp_path, small_pieces):
+    rows, expected = _rows(300)
+    rows.insert(37, "\n")  # blank lines are skipped, wherever they fall
+    rows.insert(150, "   \t \n")
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows, frames=300), newline="")
+    got = read_bvh_channels(p).channels
+    assert got.dtype == np.float64 and got.shape == (300, N_CH)
+    assert np.array_equal(got, expected)  # bit for bit, not close
+    assert np.array_equal(parse_bvh_bytes(p.read_bytes()).channels, expected)
+
+
+def test_float32_is_the_float64_values_rounded(tmp_path, small_pieces):
+    rows, expected = _rows(60, seed=1)
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    got = read_bvh_channels(p, dtype=np.float32).channels
+    assert got.dtype == np.float32 and np.array_equal(got, expected.astype(np.float32))
+
+
+@pytest.mark.parametrize("bad_frame", [0, 9, 10, 11, 123, 299])
+def test_a_bad_line_in_any_piece_is_named_by_file_line_and_frame(tmp_path, small_pieces, bad_frame):
+    rows, _ = _rows(300)
+    rows[bad_frame] = rows[bad_frame].rstrip().rsplit(None, 1)[0] + "\n"  # one value short
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    first_data_line = HEADER.count("\n") + 3
+    with pytest.raises(InputError) as err:
+        read_bvh_channels(p)
+    assert err.value.where == f"line {first_data_line + bad_frame}"
+    hint = " (the file looks truncated)" if bad_frame == 299 else ""
+    assert err.value.problem == (f"frame {bad_frame + 1} has {N_CH - 1} values but the hierarchy declares "
+                                 f"{N_CH} channels{hint}")
+
+
+def test_a_non_number_deep_in_the_file_is_named(tmp_path, small_pieces):
+    rows, _ = _rows(200)
+    toks = rows[150].split()
+    toks[7] = "0x1F"
+    rows[150] = " ".join(toks) + "\n"
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    with pytest.raises(InputError, match=rf"line {HEADER.count(chr(10)) + 3 + 150}: value 8 is not a number: '0x1F'"):
+        read_bvh_channels(p)
+
+
+@pytest.mark.parametrize("claim", [0, 5, 10**12])
+def test_the_header_claim_only_sizes_the_first_allocation(tmp_path, small_pieces, claim):
+    rows, expected = _rows(120)
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows, frames=claim), newline="")
+    with pytest.warns(UserWarning, match=f"header says Frames: {claim} but the file has 120 data lines"):
+        d = read_bvh_channels(p)
+    assert np.array_equal(d.channels, expected)
+    assert d.channels.base is None or d.channels.base.shape[0] < 2 * 120  # no 10^12-row (or grown, unused) buffer
+
+
+@pytest.mark.parametrize("path", ["stream", "pieces"])
+def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch, path):
+    """4,000 frames (~12 MB of text, ~7 MB of float64) read in 256 KB pieces: the peak stays near the array."""
+    monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 256 << 10)
+    if path == "pieces":
+        monkeypatch.setattr(bvh_frames, "STREAM_MAX_BYTES", -1)
+    rng = np.random.default_rng(2)
+    vals = rng.normal(scale=50.0, size=(4000, N_CH))
+    line = "  ".join(["%e"] * N_CH) + " \n"
+    p = tmp_path / "long.bvh"
+    with open(p, "w") as fh:
+        fh.write(f"{HEADER}Frames: 4000\nFrame Time: 0.008333\n")
+        fh.writelines(line % tuple(r) for r in vals.tolist())
+    text_bytes = p.stat().st_size
+    tracemalloc.start()
+    try:
+        d = read_bvh_channels(p)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert d.channels.shape == (4000, N_CH)
+    # the stream's array grows as it reads (numpy's reader over-allocates by up to a quarter, then trims)
+    slack = d.channels.nbytes // 4 if path == "stream" else 0
+    assert peak < d.channels.nbytes + slack + 3 * (256 << 10) + (1 << 20), (peak, d.channels.nbytes, text_bytes)
+    assert peak < text_bytes  # holding the text alone would pass this bound
+
+
+def test_reading_a_bvh_imports_no_pandas():
+    code = ("import sys, json\nfrom studyapp.motion.bvh import read_bvh\n"
+            f"read_bvh({str(BEAT_SAMPLE)!r})\nprint(json.dumps('pandas' in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert json.loads(out.strip().splitlines()[-1]) is False
+
+
+def test_a_line_without_its_break_is_measured_whole(tmp_path, small_pieces):
+    rows, _ = _rows(20)
+    rows[5] = rows[5].rstrip("\r\n") + " " + "1.0 " * 30_000 + "\n"  # 120 KB: three pieces long
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    limit = bvh_frames.line_limit(N_CH)
+    length = len(rows[5].rstrip("\r\n").encode())
+    with pytest.raises(InputError) as err:
+        read_bvh_channels(p)
+    assert err.value.where == f"line {HEADER.count(chr(10)) + 3 + 5}"
+    assert re.fullmatch(rf"frame line is {length:,} characters long; {N_CH} channels take at most {limit:,} "
+                        r"\(are the line breaks missing\?\)", err.value.problem)
+
+
+def test_values_whose_sum_overflows_are_still_read_exactly(tmp_path):
+    """The fast pass checks finiteness by one sum; a piece of huge finite values overflows it and is read by the
+    careful pass, with the same numbers."""
+    rows, expected = _rows(4)
+    toks = rows[2].split()
+    toks[:3] = ["1.7e308", "1.7e308", "-1.7976931348623157e308"]
+    rows[2] = " ".join(toks) + "\n"
+    expected[2, :3] = [1.7e308, 1.7e308, -1.7976931348623157e308]
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    assert np.array_equal(read_bvh_channels(p).channels, expected)
+
+
+def test_the_stream_takes_a_clean_block_and_hands_a_bad_one_over(tmp_path, small_pieces, monkeypatch):
+    """A clean 60-frame block is read by the C reader's stream when that path is on; a block with one short
+    line is refused by it and read piece by piece, which names the line."""
+    taken = []
+    real = bvh_frames._in_pieces
+    monkeypatch.setattr(bvh_frames, "_in_pieces", lambda *a, **k: taken.append(1) or real(*a, **k))
+    rows, expected = _rows(60)
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    assert np.array_equal(read_bvh_channels(p).channels, expected)
+    assert len(taken) == (0 if small_pieces == "stream" else 1)
+    rows[30] = rows[30].rstrip().rsplit(None, 1)[0] + "\n"
+    p.write_text(_text(rows), newline="")
+    with pytest.raises(InputError, match=f"frame 31 has {N_CH - 1} values"):
+        read_bvh_channels(p)
+    assert len(taken) == (1 if small_pieces == "stream" else 2)
