@@ -665,13 +665,14 @@ class ResultsDB:
         return [self._participant(r) for r in self._con.execute("SELECT * FROM participants ORDER BY created, id")]
 
     def row_counts(self, n_rows: int) -> list[int]:
-        """How many participants follow each Latin-square row ``0 .. n_rows-1``; an abandoned participant
-        (status ``ended_early`` with :data:`ABANDONED` in a session's machine record) no longer holds a row."""
+        """How many participants follow each Latin-square row ``0 .. n_rows-1``. A participant who declined
+        consent or was abandoned (status ``ended_early`` with ``"consent": "declined"`` or :data:`ABANDONED` in a
+        session's machine record) saw no trial, or no longer will, and holds no row."""
         counts = [0] * n_rows
         for r in self._con.execute(
                 "SELECT latin_row, COUNT(*) FROM participants p WHERE NOT (p.status = 'ended_early' AND EXISTS "
-                "(SELECT 1 FROM sessions s WHERE s.participant = p.id AND s.machine LIKE ?)) GROUP BY latin_row",
-                (f'%"{ABANDONED}"%',)):
+                "(SELECT 1 FROM sessions s WHERE s.participant = p.id AND (s.machine LIKE ? OR s.machine LIKE ?))) "
+                "GROUP BY latin_row", (f'%"{ABANDONED}"%', '%"consent": "declined"%')):
             if 0 <= r[0] < n_rows:
                 counts[r[0]] = r[1]
         return counts
