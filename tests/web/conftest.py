@@ -81,6 +81,7 @@ class Browser:
         self.seen: list[tuple[str, dict[str, str], bytes]] = []
         self.state: dict[str, Any] = {}
         self.base = ""
+        self.csrf = ""
 
     def _keep(self, r: Any) -> Any:
         self.seen.append((str(r.url), dict(r.headers), r.content))
@@ -92,8 +93,7 @@ class Browser:
     def open(self, query: str = "") -> dict[str, Any]:
         r = self.get("/" + (f"?{query}" if query else ""))
         assert r.status_code == 200, r.text[:300]
-        self.state = state_of(r.text)
-        return self.state
+        return self._set(state_of(r.text))
 
     def consent(self, agree: bool = True) -> Any:
         s = self.state
@@ -106,16 +106,19 @@ class Browser:
     def reload(self) -> dict[str, Any]:
         r = self.get(self.base)
         assert r.status_code == 200, r.text[:300]
-        self.state = state_of(r.text)
-        return self.state
+        return self._set(state_of(r.text))
 
     def act(self, action: str, body: dict | None = None, expect: int = 200) -> Any:
-        r = self._keep(self.client.post(self.base + action, json=body or {},
-                                        headers={"X-CSRF-Token": self.state.get("csrf", "")}))
+        r = self._keep(self.client.post(self.base + action, json=body or {}, headers={"X-CSRF-Token": self.csrf}))
         assert r.status_code == expect, r.text
         if r.status_code == 200:
-            self.state = r.json()
+            self._set(r.json())
         return r
+
+    def _set(self, state: dict[str, Any]) -> dict[str, Any]:
+        self.state = state
+        self.csrf = state.get("csrf", self.csrf)
+        return state
 
     def watch(self) -> None:
         """Fetch the trial's video, play it and report its end after its length passed on the server clock."""
