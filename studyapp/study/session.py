@@ -530,6 +530,15 @@ class Session:
             w = abs(float(s["worst_av_offset_ms"]))
             self._worst_av = w if self._worst_av is None else max(self._worst_av, w)
 
+    def abandon_play(self) -> None:
+        """The front end lost the open play (a browser page reloaded mid-clip): it is recorded as not
+        completed and, as after a restart, does not count against ``allow_replay = false``."""
+        self._expect(State.PRACTICE, State.TRIALS)
+        if self._play_id is None:
+            raise SessionError("no clip is playing")
+        self.record_play_finished(False)
+        self._plays -= 1
+
     def can_rank(self) -> bool:
         """True when the ranking may be submitted (the clip was watched fully once, if the design asks)."""
         if self.current_trial() is None or self._play_id is not None:

@@ -338,7 +338,9 @@ class Flow:
         return self._page(
             "trial", progress=session.progress_label(), practice_note=self.t("trial.practice_note") if plan.is_practice else "",
             video=f"/s/{tok}/{self.tokens.media(pid, plan.trial_index)}.mp4", labels=labels,
-            criteria=self._criteria(), can_play=session.can_play(), can_rank=session.can_rank(),
+            # a play still open here belongs to a page that was reloaded: the next "play" closes it
+            criteria=self._criteria(), can_play=session.can_play() or session.playing,
+            can_rank=session.can_rank(),
             allow_replay=bool(pb.allow_replay), allow_ties=bool(pb.allow_ties),
             texts={k: self.t(k) for k in ("trial.play", "trial.replay", "trial.ready", "trial.watch",
                                           "trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
@@ -421,7 +423,7 @@ class Flow:
     def _play(self, session: Session, pid: str) -> None:
         if session.playing:
             # the page was reloaded (or lost) while a play was open: that play did not finish
-            session.record_play_finished(False)
+            session.abandon_play()
         plan = session.current_trial()
         if plan is None:
             raise BadRequest("no clip to play now")
