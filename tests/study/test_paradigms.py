@@ -449,3 +449,116 @@ def test_a_schema_5_database_made_by_the_old_code_is_upgraded_in_place(tmp_path:
     with sqlite3.connect(path) as con:
         assert integrity.damaged_rows(con) == []
     con.close()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Merge: returned preference and rating answers are re-checked
+
+
+def _quick_copy(paradigm: str, folder: Path) -> Path:
+    """The example next to a link to the demo's files, without must_watch_fully (answers come at once)."""
+    folder.mkdir()
+    (folder / "demo").symlink_to(designs_dir() / "demo", target_is_directory=True)
+    text = EXAMPLES[paradigm].read_text().replace("must_watch_fully = true", "must_watch_fully = false")
+    path = folder / EXAMPLES[paradigm].name
+    path.write_text(text)
+    return path
+
+
+def _edited_zip(src: Path, out: Path, edit) -> Path:
+    import hashlib
+    import zipfile
+
+    with zipfile.ZipFile(src) as zf:
+        payload = json.loads(zf.read("results.json"))
+        manifest = json.loads(zf.read("manifest.json"))
+    edit(payload)
+    body = json.dumps(payload, indent=1, sort_keys=True).encode()
+    manifest["files"]["results.json"] = hashlib.sha256(body).hexdigest()
+    with zipfile.ZipFile(out, "w") as zf:
+        zf.writestr("results.json", body)
+        zf.writestr("manifest.json", json.dumps(manifest))
+    return out
+
+
+def _first(payload: dict, table: str, **match) -> dict:
+    return next(r for r in payload[table] if all(r.get(k) == v for k, v in match.items()))
+
+
+def _pairwise_not_opposite(p: dict) -> None:
+    t = next(t["trial_index"] for t in p["trials"] if not t["is_practice"])
+    _first(p, "judgements", trial_index=t, slot=0)["value"] = 1.0
+    _first(p, "judgements", trial_index=t, slot=1)["value"] = 1.0
+
+
+def _pairwise_level_off_scale(p: dict) -> None:
+    for r in p["judgements"]:
+        if r["trial_index"] == 1:
+            r["value"] = 3.0 if r["slot"] == 1 else -3.0
+
+
+def _pairwise_invented_reason(p: dict) -> None:
+    for r in p["judgements"]:
+        if r["trial_index"] == 1:
+            r["value"] = 1.0 if r["slot"] == 1 else -1.0
+            r["reasons"] = json.dumps(["Colour"])
+
+
+def _pairwise_ranked(p: dict) -> None:
+    p["responses"].append({"participant": p["participant"], "trial_index": 1, "criterion": "human_likeness",
+                           "condition": p["trial_slots"][2]["condition"], "slot": 0, "rank": 1.0,
+                           "design_hash": p["design_hash"], "app_version": "x"})
+
+
+def _mismatch_other_motion(p: dict) -> None:
+    row = _first(p, "trial_slots", trial_index=1, slot=0)
+    row["motion_stimulus"] = "clip04" if row["motion_stimulus"] != "clip04" else "clip03"
+
+
+def _rating_slider_missing(p: dict) -> None:
+    p["judgements"].remove(_first(p, "judgements", trial_index=1, slot=2))
+
+
+def _rating_over_100(p: dict) -> None:
+    _first(p, "judgements", trial_index=1, slot=0)["value"] = 140.0
+
+
+EDITS = [
+    ("pairwise", _pairwise_not_opposite, "are not a preference: the two slots get -p and p"),
+    ("pairwise", _pairwise_level_off_scale, "p one of [-2, -1, 0, 1, 2]"),
+    ("pairwise", _pairwise_invented_reason, "reasons ['Colour'] are not some of the block's reasons"),
+    ("pairwise", _pairwise_ranked, "trial 1: ranks on a pairwise trial"),
+    ("mismatch", _mismatch_other_motion, "trial 1: its slots (condition, motion of which clip, sample)"),
+    ("rating", _rating_slider_missing, "needs one answer for each of the 3 slots"),
+    ("rating", _rating_over_100, "are not all in 0..100"),
+]
+
+
+@pytest.mark.parametrize("paradigm", list(EXAMPLES))
+def test_returned_answers_of_each_paradigm_merge_and_edits_are_refused(paradigm: str, tmp_path: Path) -> None:
+    from studyapp.study.bundle import merge_results, write_results_file
+
+    design_path = _quick_copy(paradigm, tmp_path / "study")
+    d = load_design(design_path, check_files=False)
+    with ResultsDB(tmp_path / "remote.sqlite", d) as db:
+        _run(d, db, "P1", 3)
+        results = write_results_file(db, "P1", tmp_path / "out")
+        stored = (db.trial_slots("P1"), db.judgements("P1"))
+    for k, (_, edit, message) in enumerate(e for e in EDITS if e[0] == paradigm):
+        lab = design_path.with_name(f"lab{k}.sqlite")
+        ResultsDB(lab, d).close()
+        [report] = merge_results(lab, [_edited_zip(results, tmp_path / f"edit{k}.zip", edit)], design=design_path)
+        assert not report.ok and any(message in p for p in report.problems), (report.message, report.problems)
+        with ResultsDB(lab, create=False) as db:
+            assert db.trials() == [] and db.judgements() == []
+    lab = design_path.with_name("lab.sqlite")
+    ResultsDB(lab, d).close()
+    [report] = merge_results(lab, [results], design=design_path)
+    assert report.ok, report.problems
+    with ResultsDB(lab, create=False) as db:
+        assert [{k: v for k, v in r.items() if k != "app_version"} for r in db.trial_slots("P1")] == [
+            {k: v for k, v in r.items() if k != "app_version"} for r in stored[0]]
+        assert [(r["trial_index"], r["slot"], r["value"], r["reasons"]) for r in db.judgements("P1")] == [
+            (r["trial_index"], r["slot"], r["value"], r["reasons"]) for r in stored[1]]
+    [again] = merge_results(lab, [results], design=design_path)
+    assert again.ok and again.already
