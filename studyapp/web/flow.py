@@ -273,7 +273,7 @@ class Flow:
             return self._page("instructions", heading=self.t("instructions.title"),
                               text=self.design.instructions, questions_title=self.t("instructions.questions"),
                               criteria=self._criteria(), how_title=self.t("instructions.how_title"),
-                              how=self.t("instructions.how", keys="1, 2, 3"),
+                              how="\n\n".join(self._how()),
                               ties=self.t("instructions.ties") if self.design.playback.allow_ties else "",
                               button=self.t("page.continue"), **common)
         if st is State.ENV_CHECK:
@@ -301,9 +301,25 @@ class Flow:
         text = self.t("online.expired") if self._abandoned(pid) else self.t("final.ended_early_text")
         return self._page("ended", heading=self.t("final.ended_early"), text=text)
 
-    def _criteria(self) -> list[dict[str, str]]:
+    def _criteria(self, ids: list[str] | None = None) -> list[dict[str, str]]:
         return [{"id": c.id, "label": c.label, "question": c.question, "explanation": c.explanation}
-                for c in self.design.criteria]
+                for c in self.design.criteria if ids is None or c.id in ids]
+
+    def _how(self) -> list[str]:
+        """How to answer, for each paradigm the design's blocks use (in their order)."""
+        out: list[str] = []
+        for block in self.design.trial_blocks:
+            if block.paradigm == "rank":
+                text = self.t("instructions.how", keys="1, 2, 3")
+            elif block.paradigm in ("pairwise", "mismatch"):
+                text = self.t("instructions.how_pref", n=block.levels)
+                if block.reasons:
+                    text += "\n\n" + self.t("instructions.how_reasons")
+            else:
+                text = self.t("instructions.how_rating", n=max(2, len(block.anchors) or 5))
+            if text not in out:
+                out.append(text)
+        return out
 
     def _items(self) -> list[dict[str, Any]]:
         out = []
@@ -325,6 +341,10 @@ class Flow:
 
     def _trial(self, session: Session, pid: str, tok: str, common: dict[str, Any]) -> dict[str, Any]:
         plan = session.current_trial()
+        intro = session.block_instructions()
+        if intro is not None:
+            return self._page("block", heading=self.t("block.title"), text=intro, button=self.t("block.continue"),
+                              **common)
         pos = session.plans.index(plan)
         nxt = session.plans[pos + 1] if pos + 1 < len(session.plans) else None
         if nxt is None:
@@ -333,22 +353,50 @@ class Flow:
             next_key = "rank.start_study"
         else:
             next_key = "rank.next_practice" if plan.is_practice else "rank.next"
-        labels = list(self.design.slot_labels or ("1", "2", "3"))
+        n = len(plan.slots)
+        labels = list(self.design.slot_labels_for(n) or [str(k + 1) for k in range(n)])
+        paradigm = getattr(plan, "paradigm", "rank")
+        block = self.design.block(getattr(plan, "block", "main"))
         pb = self.design.playback
+        texts = {k: self.t(k) for k in ("trial.play", "trial.replay", "trial.ready", "trial.watch", "rank.wait",
+                                        "rank.next_ok", "trial.loading")}
+        if paradigm == "rank":
+            texts |= {k: self.t(k) for k in ("trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
+                                             "rank.third", "rank.drop_here", "rank.tie_on", "rank.tie_off")}
+            texts |= {"start_hint": self.t("rank.start_hint", keys="1, 2, 3"), "still": self.t("rank.still", criteria="{criteria}")}
+            answer: dict[str, Any] = {}
+        elif paradigm in ("pairwise", "mismatch"):
+            texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),
+                      "reasons": self.t("pref.reasons"), "still": self.t("pref.still", criteria="{criteria}"),
+                      "start_hint": self.t("pref.start_hint", n=block.levels)}
+            answer = {"options": self._preference_options(block.levels, labels), "reasons": list(block.reasons)}
+        else:
+            texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),
+                      "unset": self.t("rating.unset"), "still": self.t("rating.still", sliders="{criteria}"),
+                      "start_hint": self.t("rating.start_hint", n=max(2, len(block.anchors) or 5))}
+            answer = {"anchors": list(block.anchors)}
+        texts["next"] = self.t(next_key)
         return self._page(
-            "trial", progress=session.progress_label(), practice_note=self.t("trial.practice_note") if plan.is_practice else "",
+            "trial", paradigm=paradigm, progress=session.progress_label(),
+            practice_note=self.t("trial.practice_note") if plan.is_practice else "",
             video=f"/s/{tok}/{self.tokens.media(pid, plan.trial_index)}.mp4", labels=labels,
+            criteria=self._criteria(session.criteria_of(plan)),
             # a play still open here belongs to a page that was reloaded: the next "play" closes it
-            criteria=self._criteria(), can_play=session.can_play() or session.playing,
-            can_rank=session.can_rank(),
-            allow_replay=bool(pb.allow_replay), allow_ties=bool(pb.allow_ties),
-            texts={k: self.t(k) for k in ("trial.play", "trial.replay", "trial.ready", "trial.watch",
-                                          "trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
-                                          "rank.third", "rank.drop_here", "rank.wait", "rank.next_ok",
-                                          "rank.tie_on", "rank.tie_off", "trial.loading")}
-            | {"start_hint": self.t("rank.start_hint", keys="1, 2, 3"), "next": self.t(next_key),
-               "still": self.t("rank.still", criteria="{criteria}")},
-            **common)
+            can_play=session.can_play() or session.playing, can_rank=session.can_rank(),
+            allow_replay=bool(pb.allow_replay), allow_ties=bool(pb.allow_ties), texts=texts, **answer, **common)
+
+    def _preference_options(self, levels: int, labels: list[str]) -> list[dict[str, Any]]:
+        """The answers of a preference question, left to right: (value, text); NEGATIVE = the left figure."""
+        left, right = labels[0], labels[-1]
+        if int(levels) == 3:
+            return [{"value": -1, "text": self.t("pref.better", figure=left)},
+                    {"value": 0, "text": self.t("pref.equal")},
+                    {"value": 1, "text": self.t("pref.better", figure=right)}]
+        return [{"value": -2, "text": self.t("pref.clearly", figure=left)},
+                {"value": -1, "text": self.t("pref.slightly", figure=left)},
+                {"value": 0, "text": self.t("pref.equal")},
+                {"value": 1, "text": self.t("pref.slightly", figure=right)},
+                {"value": 2, "text": self.t("pref.clearly", figure=right)}]
 
     # ------------------------------------------------------------------ media
     def media(self, pid: str, name: str) -> Path:
@@ -392,21 +440,50 @@ class Flow:
                 self._play(session, pid)
             elif action == "ended":
                 self._ended(session, pid)
+            elif action == "block":
+                session.finish_block_instructions()
             elif action == "answer":
-                ranks = body.get("ranks")
-                if not isinstance(ranks, dict) or not all(isinstance(v, dict) for v in ranks.values()):
-                    raise BadRequest("ranks must map each question to {slot: rank}")
-                session.submit_ranking(ranks)
+                self._answer(session, body)
                 self._plays.pop(pid, None)
             elif action == "questionnaire":
                 session.submit_questionnaire(self._answers(body))
             else:
                 raise BadRequest(f"unknown action {action!r}")
-        except (RankingError, SessionError) as exc:
+        except RankingError as exc:          # the participant's answer breaks a rule: they can fix it
             raise NotSaved(str(exc)) from None
+        except SessionError as exc:          # not possible in this state: a stale or forged page
+            raise BadRequest(str(exc)) from None
         if session.finished:
             self._sessions.pop(pid, None)
         return self.state(pid)
+
+    @staticmethod
+    def _answer(session: Session, body: Mapping[str, Any]) -> None:
+        """The current trial's answer, by its paradigm, through the session's method for it (which checks it)."""
+        plan = session.current_trial()
+        if plan is None:
+            raise BadRequest("no trial to answer now")
+        paradigm = getattr(plan, "paradigm", "rank")
+        if paradigm == "rank":
+            ranks = body.get("ranks")
+            if not isinstance(ranks, dict) or not all(isinstance(v, dict) for v in ranks.values()):
+                raise BadRequest("ranks must map each question to {slot: rank}")
+            session.submit_ranking(ranks)
+        elif paradigm in ("pairwise", "mismatch"):
+            levels, reasons = body.get("levels"), body.get("reasons", [])
+            if not isinstance(levels, dict) or not all(isinstance(v, int) and not isinstance(v, bool)
+                                                       for v in levels.values()):
+                raise BadRequest("levels must map each question to a whole number")
+            if not isinstance(reasons, list) or not all(isinstance(r, str) for r in reasons) or len(reasons) > 50:
+                raise BadRequest("reasons must be a list of texts")
+            session.submit_preference(levels, reasons)
+        else:
+            ratings = body.get("ratings")
+            if not isinstance(ratings, dict) or not all(
+                    isinstance(v, dict) and all(finite_number(x, -1e9, 1e9) is not None for x in v.values())
+                    for v in ratings.values()):
+                raise BadRequest("ratings must map each question to {slot: number}")
+            session.submit_ratings(ratings)
 
     @staticmethod
     def _env(body: Mapping[str, Any]) -> dict[str, Any]:

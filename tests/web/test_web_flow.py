@@ -268,7 +268,7 @@ def test_invalid_answers_are_refused_and_nothing_is_stored(study, browser_for) -
                         headers={"X-CSRF-Token": b.csrf, "content-type": "application/json"})
         assert r.status_code == 400
         b.act("nonsense", {}, expect=400)
-        b.act("questionnaire", {"answers": {}}, expect=422)   # not in that state: refused, nothing stored
+        b.act("questionnaire", {"answers": {}}, expect=400)   # not in that state: refused, nothing stored
     db = study.db()
     assert db.trials("5f0c0ffee0ddba11") == [] and db.questionnaire("5f0c0ffee0ddba11") == []
     db.close()
