@@ -29,6 +29,13 @@ Abandonment
     that the session was closed. Activity is the latest session start or end, play start or end, and answer, or
     any request this server process saw.
 
+Paradigms
+    A trial's page carries its paradigm (``rank``, ``pairwise``, ``mismatch``, ``rating``) and the answer goes to
+    the session's method for it (``submit_ranking``, ``submit_preference``, ``submit_ratings``), which checks
+    it; a block's instructions come first (``block`` action, ``Session.finish_block_instructions``). An answer
+    the session refuses is a 422 with its message for the participant; a request the session's state does not
+    allow (a stale or forged page) is a 400.
+
 Must watch once
     The page reports when the video starts (``play``) and when it fires ``ended``; the server counts the play
     as complete only when at least the video's length (less :data:`WATCH_SLACK_S`) passed between the two,
