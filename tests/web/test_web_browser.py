@@ -10,96 +10,16 @@ from the participant's schedule, never from the page.
 """
 from __future__ import annotations
 
-import os
-import shutil
-import signal
-import socket
-import sqlite3
-import subprocess
-import sys
 import time
-import urllib.request
-from pathlib import Path
 
-import pytest
-
+from fixtures.web_serve import CHROME_MISSING, Server, free_port, read_db as _read
 from fixtures.web_study import COMPLETION_CODE, write_web_study
 from studyapp.study.design import load_design
 from studyapp.study.schedule import participant_schedule
 
-ROOT = Path(__file__).resolve().parents[2]
-CHROMEDRIVER = shutil.which("chromedriver")
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 PID = "60b1browser0000000000001"
 
-pytestmark = pytest.mark.skipif(not (CHROMEDRIVER and CHROMIUM),
-                                reason="needs Debian's chromium and chromium-driver (.ci/setup.sh installs them)")
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Server:
-    """``fixtures.web_serve`` in its own process."""
-
-    def __init__(self, design: Path, db: Path, port: int, videos: Path) -> None:
-        self.args = [sys.executable, "-m", "fixtures.web_serve", str(design), str(db), str(port), str(videos)]
-        self.port = port
-        self.proc: subprocess.Popen | None = None
-
-    def start(self) -> None:
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "tests")])}
-        self.proc = subprocess.Popen(self.args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        give_up = time.monotonic() + 60
-        while time.monotonic() < give_up:
-            if self.proc.poll() is not None:
-                raise AssertionError(f"the server ended: {self.proc.stderr.read().decode()[-2000:]}")
-            try:
-                urllib.request.urlopen(f"http://127.0.0.1:{self.port}/a/app.css", timeout=1).read()
-                return
-            except OSError:
-                time.sleep(0.1)
-        raise AssertionError("the server did not start in 60 s")
-
-    def kill(self) -> None:
-        assert self.proc is not None
-        os.kill(self.proc.pid, signal.SIGKILL)     # no shutdown, no flush: what is on disk is what was committed
-        self.proc.wait(10)
-
-    def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-
-
-def _read(db: Path, sql: str, *args: object) -> list[tuple]:
-    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
-    try:
-        return con.execute(sql, args).fetchall()
-    finally:
-        con.close()
-
-
-@pytest.fixture
-def chrome():
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--mute-audio", "--disable-gpu",
-                "--window-size=1200,1400"):
-        opts.add_argument(arg)
-    opts.binary_location = CHROMIUM
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
-    driver.set_page_load_timeout(30)
-    yield driver
-    driver.quit()
+pytestmark = CHROME_MISSING
 
 
 def test_a_participant_completes_the_study_in_chromium_through_a_reload_and_a_server_kill(tmp_path, chrome) -> None:
@@ -109,7 +29,7 @@ def test_a_participant_completes_the_study_in_chromium_through_a_reload_and_a_se
     from selenium.webdriver.common.keys import Keys
     from selenium.webdriver.support.ui import WebDriverWait
 
-    port = _free_port()
+    port = free_port()
     complete = f"http://127.0.0.1:{port}/complete?cc={COMPLETION_CODE}"
     design_path = write_web_study(tmp_path / "study", completion_url=complete)
     design = load_design(design_path)
