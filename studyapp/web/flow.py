@@ -126,6 +126,7 @@ class Flow:
         self._plays: dict[str, _Play] = {}
         self._seen: dict[str, float] = {}
         self._lengths: dict[Path, float] = {}
+        self._minutes: int | None = None
 
     # ------------------------------------------------------------------ texts
     def t(self, key: str, **values: Any) -> str:
@@ -156,13 +157,16 @@ class Flow:
             decline_back=self.t("welcome.decline_back"))
 
     def estimated_minutes(self) -> int:
-        """About how long the study takes: each trial's timeline plus 40 s to answer (as the desktop says)."""
-        from studyapp.study.schedule import participant_schedule
+        """About how long the study takes: each trial's timeline plus 40 s to answer (as the desktop says);
+        worked out once (it reads every clip's audio header)."""
+        if self._minutes is None:
+            from studyapp.study.schedule import participant_schedule
 
-        total = 0.0
-        for plan in participant_schedule(self.design, "estimate", 0):
-            total += (trial_duration_s(self.design, plan) or 30.0) + 40.0
-        return max(2, int(round(total / 60.0)))
+            total = 0.0
+            for plan in participant_schedule(self.design, "estimate", 0):
+                total += (trial_duration_s(self.design, plan) or 30.0) + 40.0
+            self._minutes = max(2, int(round(total / 60.0)))
+        return self._minutes
 
     def start(self, body: Mapping[str, Any]) -> str:
         """The consent page's answer: create the participant (or find the one coming back) and return their

@@ -1,6 +1,7 @@
 """The paradigm pages in a real browser (headless Chromium, selenium): a block's instructions page, a pairwise
 preference answered by clicks with a reason ticked, a rating answered by moving every slider with the
-keyboard; what the database holds is what was chosen on the page."""
+keyboard; what the database holds is what was chosen on the page. Then the experimenter's dashboard, logged
+in, shows the completed participant on their row."""
 from __future__ import annotations
 
 import json
@@ -48,7 +49,7 @@ def test_pairwise_and_rating_pages_in_chromium(tmp_path, chrome) -> None:
     assert [b.paradigm for b in design.trial_blocks] == ["pairwise", "rating"]
     db = tmp_path / "results.sqlite"
     port = free_port()
-    server = Server(design_path, db, port, tmp_path / "videos")
+    server = Server(design_path, db, port, tmp_path / "videos", password="dashboard password 1")
     server.start()
     wait = WebDriverWait(chrome, 20)
 
@@ -110,6 +111,18 @@ def test_pairwise_and_rating_pages_in_chromium(tmp_path, chrome) -> None:
             click("#next")
             wait.until(lambda d: answered() == done + 1)
             done += 1
+        # the experimenter's dashboard: log in, one participant completed on its row
+        chrome.get(f"http://127.0.0.1:{port}/dashboard")
+        chrome.find_element(By.ID, "password").send_keys("dashboard password 1")
+        chrome.find_element(By.CSS_SELECTOR, "#login button").click()
+        wait.until(lambda d: d.find_elements(By.ID, "rows"))
+        totals = {r.find_element(By.TAG_NAME, "th").text: r.find_element(By.TAG_NAME, "td").text
+                  for r in chrome.find_elements(By.CSS_SELECTOR, "#totals tr")}
+        assert totals["Participants"] == "1" and totals["Completed"] == "1"
+        cells = [[td.text for td in tr.find_elements(By.TAG_NAME, "td")]
+                 for tr in chrome.find_elements(By.CSS_SELECTOR, "#rows tr")][1:]
+        assert cells[0][:2] == ["0", "1"] and all(c[1] == "0" for c in cells[1:])
+        assert chrome.find_element(By.ID, "export").get_attribute("href").endswith("/dashboard/export.csv")
     finally:
         server.stop()
 
