@@ -315,3 +315,28 @@ def test_a_reload_mid_clip_keeps_a_play_once_clip_playable(web_study_files, tmp_
     db = study.db()
     assert [(p["trial_index"], p["completed"]) for p in db.plays("5f0c0ffee0ddba11")] == [(0, 0), (0, 1)]
     db.close()
+
+
+def test_the_demo_is_served(tmp_path, browser_for) -> None:
+    """The shipped demo design through the server (stand-in videos): every page, the frozen attention check
+    passed, its questionnaire, done."""
+    from studyapp.resources import demo_design
+
+    design = load_design(demo_design(), check_files=False)
+    study = Study(demo_design(), design, tmp_path / "demo.sqlite", ClipVideos(tmp_path / "videos"), Clock())
+    with TestClient(study.app()) as client:
+        b = browser_for(client, study)
+        _to_first_trial(b, "PROLIFIC_PID=demo1")
+        assert "Practice clip 1 of 1" == b.state["progress"] and b.state["labels"] == ["A", "B", "C"]
+        while b.state["screen"] == "trial":
+            b.watch()
+            b.answer_well()
+        assert b.state["screen"] == "questionnaire"
+        b.act("questionnaire", {"answers": {q["id"]: 5 for q in b.state["items"]}})
+        assert b.state["screen"] == "done"
+        for url, headers, body in b.seen:
+            assert conditions_named_in(design, " ".join([url, json.dumps(headers), body.decode("latin-1")])) == []
+    db = study.db()
+    assert db.participant("demo1").status == "done"
+    assert [t["attention_passed"] for t in db.trials("demo1") if t["is_attention_check"]] == [1]
+    db.close()
