@@ -242,7 +242,7 @@ class OrderFrames:
             return
         n = len(self.columns)
         order = self.orders[j]
-        if order[0] != 0 and all(order[p] == (order[0] + p) % n for p in range(n)):
+        if all(order[p] == (order[0] + p) % n for p in range(n)):
             np.copyto(out, self.buffers[order[0]])  # a rotation itself: one contiguous copy
             return
         for p, (x0, x1) in enumerate(self.columns):

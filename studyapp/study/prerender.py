@@ -26,7 +26,7 @@ version tag is left out), so nothing served reveals or groups a condition. The G
 the key: a cache made on one machine is served from another; videos rendered by a GPU and by llvmpipe
 differ only by anti-aliasing at the figures' edges.
 
-Resumable. Each video is written to a temporary file in the cache folder (``.part-<key>-<pid>``), synced to
+Resumable. Each video is written to a temporary file in the cache folder (``.part-<key>-<pid>-<random>``), synced to
 disk, then renamed to its final name (atomic on one file system) and the folder synced: a final name always
 holds a whole video. A prerender killed at any moment leaves at most some temporary files, which the next
 run removes (those of processes no longer running) before it renders what is missing.
@@ -49,6 +49,8 @@ import hashlib
 import itertools
 import json
 import os
+import secrets
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -212,7 +214,9 @@ def cached_path(design: Design, plan: TrialPlan, cache_dir: str | Path,
 # -- writing one file safely ------------------------------------------------------------------------------
 
 def _part_path(final: Path) -> Path:
-    return final.with_name(f"{PART_PREFIX}{final.stem}-{os.getpid()}")
+    """``.part-<key>-<pid>-<random>``: unique to this writer, so two threads or processes rendering the same
+    video never write into one file (the last rename wins; both hold the same video)."""
+    return final.with_name(f"{PART_PREFIX}{final.stem}-{os.getpid()}-{secrets.token_hex(4)}")
 
 
 def _publish(part: Path, final: Path) -> None:
@@ -239,10 +243,10 @@ def remove_stale_parts(cache_dir: str | Path) -> int:
     removed = 0
     for p in Path(cache_dir).glob(PART_PREFIX + "*"):
         try:
-            pid = int(p.name.rsplit("-", 1)[1])
+            pid = int(p.name.rsplit("-", 2)[1])
         except (IndexError, ValueError):
             continue
-        if pid != os.getpid() and _alive(pid):
+        if _alive(pid):  # still writing it (this process included: another thread may be)
             continue
         p.unlink(missing_ok=True)
         removed += 1
@@ -280,8 +284,13 @@ def video_for(design: Design, plan: TrialPlan, cache_dir: str | Path,
     final = cached_path(design, plan, folder, settings)
     if final.is_file():
         return final
-    _render_group(design, [plan], [final], settings)
+    with _GL_LOCK:  # one GL context per process: one thread draws at a time
+        if not final.is_file():  # another thread may have rendered it meanwhile
+            _render_group(design, [plan], [final], settings)
     return final
+
+
+_GL_LOCK = threading.RLock()
 
 
 def _render_group(design: Design, plans: Sequence[TrialPlan], finals: Sequence[Path],
@@ -399,7 +408,8 @@ def _run(design: Design, tasks: list, settings: RenderSettings, jobs: int):
     """Yield ``(videos, seconds each)`` per finished group, rendered here or in ``jobs`` processes."""
     if jobs == 1 or len(tasks) <= 1:
         for plans, finals in tasks:
-            _render_group(design, plans, finals, settings)
+            with _GL_LOCK:
+                _render_group(design, plans, finals, settings)
             yield len(plans), _duration(design, plans[0])
         return
     import multiprocessing

@@ -224,3 +224,15 @@ def test_killed_prerender_resumes_with_nothing_half_written(study, tmp_path):
         assert (now.st_ino, now.st_mtime_ns) == (st.st_ino, st.st_mtime_ns)
     for plan in pr.distinct_trials(study):
         assert pr.cached_path(study, plan, cache_dir, SETTINGS).is_file()
+
+
+def test_only_parts_of_finished_processes_are_removed(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    key = "0" * 64
+    stale = tmp_path / f"{pr.PART_PREFIX}{key}-{int(dead.stdout)}-abcd1234"
+    mine = tmp_path / f"{pr.PART_PREFIX}{key}-{os.getpid()}-abcd1234"
+    video = tmp_path / f"{key}.mp4"
+    for p in (stale, mine, video):
+        p.write_bytes(b"x")
+    assert pr.remove_stale_parts(tmp_path) == 1
+    assert not stale.exists() and mine.exists() and video.exists()
