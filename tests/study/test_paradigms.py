@@ -562,3 +562,55 @@ def test_returned_answers_of_each_paradigm_merge_and_edits_are_refused(paradigm:
             (r["trial_index"], r["slot"], r["value"], r["reasons"]) for r in stored[1]]
     [again] = merge_results(lab, [results], design=design_path)
     assert again.ok and again.already
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Bundles: the paradigms shipped blinded, run remotely, merged back
+
+
+@pytest.mark.parametrize("paradigm", ["mismatch", "rating"])  # pairwise ships as rating does (2 tokens shown)
+def test_a_bundle_ships_each_paradigm_blinded_and_its_answers_merge_back(paradigm: str, tmp_path: Path) -> None:
+    import zipfile
+
+    from studyapp.study.bundle import make_bundle, merge_results, open_bundle, remote_plan, write_results_file
+
+    design_path = _quick_copy(paradigm, tmp_path / "study")
+    lab = design_path.with_name("lab.sqlite")
+    bundle = tmp_path / "send" / "study.zip"
+    make_bundle(design_path, bundle, participants=1, results=lab, salt="s" * 32)  # checks both designs' files
+    d = load_design(design_path, check_files=False)
+    with zipfile.ZipFile(bundle) as zf:
+        shipped = zf.read("study.toml").decode()
+        names = [n for n in zf.namelist() if n.startswith("media/")]
+    import re
+
+    for secret in (*d.condition_ids, *(s.id for s in d.stimuli)):
+        assert not re.search(rf"\b{secret}\b", shipped), secret
+    assert not re.search(r"^\s*(reference|match_tag = \"speaker\"|speaker)\s*=", shipped, re.M)
+    assert len(names) == len(set(names))
+    opened = open_bundle(bundle, tmp_path / "cache")
+    carried = remote_plan(opened, "R01")
+    remote = load_design(opened.design_path, check_files=False)
+    expected = participant_schedule(d, "R01", carried.row)
+    assert [(p.block, p.paradigm, len(p.slots)) for p in carried.plans] == [
+        (p.block, p.paradigm, len(p.slots)) for p in expected]
+    with ResultsDB(tmp_path / "remote.sqlite", remote) as db:
+        s = Session(remote, db, "R01", row=carried.row, plans=carried.plans, n_rows=carried.n_rows)
+        _start(s)
+        rng = np.random.default_rng(1)
+        while s.current_trial() is not None:
+            if s.block_instructions() is not None:
+                s.finish_block_instructions()
+            s.record_play_started()
+            s.record_play_finished(True)
+            _answer(s, s.current_trial(), rng)
+        results = write_results_file(db, "R01", tmp_path / "out", opened)
+        answers = [(r["trial_index"], r["slot"], r["value"]) for r in db.judgements("R01")]
+    [report] = merge_results(lab, [results], design=design_path)
+    assert report.ok, report.problems
+    with ResultsDB(lab, create=False) as db:
+        slots = db.trial_slots("R01")
+        assert [(r["trial_index"], r["slot"], r["condition"], r["motion_stimulus"], r["sample"]) for r in slots] == [
+            (p.trial_index, i, c, p.motion_stimulus(i), p.samples[i]) for p in expected for i, c in enumerate(p.slots)]
+        assert [(r["trial_index"], r["slot"], r["value"]) for r in db.judgements("R01")] == answers
+        assert {r["condition"] for r in db.judgements("R01")} <= set(d.condition_ids)
