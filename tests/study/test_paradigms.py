@@ -15,6 +15,7 @@ from itertools import combinations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from studyapp.resources import demo_design, designs_dir
@@ -614,3 +615,58 @@ def test_a_bundle_ships_each_paradigm_blinded_and_its_answers_merge_back(paradig
             (p.trial_index, i, c, p.motion_stimulus(i), p.samples[i]) for p in expected for i, c in enumerate(p.slots)]
         assert [(r["trial_index"], r["slot"], r["value"]) for r in db.judgements("R01")] == answers
         assert {r["condition"] for r in db.judgements("R01")} <= set(d.condition_ids)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Export: the tidy table's paradigm columns
+
+
+def test_the_export_has_each_answer_once_in_its_paradigm_columns(examples, tmp_path: Path) -> None:
+    from results_analysis.loader import load_results
+    from studyapp.study.export import export_dataframe
+
+    d = load_design(EXAMPLES["mismatch"], check_files=False)
+    r = load_design(EXAMPLES["rating"], check_files=False)
+    r.blocks = [*r.blocks, Block("pw", "pairwise", ("realism",), ("lagged", "static"), ("clip02", "clip03"),
+                                 reasons=("Hands",))]
+    r.blocks = [Block("rk", "rank", ("realism",), ("synced", "lagged", "static"), ("clip01", "clip04")), *r.blocks]
+    for design, name in ((d, "m"), (r, "r")):
+        with ResultsDB(tmp_path / f"{name}.sqlite", design) as db:
+            _run(design, db, "P1", 5)
+            judged = {(j["trial_index"], j["criterion"], j["slot"]): j for j in db.judgements("P1")}
+            ranked = {(x["trial_index"], x["criterion"], x["slot"]): x for x in db.responses("P1")}
+            plans = {p.trial_index: p for p in participant_schedule(design, "P1", db.participant("P1").latin_row)}
+            df = export_dataframe(db)
+        assert len(df) == len(judged) + len(ranked)
+        for row in df.itertuples():
+            plan = plans[row.trial_index]
+            assert (row.block, row.paradigm, row.motion_stimulus) == (
+                plan.block, plan.paradigm, plan.motion_stimulus(row.slot))
+            key = (row.trial_index, row.criterion, row.slot)
+            if plan.paradigm == "rank":
+                assert row.rank == ranked[key]["rank"] and np.isnan(row.rating) and np.isnan(row.preference)
+                continue
+            j = judged[key]
+            assert np.isnan(row.rank) and row.condition == j["condition"]
+            if plan.paradigm == "rating":
+                assert row.rating == j["value"] and np.isnan(row.preference) and row.reasons == ""
+            else:
+                assert row.preference == j["value"] and np.isnan(row.rating)
+                assert row.reasons == ("" if j["reasons"] == "[]" else j["reasons"])
+            if plan.paradigm == "mismatch":
+                assert row.matched == int(plan.motion_stimuli[row.slot] == plan.stimulus_id)
+            else:
+                assert row.matched is pd.NA
+        csv = tmp_path / f"{name}.csv"
+        df.to_csv(csv, index=False)
+        for source in (csv, tmp_path / f"{name}.sqlite"):
+            loaded = load_results(source)
+            assert list(loaded["paradigm"]) == list(df["paradigm"])
+            assert np.allclose(loaded["preference"], df["preference"], equal_nan=True)
+            assert np.allclose(loaded["rating"], df["rating"], equal_nan=True)
+    old = tmp_path / "old.csv"  # an export before schema 6: a rank study
+    old.write_text("participant,trial_index,stimulus,criterion,condition,rank\nP1,0,c1,realism,A,1\n"
+                   "P1,0,c1,realism,B,2\n")
+    loaded = load_results(old)
+    assert list(loaded["paradigm"]) == ["rank", "rank"] and list(loaded["block"]) == ["main", "main"]
+    assert list(loaded["motion_stimulus"]) == ["c1", "c1"]
