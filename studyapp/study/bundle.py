@@ -685,8 +685,13 @@ def remote_plan(opened: OpenedBundle, participant_id: str) -> RemotePlan | None:
     try:
         mine = people[participant_id]
         row, rows = int(mine["row"]), int(data["rows"])
-        plans = [TrialPlan(i, str(sid), (str(slots[0]), str(slots[1]), str(slots[2])), bool(prac), bool(check), row)
-                 for i, (sid, slots, prac, check) in enumerate(mine["trials"])]
+        # a trial is [stimulus, slots, practice, check] and, since the response paradigms, {block, paradigm}
+        plans = [TrialPlan(i, str(t[0]), tuple(str(c) for c in t[1]), bool(t[2]), bool(t[3]), row,
+                           (1,) * len(t[1]), *((str(t[4]["block"]), str(t[4]["paradigm"])) if len(t) > 4
+                                               else ("main", "rank")))
+                 for i, t in enumerate(mine["trials"])]
+        if any(len(p.slots) not in (2, 3, 4) for p in plans):
+            raise ValueError("a trial with a number of slots no paradigm shows")
     except (ValueError, KeyError, TypeError, IndexError) as exc:
         raise unreadable(exc) from None
     return RemotePlan(row=row, n_rows=rows, plans=plans)

@@ -15,6 +15,7 @@ from itertools import combinations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from studyapp.resources import demo_design, designs_dir
@@ -562,3 +563,123 @@ def test_returned_answers_of_each_paradigm_merge_and_edits_are_refused(paradigm:
             (r["trial_index"], r["slot"], r["value"], r["reasons"]) for r in stored[1]]
     [again] = merge_results(lab, [results], design=design_path)
     assert again.ok and again.already
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Bundles: the paradigms shipped blinded, run remotely, merged back
+
+
+@pytest.mark.parametrize("paradigm", ["mismatch", "rating"])  # pairwise ships as rating does (2 tokens shown)
+def test_a_bundle_ships_each_paradigm_blinded_and_its_answers_merge_back(paradigm: str, tmp_path: Path) -> None:
+    import zipfile
+
+    from studyapp.study.bundle import make_bundle, merge_results, open_bundle, remote_plan, write_results_file
+
+    design_path = _quick_copy(paradigm, tmp_path / "study")
+    lab = design_path.with_name("lab.sqlite")
+    bundle = tmp_path / "send" / "study.zip"
+    make_bundle(design_path, bundle, participants=1, results=lab, salt="s" * 32)  # checks both designs' files
+    d = load_design(design_path, check_files=False)
+    with zipfile.ZipFile(bundle) as zf:
+        shipped = zf.read("study.toml").decode()
+        names = [n for n in zf.namelist() if n.startswith("media/")]
+    import re
+
+    for secret in (*d.condition_ids, *(s.id for s in d.stimuli)):
+        assert not re.search(rf"\b{secret}\b", shipped), secret
+    assert not re.search(r"^\s*(reference|match_tag = \"speaker\"|speaker)\s*=", shipped, re.M)
+    assert len(names) == len(set(names))
+    opened = open_bundle(bundle, tmp_path / "cache")
+    carried = remote_plan(opened, "R01")
+    remote = load_design(opened.design_path, check_files=False)
+    expected = participant_schedule(d, "R01", carried.row)
+    assert [(p.block, p.paradigm, len(p.slots)) for p in carried.plans] == [
+        (p.block, p.paradigm, len(p.slots)) for p in expected]
+    with ResultsDB(tmp_path / "remote.sqlite", remote) as db:
+        s = Session(remote, db, "R01", row=carried.row, plans=carried.plans, n_rows=carried.n_rows)
+        _start(s)
+        rng = np.random.default_rng(1)
+        while s.current_trial() is not None:
+            if s.block_instructions() is not None:
+                s.finish_block_instructions()
+            s.record_play_started()
+            s.record_play_finished(True)
+            _answer(s, s.current_trial(), rng)
+        results = write_results_file(db, "R01", tmp_path / "out", opened)
+        answers = [(r["trial_index"], r["slot"], r["value"]) for r in db.judgements("R01")]
+    [report] = merge_results(lab, [results], design=design_path)
+    assert report.ok, report.problems
+    with ResultsDB(lab, create=False) as db:
+        slots = db.trial_slots("R01")
+        assert [(r["trial_index"], r["slot"], r["condition"], r["motion_stimulus"], r["sample"]) for r in slots] == [
+            (p.trial_index, i, c, p.motion_stimulus(i), p.samples[i]) for p in expected for i, c in enumerate(p.slots)]
+        assert [(r["trial_index"], r["slot"], r["value"]) for r in db.judgements("R01")] == answers
+        assert {r["condition"] for r in db.judgements("R01")} <= set(d.condition_ids)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Export: the tidy table's paradigm columns
+
+
+def test_the_export_has_each_answer_once_in_its_paradigm_columns(examples, tmp_path: Path) -> None:
+    from results_analysis.loader import load_results
+    from studyapp.study.export import export_dataframe
+
+    d = load_design(EXAMPLES["mismatch"], check_files=False)
+    r = load_design(EXAMPLES["rating"], check_files=False)
+    r.blocks = [*r.blocks, Block("pw", "pairwise", ("realism",), ("lagged", "static"), ("clip02", "clip03"),
+                                 reasons=("Hands",))]
+    r.blocks = [Block("rk", "rank", ("realism",), ("synced", "lagged", "static"), ("clip01", "clip04")), *r.blocks]
+    for design, name in ((d, "m"), (r, "r")):
+        with ResultsDB(tmp_path / f"{name}.sqlite", design) as db:
+            _run(design, db, "P1", 5)
+            judged = {(j["trial_index"], j["criterion"], j["slot"]): j for j in db.judgements("P1")}
+            ranked = {(x["trial_index"], x["criterion"], x["slot"]): x for x in db.responses("P1")}
+            plans = {p.trial_index: p for p in participant_schedule(design, "P1", db.participant("P1").latin_row)}
+            df = export_dataframe(db)
+        assert len(df) == len(judged) + len(ranked)
+        for row in df.itertuples():
+            plan = plans[row.trial_index]
+            assert (row.block, row.paradigm, row.motion_stimulus) == (
+                plan.block, plan.paradigm, plan.motion_stimulus(row.slot))
+            key = (row.trial_index, row.criterion, row.slot)
+            if plan.paradigm == "rank":
+                assert row.rank == ranked[key]["rank"] and np.isnan(row.rating) and np.isnan(row.preference)
+                continue
+            j = judged[key]
+            assert np.isnan(row.rank) and row.condition == j["condition"]
+            if plan.paradigm == "rating":
+                assert row.rating == j["value"] and np.isnan(row.preference) and row.reasons == ""
+            else:
+                assert row.preference == j["value"] and np.isnan(row.rating)
+                assert row.reasons == ("" if j["reasons"] == "[]" else j["reasons"])
+            if plan.paradigm == "mismatch":
+                assert row.matched == int(plan.motion_stimuli[row.slot] == plan.stimulus_id)
+            else:
+                assert row.matched is pd.NA
+        csv = tmp_path / f"{name}.csv"
+        df.to_csv(csv, index=False)
+        for source in (csv, tmp_path / f"{name}.sqlite"):
+            loaded = load_results(source)
+            assert list(loaded["paradigm"]) == list(df["paradigm"])
+            assert np.allclose(loaded["preference"], df["preference"], equal_nan=True)
+            assert np.allclose(loaded["rating"], df["rating"], equal_nan=True)
+    old = tmp_path / "old.csv"  # an export before schema 6: a rank study
+    old.write_text("participant,trial_index,stimulus,criterion,condition,rank\nP1,0,c1,realism,A,1\n"
+                   "P1,0,c1,realism,B,2\n")
+    loaded = load_results(old)
+    assert list(loaded["paradigm"]) == ["rank", "rank"] and list(loaded["block"]) == ["main", "main"]
+    assert list(loaded["motion_stimulus"]) == ["c1", "c1"]
+
+
+def test_a_scene_holds_up_to_four_figures() -> None:
+    from studyapp.motion.skeleton import Motion
+    from studyapp.render.avatar import build_default_avatar
+    from studyapp.render.pose import prepare_slot
+    from studyapp.render.scene import MAX_SLOTS, make_scene
+
+    av = build_default_avatar()
+    slot = prepare_slot(av, Motion.rest(av.skeleton, n_frames=3, fps=30.0), None)
+    assert MAX_SLOTS == 4 and make_scene([slot] * 4, av, labels=("A", "B", "C", "D")).n_slots == 4
+    with pytest.raises(ValueError, match="1 to 4 slots"):
+        make_scene([slot] * 5, av)
