@@ -23,7 +23,8 @@ Coming back
 
 Abandonment
     A browser participant with no activity for the design's ``[online] abandon_after_min`` is abandoned when the
-    server next assigns a row or shows the dashboard (:meth:`Flow.sweep`): status ``ended_early``, and the
+    server next assigns a row (looking at most once per :data:`SWEEP_EVERY_S`) or shows the dashboard
+    (:meth:`Flow.sweep`): status ``ended_early``, and the
     last session's machine record gets :data:`~studyapp.study.storage.ABANDONED` (the time) and
     ``abandon_after_min``. Their answers are kept; their row is given out again. Coming back later, they read
     that the session was closed. Activity is the latest session start or end, play start or end, and answer, or
@@ -64,6 +65,9 @@ PROLIFIC_PARAMS = ("PROLIFIC_PID", "STUDY_ID", "SESSION_ID")
 _PARAM_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 #: A completed play may end this much sooner than the video's length (timer granularity, start latency).
 WATCH_SLACK_S = 0.5
+#: Abandonment is looked for at most this often (it reads every unfinished participant's record); the
+#: timeout itself is minutes to hours.
+SWEEP_EVERY_S = 60.0
 #: The longest text answer kept (a questionnaire comment).
 MAX_TEXT_CHARS = 5000
 
@@ -127,6 +131,7 @@ class Flow:
         self._seen: dict[str, float] = {}
         self._lengths: dict[Path, float] = {}
         self._minutes: int | None = None
+        self._swept: float | None = None
 
     # ------------------------------------------------------------------ texts
     def t(self, key: str, **values: Any) -> str:
@@ -233,11 +238,15 @@ class Flow:
         times += [_seconds(t["answered_at"]) for t in self.db.trials(pid)]
         return max((t for t in times if t is not None), default=0.0)
 
-    def sweep(self) -> list[str]:
+    def sweep(self, force: bool = False) -> list[str]:
         """Mark every browser participant inactive for longer than ``abandon_after_min`` abandoned (see the
-        module docstring); returns their ids."""
+        module docstring); returns their ids. It reads every unfinished participant's record, so it runs at
+        most once per :data:`SWEEP_EVERY_S` unless ``force`` (the dashboard)."""
         limit_s = float(self.design.online.abandon_after_min) * 60.0
         now = self.clock()
+        if not force and self._swept is not None and now - self._swept < SWEEP_EVERY_S:
+            return []
+        self._swept = now
         out = []
         for rec in self.db.participants():
             if rec.status != "active":
