@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "serve",
         help="serve a study to participants in their web browser (online studies, Prolific)",
         description="Serve a study design to browser participants: consent, instructions, a sound check, "
-        "practice, the trials as pre-rendered videos, ranking, attention checks, the questionnaire and the "
+        "practice, the trials as pre-rendered videos, the answers (ranking, preferences, ratings), attention "
+        "checks, the questionnaire and the "
         "completion code or redirect. Answers go to the same results database as `studyapp run` (every answer "
         "committed before the next clip). Put it behind an HTTPS reverse proxy (README, 'Online studies').",
     )
@@ -108,7 +109,12 @@ def make_app(design_path: Path, db_url: str | None, cache_dir: Path | None, secr
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
+    try:
+        import starlette  # noqa: F401
+        import uvicorn
+    except ImportError as exc:   # a participant's install: the server's packages are an extra
+        raise InputError(None, "studyapp serve", f"needs the server's packages ({exc.name} is missing): "
+                         'pip install "studyapp[server]"') from None
 
     from studyapp.cli.prerender import ProgressBar
     from studyapp.study.prerender import RenderSettings, prerender

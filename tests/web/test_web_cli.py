@@ -114,3 +114,13 @@ def test_serve_refuses_a_bad_online_table(tmp_path) -> None:
     assert "online.abandon_after_min: must be more than 0 minutes" in r.stdout + r.stderr
     assert "online.completion_url: 'ftp://x' is not a web address" in r.stdout + r.stderr
     assert "online.foo: unknown key 'foo'" in r.stdout + r.stderr
+
+
+def test_serve_without_the_server_extra_says_what_to_install(monkeypatch, tmp_path) -> None:
+    import argparse
+
+    from studyapp.cli.serve import _cmd_serve
+
+    monkeypatch.setitem(sys.modules, "uvicorn", None)     # as on a participant's install
+    with pytest.raises(InputError, match=r'pip install "studyapp\[server\]"'):
+        _cmd_serve(argparse.Namespace(design=tmp_path / "x.toml"))
