@@ -18,14 +18,18 @@ import pandas as pd
 
 from results_analysis.errors import AnalysisInputError
 
-#: Columns every results table must have.
+#: Columns every results table must have (``rank`` only a table without a ``paradigm`` column: with one, only its
+#: ``rank`` rows need a rank; see :mod:`results_analysis.paradigms`).
 REQUIRED_COLUMNS = ("participant", "trial_index", "stimulus", "criterion", "condition", "rank")
+#: Columns of the response paradigms (block, paradigm and each paradigm's answer); a table without them is a
+#: rank study, loaded unchanged.
+PARADIGM_COLUMNS = ("block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
 #: Boolean flags of the export; missing ones default to False (attention_passed to True).
 FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
 #: Columns that are bookkeeping, never a stimulus tag or participant group.
 CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
     "session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "design_hash", "app_version", "_where",
-    "condition_label", "condition_position", "study_title")
+    "condition_label", "condition_position", "study_title") + PARADIGM_COLUMNS
 
 #: Columns the loader adds for its own use (``_where``: where a row came from, for messages); never shown
 #: to users as one of their columns.
@@ -33,9 +37,9 @@ INTERNAL_COLUMNS = ("_where",)
 
 #: Columns :func:`normalize_results` makes text (object: str or None) and numbers (float).
 _TEXT_COLUMNS = ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version",
-                 "condition_label", "study_title")
+                 "condition_label", "study_title", "block", "paradigm", "motion_stimulus", "reasons")
 _NUMBER_COLUMNS = ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample",
-                   "condition_position")
+                   "condition_position", "rating", "preference", "matched")
 
 _TRUE = {"1", "true", "t", "yes", "y"}
 _FALSE = {"0", "false", "f", "no", "n", ""}
@@ -86,6 +90,8 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
     df = df.copy()
     if "_where" not in df.columns:
         df["_where"] = [f"row {i + 1}" for i in range(len(df))]
+    if "paradigm" in df.columns and "rank" not in df.columns:
+        df["rank"] = np.nan  # a study without a rank block; rank rows would need one (checked below)
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
         found = [str(c) for c in df.columns if c not in INTERNAL_COLUMNS]
@@ -103,8 +109,10 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if col in df.columns:
             num = _to_number(df[col])
             bad = num.isna() & df[col].notna()
-            if col in ("rank", "trial_index"):
+            if col == "trial_index":
                 bad |= num.isna()
+            elif col == "rank":
+                bad |= num.isna() & _rank_rows(df)
             if bad.any():
                 i = int(np.argmax(bad.to_numpy()))
                 raise AnalysisInputError(src, f"{df['_where'].iloc[i]}, column '{col}'",
@@ -116,8 +124,35 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
             df[col] = default
             continue
         df[col] = _parse_flags(df[col], col, df["_where"], src, default)
+    if "paradigm" in df.columns:
+        _check_paradigms(df, src)
     df.attrs["source"] = src
     return df.reset_index(drop=True)
+
+
+def _rank_rows(df: pd.DataFrame) -> pd.Series:
+    """Rows answered by ranking: all of them in a table without a ``paradigm`` column, else those whose
+    paradigm is ``rank`` or empty (an empty paradigm is a rank row, as in a migrated database)."""
+    if "paradigm" not in df.columns:
+        return pd.Series(True, index=df.index)
+    p = df["paradigm"]
+    return p.isna() | (p.astype(str).str.strip().isin(("", "rank")))
+
+
+def _check_paradigms(df: pd.DataFrame, src: str | None) -> None:
+    """Empty ``block``/``paradigm`` cells become "main"/"rank" (what a study without blocks is); an unknown
+    paradigm is an error naming its row."""
+    from results_analysis.paradigms import PARADIGMS
+
+    df["paradigm"] = df["paradigm"].where(df["paradigm"].notna() & (df["paradigm"] != ""), "rank")
+    if "block" not in df.columns:
+        df["block"] = "main"
+    df["block"] = df["block"].where(df["block"].notna() & (df["block"] != ""), "main")
+    bad = ~df["paradigm"].isin(PARADIGMS)
+    if bad.any():
+        i = int(np.argmax(bad.to_numpy()))
+        raise AnalysisInputError(src, f"{df['_where'].iloc[i]}, column 'paradigm'",
+                                 f"{df['paradigm'].iloc[i]!r} is not one of {', '.join(PARADIGMS)}")
 
 
 def load_questionnaire(path: str | Path) -> pd.DataFrame:
