@@ -12,6 +12,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from results_analysis.pairwise import elo_win_probability
+
 
 def simulate_results(n_participants: int = 24, n_stimuli: int = 8, *,
                      conditions: Sequence[str] = ("FaceCapGes", "DiffSHEG", "CaMN"),
@@ -102,17 +104,6 @@ def _plackett_luce_ranks(rng: np.random.Generator, strengths: np.ndarray) -> np.
 
 # --- the other response paradigms ------------------------------------------------------------------------
 
-#: The expected score (win 1, tie 1/2, loss 0) of a condition whose Elo is ``d`` above its opponent's:
-#: 1 / (1 + 10^(-d/400)), the Bradley-Terry probability on the Elo scale.
-def elo_expected_score(d: float | np.ndarray) -> np.ndarray:
-    """P(preferred) of an Elo difference ``d``: a difference of 200 is preferred 76 % of the time.
-
-    >>> round(float(elo_expected_score(200)), 4)
-    0.7597
-    """
-    return 1.0 / (1.0 + 10.0 ** (-np.asarray(d, dtype=float) / 400.0))
-
-
 def simulate_paradigm(paradigm: str, n_participants: int = 24, n_stimuli: int = 8, *,
                       conditions: Sequence[str] = ("A", "B", "C"), criteria: Sequence[str] = ("realism",),
                       truth: Mapping[str, float] | None = None, block: str | None = None, levels: int = 5,
@@ -124,8 +115,8 @@ def simulate_paradigm(paradigm: str, n_participants: int = 24, n_stimuli: int = 
     ``truth`` per condition (default: evenly spread):
 
     * pairwise: Elo (mean 0). A trial shows two conditions; the left one's *expected score* (win 1, tie 1/2,
-      loss 0) is :func:`elo_expected_score` of the Elo difference: a tie with probability ``tie_rate``, else a
-      win or loss drawn so that the expectation holds. Every unordered pair appears equally often (pairs
+      loss 0) is :func:`results_analysis.pairwise.elo_win_probability` of the Elo difference: a tie with
+      probability ``tie_rate``, else a win or loss drawn so that the expectation holds. Every unordered pair appears equally often (pairs
       rotate over stimuli and participants), sides alternate.
     * mismatch: the matched-preference rate (expected score of the matched slot); ties with ``tie_rate``.
       Conditions rotate over stimuli, the matched slot alternates sides, the mismatched motion is another
@@ -180,7 +171,7 @@ def simulate_paradigm(paradigm: str, n_participants: int = 24, n_stimuli: int = 
                 if (p_i // len(pairs) + s_i) % 2:
                     i, j = j, i
                 for crit in criteria:
-                    pref = level(score(float(elo_expected_score(truth[conditions[i]] - truth[conditions[j]]))))
+                    pref = level(score(float(elo_win_probability(truth[conditions[i]] - truth[conditions[j]]))))
                     reasons = "[]" if pref == 0 else '["Hands"]'
                     for slot, c, v in ((0, i, pref), (1, j, -pref)):
                         rows.append(base | dict(criterion=crit, condition=conditions[c], slot=slot, rating=np.nan,
