@@ -69,7 +69,7 @@ def blocks(df: pd.DataFrame) -> list[tuple[str, str]]:
 
 def analysed_rows(df: pd.DataFrame, block: str) -> pd.DataFrame:
     """The rows of ``block`` that are analysed: neither practice nor attention check."""
-    mask = (df["block"] == block).to_numpy() if "block" in df.columns else np.ones(len(df), dtype=bool)
+    mask = (df["block"] == block).to_numpy(copy=True) if "block" in df.columns else np.ones(len(df), dtype=bool)
     for col in ("is_practice", "is_attention_check"):
         if col in df.columns:
             mask &= ~df[col].astype(bool).to_numpy()
