@@ -49,6 +49,13 @@ def rank_rows(df: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def other_rows(df: pd.DataFrame) -> pd.DataFrame:
+    """The rows of the pairwise, mismatch and rating blocks (none in a table without paradigms)."""
+    out = df.iloc[:0] if "paradigm" not in df.columns else df[(paradigm_of(df) != "rank").to_numpy()]
+    out.attrs.update(df.attrs)
+    return out
+
+
 def blocks(df: pd.DataFrame) -> list[tuple[str, str]]:
     """(block, paradigm) of every non-rank block, in the order the study ran them (first trial index).
 

@@ -195,7 +195,7 @@ def simulate_paradigm(paradigm: str, n_participants: int = 24, n_stimuli: int = 
                     for slot, c in enumerate(order):
                         if c == reference:
                             mean = 50.0 if p in bad_raters else reference_mean
-                            value = mean + rng.normal(0.0, 4.0)
+                            value = mean + rng.normal(0.0, 2.5)
                         else:
                             value = truth[c] + offset + rng.normal(0.0, noise_sd)
                         rows.append(base | dict(criterion=crit, condition=c, slot=slot,
