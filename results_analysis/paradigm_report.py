@@ -189,7 +189,8 @@ def _mismatch(b: BlockAnalysis, doc: Document, ci: str) -> None:
                 "pair": [f"{a} vs {b_}" for a, b_ in zip(comp["a"], comp["b"])],
                 "difference": [f"{100 * v:+.1f}" for v in comp["difference"]],
                 f"{ci} CI": [_ci(100 * lo, 100 * hi, 1) for lo, hi in zip(comp["ci_low"], comp["ci_high"])],
-                "2×2 (matched, not)": [f"{t_[0]} / {t_[1]}" for t_ in comp["table"]],
+                "matched / not (a)": [f"{t_[0][0]} / {t_[1][0]}" for t_ in comp["table"]],
+                "matched / not (b)": [f"{t_[0][1]} / {t_[1][1]}" for t_ in comp["table"]],
                 "Barnard p_adj": [_p(v, True).split(" ", 1)[1].lstrip("= ") for v in comp["p_barnard_adjusted"]],
                 "bootstrap p_adj": [_p(v, True).split(" ", 1)[1].lstrip("= ") for v in comp["p_bootstrap_adjusted"]]}),
                 f"{b.block} · {crit}: differences of matched-preference rates (percentage points), "
