@@ -146,7 +146,27 @@ def analyze_blocks(df: pd.DataFrame, **kwargs) -> dict[str, BlockAnalysis]:
     >>> {b: a.paradigm for b, a in analyze_blocks(df, n_boot=100).items()}
     {'rating': 'rating', 'pairwise': 'pairwise'}
     """
+    if kwargs.get("reference") is not None:
+        kwargs["reference"] = resolve_condition(df, kwargs["reference"])
     return {b: analyze_block(df, b, p, **kwargs) for b, p in blocks(df)}
+
+
+def resolve_condition(df: pd.DataFrame, name: str) -> str:
+    """The condition id ``name`` stands for: itself when it is an id, else the id whose ``condition_label`` it
+    is (an analyst thinks in labels); an error lists the conditions when it is neither.
+
+    >>> resolve_condition(pd.DataFrame({"condition": ["a1"], "condition_label": ["Ours"]}), "Ours")
+    'a1'
+    """
+    ids = [str(c) for c in dict.fromkeys(df["condition"])]
+    if name in ids:
+        return name
+    if "condition_label" in df.columns:
+        by_label = {str(lb): str(c) for c, lb in zip(df["condition"], df["condition_label"]) if isinstance(lb, str)}
+        if name in by_label:
+            return by_label[name]
+    raise AnalysisInputError(df.attrs.get("source"), "--reference",
+                             f"no condition {name!r}; the conditions are {', '.join(ids)}")
 
 
 def stats_entry(b: BlockAnalysis) -> dict:
@@ -185,4 +205,4 @@ def n_boot_note(b: BlockAnalysis) -> str:
 
 
 __all__ = ["BlockAnalysis", "MismatchResult", "PairwiseResult", "RatingResult", "analyze_block", "analyze_blocks",
-           "n_boot_note", "stats_entry"]
+           "n_boot_note", "resolve_condition", "stats_entry"]

@@ -157,7 +157,7 @@ def screen_reference(data: pd.DataFrame, reference: str, *, threshold: float = S
     out = out.reset_index().astype({"participant": str})
     out["share"] = out["below"] / out["items"]
     out["excluded"] = out["share"] > max_share
-    out["reason"] = [f"rated the hidden reference {reference} below {threshold:g} in {b} of {n} items "
+    out["reason"] = [f"rated the hidden reference below {threshold:g} in {b} of {n} items "
                      f"({s:.0%} > {max_share:.0%})" if e else ""
                      for b, n, s, e in zip(out["below"], out["items"], out["share"], out["excluded"])]
     out.attrs.update(reference=reference, threshold=threshold, max_share=max_share)

@@ -107,7 +107,7 @@ def _plackett_luce_ranks(rng: np.random.Generator, strengths: np.ndarray) -> np.
 def simulate_paradigm(paradigm: str, n_participants: int = 24, n_stimuli: int = 8, *,
                       conditions: Sequence[str] = ("A", "B", "C"), criteria: Sequence[str] = ("realism",),
                       truth: Mapping[str, float] | None = None, block: str | None = None, levels: int = 5,
-                      tie_rate: float = 0.2, reference: str | None = None, reference_mean: float = 95.0,
+                      tie_rate: float = 0.2, reference: str | None = None, reference_mean: float = 97.0,
                       bad_raters: Sequence[str] = (), noise_sd: float = 12.0, participant_sd: float = 6.0,
                       speakers: int = 2, trial_offset: int = 0, seed: int = 0) -> pd.DataFrame:
     """A tidy results frame of one ``pairwise``, ``mismatch`` or ``rating`` block with a known truth.
@@ -195,7 +195,7 @@ def simulate_paradigm(paradigm: str, n_participants: int = 24, n_stimuli: int = 
                     for slot, c in enumerate(order):
                         if c == reference:
                             mean = 50.0 if p in bad_raters else reference_mean
-                            value = mean + rng.normal(0.0, 2.5)
+                            value = mean + rng.normal(0.0, 1.5)
                         else:
                             value = truth[c] + offset + rng.normal(0.0, noise_sd)
                         rows.append(base | dict(criterion=crit, condition=c, slot=slot,

@@ -1,4 +1,4 @@
-"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 5).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 6).
 
 Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
@@ -11,7 +11,11 @@ figures; empty for a pseudo-condition such as an attention check's frozen slot),
 report's title) and each participant's questionnaire answers, one column per rated (Likert) item named
 ``questionnaire:<scale>:<item>`` (see :data:`QUESTIONNAIRE_PREFIX`; the scale part is empty where none was
 stored). Free-text answers stay out of the table (``studyapp export --questionnaire-csv`` has them).
-It reads what it is given: the loader proves the file intact first
+A schema-6 database (tables ``trial_slots`` and ``judgements``, trials with ``block`` and ``paradigm``) adds
+:data:`PARADIGM_COLUMNS` after the core columns, and the answers of its pairwise, mismatch and rating trials as
+rows of the same table (``rank`` empty; ``preference`` -2..2 for that row's slot, ``rating`` 0..100, ``matched``
+1/0 on mismatch rows from whose motion the slot played, ``reasons`` a JSON list); an older database gives
+exactly the columns it always gave. It reads what it is given: the loader proves the file intact first
 (:mod:`results_analysis.integrity`), as ``studyapp`` does when it opens a database.
 """
 from __future__ import annotations
@@ -46,11 +50,51 @@ _QUERY = """
 WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.rowid AS _rowid, r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition,
        r.slot, r.rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
-       {trial_duration} AS trial_duration_s, {sample} AS sample, r.design_hash, r.app_version
+       {trial_duration} AS trial_duration_s, {sample} AS sample, r.design_hash, r.app_version{paradigm_columns}
 FROM responses r JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
-JOIN crit ON crit.criterion = r.criterion
+{slot_join}JOIN crit ON crit.criterion = r.criterion
 ORDER BY r.participant, r.trial_index, crit.pos, r.slot
 """
+
+
+#: The paradigm columns a schema-6 database adds after :data:`CORE_COLUMNS` (see :func:`tidy_table`).
+PARADIGM_COLUMNS = ("block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
+
+# Schema 6: the rank rows' paradigm columns, and the answers of pairwise, mismatch and rating trials (table
+# judgements, one row per criterion x slot) as rows of the same table. ``matched`` is 1 for the slot of a
+# mismatch trial that played its own stimulus's motion, 0 for the other; ``value`` is the preference for that
+# slot (pairwise, mismatch) or its rating.
+_RANK_PARADIGM = """, COALESCE(t.block, 'main') AS block, COALESCE(t.paradigm, 'rank') AS paradigm, NULL AS rating,
+       NULL AS preference, NULL AS matched, COALESCE(s.motion_stimulus, t.stimulus) AS motion_stimulus,
+       '' AS reasons"""
+_SLOT_JOIN = """LEFT JOIN trial_slots s ON s.participant = {a}.participant AND s.trial_index = {a}.trial_index
+  AND s.slot = {a}.slot
+"""
+_JUDGEMENT_QUERY = """
+SELECT j.rowid AS _rowid, j.participant, t.session, j.trial_index, t.stimulus, j.criterion, j.condition,
+       j.slot, NULL AS rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
+       {trial_duration} AS trial_duration_s, s.sample AS sample, j.design_hash, j.app_version,
+       COALESCE(t.block, 'main') AS block, COALESCE(t.paradigm, 'rank') AS paradigm,
+       CASE WHEN t.paradigm = 'rating' THEN j.value END AS rating,
+       CASE WHEN t.paradigm IN ('pairwise', 'mismatch') THEN j.value END AS preference,
+       CASE WHEN t.paradigm = 'mismatch' THEN (CASE WHEN s.motion_stimulus = t.stimulus THEN 1 ELSE 0 END) END
+         AS matched,
+       COALESCE(s.motion_stimulus, t.stimulus) AS motion_stimulus, COALESCE(j.reasons, '') AS reasons
+FROM judgements j JOIN trials t ON t.participant = j.participant AND t.trial_index = j.trial_index
+""" + _SLOT_JOIN.format(a="j") + "ORDER BY j.rowid"
+
+
+def _with_judgements(con: sqlite3.Connection, df: pd.DataFrame, duration: str) -> pd.DataFrame:
+    """The rank rows ``df`` and the judgement rows, ordered by participant, trial, criterion (in the order the
+    study first stored each: rank answers first) and slot; ``_table`` says which table a row came from."""
+    jd = pd.read_sql_query(_JUDGEMENT_QUERY.format(trial_duration=duration), con)
+    df = df.assign(_table="responses")
+    jd = jd.assign(_table="judgements")
+    crit = {c: i for i, c in enumerate(dict.fromkeys(list(df["criterion"]) + list(jd["criterion"])))}
+    both = pd.concat([df, jd], ignore_index=True) if len(jd) else df
+    order = both.assign(_pos=both["criterion"].map(crit)).sort_values(
+        ["participant", "trial_index", "_pos", "slot"], kind="stable").index
+    return both.loc[order].reset_index(drop=True)
 
 
 def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: bool = True,
@@ -77,7 +121,13 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
     # files get it empty, as for trial_duration_s.
     sample = ("CASE r.slot WHEN 0 THEN t.sample_left WHEN 1 THEN t.sample_middle ELSE t.sample_right END"
               if {"sample_left", "sample_middle", "sample_right"} <= trial_cols else "NULL")
-    df = pd.read_sql_query(_QUERY.format(trial_duration=duration, sample=sample), con)
+    # Schema 6 (a judgements table): the paradigm columns, and the answers of the other paradigms as rows.
+    paradigms = "judgements" in tables and "trial_slots" in tables and {"block", "paradigm"} <= trial_cols
+    df = pd.read_sql_query(_QUERY.format(trial_duration=duration, sample=sample,
+                                         paradigm_columns=_RANK_PARADIGM if paradigms else "",
+                                         slot_join=_SLOT_JOIN.format(a="r") if paradigms else ""), con)
+    if paradigms:
+        df = _with_judgements(con, df, duration)
     for col in ("is_practice", "is_attention_check"):
         df[col] = df[col].astype(int).astype(bool)
     df["attention_passed"] = df["attention_passed"].map(lambda v: None if pd.isna(v) else bool(v)).astype(object)
@@ -102,7 +152,8 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
         if name not in df.columns and name not in extra:
             df[name] = df["participant"].map(lambda p, v=values: v.get(str(p)))
             extra.append(name)
-    df = df[(["_rowid"] if rowid else []) + list(CORE_COLUMNS) + extra + list(TAIL_COLUMNS)]
+    df = df[(["_rowid"] + (["_table"] if paradigms else []) if rowid else []) + list(CORE_COLUMNS)
+            + (list(PARADIGM_COLUMNS) if paradigms else []) + extra + list(TAIL_COLUMNS)]
     if not include_practice:
         df = df[~df["is_practice"]].reset_index(drop=True)
     return df
@@ -112,8 +163,9 @@ def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFr
     """The tidy frame the analysis reads: :func:`tidy_table`, each row's place in the database in ``_where``
     (for messages), and ``attention_passed`` true where there was nothing to fail."""
     df = tidy_table(con, path, rowid=True)
-    df["_where"] = [f"responses row {r} (participant {p}, trial {t}, criterion {c})"
-                    for r, p, t, c in zip(df.pop("_rowid"), df["participant"], df["trial_index"], df["criterion"])]
+    table = df.pop("_table") if "_table" in df.columns else ["responses"] * len(df)
+    df["_where"] = [f"{tb} row {r} (participant {p}, trial {t}, criterion {c})" for tb, r, p, t, c in
+                    zip(table, df.pop("_rowid"), df["participant"], df["trial_index"], df["criterion"])]
     # A trial that is not an attention check has attention_passed NULL: nothing to fail.
     df["attention_passed"] = df["attention_passed"].map(lambda v: True if v is None else bool(v)).astype(bool)
     return df

@@ -323,4 +323,4 @@ def test_reference_screening_mushra_rule() -> None:
                         "condition": "hidden", "rating": [80] + [95] * 7 + [80, 85] + [95] * 6})
     r = screen_reference(one, "hidden").set_index("participant")
     assert not r.loc["X", "excluded"] and r.loc["Y", "excluded"]
-    assert r.loc["Y", "reason"] == "rated the hidden reference hidden below 90 in 2 of 8 items (25% > 15%)"
+    assert r.loc["Y", "reason"] == "rated the hidden reference below 90 in 2 of 8 items (25% > 15%)"
