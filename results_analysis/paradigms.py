@@ -153,7 +153,8 @@ def preference_trials(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def check_rating_rows(df: pd.DataFrame) -> pd.Series:
-    """The ``rating`` column as numbers, each checked to be within 0..100 (an error names the first bad row).
+    """The ``rating`` column as numbers, each checked to be within 0..100, and no condition rated twice on one
+    criterion of a trial (an error names the first bad row).
 
     >>> check_rating_rows(pd.DataFrame({"rating": ["12.5", 100]})).tolist()
     [12.5, 100.0]
@@ -168,7 +169,7 @@ def check_rating_rows(df: pd.DataFrame) -> pd.Series:
         raise AnalysisInputError(src, f"{_where(df, i)}, column 'rating'",
                                  f"{df['rating'].iloc[i]!r} is not a rating within 0..100")
     key = ["participant", "trial_index", "criterion", "condition"]
-    dup = df.duplicated(key, keep="first")
+    dup = df.duplicated(key, keep="first") if set(key) <= set(df.columns) else pd.Series(False, index=df.index)
     if dup.any():
         i = int(np.argmax(dup.to_numpy()))
         raise AnalysisInputError(src, _where(df, i), f"duplicated rating: participant {df['participant'].iloc[i]}, "
