@@ -21,6 +21,7 @@ from results_analysis.loader import load_results
 from results_analysis.paradigm_analysis import analyze_blocks
 from results_analysis.report import analyze
 from results_analysis.simulate import simulate_paradigm, simulate_results
+from results_analysis.validate import validate_results
 
 
 @pytest.fixture(scope="module")
@@ -75,6 +76,8 @@ def test_rank_analysis_uses_only_rank_rows(study) -> None:
     assert mixed.conditions == alone.conditions
     assert [(b.block, b.paradigm) for b in mixed.paradigm_blocks.values()] == [
         ("pairwise", "pairwise"), ("mismatch", "mismatch"), ("rating", "rating")]
+    # the public validator checks (and returns) the rank rows
+    assert set(validate_results(study)["paradigm"]) == {"rank"}
     # excluding a participant from the study leaves them out of every block
     out = run_analysis(study, n_boot=0, paradigm_n_boot=0, exclude=["P02"])
     assert all(b.n_participants == 9 for b in out.paradigm_blocks.values())
