@@ -14,7 +14,8 @@ mismatched one is preferred. Chance is 0.5.
   respects repeated measures (it excludes 0.5 when the effect holds across participants).
 * :func:`compare_conditions` — every pair of conditions: the difference of their rates with a participant
   bootstrap interval and two-sided bootstrap p-value (twice the smaller share of resampled differences on either
-  side of 0), and Barnard's exact test (:func:`barnard_exact`: scipy.stats.barnard_exact's definition, two-sided,
+  side of 0, each share counted as (1 + count) / (1 + B) so that B resamples never claim p = 0), and Barnard's
+  exact test (:func:`barnard_exact`: scipy.stats.barnard_exact's definition, two-sided,
   pooled Wald statistic, with tied tables counted as extreme) on the
   2x2 table whose columns are the two conditions (the samples, whose totals Barnard's test holds fixed) and
   whose rows are "matched preferred" and "not": [[a matched, b matched], [a not, b not]]. Ties enter that table split: half of a
@@ -223,7 +224,9 @@ def compare_conditions(data: pd.DataFrame, criterion: str | None = None, *, cond
                 d = d[np.isfinite(d)]
                 if d.size:
                     lo, hi = np.quantile(d, [a, 1.0 - a])
-                    p_boot = float(min(1.0, 2.0 * min((d <= 0).mean(), (d >= 0).mean())))
+                    # (1 + count) / (1 + B): a p-value a finite resampling can support, never 0
+                    tail_ = min((d <= 0).sum(), (d >= 0).sum())
+                    p_boot = float(min(1.0, 2.0 * (1 + tail_) / (1 + d.size)))
             rows.append({"a": conds[i], "b": conds[j], "rate_a": ri.rate, "rate_b": rj.rate,
                          "difference": ri.rate - rj.rate, "ci_low": lo, "ci_high": hi, "p_bootstrap": p_boot,
                          "table": table, "p_barnard": p_barnard})

@@ -180,7 +180,8 @@ def _mismatch(b: BlockAnalysis, doc: Document, ci: str) -> None:
         doc.table(pd.DataFrame({"condition": t["condition"], "trials": t["n"], "participants": t["n_participants"],
                                 "matched": t["matched"], "equal": t["equal"], "mismatched": t["mismatched"],
                                 "rate": [f"{v:.1%}" for v in t["rate"]],
-                                f"{ci} CI": [_ci(lo, hi, 3) for lo, hi in zip(t["ci_low"], t["ci_high"])],
+                                f"{ci} CI": [_ci(100 * lo, 100 * hi, 1) + " %" for lo, hi in zip(t["ci_low"],
+                                                                                               t["ci_high"])],
                                 "p (vs 0.5)": [_p(v).split(" ", 1)[1].lstrip("= ") for v in t["p"]]}),
                   f"{b.block} · {crit}: matched-preference rate per condition (ties ½) with {ci} participant-"
                   "bootstrap interval and exact binomial test against 0.5.")

@@ -232,6 +232,8 @@ def test_comparisons_barnard_on_the_documented_table_with_holm() -> None:
     holm = np.maximum.accumulate(np.minimum(1, np.sort(raw) * np.array([3, 2, 1])))
     assert c["p_barnard_adjusted"].to_numpy()[order] == pytest.approx(holm)
     assert (c["p_bootstrap_adjusted"] >= c["p_bootstrap"]).all()
+    # A vs B: every resampled difference is positive, and 400 resamples support p = 2/401 at best, never 0
+    assert c.loc[0, "p_bootstrap"] == pytest.approx(2 / 401) and c.loc[0, "ci_low"] > 0
     # dropping ties: the decided trials only
     d = compare_conditions(_mismatch_rows(counts), n_boot=0, ties="drop")
     assert d.loc[0, "table"] == [[30, 12], [8, 15]]
