@@ -1,5 +1,7 @@
 """Write the analysis of a results frame to a folder: stats.json, tables/*.csv, figures/*.png|svg,
-report.md and a self-contained report.html that reads like a results section.
+report.md and a self-contained report.html that reads like a results section: the rank analysis (when the
+study has rank rows), then one section per pairwise, mismatch or rating block
+(:mod:`results_analysis.paradigm_report`).
 
 >>> import tempfile, pathlib
 >>> from results_analysis.simulate import simulate_results
@@ -33,7 +35,8 @@ def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study r
     """Run :func:`results_analysis.analysis.run_analysis` on ``df`` and write every output into ``out_dir``.
 
     Keyword arguments are those of ``run_analysis`` (block, groups, questionnaire,
-    exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete, sm_permutations). Returns the
+    exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete, sm_permutations; for the
+    pairwise, mismatch and rating blocks paradigm_n_boot, reference, screen_reference). Returns the
     :class:`Analysis`; the report is ``out_dir / "report.html"``. ``metrics``: a ``studyapp metrics`` table
     (:mod:`results_analysis.objective_metrics`), reported beside the mean ranks.
     """
