@@ -105,6 +105,9 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if bad.any():
             raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
                                      "empty value")
+    if "matched" in df.columns and not pd.api.types.is_float_dtype(df["matched"]):  # a flag: 1/0 or true/false
+        df["matched"] = df["matched"].map(lambda v: {"true": "1", "false": "0"}.get(str(v).strip().lower(), v)
+                                          if isinstance(v, (str, bool)) else v)
     for col in _NUMBER_COLUMNS:
         if col in df.columns:
             num = _to_number(df[col])

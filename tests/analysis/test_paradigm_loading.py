@@ -192,3 +192,10 @@ def test_cli_analyses_a_study_of_other_paradigms_only_with_chinese_labels(tmp_pa
     assert [str(w.message) for w in caught if "missing from font" in str(w.message)] == []
     svg = (tmp_path / "o" / "figures" / "block_pairwise_elo.svg").read_text()
     assert "模型甲" in svg and "真人动作" in svg
+
+
+def test_matched_loads_written_as_true_false(tmp_path, study) -> None:
+    m = study[study["paradigm"] == "mismatch"].drop(columns="rank")
+    m.assign(matched=m["matched"].map({1.0: "true", 0.0: "False"})).to_csv(tmp_path / "m.csv", index=False)
+    got = load_results(tmp_path / "m.csv")
+    assert got["matched"].tolist() == m["matched"].tolist()
