@@ -22,7 +22,7 @@ from results_analysis.exclusions import apply_exclusions
 from results_analysis.friedman import FriedmanResult, friedman, friedman_ranks, kendall_w
 from results_analysis.loader import load_questionnaire, load_results, load_study_title, normalize_results
 from results_analysis.mismatch import barnard_exact, compare_conditions, matched_preference
-from results_analysis.pairwise import bradley_terry_elo, elo_win_probability, win_matrix
+from results_analysis.pairwise import bradley_terry_elo, elo_differences, elo_win_probability, win_matrix
 from results_analysis.paradigm_analysis import analyze_blocks
 from results_analysis.rating import rating_summary, rating_tests, screen_reference
 from results_analysis.posthoc import (conover, critical_difference, holm, nemenyi, nemenyi_q_alpha, posthoc_table,
@@ -46,6 +46,7 @@ __all__ = [
     "pairwise_wins", "place_shares", "posthoc_table", "rank_blocks", "run_analysis", "scale_reliability",
     "simulate_results", "validate_results", "within_block_ranks", "wilcoxon_holm",
     # the other response paradigms (pairwise, mismatch, rating blocks)
-    "analyze_blocks", "barnard_exact", "bradley_terry_elo", "compare_conditions", "elo_win_probability",
+    "analyze_blocks", "barnard_exact", "bradley_terry_elo", "compare_conditions", "elo_differences",
+    "elo_win_probability",
     "matched_preference", "rating_summary", "rating_tests", "screen_reference", "simulate_paradigm", "win_matrix",
 ]

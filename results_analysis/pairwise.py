@@ -17,7 +17,8 @@ difference of 200 = preferred 76 % of the time (:func:`elo_win_probability`).
 
 Intervals. ``n_boot`` (10,000 by default, as GENEA) resamples of participants with replacement (each
 participant's win counts kept together), seeded, all fitted at once as one stack of win matrices; each
-resample's Elo is anchored to mean 0 like the estimate, and the interval is the percentile interval. A
+resample's Elo is anchored to mean 0 like the estimate, and the interval is the percentile interval. The same
+resamples give each pair's Elo difference its interval and a bootstrap p-value (:func:`elo_differences`). A
 resample in which a condition happens never to win is kept finite by a pseudo-count of
 :data:`results_analysis.bradley_terry.BOOT_PRIOR` wins each way per pair.
 """
@@ -134,6 +135,12 @@ def _elo(strengths: np.ndarray) -> np.ndarray:
     return e - e.mean(axis=-1, keepdims=True)
 
 
+def _boot_elo(per: np.ndarray, n_boot: int, seed: int) -> np.ndarray:
+    """(n_boot, k) Elo (mean 0) of participant resamples of the (P, k, k) win counts, fitted as one stack."""
+    weights = bootstrap_weights(per.shape[0], n_boot, seed)
+    return _elo(fit_bradley_terry(np.einsum("bp,pij->bij", weights, per), prior=BOOT_PRIOR, tol=1e-8))
+
+
 def bradley_terry_elo(data: pd.DataFrame, criterion: str | None = None, *, conditions: Sequence[str] | None = None,
                       ties: str = "half", n_boot: int = 10_000, ci: float = 0.95, seed: int = 0) -> pd.DataFrame:
     """Bradley-Terry strengths of a pairwise block as Elo, with participant-bootstrap percentile intervals.
@@ -165,9 +172,7 @@ def bradley_terry_elo(data: pd.DataFrame, criterion: str | None = None, *, condi
         p[keep] = fit_bradley_terry(wins[np.ix_(keep, keep)])
         elo[keep] = _elo(p[keep])
         if n_boot > 0 and ids.size >= 2:
-            weights = bootstrap_weights(ids.size, n_boot, seed)
-            boot = np.einsum("bp,pij->bij", weights, per[:, keep][:, :, keep])
-            e = _elo(fit_bradley_terry(boot, prior=BOOT_PRIOR, tol=1e-8))
+            e = _boot_elo(per[:, keep][:, :, keep], n_boot, seed)
             a = (1.0 - ci) / 2.0
             lo[keep], hi[keep] = np.quantile(e, a, axis=0), np.quantile(e, 1.0 - a, axis=0)
     games = wins + wins.T
@@ -177,4 +182,51 @@ def bradley_terry_elo(data: pd.DataFrame, criterion: str | None = None, *, condi
                         "n": n, "estimable": estimable, "note": notes})
     out.attrs.update(n_boot=n_boot, ci=ci, seed=seed, ties=ties, anchor="mean Elo of the estimable conditions = 0",
                      n_participants=int(ids.size))
+    return out
+
+
+def elo_differences(data: pd.DataFrame, criterion: str | None = None, *, conditions: Sequence[str] | None = None,
+                    ties: str = "half", n_boot: int = 10_000, ci: float = 0.95, seed: int = 0,
+                    adjust: str = "holm") -> pd.DataFrame:
+    """Every pair of estimable conditions: the Elo difference a - b, the probability it implies that ``a`` is
+    preferred (:func:`elo_win_probability`), a percentile interval of the difference from the same participant
+    resamples as :func:`bradley_terry_elo` (same ``seed``), and a two-sided bootstrap p-value (twice the smaller
+    share of resampled differences on either side of 0, each counted as (1 + count) / (1 + B)), adjusted over the
+    pairs (``adjust``: :data:`results_analysis.adjust.ADJUSTMENTS`).
+
+    Columns: a, b, difference, p_preferred, ci_low, ci_high, p, p_adjusted, adjustment.
+
+    >>> from results_analysis.simulate import simulate_paradigm
+    >>> df = simulate_paradigm("pairwise", 30, 6, truth={"A": 200, "B": 0, "C": -200}, tie_rate=0.1, seed=4)
+    >>> d = elo_differences(df, n_boot=300)
+    >>> d[["a", "b"]].values.tolist(), (d.p_adjusted < 0.05).tolist()
+    ([['A', 'B'], ['A', 'C'], ['B', 'C']], [True, True, True])
+    """
+    from results_analysis.adjust import ADJUSTMENT_NAMES, adjust_pvalues
+
+    ids, per = participant_win_matrices(data, criterion, conditions=conditions, ties=ties)
+    elo = bradley_terry_elo(data, criterion, conditions=conditions, ties=ties, n_boot=0)
+    keep = np.flatnonzero(elo["estimable"].to_numpy())
+    names = elo["condition"].tolist()
+    boot = _boot_elo(per[:, keep][:, :, keep], n_boot, seed) if n_boot > 0 and ids.size >= 2 and keep.size else None
+    a = (1.0 - ci) / 2.0
+    rows = []
+    for x in range(keep.size):
+        for y in range(x + 1, keep.size):
+            i, j = keep[x], keep[y]
+            d = float(elo["elo"].iloc[i] - elo["elo"].iloc[j])
+            lo = hi = p = np.nan
+            if boot is not None:
+                bd = boot[:, x] - boot[:, y]
+                lo, hi = np.quantile(bd, [a, 1.0 - a])
+                p = float(min(1.0, 2.0 * (1 + min((bd <= 0).sum(), (bd >= 0).sum())) / (1 + bd.size)))
+            rows.append({"a": names[i], "b": names[j], "difference": d, "p_preferred": float(elo_win_probability(d)),
+                         "ci_low": lo, "ci_high": hi, "p": p})
+    out = pd.DataFrame(rows, columns=["a", "b", "difference", "p_preferred", "ci_low", "ci_high", "p"])
+    adj = np.full(len(out), np.nan)
+    ok = np.isfinite(out["p"].to_numpy(dtype=float))
+    adj[ok] = adjust_pvalues(out["p"].to_numpy(dtype=float)[ok], adjust)
+    out["p_adjusted"] = adj
+    out["adjustment"] = ADJUSTMENT_NAMES[adjust]
+    out.attrs.update(n_boot=n_boot, ci=ci, seed=seed, ties=ties, adjust=adjust)
     return out

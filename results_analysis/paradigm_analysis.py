@@ -3,8 +3,8 @@
 Each block is analysed on its own rows, per criterion, in the study's order of blocks
 (:func:`results_analysis.paradigms.blocks`), with its own conditions in the design's order:
 
-* ``pairwise``: Bradley-Terry Elo with participant-bootstrap intervals and the win/tie/loss matrix
-  (:mod:`results_analysis.pairwise`);
+* ``pairwise``: Bradley-Terry Elo with participant-bootstrap intervals, the win/tie/loss matrix and the
+  pairwise Elo differences with intervals and adjusted bootstrap p-values (:mod:`results_analysis.pairwise`);
 * ``mismatch``: matched-preference rate per condition against 0.5 and the Holm-adjusted comparisons between
   conditions (:mod:`results_analysis.mismatch`);
 * ``rating``: means with participant-bootstrap intervals, Friedman and Wilcoxon-Holm on the participants' mean
@@ -22,7 +22,7 @@ import pandas as pd
 
 from results_analysis.errors import AnalysisInputError
 from results_analysis.mismatch import compare_conditions, matched_preference, trial_scores
-from results_analysis.pairwise import bradley_terry_elo, win_matrix
+from results_analysis.pairwise import bradley_terry_elo, elo_differences, win_matrix
 from results_analysis.paradigms import analysed_rows, blocks, preference_trials
 from results_analysis.rating import (SCREEN_MAX_SHARE, SCREEN_THRESHOLD, rating_summary, rating_tests,
                                      screen_reference)
@@ -31,11 +31,12 @@ from results_analysis.study_meta import condition_order
 
 @dataclass
 class PairwiseResult:
-    """One criterion of a pairwise block: Elo per condition and the win/tie/loss matrix."""
+    """One criterion of a pairwise block: Elo per condition, the win/tie/loss matrix and the Elo differences."""
 
     criterion: str
     elo: pd.DataFrame
     wins: pd.DataFrame
+    differences: pd.DataFrame
 
 
 @dataclass
@@ -114,9 +115,10 @@ def analyze_block(df: pd.DataFrame, block: str, paradigm: str, *, n_boot: int = 
         sub.attrs.update(df.attrs)
         if paradigm == "pairwise":
             trials = preference_trials(sub)
-            results[crit] = PairwiseResult(crit, bradley_terry_elo(trials, conditions=conditions, n_boot=n_boot,
-                                                                   ci=ci, seed=seed),
-                                           win_matrix(trials, conditions=conditions))
+            results[crit] = PairwiseResult(
+                crit, bradley_terry_elo(trials, conditions=conditions, n_boot=n_boot, ci=ci, seed=seed),
+                win_matrix(trials, conditions=conditions),
+                elo_differences(trials, conditions=conditions, n_boot=n_boot, ci=ci, seed=seed, adjust=adjust))
         elif paradigm == "mismatch":
             scores = trial_scores(sub)
             results[crit] = MismatchResult(
@@ -179,6 +181,7 @@ def stats_entry(b: BlockAnalysis) -> dict:
     for crit, r in b.results.items():
         if isinstance(r, PairwiseResult):
             entry = {"elo": r.elo.to_dict("records"), "wins": r.wins.to_dict("records"),
+                     "differences": r.differences.to_dict("records"), "adjustment": b.adjust,
                      "ties": r.elo.attrs.get("ties"), "anchor": r.elo.attrs.get("anchor")}
         elif isinstance(r, MismatchResult):
             entry = {"rates": r.rates.to_dict("records"), "comparisons": r.comparisons.to_dict("records"),

@@ -48,6 +48,7 @@ def block_tables(b: BlockAnalysis) -> dict[str, pd.DataFrame]:
         res = _of(b, PairwiseResult)
         out[f"{s}_elo"] = _concat({c: r.elo for c, r in res.items()})
         out[f"{s}_wins"] = _concat({c: r.wins for c, r in res.items()})
+        out[f"{s}_elo_differences"] = _concat({c: r.differences for c, r in res.items()})
     elif b.paradigm == "mismatch":
         res = _of(b, MismatchResult)
         out[f"{s}_mismatch"] = _concat({c: r.rates for c, r in res.items()})
@@ -126,7 +127,9 @@ def _pairwise(b: BlockAnalysis, doc: Document, ci: str) -> None:
           f"that the conditions' mean Elo is 0: a difference of 200 means the higher one is preferred 76 % of the "
           f"time. Intervals: {n_boot_note(b)}, each resample's wins kept together per participant (a pseudo-count "
           f"of {BOOT_PRIOR:g} wins per pair keeps a resample finite); a condition that never won or never lost has "
-          f"no finite strength and is reported as not estimable.")
+          f"no finite strength and is reported as not estimable. Each pair's Elo difference has its interval from "
+          f"the same resamples and a two-sided bootstrap p-value (twice the smaller share of resampled differences "
+          f"on either side of 0, counted as (1 + count)/(1 + B)), adjusted over the pairs.")
     for crit, r in _of(b, PairwiseResult).items():
         e = r.elo.sort_values("elo", ascending=False, na_position="last")
         parts = [f"{row.condition} {row.elo:+.0f} ({ci} CI {row.ci_low:+.0f} to {row.ci_high:+.0f})"
@@ -142,6 +145,16 @@ def _pairwise(b: BlockAnalysis, doc: Document, ci: str) -> None:
                              "points won": [f"{v:.0%}" if np.isfinite(v) else "n/a" for v in r.elo["score"]],
                              "comparisons": r.elo["n"].astype(int)})
         doc.table(show, f"{b.block} · {crit}: Bradley–Terry Elo (mean 0) with {ci} participant-bootstrap interval.")
+        d = r.differences
+        if len(d):
+            doc.table(pd.DataFrame({
+                "pair": [f"{a} vs {b_}" for a, b_ in zip(d["a"], d["b"])],
+                "Elo difference": [f"{v:+.0f}" for v in d["difference"]],
+                f"{ci} CI": [_ci(lo, hi, 0) for lo, hi in zip(d["ci_low"], d["ci_high"])],
+                "implied preference": [f"{v:.0%}" for v in d["p_preferred"]],
+                "p_adj": [_p(v, True).split(" ", 1)[1].lstrip("= ") for v in d["p_adjusted"]]}),
+                f"{b.block} · {crit}: Elo differences with {ci} participant-bootstrap interval, the share of "
+                f"preferences they imply, and bootstrap p-values ({d['adjustment'].iloc[0]}-adjusted over the pairs).")
         w = r.wins
         doc.table(pd.DataFrame({"condition": w["a"], "against": w["b"], "wins": w["wins"], "ties": w["ties"],
                                 "losses": w["losses"], "points won": [f"{v:.0%}" if np.isfinite(v) else "n/a"

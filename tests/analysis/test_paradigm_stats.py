@@ -21,7 +21,8 @@ from scipy import optimize, stats
 
 from results_analysis.mismatch import (barnard_exact, barnard_table, compare_conditions, matched_preference,
                                       trial_scores)
-from results_analysis.pairwise import (bradley_terry_elo, elo_win_probability, participant_win_matrices,
+from results_analysis.pairwise import (bradley_terry_elo, elo_differences, elo_win_probability,
+                                       participant_win_matrices,
                                        win_matrix)
 from results_analysis.rating import participant_means, rating_summary, rating_tests, screen_reference
 from results_analysis.simulate import simulate_paradigm
@@ -326,3 +327,26 @@ def test_reference_screening_mushra_rule() -> None:
     r = screen_reference(one, "hidden").set_index("participant")
     assert not r.loc["X", "excluded"] and r.loc["Y", "excluded"]
     assert r.loc["Y", "reason"] == "rated the hidden reference below 90 in 2 of 8 items (25% > 15%)"
+
+
+def test_elo_differences_from_the_same_resamples_checked_with_choix() -> None:
+    df = simulate_paradigm("pairwise", 12, 6, truth={"A": 150, "B": 0, "C": -150}, seed=8)
+    conds = ["A", "B", "C"]
+    bt = bradley_terry_elo(df, conditions=conds, n_boot=60, seed=3).set_index("condition")
+    d = elo_differences(df, conditions=conds, n_boot=60, seed=3).set_index(["a", "b"])
+    assert d.loc[("A", "C"), "difference"] == pytest.approx(bt.loc["A", "elo"] - bt.loc["C", "elo"])
+    assert d.loc[("A", "C"), "p_preferred"] == pytest.approx(
+        1 / (1 + 10 ** (-(bt.loc["A", "elo"] - bt.loc["C", "elo"]) / 400)))
+    # each resample refitted one at a time by choix (ILSR) on the same participant multiplicities
+    ids, per = participant_win_matrices(df, conditions=conds)
+    w = np.random.default_rng(3).multinomial(len(ids), np.full(len(ids), 1 / len(ids)), size=60)
+    diffs = []
+    for row in w:
+        wins = np.einsum("p,pij->ij", row.astype(float), per) + 1e-3 * (1 - np.eye(3))
+        theta = choix.ilsr_pairwise_dense(wins, tol=1e-12, max_iter=100_000)
+        diffs.append(400 / np.log(10) * (theta[0] - theta[2]))
+    assert [d.loc[("A", "C"), "ci_low"], d.loc[("A", "C"), "ci_high"]] == pytest.approx(
+        np.quantile(diffs, [0.025, 0.975]), abs=1e-3)
+    diffs = np.array(diffs)
+    assert d.loc[("A", "C"), "p"] == pytest.approx(min(1, 2 * (1 + min((diffs <= 0).sum(), (diffs >= 0).sum())) / 61))
+    assert (d["p_adjusted"] >= d["p"]).all()
