@@ -22,8 +22,7 @@ from scipy import optimize, stats
 from results_analysis.mismatch import (barnard_exact, barnard_table, compare_conditions, matched_preference,
                                       trial_scores)
 from results_analysis.pairwise import (bradley_terry_elo, elo_differences, elo_win_probability,
-                                       participant_win_matrices,
-                                       win_matrix)
+                                       participant_win_matrices, win_matrix)
 from results_analysis.rating import participant_means, rating_summary, rating_tests, screen_reference
 from results_analysis.simulate import simulate_paradigm
 
