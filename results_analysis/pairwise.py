@@ -24,6 +24,7 @@ resample in which a condition happens never to win is kept finite by a pseudo-co
 """
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 
 import numpy as np
@@ -230,3 +231,42 @@ def elo_differences(data: pd.DataFrame, criterion: str | None = None, *, conditi
     out["adjustment"] = ADJUSTMENT_NAMES[adjust]
     out.attrs.update(n_boot=n_boot, ci=ci, seed=seed, ties=ties, adjust=adjust)
     return out
+
+
+def reason_counts(data: pd.DataFrame, criterion: str | None = None, *,
+                  conditions: Sequence[str] | None = None) -> pd.DataFrame:
+    """How often each reason was given, per preferred condition: one row per reason, columns n (trials it was
+    given in), share (of the trials with a preference, where reasons are asked) and one count per condition
+    (``preferred_<condition>``: trials in which that condition was preferred and the reason given). Reasons are
+    the JSON lists of the ``reasons`` column; a cell that is not a JSON list of texts is an error naming its row.
+
+    >>> t = pd.DataFrame({"a": ["X", "X", "Y"], "b": ["Y", "Y", "X"], "pref_a": [2, -1, 0],
+    ...                   "reasons": ['["Hands"]', '["Hands", "Timing"]', "[]"]})
+    >>> reason_counts(t).values.tolist()
+    [['Hands', 2, 1.0, 1, 1], ['Timing', 1, 0.5, 0, 1]]
+    """
+    from results_analysis.errors import AnalysisInputError
+
+    t = _trials(data, criterion)
+    conds = _conditions(t, conditions)
+    decided = t[np.asarray(t["pref_a"], dtype=float) != 0]
+    counts: dict[str, dict[str, int]] = {}
+    where = decided["_where"] if "_where" in decided.columns else [f"trial {i + 1}" for i in range(len(decided))]
+    for w, text, pref, a, b in zip(where, decided["reasons"] if "reasons" in decided.columns
+                                   else [None] * len(decided), decided["pref_a"], decided["a"], decided["b"]):
+        if text is None or (isinstance(text, float) and np.isnan(text)) or str(text).strip() == "":
+            continue
+        try:
+            reasons = json.loads(str(text))
+        except json.JSONDecodeError:
+            reasons = None
+        if not isinstance(reasons, list) or not all(isinstance(r, str) for r in reasons):
+            raise AnalysisInputError(data.attrs.get("source"), f"{w}, column 'reasons'",
+                                     f"{text!r} is not a JSON list of reasons")
+        winner = a if float(pref) > 0 else b
+        for r in dict.fromkeys(reasons):
+            counts.setdefault(r, {c: 0 for c in conds})[winner] += 1
+    rows = [{"reason": r, "n": sum(by.values()), "share": sum(by.values()) / len(decided) if len(decided) else np.nan,
+             **{f"preferred_{c}": by[c] for c in conds}} for r, by in counts.items()]
+    out = pd.DataFrame(rows, columns=["reason", "n", "share", *[f"preferred_{c}" for c in conds]])
+    return out.sort_values(["n", "reason"], ascending=[False, True], kind="stable").reset_index(drop=True)

@@ -22,7 +22,7 @@ import pandas as pd
 
 from results_analysis.errors import AnalysisInputError
 from results_analysis.mismatch import compare_conditions, matched_preference, trial_scores
-from results_analysis.pairwise import bradley_terry_elo, elo_differences, win_matrix
+from results_analysis.pairwise import bradley_terry_elo, elo_differences, reason_counts, win_matrix
 from results_analysis.paradigms import analysed_rows, blocks, preference_trials
 from results_analysis.rating import (SCREEN_MAX_SHARE, SCREEN_THRESHOLD, rating_summary, rating_tests,
                                      screen_reference)
@@ -37,6 +37,8 @@ class PairwiseResult:
     elo: pd.DataFrame
     wins: pd.DataFrame
     differences: pd.DataFrame
+    #: reasons given with the preferences (see :func:`results_analysis.pairwise.reason_counts`)
+    reasons: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 @dataclass
@@ -118,7 +120,8 @@ def analyze_block(df: pd.DataFrame, block: str, paradigm: str, *, n_boot: int = 
             results[crit] = PairwiseResult(
                 crit, bradley_terry_elo(trials, conditions=conditions, n_boot=n_boot, ci=ci, seed=seed),
                 win_matrix(trials, conditions=conditions),
-                elo_differences(trials, conditions=conditions, n_boot=n_boot, ci=ci, seed=seed, adjust=adjust))
+                elo_differences(trials, conditions=conditions, n_boot=n_boot, ci=ci, seed=seed, adjust=adjust),
+                reason_counts(trials, conditions=conditions))
         elif paradigm == "mismatch":
             scores = trial_scores(sub)
             results[crit] = MismatchResult(
@@ -182,6 +185,7 @@ def stats_entry(b: BlockAnalysis) -> dict:
         if isinstance(r, PairwiseResult):
             entry = {"elo": r.elo.to_dict("records"), "wins": r.wins.to_dict("records"),
                      "differences": r.differences.to_dict("records"), "adjustment": b.adjust,
+                     "reasons": r.reasons.to_dict("records"),
                      "ties": r.elo.attrs.get("ties"), "anchor": r.elo.attrs.get("anchor")}
         elif isinstance(r, MismatchResult):
             entry = {"rates": r.rates.to_dict("records"), "comparisons": r.comparisons.to_dict("records"),

@@ -49,6 +49,8 @@ def block_tables(b: BlockAnalysis) -> dict[str, pd.DataFrame]:
         out[f"{s}_elo"] = _concat({c: r.elo for c, r in res.items()})
         out[f"{s}_wins"] = _concat({c: r.wins for c, r in res.items()})
         out[f"{s}_elo_differences"] = _concat({c: r.differences for c, r in res.items()})
+        if any(len(r.reasons) for r in res.values()):
+            out[f"{s}_reasons"] = _concat({c: r.reasons for c, r in res.items()})
     elif b.paradigm == "mismatch":
         res = _of(b, MismatchResult)
         out[f"{s}_mismatch"] = _concat({c: r.rates for c, r in res.items()})
@@ -160,6 +162,15 @@ def _pairwise(b: BlockAnalysis, doc: Document, ci: str) -> None:
                                 "losses": w["losses"], "points won": [f"{v:.0%}" if np.isfinite(v) else "n/a"
                                                                       for v in w["score"]]}),
                   f"{b.block} · {crit}: wins, ties and losses of each condition against each other one.")
+        if len(r.reasons):
+            rs = r.reasons
+            doc.table(pd.DataFrame({"reason": rs["reason"], "given": rs["n"],
+                                    "of decided trials": [f"{v:.0%}" for v in rs["share"]],
+                                    # by position: the columns follow the block's conditions (relabel may have
+                                    # renamed them to labels, or not when the study has other conditions too)
+                                    **{f"when {c} preferred": rs[col] for c, col in zip(
+                                        b.conditions, [x for x in rs.columns if str(x).startswith("preferred_")])}}),
+                      f"{b.block} · {crit}: reasons given with a preference, and for which preferred condition.")
     s = _stem(b)
     doc.figure(f"{s}_elo", f"{b.block}: Bradley–Terry Elo with {ci} participant-bootstrap interval.")
     doc.figure(f"{s}_wins", f"{b.block}: share of points of the row condition against the column condition.")

@@ -149,6 +149,7 @@ def preference_trials(df: pd.DataFrame) -> pd.DataFrame:
     else:
         out["a_matched"] = np.nan
     out["reasons"] = first["reasons"].to_numpy() if "reasons" in df.columns else None
+    out["_where"] = [_where(df, int(i)) for i in first["_row"].to_numpy()]
     return out
 
 

@@ -349,3 +349,22 @@ def test_elo_differences_from_the_same_resamples_checked_with_choix() -> None:
     diffs = np.array(diffs)
     assert d.loc[("A", "C"), "p"] == pytest.approx(min(1, 2 * (1 + min((diffs <= 0).sum(), (diffs >= 0).sum())) / 61))
     assert (d["p_adjusted"] >= d["p"]).all()
+
+
+def test_reasons_are_counted_per_preferred_condition() -> None:
+    from results_analysis.errors import AnalysisInputError
+    from results_analysis.pairwise import reason_counts
+    from results_analysis.paradigms import preference_trials
+
+    rows = []
+    for t, (left, right, pref, reasons) in enumerate([("A", "B", 2, '["Hands", "Timing"]'), ("B", "A", 1, '["Hands"]'),
+                                                      ("A", "B", 0, "[]"), ("A", "B", -1, '["Timing"]')]):
+        for slot, (c, p) in enumerate(((left, pref), (right, -pref))):
+            rows.append({"participant": "P1", "trial_index": t, "stimulus": "s", "criterion": "c", "condition": c,
+                         "slot": slot, "preference": p, "reasons": reasons, "_where": f"line {2 + 2 * t + slot}"})
+    df = pd.DataFrame(rows)
+    r = reason_counts(preference_trials(df), conditions=["A", "B"]).set_index("reason")
+    assert r.loc["Hands"].tolist() == [2, 2 / 3, 1, 1] and r.loc["Timing"].tolist() == [2, 2 / 3, 1, 1]
+    df.loc[6, "reasons"] = df.loc[7, "reasons"] = "Timing"
+    with pytest.raises(AnalysisInputError, match=r"line 8, column 'reasons': 'Timing' is not a JSON list"):
+        reason_counts(preference_trials(df))
