@@ -175,7 +175,13 @@ def resolve_condition(df: pd.DataFrame, name: str) -> str:
 
 
 def stats_entry(b: BlockAnalysis) -> dict:
-    """The block's part of stats.json (condition ids, numbers as computed)."""
+    """The block's part of stats.json (condition ids, numbers as computed).
+
+    >>> from results_analysis.simulate import simulate_paradigm
+    >>> e = stats_entry(analyze_block(simulate_paradigm("rating", 6, 2, seed=1), "rating", "rating", n_boot=50))
+    >>> e["paradigm"], sorted(e["criteria"]["realism"])[:3]
+    ('rating', ['friedman', 'reference', 'reference_tested'])
+    """
     out: dict = {"block": b.block, "paradigm": b.paradigm, "conditions": b.conditions,
                  "n_participants": b.n_participants, "n_trials": b.n_trials,
                  "bootstrap": {"n_boot": b.n_boot, "ci": b.ci, "seed": b.seed, "resampled": "participants",
@@ -206,7 +212,12 @@ def stats_entry(b: BlockAnalysis) -> dict:
 
 
 def n_boot_note(b: BlockAnalysis) -> str:
-    """How the block's intervals were computed, in words."""
+    """How the block's intervals were computed, in words.
+
+    >>> from results_analysis.simulate import simulate_paradigm
+    >>> n_boot_note(analyze_block(simulate_paradigm("rating", 6, 2, seed=1), "rating", "rating", n_boot=50))
+    '95% percentile intervals from 50 bootstrap resamples of participants (seed 0)'
+    """
     return (f"{b.ci:.0%} percentile intervals from {b.n_boot} bootstrap resamples of participants (seed {b.seed})"
             if b.n_boot > 0 else "no bootstrap intervals (0 resamples)")
 

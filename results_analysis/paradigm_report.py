@@ -41,7 +41,14 @@ def _concat(parts: dict[str, pd.DataFrame]) -> pd.DataFrame:
 
 
 def block_tables(b: BlockAnalysis) -> dict[str, pd.DataFrame]:
-    """The CSV tables of one block, by file name stem."""
+    """The CSV tables of one block, by file name stem.
+
+    >>> from results_analysis.paradigm_analysis import analyze_block
+    >>> from results_analysis.simulate import simulate_paradigm
+    >>> b = analyze_block(simulate_paradigm("mismatch", 6, 3, block="m", seed=1), "m", "mismatch", n_boot=0)
+    >>> sorted(block_tables(b))
+    ['block_m_mismatch', 'block_m_mismatch_comparisons']
+    """
     s = _stem(b)
     out: dict[str, pd.DataFrame] = {}
     if b.paradigm == "pairwise":
@@ -66,6 +73,7 @@ def block_tables(b: BlockAnalysis) -> dict[str, pd.DataFrame]:
 
 
 def write_tables(blocks: dict[str, BlockAnalysis], out: Path) -> None:
+    """Every block's :func:`block_tables` as ``out/<stem>.csv``."""
     out.mkdir(parents=True, exist_ok=True)
     for b in blocks.values():
         for name, t in block_tables(b).items():
@@ -76,6 +84,7 @@ def write_tables(blocks: dict[str, BlockAnalysis], out: Path) -> None:
 
 
 def write_figures(blocks: dict[str, BlockAnalysis], out: Path) -> None:
+    """Every block's figures, each drawn once and saved as ``out/block_<id>_<kind>.png|svg``."""
     for b in blocks.values():
         s, ci = _stem(b), f"{b.ci:.0%}"
         boot = "participant bootstrap" if b.n_boot > 0 else "no interval"
@@ -265,7 +274,15 @@ def _rating(b: BlockAnalysis, doc: Document, ci: str) -> None:
 
 
 def add_sections(blocks: dict[str, BlockAnalysis], doc: Document) -> None:
-    """One section per block: its method, results text, tables and figures."""
+    """One section per block: its method, results text, tables and figures.
+
+    >>> from results_analysis.paradigm_analysis import analyze_blocks
+    >>> from results_analysis.simulate import simulate_paradigm
+    >>> doc = Document("t")
+    >>> add_sections(analyze_blocks(simulate_paradigm("rating", 6, 2, seed=1), n_boot=0), doc)
+    >>> doc.to_markdown().count("## Block rating (rating)")
+    1
+    """
     for b in blocks.values():
         ci = f"{b.ci:.0%}"
         doc.h(1, f"Block {b.block} ({b.paradigm})")

@@ -29,7 +29,11 @@ PREFERENCE_PARADIGMS = ("pairwise", "mismatch")
 
 
 def paradigm_of(df: pd.DataFrame) -> pd.Series:
-    """Each row's paradigm ("rank" for a table without the column)."""
+    """Each row's paradigm ("rank" for a table without the column, or where it is empty).
+
+    >>> paradigm_of(pd.DataFrame({"paradigm": ["rating", None, ""]})).tolist()
+    ['rating', 'rank', 'rank']
+    """
     if "paradigm" not in df.columns:
         return pd.Series("rank", index=df.index, dtype=object)
     return df["paradigm"].fillna("rank").replace("", "rank")
@@ -50,7 +54,11 @@ def rank_rows(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def other_rows(df: pd.DataFrame) -> pd.DataFrame:
-    """The rows of the pairwise, mismatch and rating blocks (none in a table without paradigms)."""
+    """The rows of the pairwise, mismatch and rating blocks (none in a table without paradigms).
+
+    >>> other_rows(pd.DataFrame({"paradigm": ["rank", "pairwise"], "rank": [1.0, None]}))["paradigm"].tolist()
+    ['pairwise']
+    """
     out = df.iloc[:0] if "paradigm" not in df.columns else df[(paradigm_of(df) != "rank").to_numpy()]
     out.attrs.update(df.attrs)
     return out
@@ -75,7 +83,12 @@ def blocks(df: pd.DataFrame) -> list[tuple[str, str]]:
 
 
 def analysed_rows(df: pd.DataFrame, block: str) -> pd.DataFrame:
-    """The rows of ``block`` that are analysed: neither practice nor attention check."""
+    """The rows of ``block`` that are analysed: neither practice nor attention check.
+
+    >>> t = pd.DataFrame({"block": ["b", "b", "c"], "is_practice": [True, False, False]})
+    >>> analysed_rows(t, "b").index.tolist()
+    [1]
+    """
     mask = (df["block"] == block).to_numpy(copy=True) if "block" in df.columns else np.ones(len(df), dtype=bool)
     for col in ("is_practice", "is_attention_check"):
         if col in df.columns:
