@@ -18,18 +18,19 @@ import pandas as pd
 
 from results_analysis.errors import AnalysisInputError
 
-#: Columns every results table must have (``rank`` only a table without a ``paradigm`` column: with one, only its
-#: ``rank`` rows need a rank; see :mod:`results_analysis.paradigms`).
+#: Columns every results table must have.
 REQUIRED_COLUMNS = ("participant", "trial_index", "stimulus", "criterion", "condition", "rank")
-#: Columns of the response paradigms (block, paradigm and each paradigm's answer); a table without them is a
-#: rank study, loaded unchanged.
-PARADIGM_COLUMNS = ("block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
 #: Boolean flags of the export; missing ones default to False (attention_passed to True).
 FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
 #: Columns that are bookkeeping, never a stimulus tag or participant group.
 CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
     "session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "design_hash", "app_version", "_where",
-    "condition_label", "condition_position", "study_title") + PARADIGM_COLUMNS
+    "condition_label", "condition_position", "study_title",
+    "block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
+#: The response-paradigm columns and their value in a table without them (an export before schema 6 is one
+#: rank block "main"); see :mod:`results_analysis.sqlite_schema`.
+PARADIGM_DEFAULTS = {"block": "main", "paradigm": "rank", "rating": np.nan, "preference": np.nan,
+                     "matched": np.nan, "motion_stimulus": None, "reasons": ""}
 
 #: Columns the loader adds for its own use (``_where``: where a row came from, for messages); never shown
 #: to users as one of their columns.
@@ -90,8 +91,6 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
     df = df.copy()
     if "_where" not in df.columns:
         df["_where"] = [f"row {i + 1}" for i in range(len(df))]
-    if "paradigm" in df.columns and "rank" not in df.columns:
-        df["rank"] = np.nan  # a study without a rank block; rank rows would need one (checked below)
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
         found = [str(c) for c in df.columns if c not in INTERNAL_COLUMNS]
@@ -105,17 +104,21 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if bad.any():
             raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
                                      "empty value")
-    if "matched" in df.columns and not pd.api.types.is_float_dtype(df["matched"]):  # a flag: 1/0 or true/false
-        df["matched"] = df["matched"].map(lambda v: {"true": "1", "false": "0"}.get(str(v).strip().lower(), v)
-                                          if isinstance(v, (str, bool)) else v)
+    for col, default in PARADIGM_DEFAULTS.items():
+        if col not in df.columns:
+            df[col] = default
+    df["block"] = df["block"].fillna("main")
+    df["paradigm"] = df["paradigm"].fillna("rank")
+    df["motion_stimulus"] = df["motion_stimulus"].where(df["motion_stimulus"].notna(), df["stimulus"])
+    df["reasons"] = df["reasons"].fillna("")
     for col in _NUMBER_COLUMNS:
         if col in df.columns:
             num = _to_number(df[col])
             bad = num.isna() & df[col].notna()
             if col == "trial_index":
                 bad |= num.isna()
-            elif col == "rank":
-                bad |= num.isna() & _rank_rows(df)
+            elif col == "rank":  # a rank row needs its rank; other paradigms' rows have none
+                bad |= num.isna() & (df["paradigm"] == "rank")
             if bad.any():
                 i = int(np.argmax(bad.to_numpy()))
                 raise AnalysisInputError(src, f"{df['_where'].iloc[i]}, column '{col}'",
@@ -127,35 +130,8 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
             df[col] = default
             continue
         df[col] = _parse_flags(df[col], col, df["_where"], src, default)
-    if "paradigm" in df.columns:
-        _check_paradigms(df, src)
     df.attrs["source"] = src
     return df.reset_index(drop=True)
-
-
-def _rank_rows(df: pd.DataFrame) -> pd.Series:
-    """Rows answered by ranking: all of them in a table without a ``paradigm`` column, else those whose
-    paradigm is ``rank`` or empty (an empty paradigm is a rank row, as in a migrated database)."""
-    if "paradigm" not in df.columns:
-        return pd.Series(True, index=df.index)
-    p = df["paradigm"]
-    return p.isna() | (p.astype(str).str.strip().isin(("", "rank")))
-
-
-def _check_paradigms(df: pd.DataFrame, src: str | None) -> None:
-    """Empty ``block``/``paradigm`` cells become "main"/"rank" (what a study without blocks is); an unknown
-    paradigm is an error naming its row."""
-    from results_analysis.paradigms import PARADIGMS
-
-    df["paradigm"] = df["paradigm"].where(df["paradigm"].notna() & (df["paradigm"] != ""), "rank")
-    if "block" not in df.columns:
-        df["block"] = "main"
-    df["block"] = df["block"].where(df["block"].notna() & (df["block"] != ""), "main")
-    bad = ~df["paradigm"].isin(PARADIGMS)
-    if bad.any():
-        i = int(np.argmax(bad.to_numpy()))
-        raise AnalysisInputError(src, f"{df['_where'].iloc[i]}, column 'paradigm'",
-                                 f"{df['paradigm'].iloc[i]!r} is not one of {', '.join(PARADIGMS)}")
 
 
 def load_questionnaire(path: str | Path) -> pd.DataFrame:

@@ -12,11 +12,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from results_analysis import figures
 from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
 from results_analysis.paradigm_analysis import BlockAnalysis, MismatchResult, PairwiseResult, RatingResult, n_boot_note
-from results_analysis.paradigm_figures import interval_figure, win_matrix_figure
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N
 
 
@@ -72,7 +70,7 @@ def block_tables(b: BlockAnalysis) -> dict[str, pd.DataFrame]:
     return out
 
 
-def write_tables(blocks: dict[str, BlockAnalysis], out: Path) -> None:
+def write_block_tables(blocks: dict[str, BlockAnalysis], out: Path) -> None:
     """Every block's :func:`block_tables` as ``out/<stem>.csv``."""
     out.mkdir(parents=True, exist_ok=True)
     for b in blocks.values():
@@ -83,8 +81,14 @@ def write_tables(blocks: dict[str, BlockAnalysis], out: Path) -> None:
 # --- figures ------------------------------------------------------------------------------------------
 
 
-def write_figures(blocks: dict[str, BlockAnalysis], out: Path) -> None:
+def write_block_figures(blocks: dict[str, BlockAnalysis], out: Path) -> None:
     """Every block's figures, each drawn once and saved as ``out/block_<id>_<kind>.png|svg``."""
+    if not blocks:
+        return
+    # matplotlib is imported when figures are drawn, not with the statistics (a cold start pays for it once)
+    from results_analysis import figures
+    from results_analysis.paradigm_figures import interval_figure, win_matrix_figure
+
     for b in blocks.values():
         s, ci = _stem(b), f"{b.ci:.0%}"
         boot = "participant bootstrap" if b.n_boot > 0 else "no interval"

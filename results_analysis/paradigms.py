@@ -65,7 +65,8 @@ def other_rows(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def blocks(df: pd.DataFrame) -> list[tuple[str, str]]:
-    """(block, paradigm) of every non-rank block, in the order the study ran them (first trial index).
+    """(block, paradigm) of every non-rank block, in the order the study ran them (first trial index); an
+    unknown paradigm is an error naming its row.
 
     >>> t = pd.DataFrame({"block": ["m", "p", "p"], "paradigm": ["mismatch", "pairwise", "pairwise"],
     ...                   "trial_index": [5, 1, 2]})
@@ -75,6 +76,11 @@ def blocks(df: pd.DataFrame) -> list[tuple[str, str]]:
     if "paradigm" not in df.columns or df.empty:
         return []
     par = paradigm_of(df)
+    bad = ~par.isin(PARADIGMS)
+    if bad.any():
+        i = int(np.argmax(bad.to_numpy()))
+        raise AnalysisInputError(df.attrs.get("source"), f"{_where(df, i)}, column 'paradigm'",
+                                 f"{par.iloc[i]!r} is not one of {', '.join(PARADIGMS)}")
     sub = df.loc[par != "rank"].assign(_par=par[par != "rank"])
     if sub.empty:
         return []

@@ -20,12 +20,13 @@ import numpy as np
 import pandas as pd
 import scipy
 
-from results_analysis import effects_report, figures, paradigm_report
+from results_analysis import effects_report, figures
 from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
 from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
 from results_analysis.objective_metrics import compare_metrics
 from results_analysis.paradigm_analysis import stats_entry
+from results_analysis.paradigm_report import add_sections, write_block_figures, write_block_tables
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, nemenyi_q_alpha
 from results_analysis.study_meta import relabel
 
@@ -61,7 +62,9 @@ def write_outputs(a: Analysis, out: Path, *, title: str, metrics: pd.DataFrame |
     (out / "stats.json").write_text(json.dumps(_clean(stats), indent=2, allow_nan=False) + "\n")
     a = relabel(a, a.labels)
     write_tables(a, out / "tables")
-    write_figures(a, out / "figures")
+    if a.criteria:  # the rank blocks' figures (a study of other paradigms only has none)
+        write_figures(a, out / "figures")
+    write_block_figures(a.paradigm_blocks, out / "figures")
     doc = build_document(a, title)
     if objective is not None:
         objective.write_tables(out / "tables")
@@ -168,7 +171,7 @@ def friedman_table(a: Analysis) -> pd.DataFrame:
 
 def write_tables(a: Analysis, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    paradigm_report.write_tables(a.paradigm_blocks, out)
+    write_block_tables(a.paradigm_blocks, out)
     if a.criteria:  # the rank blocks' tables (a study of other paradigms only has none)
         friedman_table(a).to_csv(out / "friedman.csv", index=False)
         pd.concat([c.summary.assign(criterion=k) for k, c in a.criteria.items()])[
@@ -202,9 +205,6 @@ def display_order(a: Analysis) -> list[str]:
 
 
 def write_figures(a: Analysis, out: Path) -> None:
-    paradigm_report.write_figures(a.paradigm_blocks, out)
-    if not a.criteria:
-        return
     order = display_order(a)
     summaries = {k: c.summary for k, c in a.criteria.items()}
     figures.save(figures.rank_share_figure(summaries, order), out, "rank_shares")
@@ -479,7 +479,7 @@ def build_document(a: Analysis, title: str) -> Document:
         doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")
         doc.figure("bradley_terry", f"Figure 4. Bradley–Terry strengths with {a.ci:.0%} participant-bootstrap interval.")
         effects_report.agreement_section(a, doc)
-    paradigm_report.add_sections(a.paradigm_blocks, doc)
+    add_sections(a.paradigm_blocks, doc)
     if a.groups:
         doc.h(1, "Breakdowns")
         for g, t in a.groups.items():

@@ -36,12 +36,14 @@ def study() -> pd.DataFrame:
                                         bad_raters=["P03"], seed=1)], ignore_index=True)
 
 
-def test_old_rank_only_csv_loads_unchanged(tmp_path) -> None:
+def test_old_rank_only_csv_loads_as_one_rank_block(tmp_path) -> None:
     df = simulate_results(6, 2, seed=3)
     df.to_csv(tmp_path / "r.csv", index=False)
     got = load_results(tmp_path / "r.csv")
-    assert list(got.columns) == list(df.columns) + ["_where"]  # no paradigm columns appear
     assert got["rank"].tolist() == df["rank"].astype(float).tolist()
+    assert set(got["paradigm"]) == {"rank"} and set(got["block"]) == {"main"}
+    a = run_analysis(got, n_boot=0)
+    assert a.paradigm_blocks == {} and list(a.criteria) == ["realism", "synchronization", "diversity"]
 
 
 def test_rank_is_needed_on_rank_rows_only(tmp_path, study) -> None:
@@ -54,17 +56,18 @@ def test_rank_is_needed_on_rank_rows_only(tmp_path, study) -> None:
     broken.to_csv(tmp_path / "b.csv", index=False)
     with pytest.raises(AnalysisInputError, match=r"b\.csv: line 5, column 'rank'"):
         load_results(tmp_path / "b.csv")
-    # a study of other paradigms only, whose export has no rank column at all
-    study[study["paradigm"] != "rank"].drop(columns="rank").to_csv(tmp_path / "p.csv", index=False)
+    # a study of other paradigms only: its rank column is empty
+    study[study["paradigm"] != "rank"].to_csv(tmp_path / "p.csv", index=False)
     assert load_results(tmp_path / "p.csv")["rank"].isna().all()
 
 
 def test_an_unknown_paradigm_is_named_with_its_line(tmp_path, study) -> None:
     bad = study.copy()
-    bad.loc[7, "paradigm"] = "slider"
+    bad.loc[len(bad) - 3, "paradigm"] = "slider"
     bad.to_csv(tmp_path / "u.csv", index=False)
-    with pytest.raises(AnalysisInputError, match=r"line 9, column 'paradigm': 'slider' is not one of rank, pairwise"):
-        load_results(tmp_path / "u.csv")
+    with pytest.raises(AnalysisInputError, match=rf"line {len(bad) - 1}, column 'paradigm': 'slider' is not one of "
+                                                 "rank, pairwise"):
+        run_analysis(load_results(tmp_path / "u.csv"), n_boot=0, paradigm_n_boot=0)
 
 
 def test_rank_analysis_uses_only_rank_rows(study) -> None:
@@ -173,7 +176,7 @@ def test_cli_analyses_a_study_of_other_paradigms_only_with_chinese_labels(tmp_pa
     from results_analysis import figures
 
     labels = {"A": "模型甲", "B": "模型乙", "C": "真人动作", "ref": "参考"}
-    other = study[study["paradigm"] != "rank"].drop(columns="rank")
+    other = study[study["paradigm"] != "rank"]
     other.assign(condition_label=other["condition"].map(labels)).to_csv(tmp_path / "p.csv", index=False)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -192,10 +195,3 @@ def test_cli_analyses_a_study_of_other_paradigms_only_with_chinese_labels(tmp_pa
     assert [str(w.message) for w in caught if "missing from font" in str(w.message)] == []
     svg = (tmp_path / "o" / "figures" / "block_pairwise_elo.svg").read_text()
     assert "模型甲" in svg and "真人动作" in svg
-
-
-def test_matched_loads_written_as_true_false(tmp_path, study) -> None:
-    m = study[study["paradigm"] == "mismatch"].drop(columns="rank")
-    m.assign(matched=m["matched"].map({1.0: "true", 0.0: "False"})).to_csv(tmp_path / "m.csv", index=False)
-    got = load_results(tmp_path / "m.csv")
-    assert got["matched"].tolist() == m["matched"].tolist()
