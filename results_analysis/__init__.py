@@ -1,4 +1,5 @@
-"""Rank statistics of side-by-side user studies (reads only exported results; never imports studyapp).
+"""Statistics of side-by-side user studies: rankings, pairwise and speech-mismatch preferences, ratings (reads
+only exported results; never imports studyapp).
 
 Functions take DataFrames / arrays and return DataFrames, in the manner of pingouin and scipy.stats:
 
@@ -20,13 +21,17 @@ from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions
 from results_analysis.friedman import FriedmanResult, friedman, friedman_ranks, kendall_w
 from results_analysis.loader import load_questionnaire, load_results, load_study_title, normalize_results
+from results_analysis.mismatch import barnard_exact, compare_conditions, matched_preference
+from results_analysis.pairwise import bradley_terry_elo, elo_differences, elo_win_probability, win_matrix
+from results_analysis.paradigm_analysis import analyze_blocks
+from results_analysis.rating import rating_summary, rating_tests, screen_reference
 from results_analysis.posthoc import (conover, critical_difference, holm, nemenyi, nemenyi_q_alpha, posthoc_table,
                                       wilcoxon_holm)
 from results_analysis.questionnaire import cronbach_alpha, item_summary, scale_reliability
 from results_analysis.reliability import feldt_interval, item_analysis, item_reliability, scale_reliability_ci
 from results_analysis.ranks import RankBlocks, as_blocks, place_shares, rank_blocks, within_block_ranks
 from results_analysis.report import analyze
-from results_analysis.simulate import simulate_results
+from results_analysis.simulate import simulate_paradigm, simulate_results
 from results_analysis.validate import MixedDesignWarning, validate_results
 
 __all__ = [
@@ -40,4 +45,8 @@ __all__ = [
     "load_questionnaire", "load_results", "load_study_title", "nemenyi", "nemenyi_q_alpha", "normalize_results",
     "pairwise_wins", "place_shares", "posthoc_table", "rank_blocks", "run_analysis", "scale_reliability",
     "simulate_results", "validate_results", "within_block_ranks", "wilcoxon_holm",
+    # the other response paradigms (pairwise, mismatch, rating blocks)
+    "analyze_blocks", "barnard_exact", "bradley_terry_elo", "compare_conditions", "elo_differences",
+    "elo_win_probability",
+    "matched_preference", "rating_summary", "rating_tests", "screen_reference", "simulate_paradigm", "win_matrix",
 ]

@@ -37,6 +37,8 @@ from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions, attention_summary
 from results_analysis.friedman import FriedmanResult, friedman_ranks
 from results_analysis.loader import CORE_COLUMNS, normalize_results
+from results_analysis.paradigm_analysis import BlockAnalysis, analyze_blocks
+from results_analysis.paradigms import other_rows, rank_rows
 from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
@@ -101,6 +103,10 @@ class Analysis:
     #: condition id -> the name tables, figures and text show (its design label, else the id); ``conditions``
     #: is in the design's order (see :mod:`results_analysis.study_meta`)
     labels: dict[str, str] = field(default_factory=dict)
+    #: block id -> the analysis of each pairwise, mismatch and rating block, in the study's order
+    #: (:mod:`results_analysis.paradigm_analysis`); ``criteria`` holds the rank blocks' analysis (empty when
+    #: the study has none)
+    paradigm_blocks: dict[str, BlockAnalysis] = field(default_factory=dict)
 
 
 def group_columns(df: pd.DataFrame) -> list[str]:
@@ -186,8 +192,16 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                  questionnaire: pd.DataFrame | None = None, exclude_failed_attention: bool = False,
                  exclude: Iterable[str] = (), alpha: float = 0.05, conover: bool = False, n_boot: int = 2000,
                  ci: float = 0.95, seed: int = 0, incomplete: str = "error", sm_permutations: int = 2000,
-                 adjust: str = "holm", control: str | None = None, interval: str = "bca") -> Analysis:
+                 adjust: str = "holm", control: str | None = None, interval: str = "bca",
+                 paradigm_n_boot: int = 10_000, reference: str | None = None,
+                 screen_reference: bool = False) -> Analysis:
     """Validate, apply exclusions and analyse every criterion (see module docstring).
+
+    The rank analysis uses the rows of paradigm ``rank`` only; every pairwise, mismatch and rating block is
+    analysed by :func:`results_analysis.paradigm_analysis.analyze_blocks` (``paradigm_n_boot`` participant
+    resamples, 10,000 by default as GENEA; ``reference``: the rating blocks' hidden reference condition, left
+    out of their tests; ``screen_reference``: MUSHRA's post-screening of participants who rate it low) into
+    ``Analysis.paradigm_blocks``, after the same exclusions.
 
     ``block='participant'`` (default) is the primary analysis over participants; ``block='trial'`` makes the
     trial-level Friedman test the headline, as published analyses that count trials as blocks do.
@@ -211,6 +225,13 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         raise AnalysisInputError(df.attrs.get("source"), "--interval",
                                  f"{interval!r} is not one of {', '.join(INTERVALS)}")
     df = normalize_results(df)  # frames from studyapp's export_dataframe come with their own dtypes
+    others, df = other_rows(df), rank_rows(df)
+    block_options = dict(n_boot=paradigm_n_boot, ci=ci, seed=seed, adjust=adjust, reference=reference,
+                         screen=screen_reference)
+    if df.empty and len(others):
+        return _paradigms_only(others, block=block, exclude_failed_attention=exclude_failed_attention,
+                               exclude=exclude, alpha=alpha, n_boot=n_boot, ci=ci, seed=seed, incomplete=incomplete,
+                               adjust=adjust, interval=interval, block_options=block_options)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         checked = validate_structure(df)
@@ -228,6 +249,8 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     if len(conditions) < 2:
         raise AnalysisInputError(df.attrs.get("source"), "column 'condition'", "fewer than 2 conditions")
     labels = condition_labels(kept, conditions)
+    if len(others):  # the other blocks' conditions are shown by their labels too
+        labels = condition_labels(others, condition_order(others)) | labels
     if control is not None and control not in conditions:
         # an analyst thinks in labels: accept one (labels are unique among labels and ids, see the design)
         by_label = {name: cid for cid, name in labels.items()}
@@ -266,7 +289,13 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         items, reliability, item_rel = item_summary(q), scale_reliability_ci(q, ci=ci), item_reliability(q)
     key = ["participant", "trial_index"]
     hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
-    return Analysis(criteria=results, conditions=conditions, block=block, alpha=alpha,
+    paradigm_blocks = {}
+    if len(others):
+        gone = set(excluded["participant"].astype(str))
+        rest = others[~others["participant"].astype(str).isin(gone)]
+        rest.attrs.update(others.attrs)
+        paradigm_blocks = analyze_blocks(rest, **block_options)
+    return Analysis(paradigm_blocks=paradigm_blocks, criteria=results, conditions=conditions, block=block, alpha=alpha,
                     n_participants=int(kept["participant"].nunique()),
                     n_trials=int(kept[key].drop_duplicates().shape[0]), exclusions=excluded,
                     attention=attention_summary(checked), n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)),
@@ -279,3 +308,27 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                     adjust=adjust, control=control, interval=interval, agreement=agreement,
                     agreement_summary=agreement_summary(agreement, alpha=alpha),
                     questionnaire_item_reliability=item_rel, labels=labels)
+
+
+def _paradigms_only(df: pd.DataFrame, *, block: str, exclude_failed_attention: bool, exclude: Iterable[str],
+                    alpha: float, n_boot: int, ci: float, seed: int, incomplete: str, adjust: str, interval: str,
+                    block_options: dict) -> Analysis:
+    """The analysis of a study without a rank block: exclusions, then every block of another paradigm."""
+    kept, excluded = apply_exclusions(df, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
+    if kept.empty:
+        raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
+                                 "(practice and attention-check trials are never analysed)")
+    conditions = condition_order(kept)
+    hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
+    notes: list[str] = []
+    if len(hashes) > 1:
+        notes.append(f"results mix {len(hashes)} study designs: {', '.join(map(str, hashes))}")
+    return Analysis(criteria={}, conditions=conditions, block=block, alpha=alpha,
+                    n_participants=int(kept["participant"].nunique()),
+                    n_trials=int(kept[["participant", "trial_index"]].drop_duplicates().shape[0]),
+                    exclusions=excluded, attention=attention_summary(df),
+                    n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)), dropped_incomplete=0,
+                    incomplete=incomplete, warnings=notes, source=df.attrs.get("source"),
+                    design_hashes=[str(h) for h in hashes], n_boot=n_boot, seed=seed, ci=ci, adjust=adjust,
+                    interval=interval, labels=condition_labels(kept, conditions),
+                    paradigm_blocks=analyze_blocks(kept, **block_options))

@@ -49,6 +49,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="bootstrap interval of the effect sizes (W, r_rb; Hodges-Lehmann with --block trial): "
                    "bca (default) or percentile")
     p.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
+    p.add_argument("--paradigm-bootstrap", type=int, default=10_000, metavar="N",
+                   help="participant resamples of the pairwise, mismatch and rating blocks' intervals (default "
+                   "10000, as GENEA)")
+    p.add_argument("--reference", default=None, metavar="CONDITION",
+                   help="the rating blocks' hidden reference condition: shown in their tables, left out of their "
+                   "tests")
+    p.add_argument("--screen-reference", action="store_true",
+                   help="with --reference: exclude from a rating block every participant who rated the hidden "
+                   "reference below 90 in more than 15%% of the items (MUSHRA's post-screening), and say who")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
     p.add_argument("--metrics", type=Path, metavar="FILE", help="objective metrics CSV (`studyapp metrics DESIGN "
                    "--out FILE`): reported per condition with each metric's rank correlation with the mean ranks")
@@ -91,7 +100,8 @@ def main(argv: list[str] | None = None) -> int:
                         exclude=[x for x in args.exclude.split(",") if x.strip()], alpha=args.alpha,
                         conover=args.conover, n_boot=args.bootstrap, seed=args.seed, incomplete=args.incomplete,
                         sm_permutations=args.permutations, adjust=args.adjust, control=args.control,
-                        interval=args.interval, metrics=metrics)
+                        interval=args.interval, metrics=metrics, paradigm_n_boot=args.paradigm_bootstrap,
+                        reference=args.reference, screen_reference=args.screen_reference)
     except AnalysisInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -103,10 +113,30 @@ def main(argv: list[str] | None = None) -> int:
         w_ci = f" ({a.ci:.0%} CI {w['ci_low']:.2f}-{w['ci_high']:.2f})" if w is not None else ""
         print(f"{crit}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}{w_ci}, "
               f"n = {fr.n_blocks} {a.block}s")
+    for b in a.paradigm_blocks.values():
+        print(block_summary(b))
     if len(a.exclusions):
         print("excluded: " + "; ".join(f"{r.participant} ({r.reason})" for r in a.exclusions.itertuples()))
     print(f"report: {args.out / 'report.html'}")
     return 0
+
+
+def block_summary(b) -> str:
+    """One line per pairwise, mismatch or rating block: its headline numbers per criterion."""
+    parts = []
+    for crit, r in b.results.items():
+        if b.paradigm == "pairwise":
+            parts.append(f"{crit}: Elo " + ", ".join(f"{row.condition} {row.elo:+.0f}" for row in r.elo.itertuples()))
+        elif b.paradigm == "mismatch":
+            parts.append(f"{crit}: matched preferred " + ", ".join(f"{row.condition} {row.rate:.0%}"
+                                                                    for row in r.rates.itertuples()))
+        else:
+            fr = r.friedman.iloc[0]
+            parts.append(f"{crit}: mean rating " + ", ".join(f"{row.condition} {row.mean:.1f}"
+                                                            for row in r.summary.itertuples())
+                         + f"; chi2({int(fr['df'])}) = {fr['chi2']:.2f}, p = {fr['p']:.3g}")
+    screened = f"; screened out: {', '.join(b.excluded['participant'])}" if len(b.excluded) else ""
+    return f"block {b.block} ({b.paradigm}, {b.n_participants} participants): " + "; ".join(parts) + screened
 
 
 def _is_sqlite(path: Path) -> bool:

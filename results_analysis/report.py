@@ -1,5 +1,7 @@
 """Write the analysis of a results frame to a folder: stats.json, tables/*.csv, figures/*.png|svg,
-report.md and a self-contained report.html that reads like a results section.
+report.md and a self-contained report.html that reads like a results section: the rank analysis (when the
+study has rank rows), then one section per pairwise, mismatch or rating block
+(:mod:`results_analysis.paradigm_report`).
 
 >>> import tempfile, pathlib
 >>> from results_analysis.simulate import simulate_results
@@ -23,6 +25,8 @@ from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
 from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
 from results_analysis.objective_metrics import compare_metrics
+from results_analysis.paradigm_analysis import stats_entry
+from results_analysis.paradigm_report import add_sections, write_block_figures, write_block_tables
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, nemenyi_q_alpha
 from results_analysis.study_meta import relabel
 
@@ -32,7 +36,8 @@ def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study r
     """Run :func:`results_analysis.analysis.run_analysis` on ``df`` and write every output into ``out_dir``.
 
     Keyword arguments are those of ``run_analysis`` (block, groups, questionnaire,
-    exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete, sm_permutations). Returns the
+    exclude_failed_attention, exclude, alpha, conover, n_boot, ci, seed, incomplete, sm_permutations; for the
+    pairwise, mismatch and rating blocks paradigm_n_boot, reference, screen_reference). Returns the
     :class:`Analysis`; the report is ``out_dir / "report.html"``. ``metrics``: a ``studyapp metrics`` table
     (:mod:`results_analysis.objective_metrics`), reported beside the mean ranks.
     """
@@ -57,7 +62,9 @@ def write_outputs(a: Analysis, out: Path, *, title: str, metrics: pd.DataFrame |
     (out / "stats.json").write_text(json.dumps(_clean(stats), indent=2, allow_nan=False) + "\n")
     a = relabel(a, a.labels)
     write_tables(a, out / "tables")
-    write_figures(a, out / "figures")
+    if a.criteria:  # the rank blocks' figures (a study of other paradigms only has none)
+        write_figures(a, out / "figures")
+    write_block_figures(a.paradigm_blocks, out / "figures")
     doc = build_document(a, title)
     if objective is not None:
         objective.write_tables(out / "tables")
@@ -115,6 +122,8 @@ def stats_dict(a: Analysis) -> dict:
         "software": {"scipy": scipy.__version__, "numpy": np.__version__, "pandas": pd.__version__},
     }
     out["_meta"].update(effects_report.meta(a))
+    if a.paradigm_blocks:
+        out["_blocks"] = {k: stats_entry(b) for k, b in a.paradigm_blocks.items()}
     if a.groups:
         out["_groups"] = {g: t.to_dict("records") for g, t in a.groups.items()}
     if a.questionnaire_reliability is not None:
@@ -162,15 +171,18 @@ def friedman_table(a: Analysis) -> pd.DataFrame:
 
 def write_tables(a: Analysis, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    friedman_table(a).to_csv(out / "friedman.csv", index=False)
-    pd.concat([c.summary.assign(criterion=k) for k, c in a.criteria.items()])[
-        ["criterion"] + list(next(iter(a.criteria.values())).summary.columns)].to_csv(out / "conditions.csv", index=False)
-    methods = sorted({m for c in a.criteria.values() for m in c.posthoc})
-    for m in methods:
-        t = pd.concat([c.posthoc[m].assign(criterion=k) for k, c in a.criteria.items() if m in c.posthoc])
-        t[["criterion"] + [x for x in t.columns if x != "criterion"]].to_csv(out / f"posthoc_{m}.csv", index=False)
-    bt = pd.concat([c.bradley_terry.assign(criterion=k) for k, c in a.criteria.items()])
-    bt[["criterion"] + [x for x in bt.columns if x != "criterion"]].to_csv(out / "bradley_terry.csv", index=False)
+    write_block_tables(a.paradigm_blocks, out)
+    if a.criteria:  # the rank blocks' tables (a study of other paradigms only has none)
+        friedman_table(a).to_csv(out / "friedman.csv", index=False)
+        pd.concat([c.summary.assign(criterion=k) for k, c in a.criteria.items()])[
+            ["criterion"] + list(next(iter(a.criteria.values())).summary.columns)].to_csv(out / "conditions.csv",
+                                                                                         index=False)
+        methods = sorted({m for c in a.criteria.values() for m in c.posthoc})
+        for m in methods:
+            t = pd.concat([c.posthoc[m].assign(criterion=k) for k, c in a.criteria.items() if m in c.posthoc])
+            t[["criterion"] + [x for x in t.columns if x != "criterion"]].to_csv(out / f"posthoc_{m}.csv", index=False)
+        bt = pd.concat([c.bradley_terry.assign(criterion=k) for k, c in a.criteria.items()])
+        bt[["criterion"] + [x for x in bt.columns if x != "criterion"]].to_csv(out / "bradley_terry.csv", index=False)
     a.exclusions.to_csv(out / "exclusions.csv", index=False)
     for g, t in a.groups.items():
         t.to_csv(out / f"by_{_safe(g)}.csv", index=False)
@@ -426,46 +438,48 @@ def build_document(a: Analysis, title: str) -> Document:
     if a.warnings:
         doc.h(1, "Warnings")
         doc.items(a.warnings)
-    doc.h(1, "Method")
-    doc.p(methods_paragraph(a))
-    doc.h(1, "Results")
-    for c in a.criteria.values():
-        for para in criterion_paragraphs(a, c):
-            doc.p(para)
-    ft = friedman_table(a)
-    show = ft[["criterion", "n_blocks", "chi2", "df", "p", "kendall_w", "iman_davenport_f", "iman_davenport_p",
-               "critical_difference"]].rename(columns={"n_blocks": "n", "chi2": "χ²", "kendall_w": "W",
-                                                       "iman_davenport_f": "F_ID", "iman_davenport_p": "p (F_ID)",
-                                                       "critical_difference": "CD"})
-    show["p"] = [_p_cell(p) for p in show["p"]]
-    show["p (F_ID)"] = [_p_cell(p) for p in show["p (F_ID)"]]
-    for col in ("χ²", "W", "F_ID", "CD"):
-        show[col] = [_num(v) for v in show[col]]
-    doc.table(show, "Table 1. Friedman tests per criterion (" + (
-        "primary analysis, blocks: participants" if a.block == "participant" else "blocks: trials") + ").")
-    rows = []
-    for crit, c in a.criteria.items():
-        for r in c.summary.itertuples():
-            rows.append({"criterion": crit, "condition": r.condition, "n": r.n, "mean rank": _num(r.mean_rank),
-                         f"{a.ci:.0%} CI": f"{_num(r.ci_low)}–{_num(r.ci_high)}", "median": f"{r.median_rank:g}",
-                         **dict(zip((f"rank {i}" for i in range(1, len(a.conditions) + 1)), _percentages(
-                             [getattr(r, f"share_rank_{i}") for i in range(1, len(a.conditions) + 1)])))})
-    doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
-              "interval, median, and share of answers at each rank (a tied answer shared between the places it "
-              "spans, so each row sums to 100 %).")
-    doc.table(effects_report.posthoc_table(a), effects_report.posthoc_caption(a))
-    btrows = [{"criterion": crit, "condition": r["condition"], "strength": _bt_cell(r),
-               "win rate": f"{r['win_rate']:.0%}"} for crit, c in a.criteria.items()
-              for _, r in c.bradley_terry.iterrows()]
-    doc.table(pd.DataFrame(btrows), f"Table 4. Bradley–Terry strengths (sum to 1) with {a.ci:.0%} participant-"
-              "bootstrap interval; a condition that never won or never lost has no finite strength.")
-    doc.figure("rank_shares", "Figure 1. Share of answers at each rank, per condition and criterion (ties shared "
-               "between the places they span).")
-    doc.figure("critical_difference", f"Figure 2. Critical-difference diagrams (Nemenyi, α = {_alpha(a.alpha)}): "
-               "conditions joined by a bar are not significantly different.")
-    doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")
-    doc.figure("bradley_terry", f"Figure 4. Bradley–Terry strengths with {a.ci:.0%} participant-bootstrap interval.")
-    effects_report.agreement_section(a, doc)
+    if a.criteria:  # the rank blocks (a study of other paradigms only has none)
+        doc.h(1, "Method")
+        doc.p(methods_paragraph(a))
+        doc.h(1, "Results")
+        for c in a.criteria.values():
+            for para in criterion_paragraphs(a, c):
+                doc.p(para)
+        ft = friedman_table(a)
+        show = ft[["criterion", "n_blocks", "chi2", "df", "p", "kendall_w", "iman_davenport_f", "iman_davenport_p",
+                   "critical_difference"]].rename(columns={"n_blocks": "n", "chi2": "χ²", "kendall_w": "W",
+                                                           "iman_davenport_f": "F_ID", "iman_davenport_p": "p (F_ID)",
+                                                           "critical_difference": "CD"})
+        show["p"] = [_p_cell(p) for p in show["p"]]
+        show["p (F_ID)"] = [_p_cell(p) for p in show["p (F_ID)"]]
+        for col in ("χ²", "W", "F_ID", "CD"):
+            show[col] = [_num(v) for v in show[col]]
+        doc.table(show, "Table 1. Friedman tests per criterion (" + (
+            "primary analysis, blocks: participants" if a.block == "participant" else "blocks: trials") + ").")
+        rows = []
+        for crit, c in a.criteria.items():
+            for r in c.summary.itertuples():
+                rows.append({"criterion": crit, "condition": r.condition, "n": r.n, "mean rank": _num(r.mean_rank),
+                             f"{a.ci:.0%} CI": f"{_num(r.ci_low)}–{_num(r.ci_high)}", "median": f"{r.median_rank:g}",
+                             **dict(zip((f"rank {i}" for i in range(1, len(a.conditions) + 1)), _percentages(
+                                 [getattr(r, f"share_rank_{i}") for i in range(1, len(a.conditions) + 1)])))})
+        doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
+                  "interval, median, and share of answers at each rank (a tied answer shared between the places it "
+                  "spans, so each row sums to 100 %).")
+        doc.table(effects_report.posthoc_table(a), effects_report.posthoc_caption(a))
+        btrows = [{"criterion": crit, "condition": r["condition"], "strength": _bt_cell(r),
+                   "win rate": f"{r['win_rate']:.0%}"} for crit, c in a.criteria.items()
+                  for _, r in c.bradley_terry.iterrows()]
+        doc.table(pd.DataFrame(btrows), f"Table 4. Bradley–Terry strengths (sum to 1) with {a.ci:.0%} participant-"
+                  "bootstrap interval; a condition that never won or never lost has no finite strength.")
+        doc.figure("rank_shares", "Figure 1. Share of answers at each rank, per condition and criterion (ties shared "
+                   "between the places they span).")
+        doc.figure("critical_difference", f"Figure 2. Critical-difference diagrams (Nemenyi, α = {_alpha(a.alpha)}): "
+                   "conditions joined by a bar are not significantly different.")
+        doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")
+        doc.figure("bradley_terry", f"Figure 4. Bradley–Terry strengths with {a.ci:.0%} participant-bootstrap interval.")
+        effects_report.agreement_section(a, doc)
+    add_sections(a.paradigm_blocks, doc)
     if a.groups:
         doc.h(1, "Breakdowns")
         for g, t in a.groups.items():

@@ -125,8 +125,9 @@ def questionnaire_from_results(df: pd.DataFrame) -> pd.DataFrame | None:
     return pd.DataFrame(rows, columns=["participant", "item", "scale", "value", "_where"])
 
 
-#: Dataclass fields that hold a single condition id (a lone string is otherwise never relabelled).
-_CONDITION_FIELDS = frozenset({"control"})
+#: Dataclass fields that hold a single condition id (a lone string is otherwise never relabelled): the rank
+#: analysis's ``control``, a rating block's hidden ``reference``.
+_CONDITION_FIELDS = frozenset({"control", "reference"})
 
 
 def relabel(obj: T, labels: Mapping[str, str]) -> T:

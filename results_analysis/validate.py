@@ -64,7 +64,12 @@ def _where(df: pd.DataFrame) -> pd.Series:
 
 
 def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
-    """Columns, ranks (numbers within range), duplicates and design hashes; see :func:`validate_results`."""
+    """Columns, ranks (numbers within range), duplicates and design hashes of the rank rows (a table with
+    other paradigms' blocks is checked on its ``rank`` rows, which are what it returns); see
+    :func:`validate_results`."""
+    from results_analysis.paradigms import rank_rows
+
+    df = rank_rows(df)
     src = df.attrs.get("source")
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
