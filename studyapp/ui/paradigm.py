@@ -7,10 +7,10 @@ block's order), the preference scale's levels and reasons (pairwise, mismatch) a
 (rating). A design without blocks, or a plan whose block is unknown, is today's ranking on every criterion.
 
 :func:`slot_names` is what the figures are called on screen for a trial of ``n`` figures: the design's slot
-labels when it has them (one per figure; missing ones continue the letters), else Left / Right for two,
-Left / Middle / Right for three and letters for more. Those names label the figures in the 3D view
-(:func:`scene_labels`) whenever the names are not simply their positions, so a participant can always tell
-which figure a "B" or a slider belongs to. Nothing here names or groups a condition.
+labels for ``n`` figures when it has them (:func:`figure_labels`; missing ones continue the letters), else
+Left / Right for two, Left / Middle / Right for three and letters for more. Those names label the figures
+in the 3D view (:func:`scene_labels`) whenever the names are not simply their positions, so a participant
+can always tell which figure a "B" or a slider belongs to. Nothing here names or groups a condition.
 
 >>> slot_names(None, 2), slot_names(("A", "B", "C"), 2), slot_names(None, 4)
 (('Left', 'Right'), ('A', 'B'), ('A', 'B', 'C', 'D'))
@@ -84,6 +84,14 @@ def _view_of(design: Design, block: Any | None, block_id: str, paradigm: str) ->
                      reasons=tuple(getattr(block, "reasons", None) or ()),
                      anchors=tuple(getattr(block, "anchors", None) or ()),
                      instructions=str(getattr(block, "instructions", None) or ""))
+
+
+def figure_labels(design: Design, n: int) -> tuple[str, ...] | None:
+    """The design's slot labels for a trial of ``n`` figures (``[slots] labels``), or None without labels."""
+    labels_for = getattr(design, "slot_labels_for", None)
+    if labels_for is not None:
+        return labels_for(n)
+    return tuple(design.slot_labels[:n]) if design.slot_labels else None
 
 
 def slot_names(labels: Sequence[str] | None, n: int) -> tuple[str, ...]:

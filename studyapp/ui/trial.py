@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from studyapp.render.frames import PlayRecorder, clock_media_time
-from studyapp.ui.paradigm import PREFERENCE, block_view, scene_labels, slot_names
+from studyapp.ui.paradigm import PREFERENCE, block_view, figure_labels, scene_labels, slot_names
 from studyapp.ui.preference import PreferenceState
 from studyapp.ui.ranking import RankingState
 from studyapp.ui.rating import RatingState
@@ -40,7 +40,7 @@ class TrialView:
         self.criteria = self.block.criteria
         self.n_slots = len(plan.slots)
         #: What the figures are called on screen ("A", "B" / "Left", "Right").
-        self.names = slot_names(app.design.slot_labels, self.n_slots)
+        self.names = slot_names(figure_labels(app.design, self.n_slots), self.n_slots)
         ids = [c.id for c in self.criteria]
         self.answer: RankingState | PreferenceState | RatingState
         if self.paradigm in PREFERENCE:
@@ -62,7 +62,7 @@ class TrialView:
 
         self.media = load_trial_media(self.app.design, self.plan)
         self.scene = build_trial_scene(self.app.renderer, self.media,
-                                       labels=scene_labels(self.app.design.slot_labels, self.n_slots))
+                                       labels=scene_labels(figure_labels(self.app.design, self.n_slots), self.n_slots))
 
     @property
     def loaded(self) -> bool:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
-from studyapp.ui.paradigm import PREFERENCE, BlockView, block_view, slot_names
+from studyapp.ui.paradigm import PREFERENCE, BlockView, block_view, figure_labels, slot_names
 from studyapp.ui.rating import digit_points
 from studyapp.ui.screens.common import page_begin, page_end, primary_row
 
@@ -39,7 +39,7 @@ def how_to_answer(app: ScreenApp, block: BlockView) -> list[str]:
         return out
     if block.paradigm == "rating":
         return [t("instructions.how_rating", n=min(9, len(digit_points(len(block.anchors)))))]
-    names = slot_names(app.design.slot_labels, 3)
+    names = slot_names(figure_labels(app.design, 3), 3)
     out = [t("instructions.how", keys=", ".join(f"{i + 1} = {label}" for i, label in enumerate(names)))]
     if getattr(app.design.playback, "allow_ties", False):
         out.append(t("instructions.ties"))
