@@ -2,8 +2,8 @@
 
 When the trial about to be shown is the first of a block that has ``instructions`` (the session says so:
 ``Session.block_instructions()`` returns the text), the trial screen shows this page instead: the block's text
-(paragraphs as the design wrote them, :func:`studyapp.ui.widgets.reflow`), then "How to answer" for the
-block's paradigm with its keys (:func:`how_to_answer`), and "Start this part" (or Enter), which calls
+(paragraphs as the design wrote them, :func:`studyapp.ui.widgets.reflow`), the block's questions, then "How
+to answer" for the block's paradigm with its keys (:func:`how_to_answer`), and "Start this part" (or Enter), which calls
 ``Session.finish_block_instructions()``. The page never names or hints at a condition.
 
 :func:`how_to_answer` is also what the study's instructions page says for each paradigm a design uses, so
@@ -57,6 +57,15 @@ def draw(app: ScreenApp) -> None:
     ui.paragraphs(text)
     if plan is not None:
         block = block_view(app.design, plan)
+        imgui.spacing()
+        ui.heading(t("instructions.questions"), 1.3)
+        for crit in block.criteria:
+            ui.heading(crit.label, 1.1)
+            imgui.indent()
+            ui.wrapped(crit.question)
+            if crit.explanation:
+                ui.muted(crit.explanation)
+            imgui.unindent()
         imgui.spacing()
         ui.heading(t("instructions.how_answer_title" if block.paradigm != "rank" else "instructions.how_title"), 1.3)
         for para in how_to_answer(app, block):

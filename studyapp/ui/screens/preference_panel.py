@@ -182,6 +182,7 @@ def _reasons_row(app: ScreenApp, view: TrialView, p: PreferenceState, row_h: flo
         p.active = len(view.criteria)
     imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 4 * s)
     imgui.begin_disabled(not asked)
+    imgui.align_text_to_frame_padding()   # the text on the check boxes' baseline
     ui.text(t("pref.reasons"), key="reasons")
     for k, reason in enumerate(view.block.reasons):
         imgui.same_line(0, 22 * s)

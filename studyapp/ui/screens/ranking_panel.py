@@ -329,8 +329,9 @@ def next_row(app: ScreenApp, view: TrialView, why_not: str | None) -> None:
     x_button = imgui.get_window_width() - imgui.get_style().window_padding.x - bw
     imgui.set_cursor_pos_y(row_y + 10 * s)
     # One line only: a second line would run into the first question's row below. Long hints (a design's
-    # long criterion labels, a wide progress label) are drawn smaller until they fit.
-    room = max(1.0, x_button - 16 * s - x_text)
+    # long criterion labels, a wide progress label) are drawn smaller until they fit, with 4 % to spare:
+    # glyphs are rasterised at the size drawn, so text does not shrink exactly in proportion.
+    room = 0.96 * max(1.0, x_button - 16 * s - x_text)
     size = max(0.7, min(1.0, room / max(1.0, imgui.calc_text_size(why).x)))
     ui.muted(why, wrap_x=x_button - 16 * s, size=round(size - 0.005, 3) if size < 1.0 else 1.0)
     imgui.set_cursor_pos(imgui.ImVec2(max(x_button, x_text), row_y))

@@ -65,11 +65,18 @@ def height(app: ScreenApp, view: TrialView) -> float:
     return sum(rows) + GAP_PX * len(rows) * app.scale + 8 * app.scale
 
 
-def slider_spans(app: ScreenApp, n: int) -> list[tuple[float, float]]:
-    """Screen x range of each figure's slider: inside its column of the 3D view (which spans the window)."""
+def slider_spans(app: ScreenApp, n: int, inner: tuple[float, float]) -> list[tuple[float, float]]:
+    """Screen x range of each figure's slider track: inside its column of the 3D view (which spans the
+    window), after room for the figure's name, and inside the row's ``inner`` x range (its padding)."""
     s = app.scale
     cols = slot_viewports((0, 0, app.fb_size[0], 100), n)
-    return [(x + (MARGIN_PX + NAME_PX) * s, x + w - MARGIN_PX * s) for x, _, w, _ in cols]
+    lo, hi = inner
+    out = []
+    for x, _, w, _ in cols:
+        a = max(x + MARGIN_PX * s, lo) + NAME_PX * s
+        b = min(x + w - MARGIN_PX * s, hi)
+        out.append((a, max(a + 40 * s, b)))
+    return out
 
 
 def missing_text(app: ScreenApp, view: TrialView, r: RatingState) -> str:
@@ -154,7 +161,7 @@ def _slider(app: ScreenApp, view: TrialView, r: RatingState, ci: int, slot: int,
         r.set(crit.id, slot, new)
     if rows[r.active] == (crit.id, slot):
         imgui.get_window_draw_list().add_rect(imgui.ImVec2(a.x - 3 * s, a.y - 3 * s), imgui.ImVec2(b.x + 3 * s, b.y + 3 * s),
-                                              imgui.get_color_u32(imgui.ImVec4(*FOCUS_COLOR)), 6 * s, 0, 2 * s)
+                                              imgui.get_color_u32(imgui.ImVec4(*FOCUS_COLOR)), 6 * s, 2 * s)
     _anchors(app, view, a.x, b.x, b.y + 2 * s)
 
 
@@ -164,7 +171,6 @@ def draw(app: ScreenApp, view: TrialView) -> None:
     r = view.answer
     assert isinstance(r, RatingState)
     heights = row_heights(app, view)
-    spans = slider_spans(app, view.n_slots)
     for ci, crit in enumerate(view.criteria):
         imgui.push_style_color(imgui.Col_.child_bg, imgui.ImVec4(*ROW_BG))
         imgui.push_style_var(imgui.StyleVar_.window_padding, imgui.ImVec2(ROW_PAD_PX[0] * s, ROW_PAD_PX[1] * s))
@@ -173,6 +179,8 @@ def draw(app: ScreenApp, view: TrialView) -> None:
                           imgui.WindowFlags_.no_scrollbar)
         imgui.pop_style_var()
         imgui.pop_style_color()
+        left = imgui.get_cursor_screen_pos().x
+        spans = slider_spans(app, view.n_slots, (left, left + imgui.get_content_region_avail().x))
         ui.heading(crit.label, 1.05, key=("crit", crit.id))
         imgui.same_line(0, 10 * s)
         ui.wrapped(crit.question)
