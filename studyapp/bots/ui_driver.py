@@ -50,12 +50,12 @@ def center(rect: tuple[float, float, float, float]) -> tuple[float, float]:
     return (x0 + x1) / 2.0, (y0 + y1) / 2.0
 
 
-def slider_point(bot: UIBot, key: Any, value: int) -> tuple[float, float]:
-    """Where to click on the 0..100 slider drawn under ``key`` for ``value``: ImGui's own geometry for an
-    integer slider (2 px grab padding, a grab of ``max(track / 101, grab_min_size)`` centred on the value)."""
+def slider_point(rect: tuple[float, float, float, float], value: int) -> tuple[float, float]:
+    """Where to click on the 0..100 slider drawn at ``rect`` (x0, y0, x1, y1) for ``value``: ImGui's own geometry
+    for an integer slider (2 px grab padding, a grab of ``max(track / 101, grab_min_size)`` centred on the value)."""
     from imgui_bundle import imgui
 
-    x0, y0, x1, y1 = bot._rect(key)
+    x0, y0, x1, y1 = rect
     track = (x1 - x0) - 4.0
     grab = min(max(track / 101.0, imgui.get_style().grab_min_size), track)
     return x0 + 2.0 + grab / 2 + (track - grab) * value / 100.0, (y0 + y1) / 2
@@ -371,7 +371,7 @@ class UIBot:
                 if ci == 0:   # the mouse: click where the value is, then fix the last point or two by keys
                     key = ("slider", crit.id, slot)
                     self.steps.append(self._ensure_visible(key))
-                    self.steps.append(lambda k=key, v=target: self.app.input.mouse_move(*slider_point(self, k, v)))
+                    self.steps.append(lambda k=key, v=target: self.app.input.mouse_move(*slider_point(self._rect(k), v)))
                     self.steps.append(lambda: self.app.input.mouse_button(0, True))
                     self.steps.append(lambda: self.app.input.mouse_button(0, False))
                     self.steps.append(lambda: None)

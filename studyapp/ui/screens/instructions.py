@@ -41,11 +41,13 @@ def draw(app: ScreenApp) -> None:
     blocks = paradigm_views(app.design)
     only_rank = [b.paradigm for b in blocks] == ["rank"]
     ui.heading(t("instructions.how_title" if only_rank else "instructions.how_answer_title"), 1.3)
-    for k, block in enumerate(blocks):
-        for j, para in enumerate(how_to_answer(app, block)):
-            if j or k:
-                imgui.spacing()
-            ui.wrapped(para)
+    paras: list[str] = []   # pairwise and mismatch blocks are answered alike: their paragraphs once
+    for block in blocks:
+        paras += [p for p in how_to_answer(app, block) if p not in paras]
+    for k, para in enumerate(paras):
+        if k:
+            imgui.spacing()
+        ui.wrapped(para)
     if primary_row(app, t("page.continue"), "continue", hint=t("page.press_enter")):
         app.session.finish_instructions()
     page_end()
