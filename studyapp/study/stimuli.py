@@ -311,10 +311,12 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
                                duration, cond.motion_end)
                     for i, (cid, cond, k) in enumerate(zip(plan.slots, conds, plan.samples)))
     maps = tuple(dict(cond.name_map) for cond in conds)
-    block = design.block(plan.block)
+    # a dry run's plan (validate) belongs to no block: it shows every criterion
+    block = next((b for b in design.trial_blocks if b.id == plan.block), None)
     return TrialMedia(plan=plan, audio=cut_audio(audio, duration), face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels_for(len(plan.slots)),
-                      duration_s=float(duration), criteria=block.criteria, name_maps=maps,  # type: ignore[arg-type]
+                      duration_s=float(duration),
+                      criteria=block.criteria if block is not None else tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
                       avatar_bone_map=dict(design.avatar_bone_map), framing=design.display.framing)
 
 

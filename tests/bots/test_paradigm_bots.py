@@ -119,7 +119,7 @@ def test_careful_ratings_follow_the_demo_conditions():
     from studyapp.study.stimuli import load_trial_media
 
     design = load_design(demo_design())
-    plan = TrialPlan(0, "clip02", ("static", "lagged", "synced"), False, False, 0, (1, 1, 1), "rates", "rating")
+    plan = TrialPlan(0, "clip02", ("static", "lagged", "synced"), False, False, 0, (1, 1, 1), "main", "rating")
     media = load_trial_media(design, plan)
     for seed in range(10):
         r = choose_ratings("careful", plan, media, ["synchronization", "diversity"], np.random.default_rng(seed))
