@@ -153,3 +153,42 @@ def test_chosen_option_is_green_and_hover_only_lightens(paradigm_study):
     handle = np.abs(rgb[y0:y1, x0:x1].astype(int) - np.array([89, 204, 140])).max(axis=2) < 30
     assert handle.sum() == 0                     # not moved yet: no handle anywhere on the track
     assert stored(db, "S2")[3][0]["realism"][1] == 90.0
+
+
+def test_chinese_paradigm_screens_have_every_glyph_and_nothing_cut_off(tmp_path, monkeypatch):
+    """A ``language = "zh"`` study with a pairwise, mismatch and rating block whose reasons, anchors and block
+    page are Chinese: every character drawn has a glyph (checked in the pixels as test_language_glyphs does)
+    and no text is cut off."""
+    from fixtures.paradigm_studies import BLOCKS, write_paradigm_study
+    from studyapp.study.design import load_design
+    from studyapp.study.design.fonts import design_fallback_font, needed_chars, participant_texts
+    from studyapp.study.storage import ResultsDB
+    from test_language_glyphs import _glyph_cells
+
+    blocks = (BLOCKS.replace('"Hands", "Timing", "Smoothness"', '"手部", "时机", "流畅度"')
+              .replace('"Bad", "Poor", "Fair", "Good", "Excellent"', '"很差", "较差", "一般", "较好", "很好"')
+              .replace("In this part you compare two figures at a time.", "这一部分每次比较两个人物。"))
+    path = write_paradigm_study(tmp_path / "zh", blocks)
+    path.write_text('language = "zh"\n' + path.read_text())
+    design = load_design(path)
+    # the font is chosen for the blocks' texts too (validate says so when none has their characters)
+    assert {"手", "很", "较"} <= needed_chars(participant_texts(design))
+    if design_fallback_font(design)[0] is None:  # pragma: no cover - the CI installs fonts-wqy-microhei
+        pytest.skip("no CJK font installed (apt install fonts-wqy-microhei)")
+    db = ResultsDB(tmp_path / "zh.sqlite", design)
+    bot = UIBot(design, db, "Z1", "careful", 2, size=(1280, 720))
+    try:
+        assert bot.run() == 0
+        drawn = set(bot.app.ui.drawn)
+        assert bot.app.ui.cut_off == []
+    finally:
+        bot.close()
+    for key in ("pref.equal", "rating.unset", "block.title", "instructions.how_pref", "instructions.how_rating"):
+        assert any(design.text(key, n=5) in s for s in drawn), key
+    assert "这一部分每次比较两个人物。" in drawn and "很好" in drawn
+    chars = sorted({c for s in drawn for c in s if c.isprintable() and not c.isspace()})
+    cells, none = _glyph_cells(design, db, chars, monkeypatch)
+    db.close()
+    assert none.max() > 100
+    missing = [c for c, cell in zip(chars, cells) if cell.max() < 100 or np.abs(cell - none).mean() < 2.0]
+    assert missing == [], "".join(missing)
