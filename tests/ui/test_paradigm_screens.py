@@ -172,7 +172,7 @@ def test_chinese_paradigm_screens_have_every_glyph_and_nothing_cut_off(tmp_path,
     path.write_text('language = "zh"\n' + path.read_text())
     design = load_design(path)
     # the font is chosen for the blocks' texts too (validate says so when none has their characters)
-    assert {"手", "很", "较"} <= needed_chars(participant_texts(design))
+    assert {"很", "般"} <= needed_chars(participant_texts(design))   # in no built-in text: only the anchors
     if design_fallback_font(design)[0] is None:  # pragma: no cover - the CI installs fonts-wqy-microhei
         pytest.skip("no CJK font installed (apt install fonts-wqy-microhei)")
     db = ResultsDB(tmp_path / "zh.sqlite", design)
