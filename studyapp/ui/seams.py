@@ -90,7 +90,6 @@ class ScreenApp(Protocol):
     layer: ImGuiLayer
     predictor: FlipPredictor
     refresh_hz: float | None
-    slot_names: Sequence[str]
     db_path: Path | str | None
     # this frame
     fb_size: tuple[int, int]

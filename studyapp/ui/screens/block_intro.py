@@ -24,9 +24,8 @@ if TYPE_CHECKING:
 
 
 def pending(app: ScreenApp) -> str | None:
-    """The block's instructions to show now, or None (no block page due, or the session has none)."""
-    ask = getattr(app.session, "block_instructions", None)
-    return ask() if ask is not None else None
+    """The block's instructions to show now, or None (no block page due)."""
+    return app.session.block_instructions()
 
 
 def how_to_answer(app: ScreenApp, block: BlockView) -> list[str]:
