@@ -167,9 +167,10 @@ def block_latin_rows(design: Design, block: Block) -> int:
 def mismatch_sources(design: Design, block: Block, stimulus_id: str) -> list[str]:
     """The block's other stimuli sharing the stimulus's ``match_tag`` value, in block order (the clips whose
     motion a mismatch trial of ``stimulus_id`` may play)."""
-    value = design.stimulus(stimulus_id).tags.get(block.match_tag)
+    tags = {s.id: s.tags for s in design.stimuli}
+    value = tags[stimulus_id].get(block.match_tag)
     return [o for o in block.stimuli if o != stimulus_id and value is not None
-            and design.stimulus(o).tags.get(block.match_tag) == value]
+            and tags[o].get(block.match_tag) == value]
 
 
 def block_period(design: Design, block: Block) -> int:

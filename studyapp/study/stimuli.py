@@ -490,6 +490,13 @@ def _check_mismatched(design: Design) -> list[tuple[str, str, str]]:
     from studyapp.study.schedule import mismatch_sources
 
     short: dict[int, list[str]] = {}
+    seconds: dict[tuple[str, str, int], float] = {}  # each motion's length, read once however often mismatched
+
+    def length(cond: Condition, source: str, k: int) -> float:
+        if (cond.id, source, k) not in seconds:
+            seconds[cond.id, source, k] = load_condition_motion(design, cond, design.stimulus(source), k).duration
+        return seconds[cond.id, source, k]
+
     for n, block in enumerate(design.trial_blocks):
         if block.paradigm != "mismatch":
             continue
@@ -501,11 +508,12 @@ def _check_mismatched(design: Design) -> list[tuple[str, str, str]]:
                 for cid in block.conditions:
                     ci = design.condition_ids.index(cid)
                     cond = design.conditions[ci]
+                    if cond.motion_end is not None:
+                        continue  # held or looped: never too short
                     for k in range(1, cond.samples + 1):
-                        motion = load_condition_motion(design, cond, design.stimulus(source), k)
-                        if medium_end(motion.duration, trial_s, cond.motion_end) == "short":
-                            short.setdefault(ci, []).append(f"{source} ({motion.duration:.2f} s) under {sid} "
-                                                            f"({trial_s:.2f} s)")
+                        if medium_end(length(cond, source, k), trial_s, cond.motion_end) == "short":
+                            short.setdefault(ci, []).append(f"{source} ({length(cond, source, k):.2f} s) under "
+                                                            f"{sid} ({trial_s:.2f} s)")
     return [(f"conditions[{ci}].motion_end", f"condition {design.conditions[ci].id!r} is mismatched with clips "
              f"longer than its motion: {', '.join(pairs[:3])}{' ...' if len(pairs) > 3 else ''}; it would freeze",
              'set motion_end = "hold" or "loop" on the condition (mismatched motion is cut, held or looped to '
