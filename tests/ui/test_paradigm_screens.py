@@ -88,13 +88,14 @@ def test_offscreen_script_stores_each_paradigms_answer(paradigm_study, tmp_path,
     try:
         assert bot.run() == 0
         drawn = set(bot.app.ui.drawn)
+        assert bot.app.ui.cut_off == []          # five reasons flow onto two lines; nothing runs off
     finally:
         bot.close()
     assert [p.paradigm for p in bot.session.plans] == ["pairwise", "mismatch", "mismatch", "rating"]
     assert stored(db, "S1") == SCRIPT_STORED
     # Continue stayed disabled while one slider was unset, and the panel named it
     assert bot.checks == [([("diversity", 2)], [("diversity", 2)], False)]
-    for text in ("key 1", "key 5", "Clearly A", "Slightly B", "No preference", "Hands  (key 1)", "Excellent",
+    for text in ("key 1", "key 5", "Clearly A", "Slightly B", "No preference", "Hand and arm movement  (key 1)", "Facial expression  (key 5)", "Excellent",
                  "not rated yet", "In this part you compare two figures at a time.", "Still to rate: Diversity: C"):
         assert text in drawn, text
     from studyapp.ui.widgets import Painter
@@ -165,7 +166,8 @@ def test_chinese_paradigm_screens_have_every_glyph_and_nothing_cut_off(tmp_path,
     from studyapp.study.storage import ResultsDB
     from test_language_glyphs import _glyph_cells
 
-    blocks = (BLOCKS.replace('"Hands", "Timing", "Smoothness"', '"手部", "时机", "流畅度"')
+    blocks = (BLOCKS.replace('"Hand and arm movement", "Timing with the speech", "Smoothness", "Body posture", "Facial expression"',
+                            '"手部", "时机", "流畅度", "姿势", "表情"')
               .replace('"Bad", "Poor", "Fair", "Good", "Excellent"', '"很差", "较差", "一般", "较好", "很好"')
               .replace("In this part you compare two figures at a time.", "这一部分每次比较两个人物。"))
     path = write_paradigm_study(tmp_path / "zh", blocks)

@@ -48,7 +48,6 @@ BOX_PX = 54.0
 #: The highlighted row's background and the others' (as the ranking panel's).
 ACTIVE_BG = (0.21, 0.25, 0.32, 1.0)
 ROW_BG = (0.16, 0.17, 0.20, 1.0)
-REASONS_ROW_PX = 52.0
 
 
 def option_label(app: ScreenApp, view: TrialView, value: int) -> str:
@@ -78,8 +77,33 @@ def row_heights(app: ScreenApp, view: TrialView, avail_w: float | None = None) -
     out = [float(math.ceil(max(ROW_PX * s, _text_height(app, c, text_w) + 2 * ROW_PAD_PX[1] * s + 2 * s)))
            for c in view.criteria]
     if view.block.reasons:
-        out.append(float(math.ceil(REASONS_ROW_PX * s)))
+        lines = _reason_lines(app, view, avail_w - 2 * ROW_PAD_PX[0] * s)
+        style = imgui.get_style()
+        box_h = imgui.get_frame_height()
+        out.append(float(math.ceil(2 * ROW_PAD_PX[1] * s + 4 * s + imgui.get_text_line_height() + style.item_spacing.y
+                                   + len(lines) * box_h + (len(lines) - 1) * style.item_spacing.y + 2 * s)))
     return out
+
+
+def reason_label(app: ScreenApp, k: int, reason: str) -> str:
+    """A reason's check box text: the reason and, for the first nine, its number key."""
+    return f"{reason}  ({app.design.text('rank.key', n=k + 1)})" if k < 9 else reason
+
+
+def _reason_lines(app: ScreenApp, view: TrialView, width: float) -> list[list[int]]:
+    """The reasons' check boxes flowed into lines ``width`` pixels wide: indices per line."""
+    style = imgui.get_style()
+    gap = 22 * app.scale
+    lines: list[list[int]] = [[]]
+    x = 0.0
+    for k, reason in enumerate(view.block.reasons):
+        w = imgui.get_frame_height() + style.item_inner_spacing.x + imgui.calc_text_size(reason_label(app, k, reason)).x
+        if lines[-1] and x + gap + w > width:
+            lines.append([])
+            x = 0.0
+        x += (gap if lines[-1] else 0.0) + w
+        lines[-1].append(k)
+    return lines
 
 
 def height(app: ScreenApp, view: TrialView) -> float:
@@ -173,6 +197,8 @@ def draw(app: ScreenApp, view: TrialView) -> None:
 
 
 def _reasons_row(app: ScreenApp, view: TrialView, p: PreferenceState, row_h: float) -> None:
+    """"What made the difference?" on its own line, then the reasons' check boxes, flowing onto more lines
+    when they do not fit one (the row's height allows for them: :func:`row_heights`)."""
     ui = app.ui
     s = app.scale
     t = app.design.text
@@ -182,15 +208,16 @@ def _reasons_row(app: ScreenApp, view: TrialView, p: PreferenceState, row_h: flo
         p.active = len(view.criteria)
     imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 4 * s)
     imgui.begin_disabled(not asked)
-    imgui.align_text_to_frame_padding()   # the text on the check boxes' baseline
     ui.text(t("pref.reasons"), key="reasons")
-    for k, reason in enumerate(view.block.reasons):
-        imgui.same_line(0, 22 * s)
-        ticked = reason in p.ticked
-        key_hint = f"  ({t('rank.key', n=k + 1)})" if k < 9 else ""
-        if ui.checkbox(f"{reason}{key_hint}##reason{k}", ticked, key=("reason", k)) != ticked:
-            p.toggle_reason(reason)
-            p.active = len(view.criteria)
+    for line in _reason_lines(app, view, imgui.get_content_region_avail().x):
+        for j, k in enumerate(line):
+            if j:
+                imgui.same_line(0, 22 * s)
+            reason = view.block.reasons[k]
+            ticked = reason in p.ticked
+            if ui.checkbox(f"{reason_label(app, k, reason)}##reason{k}", ticked, key=("reason", k)) != ticked:
+                p.toggle_reason(reason)
+                p.active = len(view.criteria)
     imgui.end_disabled()
     imgui.end_child()
 
