@@ -1,4 +1,9 @@
-"""What a careful viewer perceives in each slot: the scores behind the ``careful`` bot's rankings.
+"""What a careful viewer perceives in each slot: the scores behind the ``careful`` bot's answers.
+
+Rankings compare the scores of a trial's three slots (:func:`careful_scores`); ratings and two-figure
+preferences need a scale that means the same in every trial, :func:`careful_ratings` (0..100 per criterion,
+:func:`ratings_from_scores`); a mismatch trial is judged on :func:`alignment_ratings`, how well each slot's
+motion fits the trial's speech.
 
 Each score is a plain, documented signal measure (higher = better), computed on the hands because that is
 where co-speech gesture lives, and normalised by the figure's height so units (cm, m) do not matter:
