@@ -670,3 +670,16 @@ def test_the_export_has_each_answer_once_in_its_paradigm_columns(examples, tmp_p
     loaded = load_results(old)
     assert list(loaded["paradigm"]) == ["rank", "rank"] and list(loaded["block"]) == ["main", "main"]
     assert list(loaded["motion_stimulus"]) == ["c1", "c1"]
+
+
+def test_a_scene_holds_up_to_four_figures() -> None:
+    from studyapp.motion.skeleton import Motion
+    from studyapp.render.avatar import build_default_avatar
+    from studyapp.render.pose import prepare_slot
+    from studyapp.render.scene import MAX_SLOTS, make_scene
+
+    av = build_default_avatar()
+    slot = prepare_slot(av, Motion.rest(av.skeleton, n_frames=3, fps=30.0), None)
+    assert MAX_SLOTS == 4 and make_scene([slot] * 4, av, labels=("A", "B", "C", "D")).n_slots == 4
+    with pytest.raises(ValueError, match="1 to 4 slots"):
+        make_scene([slot] * 5, av)
