@@ -1,4 +1,9 @@
-"""What a careful viewer perceives in each slot: the scores behind the ``careful`` bot's rankings.
+"""What a careful viewer perceives in each slot: the scores behind the ``careful`` bot's answers.
+
+Rankings compare the scores of a trial's three slots (:func:`careful_scores`); ratings and two-figure
+preferences need a scale that means the same in every trial, :func:`careful_ratings` (0..100 per criterion,
+:func:`ratings_from_scores`); a mismatch trial is judged on :func:`alignment_ratings`, how well each slot's
+motion fits the trial's speech.
 
 Each score is a plain, documented signal measure (higher = better), computed on the hands because that is
 where co-speech gesture lives, and normalised by the figure's height so units (cm, m) do not matter:
@@ -191,12 +196,8 @@ def scores_from_measures(m: dict[str, float]) -> dict[str, float]:
     }
 
 
-def careful_scores(media: "TrialMedia") -> dict[str, tuple[float, float, float]]:
-    """Scores per criterion for the three slots (left, middle, right); higher = better.
-
-    Criteria other than realism / synchronization / diversity (designs may define their own) get the mean
-    of the three normalised known scores, so a careful viewer still prefers the better motion overall.
-    """
+def _slot_scores(media: "TrialMedia") -> list[dict[str, float]]:
+    """:func:`scores_from_measures` of each slot's motion, against the trial's speech."""
     from studyapp.demo_content.signals import speech_energy
 
     energies: dict[float, np.ndarray] = {}
@@ -206,15 +207,70 @@ def careful_scores(media: "TrialMedia") -> dict[str, tuple[float, float, float]]
         if fps not in energies:
             energies[fps] = speech_energy(media.audio, fps)
         per_slot.append(scores_from_measures(motion_measures(motion, energies[fps], media.duration_s)))
-    known = ("realism", "synchronization", "diversity")
-    out = {k: tuple(s[k] for s in per_slot) for k in known}
+    return per_slot
+
+
+_KNOWN = ("realism", "synchronization", "diversity")
+
+
+def careful_scores(media: "TrialMedia") -> dict[str, tuple[float, ...]]:
+    """Scores per criterion for the trial's slots (left to right); higher = better.
+
+    Criteria other than realism / synchronization / diversity (designs may define their own) get the mean
+    of the slots' normalised known scores, so a careful viewer still prefers the better motion overall.
+    """
+    per_slot = _slot_scores(media)
+    n = len(per_slot)
+    out = {k: tuple(s[k] for s in per_slot) for k in _KNOWN}
     extra = {}
     for cid in media.criteria:
         if cid not in out:
             normed = []
-            for k in known:
+            for k in _KNOWN:
                 v = np.asarray(out[k], dtype=np.float64)
                 rng = v.max() - v.min()
-                normed.append((v - v.min()) / rng if rng > 0 else np.zeros(3))
+                normed.append((v - v.min()) / rng if rng > 0 else np.zeros(n))
             extra[cid] = tuple(float(x) for x in np.mean(normed, axis=0))
-    return {**out, **extra}  # type: ignore[dict-item]
+    return {**out, **extra}
+
+
+#: Diversity score (figure heights, :func:`scores_from_measures`) at which a figure's rating reaches 63 of
+#: 100: gesturing figures of the demo content score 0.03-0.06, a figure standing still under 0.01.
+DIVERSITY_REF = 0.03
+
+
+def ratings_from_scores(scores: dict[str, float]) -> dict[str, float]:
+    """The scores of one figure on a 0..100 scale, the same for every trial (so figures of different trials
+    can be compared, as ratings and preferences between two figures need): realism and synchronization are
+    already 0..1 (times 100); diversity, unbounded, saturates as ``1 - exp(-d / DIVERSITY_REF)``.
+
+    >>> ratings_from_scores({"realism": 0.9, "synchronization": 0.5, "diversity": 0.03})["diversity"]
+    63.212055882855765
+    """
+    return {"realism": 100.0 * scores["realism"], "synchronization": 100.0 * scores["synchronization"],
+            "diversity": 100.0 * (1.0 - float(np.exp(-scores["diversity"] / DIVERSITY_REF)))}
+
+
+def careful_ratings(media: "TrialMedia") -> dict[str, tuple[float, ...]]:
+    """What a careful viewer would rate each slot per criterion, 0..100 (:func:`ratings_from_scores`);
+    criteria other than the known three get the mean of the three."""
+    per_slot = [ratings_from_scores(s) for s in _slot_scores(media)]
+    out = {k: tuple(r[k] for r in per_slot) for k in _KNOWN}
+    for cid in media.criteria:
+        if cid not in out:
+            out[cid] = tuple(float(np.mean([r[k] for k in _KNOWN])) for r in per_slot)
+    return out
+
+
+def alignment_ratings(media: "TrialMedia") -> tuple[float, ...]:
+    """How well each slot's motion fits the trial's speech, 0..100: the synchronization rating (hand strokes
+    against the speech's syllable accents, times activity). What a careful viewer of a ``mismatch`` trial
+    compares: the slot playing its own speech's motion should fit it better than one playing another clip's.
+
+    Why not the Beat Align Score (:func:`studyapp.motion.metrics.beat_align_score` against
+    :func:`studyapp.audio.onsets.onset_times`): syllable onsets come every ~0.25 s, so with its 0.3 s Gaussian
+    almost any motion beat is near one; on the demo content it told a synced motion with its own speech from
+    the same motion with the other clip's speech by under 0.01 in one of four pairs (the wrong way), where
+    this measure differs by 0.13-0.29 in all four.
+    """
+    return tuple(100.0 * s["synchronization"] for s in _slot_scores(media))

@@ -3,14 +3,23 @@
 What ``studyapp run --no-render --bot P`` and the demo's simulated panel use: fast (no frames), yet each
 trial's scene is built by the participant's own scene builder (on the CPU), every answer goes through the
 same session methods and storage as a participant's, and is chosen by the same policy as the offscreen
-participant's (:mod:`studyapp.bots.policies`).
+participant's (:mod:`studyapp.bots.policies`): a ranking, a preference or ratings, by the trial's
+paradigm, on its block's questions (:func:`studyapp.ui.paradigm.block_view`). A block's instructions page
+is read and left at once, as a participant pressing "Start this part" would.
 """
 from __future__ import annotations
 
 import time
 from typing import TYPE_CHECKING, Callable, Sequence
 
-from studyapp.bots.policies import POLICIES, choose_ranking, questionnaire_answers, trial_rng
+from studyapp.bots.policies import (
+    POLICIES,
+    choose_preference,
+    choose_ranking,
+    choose_ratings,
+    questionnaire_answers,
+    trial_rng,
+)
 from studyapp.errors import StudyappError
 from studyapp.study.session import PlayStats, Session, State
 
@@ -57,19 +66,31 @@ def run_bot_session(
         ties = bool(getattr(design.playback, "allow_ties", False))
         from studyapp.render.scene import build_trial_scene
         from studyapp.study.stimuli import load_trial_media
+        from studyapp.ui.paradigm import PREFERENCE, block_view, figure_labels, scene_labels
 
         while (plan := session.current_trial()) is not None:
+            if session.block_instructions() is not None:
+                session.finish_block_instructions()
             media = load_trial_media(design, plan)
             # The scene a participant's window would build (retargeting, avatar, media cut to the timeline),
             # on the CPU: a pilot without rendering fails where a participant would, and plays what they play.
-            scene = build_trial_scene(None, media)
+            scene = build_trial_scene(None, media, labels=scene_labels(figure_labels(design, len(plan.slots)), len(plan.slots)))
             session.record_play_started(duration_s=scene.duration)
             if pace_s > 0:
                 time.sleep(pace_s)
             session.record_play_finished(True, PlayStats())
             rng = trial_rng(seed, session.participant_id, plan.trial_index)
-            session.submit_ranking(choose_ranking(policy, plan, media, design.criteria, rng,
-                                                  condition_order=cond_order, allow_ties=ties))
+            block = block_view(design, plan)
+            if block.paradigm in PREFERENCE:
+                session.submit_preference(*choose_preference(policy, plan, media, block.criteria, rng,
+                                                             levels=block.levels, reasons=block.reasons,
+                                                             condition_order=cond_order))
+            elif block.paradigm == "rating":
+                session.submit_ratings(choose_ratings(policy, plan, media, block.criteria, rng,
+                                                      condition_order=cond_order))
+            else:
+                session.submit_ranking(choose_ranking(policy, plan, media, block.criteria, rng,
+                                                      condition_order=cond_order, allow_ties=ties))
         if session.state is State.QUESTIONNAIRE:
             rng = trial_rng(seed, session.participant_id, -1 & 0xFFFFFFFF)
             session.submit_questionnaire(questionnaire_answers(session.questionnaire_items, rng))

@@ -4,7 +4,13 @@ It renders every frame into an EGL framebuffer and acts only through :class:`~st
 events at the rectangles the screens drew their buttons at -- the same path a participant's mouse and
 keyboard take. Its choices come from :func:`studyapp.bots.policies.choose_ranking` (random / ordered /
 careful). To exercise every ranking method it drags the chips for the first question, clicks them for
-the second and uses the number keys for the rest. When the design allows ties and the policy chose some,
+the second and uses the number keys for the rest. The other paradigms likewise answer the first question
+with the mouse and the rest with the keyboard: a preference by clicking an option box, then by clicking
+the question (to highlight it) and pressing the option's number key, its reasons by ticking the first with
+the mouse and the rest with their number keys; ratings by clicking each slider of the first question at
+the point for its value (then Left/Right until it reads exactly that), and the others' by Up/Down to the
+slider, Right (which sets an unset slider to 50), Page Up/Page Down and Left/Right. A block's instructions
+page is left with its button. When the design allows ties and the policy chose some,
 it enters them the same way: a click on the ``>`` between two places for the mouse questions, ``=`` typed
 before the next figure for the keyboard ones. Time is virtual: each frame while a clip plays moves the
 silent clock ahead by a fraction of the clip (``frames_per_play``; None plays every frame at ``fps``).
@@ -33,6 +39,7 @@ if TYPE_CHECKING:
     from studyapp.study.schedule import TrialPlan
     from studyapp.study.storage import ResultsDB
     from studyapp.ui.seams import ParticipantSession
+    from studyapp.ui.trial import TrialView
 
 #: Rendered frames per clip play (virtual time jumps duration / this per frame).
 FRAMES_PER_PLAY = 8
@@ -41,6 +48,17 @@ FRAMES_PER_PLAY = 8
 def center(rect: tuple[float, float, float, float]) -> tuple[float, float]:
     x0, y0, x1, y1 = rect
     return (x0 + x1) / 2.0, (y0 + y1) / 2.0
+
+
+def slider_point(rect: tuple[float, float, float, float], value: int) -> tuple[float, float]:
+    """Where to click on the 0..100 slider drawn at ``rect`` (x0, y0, x1, y1) for ``value``: ImGui's own geometry
+    for an integer slider (2 px grab padding, a grab of ``max(track / 101, grab_min_size)`` centred on the value)."""
+    from imgui_bundle import imgui
+
+    x0, y0, x1, y1 = rect
+    track = (x1 - x0) - 4.0
+    grab = min(max(track / 101.0, imgui.get_style().grab_min_size), track)
+    return x0 + 2.0 + grab / 2 + (track - grab) * value / 100.0, (y0 + y1) / 2
 
 
 def save_png(rgb: np.ndarray, path: Path) -> None:
@@ -267,8 +285,12 @@ class UIBot:
     def _plan_trial(self, key: str) -> None:
         from studyapp.ui.ranking import order_and_ties
 
-        view = self.app.trial_view()
         sub = key.split(":")[1] if ":" in key else ""
+        if sub == "block":
+            self.click("block_continue")
+            self.wait(2)
+            return
+        view = self.app.trial_view()
         if view is None or not view.loaded or sub in ("loading", "playing"):
             self.wait()
             return
@@ -302,11 +324,86 @@ class UIBot:
                         self.click(("tie", crit.id, link))
             self.wait(2)
             return
-        if sub == "ranked":
+        if sub == "answering" and self._planned_for != view.plan.trial_index:
+            self._planned_for = view.plan.trial_index
+            if view.paradigm == "rating":
+                self._plan_ratings(view)
+            else:
+                self._plan_preference(view)
+            self.wait(2)
+            return
+        if sub in ("ranked", "answered"):
             self.click("next")
             self.wait(2)
             return
         self.wait()
+
+    def _rng(self, view: TrialView) -> np.random.Generator:
+        return policies.trial_rng(self.seed, self.session.participant_id, view.plan.trial_index)
+
+    def _plan_preference(self, view: TrialView) -> None:
+        plan, block = view.plan, view.block
+        levels, reasons = policies.choose_preference(
+            self.policy, plan, view.media, block.criteria, self._rng(view), levels=block.levels,
+            reasons=block.reasons, condition_order=[c.id for c in self.design.conditions])
+        options = view.answer.options  # type: ignore[union-attr]
+        for ci, crit in enumerate(block.criteria):
+            if ci == 0:   # the mouse
+                self.click(("option", crit.id, levels[crit.id]))
+            else:         # the keyboard: highlight the question, then the option's number key
+                self.click(("crit", crit.id))
+                self.key(digit_key(options.index(levels[crit.id]) + 1))
+        for k, reason in enumerate(reasons):
+            i = block.reasons.index(reason)
+            if k == 0:
+                self.click(("reason", i))
+            else:
+                self.click("reasons")
+                self.key(digit_key(i + 1))
+
+    def _plan_ratings(self, view: TrialView) -> None:
+        block = view.block
+        ratings = policies.choose_ratings(self.policy, view.plan, view.media, block.criteria, self._rng(view),
+                                          condition_order=[c.id for c in self.design.conditions])
+        for ci, crit in enumerate(block.criteria):
+            for slot in range(view.n_slots):
+                target = int(ratings[crit.id][slot])
+                if ci == 0:   # the mouse: click where the value is, then fix the last point or two by keys
+                    key = ("slider", crit.id, slot)
+                    self.steps.append(self._ensure_visible(key))
+                    self.steps.append(lambda k=key, v=target: self.app.input.mouse_move(*slider_point(self._rect(k), v)))
+                    self.steps.append(lambda: self.app.input.mouse_button(0, True))
+                    self.steps.append(lambda: self.app.input.mouse_button(0, False))
+                    self.steps.append(lambda: None)
+                # the keyboard: Up/Down to the slider, then (unset) Right, Page Up/Down, Left/Right; after a
+                # click this only corrects the point or two a click can be off
+                self.steps.append(lambda c=crit.id, s=slot, v=target: self._key_slider(c, s, v))
+
+    def _front(self, keys: list[Any]) -> None:
+        """Put presses of ``keys`` (in order) at the front of the queued steps."""
+        q = self.app.input
+        for k in reversed(keys):
+            self.steps.appendleft(lambda: None)
+            self.steps.appendleft(lambda k=k: q.key(k, False))
+            self.steps.appendleft(lambda k=k: q.key(k, True))
+
+    def _key_slider(self, crit: str, slot: int, target: int) -> None:
+        """Queue, first, the keys that take the slider ``(crit, slot)`` from where it is to ``target``."""
+        from imgui_bundle import imgui
+
+        r = self.app.trial_view().answer
+        row = r.rows().index((crit, slot))
+        moves = row - r.active
+        keys: list[Any] = [imgui.Key.down_arrow if moves > 0 else imgui.Key.up_arrow] * abs(moves)
+        start = r.values[crit][slot]
+        if start is None:
+            keys.append(imgui.Key.right_arrow)   # sets an unset slider to 50
+            start = 50
+        tens = int(round((target - start) / 10))
+        keys += [imgui.Key.page_up if tens > 0 else imgui.Key.page_down] * abs(tens)
+        rest = target - (start + 10 * tens)
+        keys += [imgui.Key.right_arrow if rest > 0 else imgui.Key.left_arrow] * abs(rest)
+        self._front(keys)
 
     def _plan_questionnaire(self) -> None:
         if self._q_planned:

@@ -84,10 +84,21 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
           f"full balance needs a multiple of {rows} participants"
           + ("" if args.participants % rows == 0 else f" ({args.participants} is not)") + ".")
     counts = balance_counts(df)
-    print("\nRated trials per position (rows) x stimulus (columns):")
-    print(counts["position_x_stimulus"].to_string())
-    print("\nConditions (rows) x slots (columns):")
-    print(counts["slot_x_condition"].to_string())
+    blocked = "paradigm" in df.columns
+    if not blocked or (df["paradigm"] == "rank").any():
+        print("\nRated trials per position (rows) x stimulus (columns)" + (", rank blocks:" if blocked else ":"))
+        print(counts["position_x_stimulus"].to_string())
+        print("\nConditions (rows) x slots (columns)" + (", rank blocks:" if blocked else ":"))
+        print(counts["slot_x_condition"].to_string())
+    if blocked:
+        from studyapp.study.schedule import block_counts
+
+        per_block = block_counts(df)
+        print("\nEvery block: conditions (rows) x slot positions (columns), 0 = left:")
+        print(per_block["figure_x_slot"].to_string())
+        if "matched_side" in per_block:
+            print("\nMismatch blocks: the figure playing its own motion, left or right, per condition x stimulus:")
+            print(per_block["matched_side"].to_string())
     if any(c.samples > 1 for c in design.conditions):
         print("\nSamples shown (columns) per condition x stimulus (rows), rated trials:")
         print(counts["sample_x_condition_stimulus"].to_string())

@@ -1,7 +1,7 @@
 """Export a results database as tidy tables (what ``results_analysis`` and R/SPSS users read).
 
-The long table has one row per participant x trial x criterion x condition, columns :data:`CORE_COLUMNS`
-in that order, then one column per stimulus tag (e.g. ``speaker``) and per participant group (e.g.
+The long table has one row per participant x trial x criterion x slot (x condition for rank), columns
+:data:`CORE_COLUMNS` in that order, then one column per stimulus tag (e.g. ``speaker``) and per participant group (e.g.
 ``device``, ``ordering_version``), one per rated questionnaire item (``questionnaire:<scale>:<item>``, the
 participant's answer), then ``study_title``, ``design_hash`` and ``app_version``. ``condition_label`` is the
 design's label of the condition (its id when it has none) and ``condition_position`` its place in the design
@@ -12,7 +12,10 @@ trials that are not attention checks; ``trial_duration_s`` is how long the trial
 stored before studyapp recorded it); ``sample`` is the 1-based sample of the condition that slot showed (see
 ``samples`` in :class:`~studyapp.study.design.Condition`; 1 for a condition with one motion per stimulus,
 empty for trials stored before studyapp recorded it). Practice trials are included and flagged (``is_practice``): the
-analysis drops them, and they show whether participants understood the task.
+analysis drops them, and they show whether participants understood the task. After the core columns come the
+response-paradigm columns (``block``, ``paradigm``, ``rating``, ``preference``, ``matched``,
+``motion_stimulus``, ``reasons``; see :mod:`results_analysis.sqlite_schema`): pairwise, mismatch and rating
+answers are rows of their own, one per criterion x slot, with ``rank`` empty.
 
 Example
 -------
@@ -85,8 +88,8 @@ def export_json(db: str | Path | ResultsDB) -> dict:
     try:
         con = rdb.connection
         out = {"schema": "studyapp-results", "design_hash": rdb.design_hash, "title": rdb.title}
-        for table in ("study", "stimuli", "conditions", "participants", "sessions", "trials", "responses", "plays",
-                      "questionnaire"):
+        for table in ("study", "stimuli", "conditions", "participants", "sessions", "trials", "trial_slots",
+                      "responses", "judgements", "plays", "questionnaire"):
             out[table] = [dict(r) for r in con.execute(f"SELECT * FROM {table}")]
     finally:
         if owned:

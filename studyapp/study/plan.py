@@ -1,8 +1,9 @@
 """Planning before recruiting: the power of a design's headline test, simulated on the design's own schedule.
 
 For ``N`` participants arriving in order (participant ``k`` on design row ``k mod n_rows``, as a results
-database assigns them), each participant's rated trials are those of
-:func:`studyapp.study.schedule.participant_schedule` (practice and attention checks are never analysed).
+database assigns them), each participant's rated trials are the ``rank`` trials of
+:func:`studyapp.study.schedule.participant_schedule` (practice and attention checks are never analysed; the
+other response paradigms are not simulated, and a design without a rank block is refused).
 Each rated trial's ranking of the conditions in its three slots is drawn from a Plackett-Luce model with the
 given strengths (the best place goes to condition ``i`` with probability ``s_i / sum s``, then the next
 among the rest; drawn with the Gumbel-max trick), independently of the slot, trial and participant.
@@ -100,7 +101,8 @@ def rated_conditions(design: Design, n_participants: int) -> np.ndarray:
     per: list[list[list[int]]] = []
     for k, pid in enumerate(participant_ids(n_participants)):
         plans = participant_schedule(design, pid, k % rows)
-        per.append([[ids.index(c) for c in p.slots] for p in plans if not (p.is_practice or p.is_attention_check)])
+        per.append([[ids.index(c) for c in p.slots] for p in plans
+                    if not (p.is_practice or p.is_attention_check) and p.paradigm == "rank"])
     m = max(len(t) for t in per)
     out = np.full((n_participants, m, 3), -1, np.int64)
     for i, t in enumerate(per):
@@ -193,6 +195,9 @@ def plan_study(design: Design, n_participants: int, strengths: dict[str, float],
         raise InputError(None, "--target", f"{target} is not between 0 and 1")
     if n_sim < 10:
         raise InputError(None, "--simulations", f"{n_sim}: need at least 10 simulated studies")
+    if not any(b.paradigm == "rank" for b in design.trial_blocks):
+        raise InputError(design.path, "blocks", "studyapp plan simulates rank trials (Plackett-Luce rankings); this "
+                         "design has no rank block")
     s = [strengths[c] for c in design.condition_ids]
     curve: dict[int, float] = {}
     power = power_at(design, n_participants, s, n_sim=n_sim, alpha=alpha, seed=seed)

@@ -52,6 +52,9 @@ position of the trial's stimulus in the block's ``stimuli`` and ``r`` the row:
   (random slots: a seeded permutation). Period ``lcm(L_b, k)``: every figure in every slot equally often per
   stimulus; the reference is in every trial.
 
+Practice clips of a pairwise, mismatch or rating first block follow the same rules with ``s`` = the practice
+clip's position + 1 (so a practice clip that is also rated is shown differently), outside the balance.
+
 :func:`n_rows` is the lcm of every block's period (and of the conditions' ``samples``).
 
 >>> from studyapp.resources import demo_design
@@ -300,8 +303,9 @@ def _block_trials(design: Design, block: Block, participant_id: str, row: int, o
                                                  ("practice:" if practice else "sides:") + block.id))
     out: list[tuple[str, tuple[str, ...], tuple[str, ...]]] = []
     for j, sid in enumerate(order):
-        # practice clips are placed by their position; rated ones by the stimulus's place in the block
-        s = j if practice or sid not in block.stimuli else block.stimuli.index(sid)
+        # rated trials go by the stimulus's place in the block; practice clips by their own position, one
+        # step on, so a practice clip that is also rated is not shown the same way twice
+        s = j + 1 if practice or sid not in block.stimuli else block.stimuli.index(sid)
         if block.paradigm == "pairwise":
             pairs = list(combinations(conds, 2))
             p = len(pairs)
@@ -359,6 +363,25 @@ def full_schedule(design: Design, n_participants: int) -> pd.DataFrame:
     rows = n_rows(design)
     return schedule_frame({pid: participant_schedule(design, pid, k % rows)
                            for k, pid in enumerate(participant_ids(n_participants))})
+
+
+def block_counts(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """Balance of a blocked schedule's rated trials (a table with :data:`BLOCK_COLUMNS`): ``figure_x_slot``
+    ((block, condition) x slot position: how often each condition is shown in each slot; a mismatch trial
+    counts its one condition in both) and ``matched_side`` ((block, condition, stimulus) x side of the
+    figure playing its own motion, mismatch blocks only)."""
+    import pandas as pd
+
+    rated = df[~df["is_practice"].astype(bool) & ~df["is_attention_check"].astype(bool)]
+    rows = [(b, c, i) for b, slots in zip(rated["block"], rated["slots"]) for i, c in enumerate(slots.split(";"))]
+    seats = pd.DataFrame(rows, columns=["block", "condition", "slot"])
+    out = {"figure_x_slot": pd.crosstab([seats["block"], seats["condition"]], seats["slot"])}
+    mm = rated[rated["paradigm"] == "mismatch"]
+    if len(mm):
+        side = ["left" if m.split(";")[0] == s else "right" for m, s in zip(mm["motion_stimuli"], mm["stimulus"])]
+        out["matched_side"] = pd.crosstab([mm["block"], mm["slot_left"], mm["stimulus"]], pd.Series(side, index=mm.index,
+                                                                                                     name="matched"))
+    return out
 
 
 def balance_counts(df: pd.DataFrame) -> dict[str, pd.DataFrame]:

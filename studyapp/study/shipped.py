@@ -89,7 +89,8 @@ class Shipped:
     media: dict[str, bytes]
     #: bundle name -> where the file came from (for the key)
     origin: dict[str, str]
-    #: ``schedule.json``: participant id -> {"row": r, "trials": [[stimulus, [slots], practice, check], ...]}
+    #: ``schedule.json``: participant id -> {"row": r, "trials": [[stimulus, [slots], practice, check], ...]};
+    #: with ``[[blocks]]`` each trial ends with ``{"block": ..., "paradigm": ...}``
     schedules: dict[str, dict[str, Any]]
     #: key part: shipped stimulus -> {participant, trial_index, stimulus, conditions {token: real},
     #: samples {token: sample}, motions {token: real stimulus whose motion the token plays}}
@@ -204,8 +205,9 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
                 entry["duration_s"] = stim.duration_s
             entry["tags"] = dict(sorted(tags.items()))
             stimuli[sid] = entry
-            entries.append([sid, slot_tokens, bool(plan.is_practice), bool(plan.is_attention_check),
-                            {"block": plan.block, "paradigm": plan.paradigm}])
+            # a design with [[blocks]] adds each trial's block and paradigm (one without keeps the old layout)
+            entries.append([sid, slot_tokens, bool(plan.is_practice), bool(plan.is_attention_check)]
+                           + ([{"block": plan.block, "paradigm": plan.paradigm}] if design.blocks else []))
             trials[sid] = {"participant": pid, "trial_index": plan.trial_index, "stimulus": stim.id,
                            "conditions": real_of, "samples": {tok: f[2] for tok, f in zip(toks, figures)},
                            "motions": motion_of}

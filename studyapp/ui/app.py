@@ -197,9 +197,18 @@ class StudyApp:
         return {k: d[k] for k in keep if d.get(k) is not None}
 
     def screen_key(self) -> str:
-        """A name for what is on screen (screenshots, tests): ``welcome``, ``trials:ranking``, ..."""
+        """A name for what is on screen (screenshots, tests): ``welcome``, ``trials:ranking``, ...
+
+        Trials: ``loading``, ``ready``, ``playing``, ``paused``, ``ended``, then ``ranking`` / ``ranked`` (a
+        ranking trial) or ``answering`` / ``answered`` (the other paradigms) while the answers are open, and
+        ``block`` while a block's instructions page is shown before its first trial.
+        """
+        from studyapp.ui.screens.block_intro import pending
+
         state = self.session.state.value
         plan = self.session.current_trial()
+        if plan is not None and pending(self):
+            return f"{state}:block"
         view = self._view
         if plan is None or view is None or view.plan.trial_index != plan.trial_index:
             view = None
@@ -212,7 +221,9 @@ class StudyApp:
         if not view.loaded:
             return f"{state}:loading"
         if view.ranking_open() and not view.in_play:
-            return f"{state}:{'ranked' if view.ranking.all_complete() else 'ranking'}"
+            if view.paradigm == "rank":
+                return f"{state}:{'ranked' if view.answers_complete() else 'ranking'}"
+            return f"{state}:{'answered' if view.answers_complete() else 'answering'}"
         return f"{state}:{view.state}"
 
     def _on_focus(self, focused: bool) -> None:

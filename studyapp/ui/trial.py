@@ -1,14 +1,22 @@
-"""One trial's playback state: media, scene, play/pause/replay, watched-once, ranking, frame stats.
+"""One trial's playback state: media, scene, play/pause/replay, watched-once, the answers, frame stats.
 
 The drawing lives in :mod:`studyapp.ui.screens.trial`; this class holds what must survive between
-frames and talks to the :class:`~studyapp.study.session.Session` (plays, stats, the ranking).
+frames and talks to the :class:`~studyapp.study.session.Session` (plays, stats, the answers).
+
+The answers are those of the trial's paradigm (:mod:`studyapp.ui.paradigm`): a
+:class:`~studyapp.ui.ranking.RankingState` (``rank``), a :class:`~studyapp.ui.preference.PreferenceState`
+(``pairwise``, ``mismatch``) or a :class:`~studyapp.ui.rating.RatingState` (``rating``), on the questions
+of the trial's block; :meth:`TrialView.submit` hands them to the session method of that paradigm.
 """
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
 from studyapp.render.frames import PlayRecorder, clock_media_time
+from studyapp.ui.paradigm import PREFERENCE, block_view, figure_labels, scene_labels, slot_names
+from studyapp.ui.preference import PreferenceState
 from studyapp.ui.ranking import RankingState
+from studyapp.ui.rating import RatingState
 
 if TYPE_CHECKING:
     from studyapp.audio.clock import MediaClock
@@ -26,8 +34,21 @@ class TrialView:
         self.plan = plan
         self.media: TrialMedia | None = None
         self.scene: TrialScene | None = None
-        self.ranking = RankingState([c.id for c in app.design.criteria],
-                                    allow_ties=bool(getattr(app.design.playback, "allow_ties", False)))
+        self.block = block_view(app.design, plan)
+        self.paradigm = self.block.paradigm
+        #: The questions of this trial (its block's criteria), in order.
+        self.criteria = self.block.criteria
+        self.n_slots = len(plan.slots)
+        #: What the figures are called on screen ("A", "B" / "Left", "Right").
+        self.names = slot_names(figure_labels(app.design, self.n_slots), self.n_slots)
+        ids = [c.id for c in self.criteria]
+        self.answer: RankingState | PreferenceState | RatingState
+        if self.paradigm in PREFERENCE:
+            self.answer = PreferenceState(ids, levels=self.block.levels, reasons=self.block.reasons)
+        elif self.paradigm == "rating":
+            self.answer = RatingState(ids, self.n_slots)
+        else:
+            self.answer = RankingState(ids, allow_ties=bool(getattr(app.design.playback, "allow_ties", False)))
         self.recorder: PlayRecorder | None = None
         self.watched = False          # played to the end at least once
         self.in_play = False          # a play is registered with the session (playing or paused)
@@ -40,7 +61,8 @@ class TrialView:
         from studyapp.study.stimuli import load_trial_media
 
         self.media = load_trial_media(self.app.design, self.plan)
-        self.scene = build_trial_scene(self.app.renderer, self.media)
+        self.scene = build_trial_scene(self.app.renderer, self.media,
+                                       labels=scene_labels(figure_labels(self.app.design, self.n_slots), self.n_slots))
 
     @property
     def loaded(self) -> bool:
@@ -121,9 +143,28 @@ class TrialView:
         """The ranking panel shows once the design's watching rule is met (and stays open on replays)."""
         return self.watched or not bool(self.app.design.playback.must_watch_fully)
 
+    @property
+    def ranking(self) -> RankingState:
+        """The ranking of a ``rank`` trial (an error on other paradigms: their answers are :attr:`answer`)."""
+        if not isinstance(self.answer, RankingState):
+            raise AttributeError(f"a {self.paradigm} trial has no ranking")
+        return self.answer
+
+    def answers_complete(self) -> bool:
+        """Every question answered (every slider moved, for ratings)."""
+        a = self.answer
+        return a.all_moved() if isinstance(a, RatingState) else a.all_complete()
+
     def can_submit(self) -> bool:
-        return self.ranking.all_complete() and not self.in_play and self.app.session.can_rank()
+        return self.answers_complete() and not self.in_play and self.app.session.can_rank()
 
     def submit(self) -> None:
-        if self.can_submit():
-            self.app.session.submit_ranking(self.ranking.ranks())
+        if not self.can_submit():
+            return
+        a = self.answer
+        if isinstance(a, PreferenceState):
+            self.app.session.submit_preference(a.answers(), a.submitted_reasons())
+        elif isinstance(a, RatingState):
+            self.app.session.submit_ratings(a.ratings())
+        else:
+            self.app.session.submit_ranking(a.ranks())

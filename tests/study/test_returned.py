@@ -103,8 +103,8 @@ def _rename(new_id: str) -> Callable[[dict[str, Any]], None]:
         old = payload["participant"]
         payload["participant"] = new_id
         payload["participants"][0]["id"] = new_id
-        for table in ("sessions", "trials", "responses", "plays", "questionnaire"):
-            for r in payload[table]:
+        for table in ("sessions", "trials", "trial_slots", "responses", "judgements", "plays", "questionnaire"):
+            for r in payload.get(table, []):
                 if r.get("participant") == old:
                     r["participant"] = new_id
     return edit

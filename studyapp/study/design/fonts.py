@@ -51,6 +51,8 @@ def participant_texts(design: Design) -> list[str]:
     for q in design.questionnaire:
         out += [q.text, *q.anchors, *q.options]
     out += list(design.slot_labels or ())
+    for b in getattr(design, "blocks", None) or ():   # a block's own page, its reasons and slider anchors
+        out += [b.instructions, *b.reasons, *b.anchors]
     return [t for t in out if t]
 
 

@@ -20,7 +20,7 @@ the next figure placed with the one above it (``1 = 2 3``). Without ties the pan
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 from imgui_bundle import imgui
 
@@ -92,20 +92,26 @@ def _text_height(app: ScreenApp, crit: Criterion, text_w: float) -> float:
     return h
 
 
-def row_heights(app: ScreenApp, avail_w: float | None = None) -> list[float]:
-    """Pixel height of each question's row: at least ``ROW_PX``, more when its text wraps to more lines."""
+def row_heights(app: ScreenApp, avail_w: float | None = None,
+                criteria: Sequence[Criterion] | None = None) -> list[float]:
+    """Pixel height of each question's row: at least ``ROW_PX``, more when its text wraps to more lines.
+
+    ``criteria``: the trial's questions (its block's); default: all of the design's."""
     s = app.scale
+    if criteria is None:
+        criteria = app.design.criteria
     if avail_w is None:
         avail_w = app.fb_size[0] - 2 * 20 * s  # the panel's width inside its padding (trial.draw)
     text_w = _text_width(app, avail_w)
     # whole pixels, so boxes and their outlines sit on pixel rows (no half-covered edges)
     return [float(math.ceil(max(ROW_PX * s, _text_height(app, c, text_w) + 2 * ROW_PAD_PX[1] * s + 2 * s)))
-            for c in app.design.criteria]
+            for c in criteria]
 
 
-def height(app: ScreenApp) -> float:
-    """Pixels the ranking rows need below the transport row."""
-    return sum(row_heights(app)) + GAP_PX * len(app.design.criteria) * app.scale + 8 * app.scale
+def height(app: ScreenApp, view: TrialView | None = None) -> float:
+    """Pixels the ranking rows (of ``view``'s questions; default: the design's) need below the transport row."""
+    criteria = view.criteria if view is not None else app.design.criteria
+    return sum(row_heights(app, criteria=criteria)) + GAP_PX * len(criteria) * app.scale + 8 * app.scale
 
 
 def _box_text(app: ScreenApp, caption: str, value: str, filled: bool) -> None:
@@ -191,17 +197,17 @@ def draw(app: ScreenApp, view: TrialView) -> None:
     ui = app.ui
     s = app.scale
     r = view.ranking
-    names = app.slot_names
+    names = view.names
     place_w, box_h, chip_w = PLACE_PX * s, BOX_PX * s, CHIP_PX * s
     link_w, link_gap = LINK_PX * s, 4 * s
     avail_w = imgui.get_content_region_avail().x
     text_w = _text_width(app, avail_w)
-    heights = row_heights(app, avail_w)
+    heights = row_heights(app, avail_w, view.criteria)
     if r.allow_ties:
         # Narrower places and the two links fit in the room of the three places without ties, so the
         # questions keep their width and still fit their row.
         place_w = TIE_PLACE_PX * s
-    for ci, crit in enumerate(app.design.criteria):
+    for ci, crit in enumerate(view.criteria):
         active = ci == r.active
         bg = (0.21, 0.25, 0.32, 1.0) if active else (0.16, 0.17, 0.20, 1.0)
         imgui.push_style_color(imgui.Col_.child_bg, imgui.ImVec4(*bg))
@@ -282,9 +288,27 @@ def draw(app: ScreenApp, view: TrialView) -> None:
 
 def next_button(app: ScreenApp, view: TrialView) -> None:
     """The "Next clip" button (right end of the transport row) and why it is disabled, if it is."""
+    t = app.design.text
+    r = view.ranking
+    if view.can_submit() or view.in_play:
+        why = None
+    elif not any(slot is not None for places in r.order.values() for slot in places):
+        why = keys_line(view.names, t("rank.start_hint"))
+        if r.allow_ties:
+            why += " " + t("rank.tie_hint")
+    else:
+        why = t("rank.still", criteria=", ".join(c.label for c in view.criteria if not r.is_complete(c.id)))
+    next_row(app, view, why)
+
+
+def next_row(app: ScreenApp, view: TrialView, why_not: str | None) -> None:
+    """The "Next clip" button at the right end of the transport row, with one line of hint before it.
+
+    ``why_not``: what is still to do while the answers are incomplete (every answer panel says it its way);
+    the waiting and "you cannot come back" hints are the same for all.
+    """
     ui = app.ui
     s = app.scale
-    r = view.ranking
     t = app.design.text
     last = app.session.trial_number() >= app.session.phase_total()
     if view.plan.is_practice:
@@ -296,12 +320,8 @@ def next_button(app: ScreenApp, view: TrialView) -> None:
         why = t("rank.next_ok")
     elif view.in_play:
         why = t("rank.wait")
-    elif not any(slot is not None for places in r.order.values() for slot in places):
-        why = keys_line(app.slot_names, t("rank.start_hint"))
-        if r.allow_ties:
-            why += " " + t("rank.tie_hint")
     else:
-        why = t("rank.still", criteria=", ".join(c.label for c in app.design.criteria if not r.is_complete(c.id)))
+        why = why_not or ""
     bw = 210 * s
     imgui.same_line(0, 20 * s)
     row_y = imgui.get_cursor_pos_y()
@@ -309,8 +329,9 @@ def next_button(app: ScreenApp, view: TrialView) -> None:
     x_button = imgui.get_window_width() - imgui.get_style().window_padding.x - bw
     imgui.set_cursor_pos_y(row_y + 10 * s)
     # One line only: a second line would run into the first question's row below. Long hints (a design's
-    # long criterion labels, a wide progress label) are drawn smaller until they fit.
-    room = max(1.0, x_button - 16 * s - x_text)
+    # long criterion labels, a wide progress label) are drawn smaller until they fit, with 4 % to spare:
+    # glyphs are rasterised at the size drawn, so text does not shrink exactly in proportion.
+    room = 0.96 * max(1.0, x_button - 16 * s - x_text)
     size = max(0.7, min(1.0, room / max(1.0, imgui.calc_text_size(why).x)))
     ui.muted(why, wrap_x=x_button - 16 * s, size=round(size - 0.005, 3) if size < 1.0 else 1.0)
     imgui.set_cursor_pos(imgui.ImVec2(max(x_button, x_text), row_y))

@@ -1,19 +1,24 @@
-"""A trial: the three figures play with the sound; Play / Pause / Replay; the ranking panel below.
+"""A trial: the figures play with the sound; Play / Pause / Replay; the answer panel below.
 
-Layout (framebuffer pixels, top to bottom): the 3D view (the renderer draws the three avatars there) and
-the control panel: one row with where the participant is ("Clip 3 of 8", amber for practice clips) and
-the transport, then the ranking once the clip has been watched. Nothing sits above the figures, so they
+Layout (framebuffer pixels, top to bottom): the 3D view (the renderer draws the trial's avatars there, two
+to four side by side) and the control panel: one row with where the participant is ("Clip 3 of 8", amber for
+practice clips) and the transport, then the answers once the clip has been watched: the panel of the
+trial's paradigm (:data:`PANELS`: ranking, preference or rating sliders).
+
+Before the first trial of a block that has its own instructions (``Session.block_instructions()``), that
+page is shown instead (:mod:`studyapp.ui.screens.block_intro`), once. Nothing sits above the figures, so they
 keep as much of the window's height as the panel leaves (the camera frames them for the view's shape).
 Attention-check trials look exactly like the others.
 """
 from __future__ import annotations
 
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 from imgui_bundle import imgui
 
 from studyapp.study.design.texts import EN as EN_TEXTS
-from studyapp.ui.screens import ranking_panel
+from studyapp.ui.screens import block_intro, preference_panel, ranking_panel, rating_panel
 from studyapp.ui.screens.common import PAGE_FLAGS
 
 if TYPE_CHECKING:
@@ -23,6 +28,14 @@ if TYPE_CHECKING:
 CONTROLS_PX = 68.0
 PRACTICE_COLOR = (1.0, 0.80, 0.35, 1.0)
 PRACTICE_NOTE = EN_TEXTS["trial.practice_note"]  # English; participants read design.text(...)
+#: The answer panel of each paradigm: ``height(app, view)``, ``draw(app, view)``, ``next_button(app, view)``.
+PANELS = {"rank": ranking_panel, "pairwise": preference_panel, "mismatch": preference_panel,
+          "rating": rating_panel}
+
+
+def panel_of(view: TrialView) -> ModuleType:
+    """The answer panel of the trial's paradigm (a module of :data:`PANELS`)."""
+    return PANELS.get(view.paradigm, ranking_panel)
 
 
 def _fmt(t: float) -> str:
@@ -36,12 +49,15 @@ def layout(app: ScreenApp, view: TrialView) -> dict[str, tuple[float, float, flo
     s = app.scale
     panel = CONTROLS_PX * s
     if view.ranking_open():
-        panel += ranking_panel.height(app)
+        panel += panel_of(view).height(app, view)
     panel = min(panel, 0.62 * h)
     return {"scene": (0, 0, w, h - panel), "panel": (0, h - panel, w, panel)}
 
 
 def draw(app: ScreenApp) -> None:
+    if block_intro.pending(app):
+        block_intro.draw(app)
+        return
     s = app.scale
     view = app.trial_view()
     if view is None or not view.loaded:
@@ -69,7 +85,7 @@ def draw(app: ScreenApp) -> None:
     if view.ranking_open():
         # the rows scroll when a design has more questions than the panel's share of the window holds
         imgui.begin_child("##ranks", imgui.ImVec2(0, 0))
-        ranking_panel.draw(app, view)
+        panel_of(view).draw(app, view)
         imgui.end_child()
     imgui.end()
 
@@ -128,7 +144,7 @@ def _transport(app: ScreenApp, view: TrialView, t: float) -> None:
     imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 10 * s)
     imgui.progress_bar(frac, imgui.ImVec2(200 * s, 24 * s), f"{_fmt(t)} / {_fmt(view.duration_s)}")
     if view.ranking_open():
-        ranking_panel.next_button(app, view)
+        panel_of(view).next_button(app, view)
     else:
         imgui.same_line(0, 20 * s)
         imgui.set_cursor_pos_y(imgui.get_cursor_pos_y() + 2 * s)
@@ -146,9 +162,10 @@ def _status_text(app: ScreenApp, view: TrialView, state: str) -> str:
         return t("trial.watch")
     if state == "playing":
         return t("trial.replaying")
+    rank = view.paradigm == "rank"
     if not view.app.session.can_play():
-        return t("trial.rank_now")
-    return t("trial.rank_replay")
+        return t("trial.rank_now" if rank else "trial.answer_now")
+    return t("trial.rank_replay" if rank else "trial.answer_replay")
 
 
 def _keys(app: ScreenApp, view: TrialView) -> None:
