@@ -11,6 +11,8 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from results_analysis.errors import AnalysisInputError
 
 
@@ -126,7 +128,9 @@ def block_summary(b) -> str:
     parts = []
     for crit, r in b.results.items():
         if b.paradigm == "pairwise":
-            parts.append(f"{crit}: Elo " + ", ".join(f"{row.condition} {row.elo:+.0f}" for row in r.elo.itertuples()))
+            parts.append(f"{crit}: Elo " + ", ".join(
+                f"{row.condition} " + (f"{row.elo:+.0f}" if np.isfinite(row.elo) else "not estimable")
+                for row in r.elo.itertuples()))
         elif b.paradigm == "mismatch":
             parts.append(f"{crit}: matched preferred " + ", ".join(f"{row.condition} {row.rate:.0%}"
                                                                     for row in r.rates.itertuples()))
