@@ -683,3 +683,21 @@ def test_a_scene_holds_up_to_four_figures() -> None:
     assert MAX_SLOTS == 4 and make_scene([slot] * 4, av, labels=("A", "B", "C", "D")).n_slots == 4
     with pytest.raises(ValueError, match="1 to 4 slots"):
         make_scene([slot] * 5, av)
+
+
+def test_row_checksums_cover_judgements_and_trial_slots(examples, tmp_path: Path) -> None:
+    from studyapp.errors import InputError
+
+    d = examples["pairwise"]
+    path = tmp_path / "r.sqlite"
+    with ResultsDB(path, d) as db:
+        _run(d, db, "P1", 2, stop_after=2)
+    for table, column in (("judgements", "value"), ("trial_slots", "motion_stimulus")):
+        copy = tmp_path / f"{table}.sqlite"
+        shutil.copy(path, copy)
+        with sqlite3.connect(copy) as con:
+            con.execute(f"UPDATE {table} SET {column} = {column} || 'x' WHERE rowid = 1" if column != "value" else
+                        f"UPDATE {table} SET value = -value + 0.5 WHERE rowid = 1")
+        con.close()
+        with pytest.raises(InputError, match=f"table {table}, row .*does not match its checksum"):
+            ResultsDB(copy, create=False)
