@@ -118,6 +118,18 @@ def test_attention_checks_need_a_rank_block(tmp_path: Path) -> None:
     assert [p.key for p in validate_design(path, check_files=False)] == ["attention_checks"]
 
 
+def test_attention_checks_are_scored_on_a_criterion_of_the_first_rank_block(tmp_path: Path) -> None:
+    path = tmp_path / "d.toml"
+    criteria = ONE_CRITERION + ONE_CRITERION.replace("realism", "sync")
+    text = _design_text('[[blocks]]\nid = "r"\nparadigm = "rank"\ncriteria = ["sync"]\n[[attention_checks]]\n'
+                        'stimulus = "clip01"\n', criteria)
+    path.write_text(text)
+    problems = validate_design(path, check_files=False)
+    assert [p.key for p in problems] == ["attention_checks[0].criterion"] and "'r'" in problems[0].message
+    path.write_text(text + 'criterion = "sync"\n')
+    assert validate_design(path, check_files=False) == []
+
+
 def test_a_block_asking_motion_and_speech_together_is_noted_not_refused(tmp_path: Path) -> None:
     path = tmp_path / "d.toml"
     path.write_text(_design_text('[[blocks]]\nid = "p"\nparadigm = "pairwise"\n', ""))  # the default three criteria
