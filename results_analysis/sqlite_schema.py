@@ -83,10 +83,12 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
                rowid: bool = False) -> pd.DataFrame:
     """The tidy table of a results database, exactly as ``studyapp export`` writes it: one row per
     participant x trial x criterion x slot (x condition for rank), :data:`CORE_COLUMNS`,
-    :data:`PARADIGM_COLUMNS`, the tag and group columns, then :data:`TAIL_COLUMNS`. ``attention_passed`` is empty (None) for trials that are not attention checks.
+    :data:`PARADIGM_COLUMNS`, the tag and group columns, then :data:`TAIL_COLUMNS`. ``attention_passed`` is
+    empty (None) for trials that are not attention checks.
 
     This is the one place the query lives: ``studyapp export`` and :func:`tidy_from_connection` both call it.
-    ``rowid``: keep each answer's row id in the database as a first column ``_rowid`` (for messages).
+    ``rowid``: keep each answer's row id in the database as a first column ``_rowid``, and its table
+    (``responses`` or ``judgements``) as ``_table`` (for messages).
     """
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type IN ('table','view')")}
     for table, cols in _NEEDED.items():

@@ -379,8 +379,8 @@ def block_counts(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
     mm = rated[rated["paradigm"] == "mismatch"]
     if len(mm):
         side = ["left" if m.split(";")[0] == s else "right" for m, s in zip(mm["motion_stimuli"], mm["stimulus"])]
-        out["matched_side"] = pd.crosstab([mm["block"], mm["slot_left"], mm["stimulus"]], pd.Series(side, index=mm.index,
-                                                                                                     name="matched"))
+        out["matched_side"] = pd.crosstab([mm["block"], mm["slot_left"], mm["stimulus"]],
+                                          pd.Series(side, index=mm.index, name="matched"))
     return out
 
 

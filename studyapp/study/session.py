@@ -452,8 +452,8 @@ class Session:
             plan = by_index.get(t["trial_index"])
             stored = (t["stimulus"], (t["slot_left"], t["slot_middle"], t["slot_right"]),
                       t.get("block") or "main", t.get("paradigm") or "rank")
-            same = plan is not None and stored == (plan.stimulus_id, three_slots(plan.slots), getattr(plan, "block", "main"),
-                                                   getattr(plan, "paradigm", "rank"))
+            same = plan is not None and stored == (plan.stimulus_id, three_slots(plan.slots),
+                                                   getattr(plan, "block", "main"), getattr(plan, "paradigm", "rank"))
             if same and t["trial_index"] in slots:  # schema 6 stores every slot and whose motion it played
                 same = slots[t["trial_index"]] == [(c, plan.motion_stimulus(i)) for i, c in enumerate(plan.slots)]
             if not same:

@@ -118,6 +118,18 @@ def test_attention_checks_need_a_rank_block(tmp_path: Path) -> None:
     assert [p.key for p in validate_design(path, check_files=False)] == ["attention_checks"]
 
 
+def test_attention_checks_are_scored_on_a_criterion_of_the_first_rank_block(tmp_path: Path) -> None:
+    path = tmp_path / "d.toml"
+    criteria = ONE_CRITERION + ONE_CRITERION.replace("realism", "sync")
+    text = _design_text('[[blocks]]\nid = "r"\nparadigm = "rank"\ncriteria = ["sync"]\n[[attention_checks]]\n'
+                        'stimulus = "clip01"\n', criteria)
+    path.write_text(text)
+    problems = validate_design(path, check_files=False)
+    assert [p.key for p in problems] == ["attention_checks[0].criterion"] and "'r'" in problems[0].message
+    path.write_text(text + 'criterion = "sync"\n')
+    assert validate_design(path, check_files=False) == []
+
+
 def test_a_block_asking_motion_and_speech_together_is_noted_not_refused(tmp_path: Path) -> None:
     path = tmp_path / "d.toml"
     path.write_text(_design_text('[[blocks]]\nid = "p"\nparadigm = "pairwise"\n', ""))  # the default three criteria
@@ -683,3 +695,21 @@ def test_a_scene_holds_up_to_four_figures() -> None:
     assert MAX_SLOTS == 4 and make_scene([slot] * 4, av, labels=("A", "B", "C", "D")).n_slots == 4
     with pytest.raises(ValueError, match="1 to 4 slots"):
         make_scene([slot] * 5, av)
+
+
+def test_row_checksums_cover_judgements_and_trial_slots(examples, tmp_path: Path) -> None:
+    from studyapp.errors import InputError
+
+    d = examples["pairwise"]
+    path = tmp_path / "r.sqlite"
+    with ResultsDB(path, d) as db:
+        _run(d, db, "P1", 2, stop_after=2)
+    for table, column in (("judgements", "value"), ("trial_slots", "motion_stimulus")):
+        copy = tmp_path / f"{table}.sqlite"
+        shutil.copy(path, copy)
+        with sqlite3.connect(copy) as con:
+            con.execute(f"UPDATE {table} SET {column} = {column} || 'x' WHERE rowid = 1" if column != "value" else
+                        f"UPDATE {table} SET value = -value + 0.5 WHERE rowid = 1")
+        con.close()
+        with pytest.raises(InputError, match=f"table {table}, row .*does not match its checksum"):
+            ResultsDB(copy, create=False)

@@ -693,6 +693,13 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
                 col.add(f"practice[{j}]", f"practice clip {sid!r} opens the mismatch block {first.id!r}, but none of "
                         f"that block's clips shares its {first.match_tag} to mismatch it with",
                         f"give it tags.{first.match_tag} of one of the block's clips, or drop it from practice")
+    if blocks and rank_blocks:  # a check is scored on a criterion its block asks
+        for i, e in checks:
+            crit = e.get("criterion", key_default(AttentionCheckTable, "criterion"))
+            if crit in crit_ids and crit not in rank_blocks[0].criteria:
+                col.add(f"attention_checks[{i}].criterion", f"criterion {crit!r} is not asked in block "
+                        f"{rank_blocks[0].id!r}, the rank block attention checks belong to",
+                        "use one of " + ", ".join(repr(c) for c in rank_blocks[0].criteria))
     attention = _attention_checks(col, checks, stim_ids, crit_ids,
                                   list(rank_blocks[0].conditions) if rank_blocks else ids_ok)
     items = _questionnaire(col, questions)
