@@ -1,6 +1,8 @@
 """Build the tidy results frame straight from a studyapp results database (schema versions 1 to 5).
 
-Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
+Reads with pandas and any DB-API connection that speaks SQLite's SQL (no studyapp import): an
+:class:`sqlite3.Connection`, or studyapp's PostgreSQL connection, which answers the same statements (``studyapp
+export`` of a ``postgresql://`` database runs this query through it). Responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
 exactly the columns of ``studyapp export``.
 
@@ -77,7 +79,7 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
     # files get it empty, as for trial_duration_s.
     sample = ("CASE r.slot WHEN 0 THEN t.sample_left WHEN 1 THEN t.sample_middle ELSE t.sample_right END"
               if {"sample_left", "sample_middle", "sample_right"} <= trial_cols else "NULL")
-    df = pd.read_sql_query(_QUERY.format(trial_duration=duration, sample=sample), con)
+    df = _frame(con, _QUERY.format(trial_duration=duration, sample=sample))
     for col in ("is_practice", "is_attention_check"):
         df[col] = df[col].astype(int).astype(bool)
     df["attention_passed"] = df["attention_passed"].map(lambda v: None if pd.isna(v) else bool(v)).astype(object)
@@ -106,6 +108,14 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
     if not include_practice:
         df = df[~df["is_practice"]].reset_index(drop=True)
     return df
+
+
+def _frame(con: sqlite3.Connection, sql: str) -> pd.DataFrame:
+    """A query's rows as a frame, as :func:`pandas.read_sql_query` makes it, from any DB-API connection
+    (pandas reads only sqlite3 and SQLAlchemy connections itself)."""
+    cur = con.execute(sql)
+    columns = [d[0] for d in cur.description]
+    return pd.DataFrame.from_records([tuple(r) for r in cur.fetchall()], columns=columns, coerce_float=True)
 
 
 def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:
