@@ -310,7 +310,9 @@ class PostgresBackend:
         return ["ok"]
 
     def begin_write(self, con: Connection) -> None:
-        con.execute("BEGIN")
+        # READ COMMITTED: each statement after the lock sees every commit made before it was granted (a
+        # REPEATABLE READ snapshot would be taken by the lock's own statement, before the wait)
+        con.execute("BEGIN ISOLATION LEVEL READ COMMITTED")
         con.execute("SELECT pg_advisory_xact_lock(%d)" % WRITE_LOCK_KEY)
 
     def kind(self, exc: BaseException) -> str:
@@ -419,6 +421,7 @@ _PRAGMA_TABLE_INFO = re.compile(r"^\s*PRAGMA\s+table_info\(\s*\"?([^\")]+)\"?\s*
 _CAST_BLOB = re.compile(r"CAST\(([^()]+?) AS BLOB\)", re.I)
 _INSERT_OR = re.compile(r"^\s*INSERT\s+OR\s+(IGNORE|REPLACE)\s+INTO\s+([\w.\"]+)\s*\(([^)]*)\)", re.I)
 _INSERT_INTO = re.compile(r"^\s*INSERT\s+INTO\s+([\w.\"]+)", re.I)
+_LEADING_COMMENTS = re.compile(r"^(?:\s*--[^\n]*(?:\n|$))+")
 _CREATE_TABLE = re.compile(r"^\s*CREATE\s+TABLE\s+(?:IF\s+NOT\s+EXISTS\s+)?\"?(\w+)\"?", re.I)
 
 
@@ -440,8 +443,9 @@ def _placeholders(sql: str) -> str:
     return "".join(out)
 
 
-def create_table_ddl(sql: str) -> tuple[str, str]:
-    """SQLite's ``CREATE TABLE`` as PostgreSQL's, and the table's name (see the module docstring)."""
+def create_table_ddl(sql: str) -> tuple[str, str, bool]:
+    """SQLite's ``CREATE TABLE`` as PostgreSQL's, the table's name and whether it has a ``rowid`` (see the
+    module docstring)."""
     name = _CREATE_TABLE.match(sql).group(1)  # type: ignore[union-attr]
     body = re.sub(r"--[^\n]*", "", sql).rstrip().rstrip(";").rstrip()
     without_rowid = re.search(r"\)\s*WITHOUT\s+ROWID$", body, re.I) is not None
@@ -457,7 +461,7 @@ def create_table_ddl(sql: str) -> tuple[str, str]:
         rowid = (f"rowid BIGINT GENERATED ALWAYS AS ({pk.group(1)}) STORED" if pk
                  else "rowid BIGINT GENERATED ALWAYS AS IDENTITY")
         body = f"{body[:-1].rstrip()},\n    {rowid}\n)"
-    return body, name
+    return body, name, not without_rowid
 
 
 def _alter_ddl(sql: str) -> str:
@@ -551,10 +555,10 @@ class PgConnection:
                 "(txid_current(), TG_TABLE_NAME, NEW.rowid); END IF; RETURN NULL; END $$")
 
     def _create_table(self, sql: str) -> Any:
-        ddl, name = create_table_ddl(sql)
+        ddl, name, has_rowid = create_table_ddl(sql)
         self._ensure_dirty_tracking()
         cur = self.raw.execute(ddl)
-        if "rowid" in ddl.split("\n")[-2]:
+        if has_rowid:
             self.raw.execute(f'CREATE TRIGGER _studyapp_dirty AFTER INSERT OR UPDATE OR DELETE ON "{name}" '
                              f"FOR EACH ROW EXECUTE FUNCTION {_PG_DIRTY_FUNC}()")
         self._pk.clear()
@@ -562,6 +566,7 @@ class PgConnection:
         return cur
 
     def execute(self, sql: str, parameters: Sequence[Any] = ()) -> PgCursor:
+        sql = _LEADING_COMMENTS.sub("", sql)
         m = _PRAGMA_TABLE_INFO.match(sql)
         if m:
             return _ListCursor(("cid", "name", "type", "notnull", "dflt_value", "pk"), self._table_info(m.group(1)))
