@@ -27,7 +27,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("studyapp.models", "studyapp.demo_content"),             # produce motion from speech (a network, a recipe)
     ("studyapp.render",),                                     # draws media; knows nothing of studies
     ("studyapp.study",),                                      # designs, sessions, storage; no screens
-    ("studyapp.ui",),                                         # the participant's screens
+    ("studyapp.ui", "studyapp.web"),                          # the participant's screens: desktop, browser
     ("studyapp.bots",),                                       # scripted participants: drive the session or the UI
     ("studyapp.cli",),                                        # the application shell: commands only
 )

@@ -11,7 +11,7 @@ import logging
 import sys
 
 from studyapp import __version__
-from studyapp.cli import demo, design, doctor, models, motion, planning, render, session
+from studyapp.cli import demo, design, doctor, models, motion, planning, render, serve, session
 from studyapp.errors import StudyappError
 
 _COMMAND_MODULES = (
@@ -23,6 +23,7 @@ _COMMAND_MODULES = (
     doctor,    # doctor
     demo,      # demo
     planning,  # metrics, plan
+    serve,     # serve (the browser study server)
 )
 
 

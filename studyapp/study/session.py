@@ -479,6 +479,12 @@ class Session:
         """Plays of the current clip in this session."""
         return self._plays
 
+    @property
+    def playing(self) -> bool:
+        """A play of the current clip started and has not been reported finished (a browser page reloaded
+        mid-clip leaves one open: the server closes it as not completed before the next play)."""
+        return self._play_id is not None
+
     def can_play(self) -> bool:
         if self.current_trial() is None or self._play_id is not None:
             return False

@@ -69,6 +69,12 @@ _MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",),
                4: (row_checksums.CREATE_TABLE,)}
 
 PARTICIPANT_STATUSES = ("active", "done", "ended_early")
+#: The key of a session's ``machine`` record that marks its participant abandoned: a browser participant who
+#: left unfinished for longer than the design's ``[online] abandon_after_min`` (see :mod:`studyapp.web`). Such a
+#: participant has status ``ended_early`` (the schema has no other status for it), keeps every answer given,
+#: and no longer counts for the balance of Latin-square rows, so :meth:`ResultsDB.add_participant` gives the
+#: row out again.
+ABANDONED = "abandoned_at"
 
 _SCHEMA = """
 CREATE TABLE schema_version (version INTEGER NOT NULL);
@@ -585,9 +591,14 @@ class ResultsDB:
         return [self._participant(r) for r in self._con.execute("SELECT * FROM participants ORDER BY created, id")]
 
     def row_counts(self, n_rows: int) -> list[int]:
-        """How many participants follow each Latin-square row ``0 .. n_rows-1``."""
+        """How many participants follow each Latin-square row ``0 .. n_rows-1``. A participant who declined
+        consent or was abandoned (status ``ended_early`` with ``"consent": "declined"`` or :data:`ABANDONED` in a
+        session's machine record) saw no trial, or no longer will, and holds no row."""
         counts = [0] * n_rows
-        for r in self._con.execute("SELECT latin_row, COUNT(*) FROM participants GROUP BY latin_row"):
+        for r in self._con.execute(
+                "SELECT latin_row, COUNT(*) FROM participants p WHERE NOT (p.status = 'ended_early' AND EXISTS "
+                "(SELECT 1 FROM sessions s WHERE s.participant = p.id AND (s.machine LIKE ? OR s.machine LIKE ?))) "
+                "GROUP BY latin_row", (f'%"{ABANDONED}"%', '%"consent": "declined"%')):
             if 0 <= r[0] < n_rows:
                 counts[r[0]] = r[1]
         return counts

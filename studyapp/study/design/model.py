@@ -13,7 +13,7 @@ from studyapp.render.camera import DEFAULT_FRAMING
 from studyapp.study.design.files import resolve
 from studyapp.study.design.texts import EN as EN_TEXTS
 from studyapp.study.design.texts import fill
-from studyapp.study.design.schema import BOOL, FROZEN_PREFIX, INT, LIST, NUM, STR, TABLE, key
+from studyapp.study.design.schema import BOOL, FROZEN_PREFIX, INT, LIST, NUM, STR, TABLE, OnlineTable, key
 
 # ---------------------------------------------------------------------------------------------------------
 # Data classes
@@ -326,6 +326,8 @@ class Design:
     #: ``language`` and every built-in participant text after the design's ``[texts]`` (see :mod:`.texts`)
     language: str = "en"
     texts: dict[str, str] = field(default_factory=lambda: dict(EN_TEXTS))
+    #: ``[online]``: the browser study server's settings (abandonment timeout, completion code and URL)
+    online: OnlineTable = field(default_factory=OnlineTable)
 
     def text(self, key: str, **values: object) -> str:
         """The participant text ``key`` in this design's language, its ``{fields}`` filled from ``values``."""

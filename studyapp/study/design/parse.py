@@ -22,7 +22,7 @@ from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condi
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
                                               MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
                                               SLOT_LABELS, AttentionCheckTable, AvatarTable,
-                                              DesignFile, OrderingTable, ParticipantsTable, SlotsTable,
+                                              DesignFile, OnlineTable, OrderingTable, ParticipantsTable, SlotsTable,
                                               key_default)
 from studyapp.study.design.texts import LANGUAGES
 from studyapp.study.design.texts import fields as text_fields
@@ -40,7 +40,7 @@ TABLES: dict[str, type] = {"": DesignFile, "conditions": Condition, "stimuli": S
                            "avatar": AvatarTable, "ordering": OrderingTable, "slots": SlotsTable,
                            "attention_checks": AttentionCheckTable, "playback": Playback,
                            "questionnaire": QuestionItem, "participants": ParticipantsTable,
-                           "display": Display}
+                           "display": Display, "online": OnlineTable}
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -465,6 +465,18 @@ def _participants(col: Collector, participants: ParticipantsTable) -> tuple[int 
 # The whole file
 
 
+def _online(col: Collector, online: OnlineTable) -> OnlineTable:
+    if not float(online.abandon_after_min) > 0:
+        col.add("online.abandon_after_min", "must be more than 0 minutes", "e.g. 120 (two hours)")
+        online.abandon_after_min = key_default(OnlineTable, "abandon_after_min")
+    url = online.completion_url.strip()
+    if url and not url.lower().startswith(("https://", "http://")):
+        col.add("online.completion_url", f"{url!r} is not a web address",
+                'e.g. "https://app.prolific.com/submissions/complete?cc=C1234ABC"')
+        online.completion_url = ""
+    return online
+
+
 def _read(path: Path) -> tuple[bytes, str, dict] | Problem:
     try:
         data = path.read_bytes()
@@ -523,6 +535,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     display = _display(col, check_table(col, top.get("display", {}), Display, "display"))
     participants = ParticipantsTable(**check_table(col, top.get("participants", {}), ParticipantsTable,
                                                     "participants"))
+    online = _online(col, OnlineTable(**check_table(col, top.get("online", {}), OnlineTable, "online")))
     check_ids(col, "conditions", conds, "condition")
     check_ids(col, "stimuli", stims, "stimulus")
     check_ids(col, "criteria", crits, "criterion")
@@ -559,7 +572,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
         avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=ordering.method, slot_assignment=slots.assignment,
         slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
         playback=Playback(**playback), display=display, questionnaire=items, max_attention_failures=maxfail,
-        seed=int(ordering.seed), groups=groups,
+        seed=int(ordering.seed), groups=groups, online=online,
     )
     for key, cid in visible_text_leaks(design):
         col.add(key, f"participants read this text and it names condition {cid!r}: that unblinds the study",

@@ -85,6 +85,7 @@ class DesignFile:
     questionnaire: list = key(LIST, default_factory=list)
     participants: dict = key(TABLE, default_factory=dict)
     display: dict = key(TABLE, default_factory=dict)
+    online: dict = key(TABLE, default_factory=dict)
 
 
 @dataclass
@@ -130,3 +131,18 @@ class ParticipantsTable:
 
     max_attention_failures: int | None = key(INT, default=None)
     groups: dict = key(TABLE, default_factory=dict)
+
+
+@dataclass
+class OnlineTable:
+    """``[online]``: the browser study server (``studyapp serve``, :mod:`studyapp.web`).
+
+    ``abandon_after_min``: minutes without activity after which an unfinished browser participant is taken as
+    abandoned and their Latin-square row is given out again (HEMVIP2 waits 2 h). ``completion_code``: the code
+    the completion page shows (Prolific's completion code). ``completion_url``: where the completion page
+    sends the participant (Prolific's ``https://app.prolific.com/submissions/complete?cc=CODE``); empty: none.
+    """
+
+    abandon_after_min: float = key(NUM, default=120.0)
+    completion_code: str = key(STR, default="")
+    completion_url: str = key(STR, default="")

@@ -171,6 +171,16 @@ EN: dict[str, str] = {
     "final.saved_text": "Nothing more is needed from you. Please let the experimenter know that you have finished.",
     "final.close_window": "You can now close this window.",
     "final.close": "Close",
+    # the browser study (studyapp serve)
+    "online.already_done": "This study has already been completed (or ended) with this link; it cannot be taken again.",
+    "online.expired": ("This session was left unfinished for too long and has been closed. Thank you for your "
+                       "time."),
+    "online.bad_link": "This study link is not valid. Please open the study again from where you found it.",
+    "online.code": "Your completion code: {code}",
+    "online.return": "Return to the study platform",
+    "online.sound_heard": "I heard the sound",
+    "online.not_saved": "Your answer could not be saved: {problem}",
+    "online.busy": "Too many requests at once; please wait a moment and try again.",
 }
 
 ZH: dict[str, str] = {
@@ -301,6 +311,15 @@ ZH: dict[str, str] = {
     "final.saved_text": "您无需再做任何事。请告诉实验人员您已完成。",
     "final.close_window": "现在可以关闭此窗口。",
     "final.close": "关闭",
+    # the browser study (studyapp serve)
+    "online.already_done": "此链接已用于完成（或结束）本研究，不能再次参加。",
+    "online.expired": "此会话未完成且闲置时间过长，已被关闭。感谢您的时间。",
+    "online.bad_link": "此研究链接无效。请从您获得研究的地方重新打开。",
+    "online.code": "您的完成代码：{code}",
+    "online.return": "返回研究平台",
+    "online.sound_heard": "我听到了声音",
+    "online.not_saved": "您的回答未能保存：{problem}",
+    "online.busy": "请求过多；请稍候再试。",
 }
 
 #: Shipped tables by language code (see the module docstring to add one).

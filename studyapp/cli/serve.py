@@ -1,0 +1,91 @@
+"""``studyapp serve``: the browser study server (:mod:`studyapp.web`) for online participants."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from studyapp.errors import InputError
+
+PASSWORD_ENV = "STUDYAPP_SERVE_PASSWORD"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="serve a study to participants in their web browser (online studies, Prolific)",
+        description="Serve a study design to browser participants: consent, instructions, a sound check, "
+        "practice, the trials as pre-rendered videos, ranking, attention checks, the questionnaire and the "
+        "completion code or redirect. Answers go to the same results database as `studyapp run` (every answer "
+        "committed before the next clip). Put it behind an HTTPS reverse proxy (README, 'Online studies').",
+    )
+    p.add_argument("design", type=Path, help="study design (.toml)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: behind a reverse "
+                   "proxy on the same machine)")
+    p.add_argument("--port", type=int, default=8000, help="port to listen on (default 8000)")
+    p.add_argument("--db", help="results database: a file path or sqlite:///PATH, or postgresql://USER@HOST/DB "
+                   "(default: <design>.results.sqlite next to the design, shared with `studyapp run`)")
+    p.add_argument("--videos", type=Path, help="folder of the pre-rendered trial videos (`studyapp prerender`; "
+                   "default: <design>.videos next to the design)")
+    p.add_argument("--secret-file", type=Path, help="the server's secret, which signs participant links (made on "
+                   "first start; default: <design>.serve-secret next to the design)")
+    p.add_argument("--password-file", type=Path, help="file whose first line is the experimenter dashboard's "
+                   f"password (or set {PASSWORD_ENV}); without either, /dashboard is off")
+    p.set_defaults(func=_cmd_serve)
+
+
+def dashboard_password(password_file: Path | None) -> str | None:
+    """The dashboard password: the file's first line, else the environment variable, else None (off)."""
+    if password_file is not None:
+        try:
+            lines = password_file.read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(password_file, None, f"cannot read the password file ({exc})") from None
+        if not lines or len(lines[0].strip()) < 8:
+            raise InputError(password_file, "line 1", "the dashboard password must be at least 8 characters")
+        return lines[0].strip()
+    value = os.environ.get(PASSWORD_ENV, "").strip()
+    if value and len(value) < 8:
+        raise InputError(None, PASSWORD_ENV, "the dashboard password must be at least 8 characters")
+    return value or None
+
+
+def make_app(design_path: Path, db_url: str | None, videos_dir: Path | None, secret_file: Path | None,
+             password: str | None, videos: Any = None) -> Any:
+    """The server's ASGI app for a design (``videos``: a :class:`~studyapp.web.media.TrialVideos` to use
+    instead of the pre-rendered ones, for tests)."""
+    from studyapp.cli.session import default_results_path, load_design_for_run
+    from studyapp.web.app import build_app
+    from studyapp.web.database import open_results, sqlite_path
+    from studyapp.web.flow import Flow
+    from studyapp.web.media import PrerenderedVideos
+    from studyapp.web.tokens import Tokens, load_or_create_secret
+
+    url = db_url or str(default_results_path(design_path))
+    local = None if url.startswith(("postgresql://", "postgres://")) else Path(sqlite_path(url))
+    design = load_design_for_run(design_path, local) if local is not None else load_design_for_run(design_path, Path(""))
+    tokens = Tokens(load_or_create_secret(secret_file or design_path.with_name(f"{design_path.stem}.serve-secret")))
+    source = videos or PrerenderedVideos(design, videos_dir or design_path.with_name(f"{design_path.stem}.videos"))
+
+    def open_flow() -> Flow:
+        return Flow(design, open_results(url, design), tokens, source)
+
+    return build_app(open_flow, password=password)
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    password = dashboard_password(args.password_file)
+    app = make_app(args.design, args.db, args.videos, args.secret_file, password)
+    if password is None:
+        print(f"note: the experimenter dashboard is off (give --password-file or set {PASSWORD_ENV})", file=sys.stderr)
+    print(f"Serving {args.design} at http://{args.host}:{args.port}/ (participants: /?PROLIFIC_PID=...; "
+          f"dashboard: /dashboard). Stop with Ctrl+C.", flush=True)
+    # proxy_headers: behind a reverse proxy on this machine the client's address (rate limits) and the scheme
+    # (secure cookies) come from its X-Forwarded-* headers; from anyone else they are ignored.
+    uvicorn.run(app, host=args.host, port=args.port, proxy_headers=True, forwarded_allow_ips="127.0.0.1",
+                server_header=False, log_level="info")
+    return 0

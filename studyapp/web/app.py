@@ -1,0 +1,239 @@
+"""The study server's HTTP side (Starlette): routes, the page shell, the security rules around them.
+
+Routes (nothing else is served: no directory listing, no file by path)::
+
+    GET  /                       the study link: consent page (Prolific parameters in the query), or on to
+                                 an unfinished participant's pages, or a refusal
+    POST /start                  consent given or declined -> {"go": "/s/<token>/"}
+    GET  /s/<token>/             the participant's current page (reload-safe)
+    POST /s/<token>/<action>     continue | sound | play | ended | answer | questionnaire -> the next page
+    GET  /s/<token>/<name>.mp4   the current trial's video (byte ranges), name opaque per participant + trial
+    GET  /a/<asset>              the page's script, style sheet and test tone (a fixed list)
+    GET  /dashboard ...          the experimenter's pages (:mod:`studyapp.web.dashboard`)
+
+Every participant page is one HTML shell with the page's state as JSON (``<script type="application/json">``,
+not executed) and ``/a/app.js``, which draws it and posts actions; each action's reply is the next state.
+All database work runs on the event loop's thread, one request at a time (SQLite's connection belongs to
+one thread; an answer's commit takes milliseconds), so two requests of one participant cannot interleave.
+"""
+from __future__ import annotations
+
+import html
+import io
+import json
+import logging
+import os
+import wave
+from contextlib import asynccontextmanager
+from importlib import resources
+from typing import Any, AsyncIterator, Callable
+
+from starlette.applications import Starlette
+from starlette.requests import Request
+from starlette.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
+from starlette.routing import Route
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from studyapp.errors import InputError
+from studyapp.web.dashboard import Dashboard
+from studyapp.web.flow import Flow, NotSaved, Refused
+from studyapp.web.security import SECURITY_HEADERS, BadRequest, RateLimiter, parse_json, same_origin
+from studyapp.web.tokens import same
+
+_log = logging.getLogger(__name__)
+
+#: The assets a page may load, by URL name: (file in studyapp/web/assets, media type).
+ASSETS = {"app.js": ("app.js", "text/javascript; charset=utf-8"),
+          "app.css": ("app.css", "text/css; charset=utf-8"),
+          "dashboard.js": ("dashboard.js", "text/javascript; charset=utf-8")}
+ACTIONS = ("continue", "sound", "play", "ended", "answer", "questionnaire")
+
+
+def asset_text(name: str) -> str:
+    return resources.files("studyapp.web").joinpath("assets", name).read_text(encoding="utf-8")
+
+
+def tone_wav() -> bytes:
+    """The sound check's beep as a 16-bit WAV file."""
+    from studyapp.audio.playback import sound_check_tone
+
+    pcm = sound_check_tone(sample_rate=48000)
+    buf = io.BytesIO()
+    with wave.open(buf, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(pcm.sample_rate)
+        w.writeframes((pcm.samples[:, 0] * 32767).astype("<i2").tobytes())
+    return buf.getvalue()
+
+
+def page(title: str, lang: str, state: dict[str, Any], script: str = "app.js") -> str:
+    """The HTML shell of every page: the state as inert JSON, the script that draws it."""
+    data = json.dumps(state, ensure_ascii=False).replace("&", "\\u0026").replace("<", "\\u003c").replace(">", "\\u003e")
+    return (f'<!DOCTYPE html>\n<html lang="{html.escape(lang)}"><head><meta charset="utf-8">'
+            '<meta name="viewport" content="width=device-width, initial-scale=1">'
+            f'<title>{html.escape(title)}</title><link rel="stylesheet" href="/a/app.css"></head>'
+            f'<body><main id="app"></main><script id="state" type="application/json">{data}</script>'
+            f'<script src="/a/{script}"></script></body></html>')
+
+
+class SecurityHeaders:
+    """Adds :data:`~studyapp.web.security.SECURITY_HEADERS` to every response; ``no-store`` except assets."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        cacheable = scope["path"].startswith("/a/")
+
+        async def send_with_headers(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                headers = [(k, v) for k, v in message.get("headers", []) if k.lower() not in (b"server",)]
+                have = {k.lower() for k, _ in headers}
+                for k, v in SECURITY_HEADERS.items():
+                    if k.encode() not in have:
+                        headers.append((k.encode(), v.encode()))
+                if b"cache-control" not in have:
+                    headers.append((b"cache-control", b"public, max-age=300" if cacheable else b"no-store"))
+                message = {**message, "headers": headers}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+
+def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
+              limits: dict[str, RateLimiter] | None = None) -> ASGIApp:
+    """The server of one study. ``open_flow`` is called once at start-up, on the server's event loop thread
+    (the database connection is made there); ``password``: the dashboard's (None: the dashboard is off)."""
+    state: dict[str, Any] = {}
+    lim = {"action": RateLimiter(per_s=10.0, burst=40), "media": RateLimiter(per_s=20.0, burst=80),
+           "start": RateLimiter(per_s=1.0, burst=30), "login": RateLimiter(per_s=5 / 60, burst=5),
+           **(limits or {})}
+    tone = tone_wav()
+
+    @asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        flow = open_flow()
+        state["flow"] = flow
+        state["dashboard"] = Dashboard(flow, password)
+        try:
+            yield
+        finally:
+            flow.db.close()
+
+    def flow() -> Flow:
+        return state["flow"]
+
+    def client(request: Request) -> str:
+        return request.client.host if request.client else "?"
+
+    def too_many() -> JSONResponse:
+        return JSONResponse({"error": flow().t("online.busy")}, status_code=429)
+
+    def refusal(exc: Refused, status: int = 403) -> HTMLResponse:
+        st = {"screen": "refused", "heading": flow().design.title, "text": flow().t(exc.key)}
+        return HTMLResponse(page(flow().design.title, flow().design.language, st), status_code=status)
+
+    async def body_of(request: Request) -> dict[str, Any]:
+        """The JSON body of a state-changing request, after the CSRF-relevant checks every one of them gets."""
+        if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
+            raise BadRequest("content type must be application/json")
+        if not same_origin(request.headers.get("origin"), request.headers.get("host"), request.url.scheme):
+            raise BadRequest("cross-origin request")
+        return parse_json(await request.body())
+
+    async def entry(request: Request) -> Response:
+        try:
+            st = flow().entry(request.query_params)
+        except Refused as exc:
+            return refusal(exc)
+        if "redirect" in st:
+            return RedirectResponse(st["redirect"], status_code=303)
+        return HTMLResponse(page(flow().design.title, flow().design.language, st))
+
+    async def start(request: Request) -> Response:
+        if not lim["start"].allow(client(request)):
+            return too_many()
+        try:
+            token = flow().start(await body_of(request))
+        except BadRequest as exc:
+            return JSONResponse({"error": str(exc)}, status_code=400)
+        except Refused as exc:
+            return JSONResponse({"refused": flow().t(exc.key)}, status_code=403)
+        return JSONResponse({"go": f"/s/{token}/"})
+
+    async def participant_page(request: Request) -> Response:
+        try:
+            pid = flow().participant_for(request.path_params["token"])
+            st = flow().state(pid)
+        except Refused as exc:
+            return refusal(exc, 404)
+        return HTMLResponse(page(flow().design.title, flow().design.language, st))
+
+    async def action(request: Request) -> Response:
+        token, name = request.path_params["token"], request.path_params["action"]
+        if not lim["action"].allow(token):
+            return too_many()
+        try:
+            pid = flow().participant_for(token)
+            if name not in ACTIONS:
+                raise BadRequest("unknown action")
+            body = await body_of(request)
+            if not same(request.headers.get("x-csrf-token"), flow().tokens.csrf(pid)):
+                raise BadRequest("missing or wrong CSRF token")
+            return JSONResponse(flow().act(pid, name, body))
+        except Refused as exc:
+            return JSONResponse({"refused": flow().t(exc.key)}, status_code=404)
+        except BadRequest as exc:
+            _log.info("refused a request: %s", exc)
+            return JSONResponse({"error": str(exc)}, status_code=400)
+        except NotSaved as exc:
+            return JSONResponse({"error": flow().t("online.not_saved", problem=str(exc))}, status_code=422)
+        except InputError as exc:   # the database could not store it (disk full, ...): nothing was saved
+            _log.error("%s", exc)
+            return JSONResponse({"error": flow().t("online.not_saved", problem="server error")}, status_code=503)
+
+    async def media(request: Request) -> Response:
+        token = request.path_params["token"]
+        if not lim["media"].allow(token):
+            return too_many()
+        try:
+            pid = flow().participant_for(token)
+            path = flow().media(pid, request.path_params["name"])
+        except Refused:
+            return Response(status_code=404)
+        name = request.path_params["name"]
+        # no real modification time, no file name: both could tell two participants' clips apart or alike
+        return FileResponse(path, media_type="video/mp4", stat_result=os.stat(path),
+                            headers={"etag": f'"{name}"', "last-modified": "Thu, 01 Jan 1970 00:00:00 GMT"})
+
+    async def asset(request: Request) -> Response:
+        name = request.path_params["name"]
+        if name == "tone.wav":
+            return Response(tone, media_type="audio/wav")
+        if name not in ASSETS:
+            return Response(status_code=404)
+        file, kind = ASSETS[name]
+        return Response(asset_text(file), media_type=kind)
+
+    async def dashboard(request: Request) -> Response:
+        return await state["dashboard"].handle(request, request.path_params.get("rest", ""), lim["login"], body_of)
+
+    async def not_found(request: Request) -> Response:
+        return Response(status_code=404)
+
+    routes = [
+        Route("/", entry, methods=["GET"]),
+        Route("/start", start, methods=["POST"]),
+        Route("/s/{token:str}/", participant_page, methods=["GET"]),
+        Route("/s/{token:str}/{name:str}.mp4", media, methods=["GET", "HEAD"]),
+        Route("/s/{token:str}/{action:str}", action, methods=["POST"]),
+        Route("/a/{name:str}", asset, methods=["GET"]),
+        Route("/dashboard", dashboard, methods=["GET", "POST"]),
+        Route("/dashboard/{rest:str}", dashboard, methods=["GET", "POST"]),
+    ]
+    app = Starlette(routes=routes, lifespan=lifespan)
+    return SecurityHeaders(app)

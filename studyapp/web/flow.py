@@ -1,0 +1,454 @@
+"""The browser participant's flow: the desktop's :class:`~studyapp.study.session.Session`, driven over HTTP.
+
+There is one path: every page a browser participant sees is a state of the same session state machine the
+desktop runs, and every answer goes through the same ``Session.submit_*`` methods, committed (one
+transaction) before the reply that shows the next trial is sent. This module knows nothing of HTTP: it turns
+a session into the JSON a page shows (:meth:`Flow.state`) and an action into a session call
+(:meth:`Flow.act`); :mod:`studyapp.web.app` puts it on the network.
+
+Participants and their rows
+    A participant is created only when they consent (or decline) on the first page, never by opening the
+    link, so a link preview or a visitor who leaves at once takes no Latin-square row. Their id is Prolific's
+    ``PROLIFIC_PID`` when the link carries one (``STUDY_ID`` and ``SESSION_ID`` are recorded in the session's
+    machine record, with ``frontend = "browser"``), else ``web-<12 random hex digits>``. The row is the least
+    used one, chosen in the database's write transaction (:meth:`~studyapp.study.storage.ResultsDB.add_participant`),
+    so lab stations and browser participants share one balance.
+
+Coming back
+    Reloading a page shows the same state. After a server restart the participant's session is opened again
+    from the database and continues at the first unanswered trial (a "welcome back" page first, as on the
+    desktop; a clip played but not answered is shown again and must be watched again). The study link
+    opened again with the same ``PROLIFIC_PID`` continues an unfinished participant; a participant who finished
+    (or ended) is refused.
+
+Abandonment
+    A browser participant with no activity for the design's ``[online] abandon_after_min`` is abandoned when the
+    server next assigns a row or shows the dashboard (:meth:`Flow.sweep`): status ``ended_early``, and the
+    last session's machine record gets :data:`~studyapp.study.storage.ABANDONED` (the time) and
+    ``abandon_after_min``. Their answers are kept; their row is given out again. Coming back later, they read
+    that the session was closed. Activity is the latest session start or end, play start or end, and answer, or
+    any request this server process saw.
+
+Must watch once
+    The page reports when the video starts (``play``) and when it fires ``ended``; the server counts the play
+    as complete only when at least the video's length (less :data:`WATCH_SLACK_S`) passed between the two,
+    so a page that skips ahead or speeds up has not watched.
+"""
+from __future__ import annotations
+
+import re
+import secrets
+import time
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from studyapp.study.design.texts import fill
+from studyapp.study.session import (ParticipantFinishedError, RankingError, Session, SessionError, State,
+                                    trial_duration_s)
+from studyapp.study.storage import ABANDONED, ResultsDB, now_iso
+from studyapp.web.media import TrialVideos, duration_s
+from studyapp.web.security import BadRequest, finite_number
+from studyapp.web.tokens import Tokens
+
+#: Prolific's URL parameters, recorded with the session (``PROLIFIC_PID`` is the participant id).
+PROLIFIC_PARAMS = ("PROLIFIC_PID", "STUDY_ID", "SESSION_ID")
+_PARAM_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+#: A completed play may end this much sooner than the video's length (timer granularity, start latency).
+WATCH_SLACK_S = 0.5
+#: The longest text answer kept (a questionnaire comment).
+MAX_TEXT_CHARS = 5000
+
+
+class Refused(Exception):
+    """The participant cannot (or can no longer) take part; ``key`` names the participant text."""
+
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+class NotSaved(Exception):
+    """An answer the session refused; the message is for the participant (nothing was stored)."""
+
+
+def prolific_params(query: Mapping[str, str]) -> dict[str, str]:
+    """The Prolific parameters of a link; a malformed value makes the link invalid (:class:`Refused`).
+
+    >>> prolific_params({"PROLIFIC_PID": "5f1c0ffee", "STUDY_ID": "s1", "x": "y"})
+    {'PROLIFIC_PID': '5f1c0ffee', 'STUDY_ID': 's1'}
+    """
+    out = {}
+    for name in PROLIFIC_PARAMS:
+        value = query.get(name)
+        if value is None or value == "":
+            continue
+        if not _PARAM_RE.match(value):
+            raise Refused("online.bad_link")
+        out[name] = value
+    return out
+
+
+def _seconds(iso: str | None) -> float | None:
+    if not iso:
+        return None
+    try:
+        return datetime.fromisoformat(iso).timestamp()
+    except ValueError:
+        return None
+
+
+@dataclass
+class _Play:
+    started: float
+    length_s: float
+
+
+class Flow:
+    """Every browser participant of one study (see the module docstring)."""
+
+    def __init__(self, design: Any, db: ResultsDB, tokens: Tokens, videos: TrialVideos,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.design = design
+        self.db = db
+        self.tokens = tokens
+        self.videos = videos
+        self.clock = clock
+        self._sessions: dict[str, Session] = {}
+        self._plays: dict[str, _Play] = {}
+        self._seen: dict[str, float] = {}
+        self._lengths: dict[Path, float] = {}
+
+    # ------------------------------------------------------------------ texts
+    def t(self, key: str, **values: Any) -> str:
+        return self.design.text(key, **values)
+
+    def _page(self, screen: str, **extra: Any) -> dict[str, Any]:
+        return {"screen": screen, "title": self.design.title, "lang": self.design.language, **extra}
+
+    # ------------------------------------------------------------------ entry and start
+    def entry(self, query: Mapping[str, str]) -> dict[str, Any]:
+        """What the study link shows: the consent page, a redirect to the participant's pages (an unfinished
+        participant coming back), or a refusal (:class:`Refused`)."""
+        params = prolific_params(query)
+        pid = params.get("PROLIFIC_PID")
+        if pid is not None and self.db.participant(pid) is not None:
+            self.sweep()
+            rec = self.db.participant(pid)
+            if rec is not None and rec.status != "active":
+                raise Refused("online.expired" if self._abandoned(pid) else "online.already_done")
+            return {"redirect": f"/s/{self.tokens.session(pid)}/"}
+        nonce = secrets.token_urlsafe(16)
+        return self._page(
+            "welcome", nonce=nonce, entry_csrf=self.tokens.entry_csrf(nonce), params=params,
+            heading=self.t("welcome.title"),
+            consent=fill(self.design.consent or self.t("welcome.consent"), minutes=self.estimated_minutes()),
+            note=self.t("welcome.agree_note"), agree=self.t("welcome.agree"), decline=self.t("welcome.decline"),
+            decline_ask=self.t("welcome.decline_ask"), decline_confirm=self.t("welcome.decline_confirm"),
+            decline_back=self.t("welcome.decline_back"))
+
+    def estimated_minutes(self) -> int:
+        """About how long the study takes: each trial's timeline plus 40 s to answer (as the desktop says)."""
+        from studyapp.study.schedule import participant_schedule
+
+        total = 0.0
+        for plan in participant_schedule(self.design, "estimate", 0):
+            total += (trial_duration_s(self.design, plan) or 30.0) + 40.0
+        return max(2, int(round(total / 60.0)))
+
+    def start(self, body: Mapping[str, Any]) -> str:
+        """The consent page's answer: create the participant (or find the one coming back) and return their
+        session token. ``body``: ``nonce``, ``csrf`` (:meth:`Tokens.entry_csrf`), ``consent`` (bool),
+        ``params`` (the link's Prolific parameters)."""
+        nonce, csrf = body.get("nonce"), body.get("csrf")
+        if not isinstance(nonce, str) or not isinstance(csrf, str) or csrf != self.tokens.entry_csrf(nonce):
+            raise BadRequest("bad entry CSRF token")
+        consent = body.get("consent")
+        if not isinstance(consent, bool):
+            raise BadRequest("consent must be true or false")
+        raw = body.get("params") or {}
+        if not isinstance(raw, dict) or not all(isinstance(v, str) for v in raw.values()):
+            raise BadRequest("params must map names to strings")
+        params = prolific_params(raw)
+        pid = params.get("PROLIFIC_PID") or f"web-{secrets.token_hex(6)}"
+        self.sweep()
+        try:
+            session = self._open(pid, params)
+        except ParticipantFinishedError:
+            raise Refused("online.expired" if self._abandoned(pid) else "online.already_done") from None
+        if session.state is State.WELCOME and not session.resumed:
+            if consent:
+                session.accept_consent()
+            else:
+                session.decline_consent()
+        self._touch(pid)
+        return self.tokens.session(pid)
+
+    def _open(self, pid: str, params: Mapping[str, str] | None = None) -> Session:
+        """The participant's live session: in memory, else opened from the database (a new participant is
+        registered on the least used row)."""
+        session = self._sessions.get(pid)
+        if session is None:
+            existed = self.db.participant(pid) is not None
+            session = Session(self.design, self.db, pid)
+            self.db.update_session_machine(session.session_id, {
+                "frontend": "browser", **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
+            if existed and not session.resumed:
+                session.accept_consent()   # consented when the record was made; nothing answered yet
+            self._sessions[pid] = session
+        return session
+
+    def participant_for(self, token: str) -> str:
+        pid = self.tokens.participant_for(token, (p.id for p in self.db.participants()))
+        if pid is None:
+            raise Refused("online.bad_link")
+        return pid
+
+    # ------------------------------------------------------------------ abandonment
+    def _touch(self, pid: str) -> None:
+        self._seen[pid] = self.clock()
+
+    def _abandoned(self, pid: str) -> bool:
+        return any(ABANDONED in s["machine"] for s in self.db.sessions(pid))
+
+    def last_activity(self, pid: str) -> float:
+        """The time (seconds since the epoch) of the participant's latest recorded or seen activity."""
+        times = [self._seen.get(pid)]
+        for s in self.db.sessions(pid):
+            times += [_seconds(s["started"]), _seconds(s["ended"])]
+        for p in self.db.plays(pid):
+            times += [_seconds(p["started"]), _seconds(p["ended"])]
+        times += [_seconds(t["answered_at"]) for t in self.db.trials(pid)]
+        return max((t for t in times if t is not None), default=0.0)
+
+    def sweep(self) -> list[str]:
+        """Mark every browser participant inactive for longer than ``abandon_after_min`` abandoned (see the
+        module docstring); returns their ids."""
+        limit_s = float(self.design.online.abandon_after_min) * 60.0
+        now = self.clock()
+        out = []
+        for rec in self.db.participants():
+            if rec.status != "active":
+                continue
+            sessions = self.db.sessions(rec.id)
+            if not sessions or not any(s["machine"].get("frontend") == "browser" for s in sessions):
+                continue   # a lab participant: the experimenter decides when they stop
+            if now - self.last_activity(rec.id) <= limit_s:
+                continue
+            self.db.update_session_machine(sessions[-1]["id"], {ABANDONED: now_iso(),
+                                                                "abandon_after_min": self.design.online.abandon_after_min})
+            self.db.set_status(rec.id, "ended_early")
+            live = self._sessions.pop(rec.id, None)
+            if live is not None:
+                self.db.end_session(live.session_id)
+            self._plays.pop(rec.id, None)
+            out.append(rec.id)
+        return out
+
+    # ------------------------------------------------------------------ what a page shows
+    def state(self, pid: str) -> dict[str, Any]:
+        """The page the participant sees now, as JSON."""
+        rec = self.db.participant(pid)
+        if rec is None:
+            raise Refused("online.bad_link")
+        self._touch(pid)
+        if rec.status != "active":
+            self._sessions.pop(pid, None)
+            return self._final(pid, rec.status)
+        session = self._open(pid)
+        tok = self.tokens.session(pid)
+        common = {"csrf": self.tokens.csrf(pid), "base": f"/s/{tok}/"}
+        st = session.state
+        if st is State.WELCOME:   # a resumed participant after a restart: "welcome back"
+            rp = session.resume_point
+            lines = []
+            if rp is not None:
+                lines.append(self.t("welcome.back_practice" if rp.practice else "welcome.back_clip", k=rp.k, n=rp.n))
+                if rp.dropped:
+                    lines.append(self.t("welcome.back_dropped"))
+            return self._page("back", heading=self.t("welcome.back_title"), lines=lines,
+                              button=self.t("page.continue"), **common)
+        if st is State.INSTRUCTIONS:
+            return self._page("instructions", heading=self.t("instructions.title"),
+                              text=self.design.instructions, questions_title=self.t("instructions.questions"),
+                              criteria=self._criteria(), how_title=self.t("instructions.how_title"),
+                              how=self.t("instructions.how", keys="1, 2, 3"),
+                              ties=self.t("instructions.ties") if self.design.playback.allow_ties else "",
+                              button=self.t("page.continue"), **common)
+        if st is State.ENV_CHECK:
+            return self._page("soundcheck", heading=self.t("env.sound_title"), text=self.t("env.sound_text"),
+                              play=self.t("env.sound_button").replace(" (T)", ""), tone="/a/tone.wav",
+                              button=self.t("online.sound_heard"), **common)
+        if st in (State.PRACTICE, State.TRIALS):
+            return self._trial(session, pid, tok, common)
+        if st is State.QUESTIONNAIRE:
+            return self._page("questionnaire", heading=self.t("questionnaire.title"),
+                              intro=self.t("questionnaire.intro"), items=self._items(),
+                              button=self.t("questionnaire.submit"), missing=self.t("questionnaire.missing"), **common)
+        return self._final(pid, "done" if st is State.DONE else "ended_early")
+
+    def _final(self, pid: str, status: str) -> dict[str, Any]:
+        if status == "done":
+            online = self.design.online
+            return self._page("done", heading=self.t("final.done"),
+                              text=self.design.completion or self.t("final.done_text"),
+                              code=self.t("online.code", code=online.completion_code) if online.completion_code else "",
+                              redirect=online.completion_url, button=self.t("online.return"))
+        declined = any(s["machine"].get("consent") == "declined" for s in self.db.sessions(pid))
+        if declined:
+            return self._page("declined", heading=self.t("final.declined"), text=self.t("final.declined_text"))
+        text = self.t("online.expired") if self._abandoned(pid) else self.t("final.ended_early_text")
+        return self._page("ended", heading=self.t("final.ended_early"), text=text)
+
+    def _criteria(self) -> list[dict[str, str]]:
+        return [{"id": c.id, "label": c.label, "question": c.question, "explanation": c.explanation}
+                for c in self.design.criteria]
+
+    def _items(self) -> list[dict[str, Any]]:
+        out = []
+        for q in self.design.questionnaire:
+            item: dict[str, Any] = {"id": q.id, "kind": q.kind, "text": q.text}
+            if q.kind == "likert":
+                item.update(points=int(q.points), anchors=list(q.anchors))
+            elif q.kind == "choice":
+                item.update(options=list(q.options), multiple=bool(q.multiple),
+                            hint=self.t("questionnaire.all_that_apply") if q.multiple else "")
+            elif q.kind == "number":
+                key = "questionnaire.whole_number" if q.integer else "questionnaire.number"
+                from studyapp.study.design.model import plain_number
+
+                item.update(min=q.min, max=q.max, integer=bool(q.integer),
+                            hint=self.t(key, min=plain_number(q.min), max=plain_number(q.max)))
+            out.append(item)
+        return out
+
+    def _trial(self, session: Session, pid: str, tok: str, common: dict[str, Any]) -> dict[str, Any]:
+        plan = session.current_trial()
+        pos = session.plans.index(plan)
+        nxt = session.plans[pos + 1] if pos + 1 < len(session.plans) else None
+        if nxt is None:
+            next_key = "rank.finish"
+        elif plan.is_practice and not nxt.is_practice:
+            next_key = "rank.start_study"
+        else:
+            next_key = "rank.next_practice" if plan.is_practice else "rank.next"
+        labels = list(self.design.slot_labels or ("1", "2", "3"))
+        pb = self.design.playback
+        return self._page(
+            "trial", progress=session.progress_label(), practice_note=self.t("trial.practice_note") if plan.is_practice else "",
+            video=f"/s/{tok}/{self.tokens.media(pid, plan.trial_index)}.mp4", labels=labels,
+            criteria=self._criteria(), can_play=session.can_play(), can_rank=session.can_rank(),
+            allow_replay=bool(pb.allow_replay), allow_ties=bool(pb.allow_ties),
+            texts={k: self.t(k) for k in ("trial.play", "trial.replay", "trial.ready", "trial.watch",
+                                          "trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
+                                          "rank.third", "rank.drop_here", "rank.wait", "rank.next_ok",
+                                          "rank.tie_on", "rank.tie_off", "trial.loading")}
+            | {"start_hint": self.t("rank.start_hint", keys="1, 2, 3"), "next": self.t(next_key),
+               "still": self.t("rank.still", criteria="{criteria}")},
+            **common)
+
+    # ------------------------------------------------------------------ media
+    def media(self, pid: str, name: str) -> Path:
+        """The current trial's video file, when ``name`` is its opaque name for this participant."""
+        session = self._open(pid)
+        plan = session.current_trial()
+        if plan is None or name != self.tokens.media(pid, plan.trial_index):
+            raise Refused("online.bad_link")
+        return self.videos.video(plan)
+
+    def _length(self, plan: Any) -> float:
+        path = self.videos.video(plan)
+        if path not in self._lengths:
+            self._lengths[path] = duration_s(path)
+        return self._lengths[path]
+
+    # ------------------------------------------------------------------ actions
+    def act(self, pid: str, action: str, body: Mapping[str, Any]) -> dict[str, Any]:
+        """Do one participant action and return the page to show next (raises :class:`NotSaved` with the
+        participant's message when the session refuses an answer, :class:`BadRequest` for a malformed one)."""
+        rec = self.db.participant(pid)
+        if rec is None:
+            raise Refused("online.bad_link")
+        if rec.status != "active":
+            return self.state(pid)
+        session = self._open(pid)
+        self._touch(pid)
+        try:
+            if action == "continue":
+                if session.state is State.WELCOME:
+                    session.accept_consent()
+                    session.finish_instructions()
+                    session.record_env_check({"frontend": "browser", "resumed_in_browser": True})
+                elif session.state is State.INSTRUCTIONS:
+                    session.finish_instructions()
+                else:
+                    raise BadRequest(f"nothing to continue in state {session.state.value}")
+            elif action == "sound":
+                session.record_env_check(self._env(body))
+            elif action == "play":
+                self._play(session, pid)
+            elif action == "ended":
+                self._ended(session, pid)
+            elif action == "answer":
+                ranks = body.get("ranks")
+                if not isinstance(ranks, dict) or not all(isinstance(v, dict) for v in ranks.values()):
+                    raise BadRequest("ranks must map each question to {slot: rank}")
+                session.submit_ranking(ranks)
+                self._plays.pop(pid, None)
+            elif action == "questionnaire":
+                session.submit_questionnaire(self._answers(body))
+            else:
+                raise BadRequest(f"unknown action {action!r}")
+        except (RankingError, SessionError) as exc:
+            raise NotSaved(str(exc)) from None
+        if session.finished:
+            self._sessions.pop(pid, None)
+        return self.state(pid)
+
+    @staticmethod
+    def _env(body: Mapping[str, Any]) -> dict[str, Any]:
+        """What the page reports about the browser: checked, cut to size (it is the participant's to say)."""
+        ua = body.get("user_agent")
+        info: dict[str, Any] = {"frontend": "browser", "sound_check": "heard"}
+        if isinstance(ua, str):
+            info["user_agent"] = ua[:300]
+        w, h = finite_number(body.get("screen_w"), 1, 100_000), finite_number(body.get("screen_h"), 1, 100_000)
+        if w is not None and h is not None:
+            info["screen"] = f"{int(w)}x{int(h)}"
+        return info
+
+    def _play(self, session: Session, pid: str) -> None:
+        if session.playing:
+            # the page was reloaded (or lost) while a play was open: that play did not finish
+            session.record_play_finished(False)
+        plan = session.current_trial()
+        if plan is None:
+            raise BadRequest("no clip to play now")
+        length = self._length(plan)
+        session.record_play_started(duration_s=length)
+        self._plays[pid] = _Play(self.clock(), length)
+
+    def _ended(self, session: Session, pid: str) -> None:
+        play = self._plays.pop(pid, None)
+        if play is None or not session.playing:
+            raise BadRequest("no clip is playing")
+        watched = self.clock() - play.started >= play.length_s - WATCH_SLACK_S
+        session.record_play_finished(watched)
+
+    def _answers(self, body: Mapping[str, Any]) -> dict[str, Any]:
+        answers = body.get("answers")
+        if not isinstance(answers, dict):
+            raise BadRequest("answers must be an object")
+        clean: dict[str, Any] = {}
+        for k, v in answers.items():
+            if isinstance(v, list):
+                if len(v) > 100 or not all(isinstance(x, str) and len(x) <= MAX_TEXT_CHARS for x in v):
+                    raise BadRequest(f"answer {k!r}: a list of texts expected")
+            elif isinstance(v, str):
+                if len(v) > MAX_TEXT_CHARS:
+                    raise NotSaved(f"{k}: at most {MAX_TEXT_CHARS} characters")
+            elif v is not None and finite_number(v, -1e12, 1e12) is None:
+                raise BadRequest(f"answer {k!r}: not a text, number or list")
+            clean[str(k)] = v
+        return clean
