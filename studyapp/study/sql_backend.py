@@ -312,8 +312,7 @@ class PostgresBackend:
     def begin_write(self, con: Connection) -> None:
         # READ COMMITTED: each statement after the lock sees every commit made before it was granted (a
         # REPEATABLE READ snapshot would be taken by the lock's own statement, before the wait)
-        con.execute("BEGIN ISOLATION LEVEL READ COMMITTED")
-        con.execute("SELECT pg_advisory_xact_lock(%d)" % WRITE_LOCK_KEY)
+        con.execute("BEGIN ISOLATION LEVEL READ COMMITTED; SELECT pg_advisory_xact_lock(%d)" % WRITE_LOCK_KEY)
 
     def kind(self, exc: BaseException) -> str:
         import psycopg
