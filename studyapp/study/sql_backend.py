@@ -6,7 +6,9 @@ holds only what differs between the two engines, behind one :class:`Backend` sea
 - ``connect``: SQLite opens the file in autocommit mode (``isolation_level=None``, rows as
   :class:`sqlite3.Row`); PostgreSQL opens a psycopg 3 connection in autocommit mode with
   ``synchronous_commit = on`` (a commit returns only once the server's WAL is on disk) and ``lock_timeout``
-  set to the same wait as SQLite's busy timeout.
+  set to the same wait as SQLite's busy timeout. A connection the server dropped is made again at the next
+  statement outside a transaction (a study server outlives a database restart); a transaction cut short is
+  reported as not saved, never repeated.
 - ``begin_write``: SQLite's ``BEGIN IMMEDIATE`` takes the database's write lock up front. PostgreSQL's
   equivalent is ``BEGIN`` followed by a transaction-scoped advisory lock (:data:`WRITE_LOCK_KEY`): every
   write transaction of every server process on one database runs one at a time, exactly as on SQLite, so
@@ -292,14 +294,17 @@ class PostgresBackend:
     def connect(self, lock_timeout_s: float) -> Connection:
         import psycopg
 
+        def connect() -> Any:
+            return psycopg.connect(self.url, autocommit=True, connect_timeout=10)
+
         try:
-            raw = psycopg.connect(self.url, autocommit=True, connect_timeout=10)
+            raw = connect()
         except psycopg.Error as exc:
             raise self.problem(exc, "the results database could not be opened") from None
         except Exception as exc:  # a malformed URL (psycopg.ProgrammingError is caught above)
             raise InputError(self.target, None, f"not a usable PostgreSQL URL ({exc}); write it as "
                              "postgresql://USER@HOST:PORT/DATABASE") from None
-        return PgConnection(raw, lock_timeout_s)
+        return PgConnection(raw, lock_timeout_s, reconnect=connect)
 
     def configure(self, con: Connection) -> None:
         pass  # PgConnection sets synchronous_commit and lock_timeout when it connects
@@ -424,6 +429,7 @@ _LEADING_COMMENTS = re.compile(r"^(?:\s*--[^\n]*(?:\n|$))+")
 _CREATE_TABLE = re.compile(r"^\s*CREATE\s+TABLE\s+(?:IF\s+NOT\s+EXISTS\s+)?\"?(\w+)\"?", re.I)
 
 
+@lru_cache(maxsize=512)
 def _placeholders(sql: str) -> str:
     """``?`` -> ``%s`` outside quotes, every ``%`` doubled (psycopg reads ``%`` as a placeholder)."""
     out, quote = [], None
@@ -496,15 +502,47 @@ def _plain_name(name: str) -> str:
 
 
 class PgConnection:
-    """A psycopg connection that runs storage's SQLite SQL (see :func:`translate`), read like sqlite3's."""
+    """A psycopg connection that runs storage's SQLite SQL (see :func:`translate`), read like sqlite3's.
 
-    def __init__(self, raw: Any, lock_timeout_s: float) -> None:
+    A connection the server dropped (a restart, a network cut, an idle timeout) is made again at the next
+    statement that starts outside a transaction, so a long-running study server outlives its database
+    server's restart; a transaction cut short is not repeated: its error reaches storage, which reports the
+    change as not saved (nothing of it was committed).
+    """
+
+    def __init__(self, raw: Any, lock_timeout_s: float, reconnect: Any = None) -> None:
         self.raw = raw
         self.row_factory: Any = None  # rows are always PgRow (sqlite3.Row-like); kept for the same interface
-        raw.execute("SET synchronous_commit = on")
-        raw.execute(f"SET lock_timeout = '{int(lock_timeout_s * 1000)}ms'")
+        self._lock_timeout_s = lock_timeout_s
+        self._reconnect = reconnect
+        self._open_tx = False  # a transaction this connection began and has not ended
+        self._settings()
         self._pk: dict[str, tuple[str, ...]] = {}
         self._has_rowid: dict[str, bool] = {}
+
+    def _settings(self) -> None:
+        self.raw.execute(f"SET synchronous_commit = on; SET lock_timeout = '{int(self._lock_timeout_s * 1000)}ms'")
+
+    def _run(self, text: str, params: tuple | None) -> Any:
+        import psycopg
+
+        word = text.lstrip()[:8].upper()
+        try:
+            cur = self.raw.execute(text, params)
+        except psycopg.OperationalError:
+            ends = word.startswith(("COMMIT", "ROLLBACK"))
+            if self._open_tx or self._reconnect is None or not (self.raw.closed or self.raw.broken):
+                self._open_tx = self._open_tx and not ends
+                raise  # a transaction cut short: storage reports its change as not saved
+            # the server dropped the connection while no transaction was open: nothing was lost, connect again
+            self.raw = self._reconnect()
+            self._settings()
+            cur = self.raw.execute(text, params)
+        if word.startswith("BEGIN"):
+            self._open_tx = True
+        elif word.startswith(("COMMIT", "ROLLBACK")):
+            self._open_tx = False
+        return cur
 
     @property
     def in_transaction(self) -> bool:
@@ -584,7 +622,7 @@ class PgConnection:
             text += " RETURNING rowid"
             returning = True
         params = tuple(parameters) if parameters else None
-        cur = self.raw.execute(_placeholders(text) if params is not None else text, params)
+        cur = self._run(_placeholders(text) if params is not None else text, params)
         lastrowid = None
         if returning:
             row = cur.fetchone()

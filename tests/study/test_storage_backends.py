@@ -313,3 +313,40 @@ def test_merge_imports_a_results_file_into_either_backend_once(results_target: P
         return df.sort_values(["participant", "trial_index", "criterion", "slot"]).reset_index(drop=True)
 
     pd.testing.assert_frame_equal(table(results_target), table(tmp_path / "elsewhere.sqlite"), check_exact=True)
+
+
+def test_a_dropped_server_connection_is_made_again_between_answers(postgres_server) -> None:
+    """The database server drops the study's connection (a restart, a network cut): the next answer is stored
+    on a new connection; an answer whose transaction was cut short is reported not saved, never half stored."""
+    url = postgres_server.new_database("dropped")
+    db = open_results(url, design_hash="ff" * 20, title="Dropped")
+    db.add_participant("P1", n_rows=1)
+    s = db.start_session("P1")
+
+    def drop() -> None:
+        _raw(url, "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = 'dropped' "
+                  "AND pid <> pg_backend_pid()")
+
+    drop()
+    db.save_trial(*_trial("P1", 0, s))  # a new connection, the answer stored
+    drop()
+    assert db.answered_trials("P1") == {0}
+    rec, ranks = _trial("P1", 1, s)
+    with db.transaction() as con:
+        con.execute("SELECT 1")
+    real_insert = db._insert
+
+    def cut(con, table, rows):  # the connection dies between the trial row and its ranks
+        ids = real_insert(con, table, rows)
+        if table == "trials":
+            drop()
+        return ids
+
+    db._insert = cut  # type: ignore[method-assign]
+    with pytest.raises(InputError, match="cannot reach the PostgreSQL server .*was not saved"):
+        db.save_trial(rec, ranks)
+    db._insert = real_insert  # type: ignore[method-assign]
+    assert db.answered_trials("P1") == {0}  # nothing of the cut answer, and the connection works again
+    db.save_trial(rec, ranks)
+    db.close()
+    assert _raw(url, "SELECT trial_index, COUNT(*) FROM responses GROUP BY trial_index ORDER BY 1") == [(0, 3), (1, 3)]
