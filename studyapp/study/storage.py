@@ -323,7 +323,7 @@ class ResultsDB:
     ) -> None:
         self._backend = sql_backend.backend_for(path)
         #: The file, or (PostgreSQL) the URL without its password: what messages name.
-        self.path: Any = self._backend.target
+        self.path: Path | str = self._backend.target
         if design is not None:
             design_hash = design.design_hash
             title = design.title
