@@ -350,3 +350,16 @@ def test_a_dropped_server_connection_is_made_again_between_answers(postgres_serv
     db.save_trial(rec, ranks)
     db.close()
     assert _raw(url, "SELECT trial_index, COUNT(*) FROM responses GROUP BY trial_index ORDER BY 1") == [(0, 3), (1, 3)]
+
+
+def test_missing_postgresql_binaries_fail_with_what_to_install(tmp_path: Path, monkeypatch) -> None:
+    """Without Debian's postgresql package the PostgreSQL tests fail (the fixture raises this), never skip."""
+    from fixtures.postgres import PostgresMissing, find_bin
+
+    monkeypatch.delenv("STUDYAPP_PG_BIN", raising=False)
+    with pytest.raises(PostgresMissing, match=r"apt-get install postgresql"):
+        find_bin(lib_root=tmp_path, search_path=str(tmp_path))
+    (tmp_path / "15" / "bin").mkdir(parents=True)
+    for tool in ("initdb", "pg_ctl"):
+        (tmp_path / "15" / "bin" / tool).write_text("")
+    assert find_bin(lib_root=tmp_path, search_path=str(tmp_path)) == tmp_path / "15" / "bin"
