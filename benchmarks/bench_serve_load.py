@@ -54,17 +54,34 @@ def write_design(folder: Path, n_stimuli: int) -> Path:
 
 
 # ------------------------------------------------------------------ the server process
-def serve(design_path: Path, db: str, port: int, videos: Path) -> None:
-    """Run the study server on ``port`` until SIGTERM (what ``studyapp serve`` runs, with stand-in videos)."""
+def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path) -> None:
+    """Run the study server on ``port`` until SIGINT (what ``studyapp serve`` runs, with stand-in videos);
+    then write how long each answer's commit took inside the server (``ResultsDB.save_trial``) to
+    ``commits_out``, so the figures split the commit from the queueing in front of it."""
     import uvicorn
 
     from fixtures.web_study import ClipVideos
     from studyapp.cli.serve import make_app
+    from studyapp.study.storage import ResultsDB
 
+    commits: list[float] = []
+    save_trial = ResultsDB.save_trial
+
+    def timed(self: ResultsDB, *args: Any, **kw: Any) -> None:
+        t0 = time.perf_counter()
+        save_trial(self, *args, **kw)
+        commits.append(time.perf_counter() - t0)
+
+    ResultsDB.save_trial = timed  # type: ignore[method-assign]
     app = make_app(design_path, db, None, design_path.with_name("serve-secret"), None,
                    videos=ClipVideos(videos, seconds=CLIP_S))
-    uvicorn.run(app, host="127.0.0.1", port=port, proxy_headers=True, forwarded_allow_ips="127.0.0.1",
-                server_header=False, log_level="warning", backlog=2048)
+    try:
+        uvicorn.run(app, host="127.0.0.1", port=port, proxy_headers=True, forwarded_allow_ips="127.0.0.1",
+                    server_header=False, log_level="warning", backlog=2048)
+    except KeyboardInterrupt:  # uvicorn shuts down on SIGINT, then raises it again
+        pass
+    finally:
+        commits_out.write_text(json.dumps(commits))
 
 
 def _free_port() -> int:
@@ -75,10 +92,11 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_server(design: Path, db: str, videos: Path) -> tuple[subprocess.Popen, str]:
+def start_server(design: Path, db: str, videos: Path, commits_out: Path) -> tuple[subprocess.Popen, str]:
     port = _free_port()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen([sys.executable, __file__, "--serve", str(design), db, str(port), str(videos)], env=env)
+    proc = subprocess.Popen([sys.executable, __file__, "--serve", str(design), db, str(port), str(videos),
+                             str(commits_out)], env=env)
     base = f"http://127.0.0.1:{port}"
     import httpx
 
@@ -183,17 +201,26 @@ def check_database(target: Path | str, design: Any, acked: dict[str, int]) -> tu
     return lost, dup, done
 
 
+def _pct(sorted_ms: list[float], q: float) -> float:
+    """The q-quantile (nearest rank) of sorted values; NaN for none."""
+    if not sorted_ms:
+        return float("nan")
+    return statistics.median(sorted_ms) if q == 0.5 else sorted_ms[min(len(sorted_ms) - 1,
+                                                                        int(round(q * (len(sorted_ms) - 1))))]
+
+
 def run_backend(name: str, target: Path | str, server_url: str, design_path: Path, videos: Path,
                 n: int) -> dict[str, Any]:
     from studyapp.study.design import load_design
 
     design = load_design(design_path, check_files=False)
-    proc, base = start_server(design_path, server_url, videos)
+    commits_out = design_path.with_name(f"commits-{name}.json")
+    proc, base = start_server(design_path, server_url, videos, commits_out)
     load_before = load_average()
     try:
         latencies, acked, wall, failures = asyncio.run(crowd(base, n))
     finally:
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(signal.SIGINT)
         try:
             proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
@@ -201,9 +228,10 @@ def run_backend(name: str, target: Path | str, server_url: str, design_path: Pat
     load_after = load_average()
     lost, dup, done = check_database(target, design, acked)
     ms = sorted(x * 1e3 for x in latencies)
-    p50 = statistics.median(ms) if ms else float("nan")
-    p99 = ms[min(len(ms) - 1, int(round(0.99 * (len(ms) - 1))))] if ms else float("nan")
+    p50, p99 = _pct(ms, 0.5), _pct(ms, 0.99)
+    commits = sorted(x * 1e3 for x in json.loads(commits_out.read_text())) if commits_out.exists() else []
     return {"backend": name, "participants": n, "done": done, "answers": len(ms), "p50_ms": p50, "p99_ms": p99,
+            "commit_p50_ms": _pct(commits, 0.5), "commit_p99_ms": _pct(commits, 0.99), "commits": len(commits),
             "max_ms": ms[-1] if ms else float("nan"), "answers_per_s": len(ms) / wall, "wall_s": wall,
             "lost": lost, "duplicated": dup, "failures": failures, "load_before": load_before,
             "load_after": load_after}
@@ -211,7 +239,7 @@ def run_backend(name: str, target: Path | str, server_url: str, design_path: Pat
 
 def main(argv: list[str]) -> int:
     if argv[:1] == ["--serve"]:
-        serve(Path(argv[1]), argv[2], int(argv[3]), Path(argv[4]))
+        serve(Path(argv[1]), argv[2], int(argv[3]), Path(argv[4]), Path(argv[5]))
         return 0
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--participants", type=int, default=200)
@@ -242,12 +270,15 @@ def main(argv: list[str]) -> int:
     trials = args.stimuli + 1
     print(f"{args.participants} participants at once on loopback, {trials} trials each (clip {CLIP_S:.0f} s watched "
           f"in real time), one server process; {os.cpu_count()} cores")
-    print(f"{'backend':<11} {'done':>5} {'answers':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'ans/s':>7} "
-          f"{'wall s':>7} {'lost':>5} {'dup':>4}  load avg (1 min) before/after")
+    print("answer round trip: the participant's POST until the reply, which the server sends once the answer is "
+          "committed; commit: the commit itself inside the server (ResultsDB.save_trial)")
+    print(f"{'backend':<11} {'done':>5} {'answers':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'commit p50':>10} "
+          f"{'commit p99':>10} {'ans/s':>7} {'wall s':>7} {'lost':>5} {'dup':>4}  load avg (1 min) before/after")
     ok = True
     for r in rows:
         print(f"{r['backend']:<11} {r['done']:>5} {r['answers']:>8} {r['p50_ms']:>8.1f} {r['p99_ms']:>8.1f} "
-              f"{r['max_ms']:>8.1f} {r['answers_per_s']:>7.1f} {r['wall_s']:>7.1f} {r['lost']:>5} "
+              f"{r['max_ms']:>8.1f} {r['commit_p50_ms']:>10.1f} {r['commit_p99_ms']:>10.1f} "
+              f"{r['answers_per_s']:>7.1f} {r['wall_s']:>7.1f} {r['lost']:>5} "
               f"{r['duplicated']:>4}  {r['load_before']:.2f} / {r['load_after']:.2f}")
         for f in r["failures"][:5]:
             print(f"  participant failed: {f}")
@@ -256,6 +287,8 @@ def main(argv: list[str]) -> int:
                      load_average=r["load_after"])
         record(f"serve_{r['backend']}_answer_commit_p50_ms", r["p50_ms"], None, "ms", **extra)
         record(f"serve_{r['backend']}_answer_commit_p99_ms", r["p99_ms"], None, "ms", **extra)
+        record(f"serve_{r['backend']}_commit_p50_ms", r["commit_p50_ms"], None, "ms", **extra)
+        record(f"serve_{r['backend']}_commit_p99_ms", r["commit_p99_ms"], None, "ms", **extra)
         record(f"serve_{r['backend']}_lost_or_duplicated", r["lost"] + r["duplicated"], None, "answers", **extra)
     print("every acknowledged answer stored exactly once" if ok else "FAILED: see above")
     return 0 if ok else 1
