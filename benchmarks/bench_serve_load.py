@@ -75,6 +75,13 @@ def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path
     ResultsDB.save_trial = timed  # type: ignore[method-assign]
     app = make_app(design_path, db, None, design_path.with_name("serve-secret"), None,
                    videos=ClipVideos(videos, seconds=CLIP_S))
+    profile_to = os.environ.get("STUDYAPP_BENCH_PROFILE")  # a file: where the server's time goes (cProfile)
+    profiler = None
+    if profile_to:
+        import cProfile
+
+        profiler = cProfile.Profile()
+        profiler.enable()
     try:
         uvicorn.run(app, host="127.0.0.1", port=port, proxy_headers=True, forwarded_allow_ips="127.0.0.1",
                     server_header=False, log_level="warning", backlog=2048)
@@ -82,6 +89,9 @@ def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path
         pass
     finally:
         commits_out.write_text(json.dumps(commits))
+        if profiler is not None:
+            profiler.disable()
+            profiler.dump_stats(f"{profile_to}.{Path(db).name[:20]}")
 
 
 def _free_port() -> int:
