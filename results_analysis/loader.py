@@ -25,7 +25,12 @@ FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
 #: Columns that are bookkeeping, never a stimulus tag or participant group.
 CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
     "session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "design_hash", "app_version", "_where",
-    "condition_label", "condition_position", "study_title")
+    "condition_label", "condition_position", "study_title",
+    "block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
+#: The response-paradigm columns and their value in a table without them (an export before schema 6 is one
+#: rank block "main"); see :mod:`results_analysis.sqlite_schema`.
+PARADIGM_DEFAULTS = {"block": "main", "paradigm": "rank", "rating": np.nan, "preference": np.nan,
+                     "matched": np.nan, "motion_stimulus": None, "reasons": ""}
 
 #: Columns the loader adds for its own use (``_where``: where a row came from, for messages); never shown
 #: to users as one of their columns.
@@ -33,9 +38,9 @@ INTERNAL_COLUMNS = ("_where",)
 
 #: Columns :func:`normalize_results` makes text (object: str or None) and numbers (float).
 _TEXT_COLUMNS = ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version",
-                 "condition_label", "study_title")
+                 "condition_label", "study_title", "block", "paradigm", "motion_stimulus", "reasons")
 _NUMBER_COLUMNS = ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample",
-                   "condition_position")
+                   "condition_position", "rating", "preference", "matched")
 
 _TRUE = {"1", "true", "t", "yes", "y"}
 _FALSE = {"0", "false", "f", "no", "n", ""}
@@ -99,12 +104,21 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if bad.any():
             raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
                                      "empty value")
+    for col, default in PARADIGM_DEFAULTS.items():
+        if col not in df.columns:
+            df[col] = default
+    df["block"] = df["block"].fillna("main")
+    df["paradigm"] = df["paradigm"].fillna("rank")
+    df["motion_stimulus"] = df["motion_stimulus"].where(df["motion_stimulus"].notna(), df["stimulus"])
+    df["reasons"] = df["reasons"].fillna("")
     for col in _NUMBER_COLUMNS:
         if col in df.columns:
             num = _to_number(df[col])
             bad = num.isna() & df[col].notna()
-            if col in ("rank", "trial_index"):
+            if col == "trial_index":
                 bad |= num.isna()
+            elif col == "rank":  # a rank row needs its rank; other paradigms' rows have none
+                bad |= num.isna() & (df["paradigm"] == "rank")
             if bad.any():
                 i = int(np.argmax(bad.to_numpy()))
                 raise AnalysisInputError(src, f"{df['_where'].iloc[i]}, column '{col}'",

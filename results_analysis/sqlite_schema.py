@@ -1,4 +1,4 @@
-"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 5).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 6).
 
 Reads with pandas and any DB-API connection that speaks SQLite's SQL (no studyapp import): an
 :class:`sqlite3.Connection`, or studyapp's PostgreSQL connection, which answers the same statements (``studyapp
@@ -15,6 +15,16 @@ report's title) and each participant's questionnaire answers, one column per rat
 stored). Free-text answers stay out of the table (``studyapp export --questionnaire-csv`` has them).
 It reads what it is given: the loader proves the file intact first
 (:mod:`results_analysis.integrity`), as ``studyapp`` does when it opens a database.
+
+Response paradigms (schema 6): after the core columns come :data:`PARADIGM_COLUMNS`. Rank answers come from
+table ``responses``, pairwise, mismatch and rating answers from ``judgements`` (one row per criterion x slot
+either way). ``block`` and ``paradigm`` are the trial's (``"main"`` and ``"rank"`` in a database before
+version 6); ``rank`` is empty on non-rank rows; ``rating`` (0..100) is set on rating rows only;
+``preference`` (-2..2, the preference FOR that row's slot: +2 clearly this one) on pairwise and mismatch rows
+only; ``matched`` on mismatch rows only (1 for the slot playing its own speech's motion, 0 for the
+mismatched one); ``motion_stimulus`` is the stimulus whose motion the slot played (the trial's stimulus
+before version 6); ``reasons`` the JSON list of reasons chosen (pairwise), empty elsewhere. A mismatch row's
+``condition`` is the condition shown in both slots.
 """
 from __future__ import annotations
 
@@ -36,6 +46,8 @@ CORE_COLUMNS = (
     "condition_position", "slot", "rank", "plays", "response_time_s", "is_practice", "is_attention_check",
     "attention_passed", "trial_duration_s", "sample",
 )
+#: The response-paradigm columns (schema 6), right after :data:`CORE_COLUMNS` (see the module notes).
+PARADIGM_COLUMNS = ("block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
 TAIL_COLUMNS = ("study_title", "design_hash", "app_version")
 #: Name prefix of the questionnaire columns: ``questionnaire:<scale>:<item>`` (an item id holds no ``:``, so
 #: the last ``:`` ends the scale). They follow the tag and group columns.
@@ -48,18 +60,32 @@ _QUERY = """
 WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM responses GROUP BY criterion)
 SELECT r.rowid AS _rowid, r.participant, t.session, r.trial_index, t.stimulus, r.criterion, r.condition,
        r.slot, r.rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
-       {trial_duration} AS trial_duration_s, {sample} AS sample, r.design_hash, r.app_version
+       {trial_duration} AS trial_duration_s, {sample} AS sample, r.design_hash, r.app_version,
+       {block} AS block, {paradigm} AS paradigm, {motion} AS motion_stimulus, crit.pos AS _crit
 FROM responses r JOIN trials t ON t.participant = r.participant AND t.trial_index = r.trial_index
 JOIN crit ON crit.criterion = r.criterion
-ORDER BY r.participant, r.trial_index, crit.pos, r.slot
+{slots_join}
+"""
+# The answers of the other paradigms (schema 6), the same columns plus the judgement's value and reasons.
+_JUDGEMENTS = """
+WITH crit AS (SELECT criterion, MIN(rowid) AS pos FROM judgements GROUP BY criterion)
+SELECT j.rowid AS _rowid, j.participant, t.session, j.trial_index, t.stimulus, j.criterion, j.condition,
+       j.slot, NULL AS rank, t.plays, t.response_time_s, t.is_practice, t.is_attention_check, t.attention_passed,
+       t.trial_duration_s, s.sample AS sample, j.design_hash, j.app_version,
+       COALESCE(t.block, 'main') AS block, COALESCE(t.paradigm, 'rank') AS paradigm,
+       COALESCE(s.motion_stimulus, t.stimulus) AS motion_stimulus, crit.pos AS _crit, j.value AS _value,
+       j.reasons AS reasons
+FROM judgements j JOIN trials t ON t.participant = j.participant AND t.trial_index = j.trial_index
+JOIN crit ON crit.criterion = j.criterion
+LEFT JOIN trial_slots s ON s.participant = j.participant AND s.trial_index = j.trial_index AND s.slot = j.slot
 """
 
 
 def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: bool = True,
                rowid: bool = False) -> pd.DataFrame:
     """The tidy table of a results database, exactly as ``studyapp export`` writes it: one row per
-    participant x trial x criterion x condition, :data:`CORE_COLUMNS`, the tag and group columns, then
-    :data:`TAIL_COLUMNS`. ``attention_passed`` is empty (None) for trials that are not attention checks.
+    participant x trial x criterion x slot (x condition for rank), :data:`CORE_COLUMNS`,
+    :data:`PARADIGM_COLUMNS`, the tag and group columns, then :data:`TAIL_COLUMNS`. ``attention_passed`` is empty (None) for trials that are not attention checks.
 
     This is the one place the query lives: ``studyapp export`` and :func:`tidy_from_connection` both call it.
     ``rowid``: keep each answer's row id in the database as a first column ``_rowid`` (for messages).
@@ -79,7 +105,31 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
     # files get it empty, as for trial_duration_s.
     sample = ("CASE r.slot WHEN 0 THEN t.sample_left WHEN 1 THEN t.sample_middle ELSE t.sample_right END"
               if {"sample_left", "sample_middle", "sample_right"} <= trial_cols else "NULL")
-    df = _frame(con, _QUERY.format(trial_duration=duration, sample=sample))
+    # Version 6 records each trial's block and paradigm and every slot's motion; older files are one rank block.
+    v6 = {"block", "paradigm"} <= trial_cols and "trial_slots" in tables
+    df = _frame(con, _QUERY.format(
+        trial_duration=duration, sample=sample,
+        block="COALESCE(t.block, 'main')" if v6 else "'main'",
+        paradigm="COALESCE(t.paradigm, 'rank')" if v6 else "'rank'",
+        motion="COALESCE(s.motion_stimulus, t.stimulus)" if v6 else "t.stimulus",
+        slots_join=("LEFT JOIN trial_slots s ON s.participant = r.participant AND s.trial_index = r.trial_index "
+                    "AND s.slot = r.slot") if v6 else ""))
+    df["_table"] = "responses"
+    df["reasons"] = ""
+    if v6 and "judgements" in tables:
+        judged = _frame(con, _JUDGEMENTS)
+        if len(judged):
+            judged["_table"] = "judgements"
+            df = pd.concat([df, judged], ignore_index=True) if len(df) else judged
+    df = df.sort_values(["participant", "trial_index", "_crit", "slot"], kind="stable").reset_index(drop=True)
+    value = df.pop("_value") if "_value" in df.columns else pd.Series(float("nan"), index=df.index)
+    df["rank"] = df["rank"].astype(float)
+    df["rating"] = value.where(df["paradigm"] == "rating").astype(float)
+    df["preference"] = value.where(df["paradigm"].isin(["pairwise", "mismatch"])).astype(float)
+    df["matched"] = pd.array([(1 if m == s else 0) if p == "mismatch" else None
+                              for p, m, s in zip(df["paradigm"], df["motion_stimulus"], df["stimulus"])],
+                             dtype="Int64")
+    df["reasons"] = df["reasons"].fillna("").map(lambda r: "" if r in ("", "[]") else r).astype(object)
     for col in ("is_practice", "is_attention_check"):
         df[col] = df[col].astype(int).astype(bool)
     df["attention_passed"] = df["attention_passed"].map(lambda v: None if pd.isna(v) else bool(v)).astype(object)
@@ -104,7 +154,8 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
         if name not in df.columns and name not in extra:
             df[name] = df["participant"].map(lambda p, v=values: v.get(str(p)))
             extra.append(name)
-    df = df[(["_rowid"] if rowid else []) + list(CORE_COLUMNS) + extra + list(TAIL_COLUMNS)]
+    df = df[(["_rowid", "_table"] if rowid else []) + list(CORE_COLUMNS) + list(PARADIGM_COLUMNS) + extra
+            + list(TAIL_COLUMNS)]
     if not include_practice:
         df = df[~df["is_practice"]].reset_index(drop=True)
     return df
@@ -122,8 +173,9 @@ def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFr
     """The tidy frame the analysis reads: :func:`tidy_table`, each row's place in the database in ``_where``
     (for messages), and ``attention_passed`` true where there was nothing to fail."""
     df = tidy_table(con, path, rowid=True)
-    df["_where"] = [f"responses row {r} (participant {p}, trial {t}, criterion {c})"
-                    for r, p, t, c in zip(df.pop("_rowid"), df["participant"], df["trial_index"], df["criterion"])]
+    df["_where"] = [f"{tb} row {r} (participant {p}, trial {t}, criterion {c})"
+                    for r, tb, p, t, c in zip(df.pop("_rowid"), df.pop("_table"), df["participant"], df["trial_index"],
+                                              df["criterion"])]
     # A trial that is not an attention check has attention_passed NULL: nothing to fail.
     df["attention_passed"] = df["attention_passed"].map(lambda v: True if v is None else bool(v)).astype(bool)
     return df

@@ -45,6 +45,8 @@ def test_wheel_contains_shaders_designs_and_demo_data(wheel: Path) -> None:
     assert any(n.startswith("results_analysis/") for n in names)
     for src in (ROOT / "shaders").iterdir():
         assert f"studyapp/_data/shaders/{src.name}" in names, f"{src.name} missing from the wheel"
+    for src in (ROOT / "studyapp" / "web" / "assets").iterdir():   # the browser pages' script and style
+        assert f"studyapp/web/assets/{src.name}" in names, f"{src.name} missing from the wheel"
 
 
 def test_wheel_leaves_out_the_test_fixtures(wheel: Path) -> None:

@@ -11,12 +11,13 @@ import logging
 import sys
 
 from studyapp import __version__
-from studyapp.cli import demo, design, doctor, models, motion, planning, render, serve, session
+from studyapp.cli import demo, design, doctor, models, motion, planning, prerender, render, serve, session
 from studyapp.errors import StudyappError
 
 _COMMAND_MODULES = (
     motion,    # inspect, convert
     render,    # render, view
+    prerender, # prerender
     design,    # validate, schedule
     session,   # run, export, bundle, key, merge
     models,    # generate

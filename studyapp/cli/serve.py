@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from studyapp.cli.render import _size
 from studyapp.errors import InputError
 
 PASSWORD_ENV = "STUDYAPP_SERVE_PASSWORD"
@@ -17,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "serve",
         help="serve a study to participants in their web browser (online studies, Prolific)",
         description="Serve a study design to browser participants: consent, instructions, a sound check, "
-        "practice, the trials as pre-rendered videos, ranking, attention checks, the questionnaire and the "
+        "practice, the trials as pre-rendered videos, the answers (ranking, preferences, ratings), attention "
+        "checks, the questionnaire and the "
         "completion code or redirect. Answers go to the same results database as `studyapp run` (every answer "
         "committed before the next clip). Put it behind an HTTPS reverse proxy (README, 'Online studies').",
     )
@@ -27,8 +29,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int, default=8000, help="port to listen on (default 8000)")
     p.add_argument("--db", help="results database: a file path or sqlite:///PATH, or postgresql://USER@HOST/DB "
                    "(default: <design>.results.sqlite next to the design, shared with `studyapp run`)")
-    p.add_argument("--videos", type=Path, help="folder of the pre-rendered trial videos (`studyapp prerender`; "
-                   "default: <design>.videos next to the design)")
+    p.add_argument("--cache", type=Path, help="folder of the pre-rendered trial videos, as for `studyapp prerender` "
+                   "(default: 'prerendered' next to the design); videos missing there are rendered before the "
+                   "server starts listening")
+    p.add_argument("--size", type=_size, default=(1280, 720), help="video size, WxH, as given to `studyapp "
+                   "prerender` (default 1280x720)")
+    p.add_argument("--fps", type=int, default=30, help="video frame rate, as given to `studyapp prerender` (default 30)")
+    p.add_argument("--jobs", type=int, default=1, help="processes rendering missing videos (default 1)")
     p.add_argument("--secret-file", type=Path, help="the server's secret, which signs participant links (made on "
                    "first start; default: <design>.serve-secret next to the design)")
     p.add_argument("--password-file", type=Path, help="file whose first line is the experimenter dashboard's "
@@ -52,34 +59,75 @@ def dashboard_password(password_file: Path | None) -> str | None:
     return value or None
 
 
-def make_app(design_path: Path, db_url: str | None, videos_dir: Path | None, secret_file: Path | None,
-             password: str | None, videos: Any = None) -> Any:
-    """The server's ASGI app for a design (``videos``: a :class:`~studyapp.web.media.TrialVideos` to use
-    instead of the pre-rendered ones, for tests)."""
-    from studyapp.cli.session import default_results_path, load_design_for_run
+def results_url(design_path: Path, db_url: str | None) -> str:
+    """``--db``, else ``<design>.results.sqlite`` next to the design (the database ``studyapp run`` uses)."""
+    from studyapp.cli.session import default_results_path
+
+    return db_url or str(default_results_path(design_path))
+
+
+def load_for_serve(design_path: Path, db_url: str | None) -> tuple[Any, str]:
+    """The design (checked as for ``studyapp run``) and the database URL the server uses."""
+    from studyapp.cli.session import load_design_for_run
+    from studyapp.web.database import sqlite_path
+
+    url = results_url(design_path, db_url)
+    if url.startswith(("postgresql://", "postgres://")):
+        from studyapp.study.design import load_design
+
+        return load_design(design_path, reuse_check=True), url   # the database compares the design hash
+    return load_design_for_run(design_path, Path(sqlite_path(url))), url
+
+
+def default_cache(design_path: Path) -> Path:
+    """Where ``studyapp prerender`` puts a design's videos by default."""
+    return design_path.resolve().parent / "prerendered"
+
+
+def make_app(design_path: Path, db_url: str | None, cache_dir: Path | None, secret_file: Path | None,
+             password: str | None, videos: Any = None, *, design: Any = None, settings: Any = None) -> Any:
+    """The server's ASGI app for a design. ``videos``: a :class:`~studyapp.web.media.TrialVideos` to use
+    instead of the pre-rendered ones (tests); ``design``: the design already loaded by :func:`load_for_serve`;
+    ``settings``: the :class:`~studyapp.study.prerender.RenderSettings` the videos were rendered with."""
     from studyapp.web.app import build_app
-    from studyapp.web.database import open_results, sqlite_path
+    from studyapp.web.database import open_results
     from studyapp.web.flow import Flow
     from studyapp.web.media import PrerenderedVideos
     from studyapp.web.tokens import Tokens, load_or_create_secret
 
-    url = db_url or str(default_results_path(design_path))
-    local = None if url.startswith(("postgresql://", "postgres://")) else Path(sqlite_path(url))
-    design = load_design_for_run(design_path, local) if local is not None else load_design_for_run(design_path, Path(""))
+    if design is None:
+        loaded, url = load_for_serve(design_path, db_url)
+    else:
+        loaded, url = design, results_url(design_path, db_url)
     tokens = Tokens(load_or_create_secret(secret_file or design_path.with_name(f"{design_path.stem}.serve-secret")))
-    source = videos or PrerenderedVideos(design, videos_dir or design_path.with_name(f"{design_path.stem}.videos"))
+    source = videos or PrerenderedVideos(loaded, cache_dir or default_cache(design_path), settings)
 
     def open_flow() -> Flow:
-        return Flow(design, open_results(url, design), tokens, source)
+        return Flow(loaded, open_results(url, loaded), tokens, source)
 
     return build_app(open_flow, password=password)
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
+    try:
+        import starlette  # noqa: F401
+        import uvicorn
+    except ImportError as exc:   # a participant's install: the server's packages are an extra
+        raise InputError(None, "studyapp serve", f"needs the server's packages ({exc.name} is missing): "
+                         'pip install "studyapp[server]"') from None
 
+    from studyapp.cli.prerender import ProgressBar
+    from studyapp.study.prerender import RenderSettings, prerender
+
+    if args.fps < 1 or args.jobs < 1:
+        raise InputError(None, "--fps/--jobs", "must be at least 1")
     password = dashboard_password(args.password_file)
-    app = make_app(args.design, args.db, args.videos, args.secret_file, password)
+    design, url = load_for_serve(args.design, args.db)
+    settings = RenderSettings(size=args.size, fps=args.fps)
+    cache = args.cache or default_cache(args.design)
+    report = prerender(design, cache, progress=ProgressBar(), jobs=args.jobs, settings=settings)
+    print(f"{report.total} trial videos in {cache} ({report.rendered} rendered now)", flush=True)
+    app = make_app(args.design, url, cache, args.secret_file, password, design=design, settings=settings)
     if password is None:
         print(f"note: the experimenter dashboard is off (give --password-file or set {PASSWORD_ENV})", file=sys.stderr)
     print(f"Serving {args.design} at http://{args.host}:{args.port}/ (participants: /?PROLIFIC_PID=...; "

@@ -67,7 +67,7 @@ class AvatarMesh:
     """Vertex buffers, morph textures and base-colour texture of one avatar, shared by every slot."""
 
     def __init__(self, ctx: moderngl.Context, avatar: Avatar, program: moderngl.Program,
-                 palette_rows: int = 3) -> None:
+                 palette_rows: int = 4) -> None:  # one per slot: render.scene.MAX_SLOTS
         self.ctx = ctx
         self.avatar = avatar
         self.n_joints = avatar.skeleton.n_joints

@@ -34,6 +34,8 @@ if TYPE_CHECKING:
     from studyapp.face.animation import FaceAnimation
     from studyapp.motion.skeleton import Motion
 
+#: Most figures one trial shows side by side (a rating trial: up to four).
+MAX_SLOTS = 4
 #: Aspect ratio (width / height) of one slot in the standard 1280x720 three-slot layout.
 THREE_SLOT_ASPECT = (1280 / 3) / 720
 
@@ -45,7 +47,7 @@ class TrialScene:
     Attributes
     ----------
     slots:
-        One :class:`SlotAnimation` per slot, left to right (1 to 3 slots).
+        One :class:`SlotAnimation` per slot, left to right (1 to :data:`MAX_SLOTS` slots).
     avatars:
         The avatar drawn in each slot. Pass the same object for every slot to share GPU buffers.
     labels:
@@ -65,8 +67,8 @@ class TrialScene:
     def __post_init__(self) -> None:
         self.slots = tuple(self.slots)
         self.avatars = tuple(self.avatars)
-        if not 1 <= len(self.slots) <= 3:
-            raise ValueError(f"a trial shows 1 to 3 slots, got {len(self.slots)}")
+        if not 1 <= len(self.slots) <= MAX_SLOTS:
+            raise ValueError(f"a trial shows 1 to {MAX_SLOTS} slots, got {len(self.slots)}")
         if len(self.avatars) != len(self.slots):
             raise ValueError(f"{len(self.avatars)} avatars for {len(self.slots)} slots")
         if self.labels is not None:
@@ -325,7 +327,7 @@ def slot_avatars(spec: str | Sequence[str] | None, n_slots: int,
 
 def build_trial_scene(renderer: AvatarUploader | None, media: TrialSource,
                       labels: tuple[str, ...] | None = None) -> TrialScene:
-    """The scene for a study trial: up to three slots, left to right, lasting the trial's ``duration_s``.
+    """The scene for a study trial: up to :data:`MAX_SLOTS` slots, left to right, lasting the trial's ``duration_s``.
 
     Each slot is retargeted with its own condition's name map onto its own avatar. A slot that cannot be
     built raises :class:`SlotError` naming the slot and the motion file. When given a renderer (anything

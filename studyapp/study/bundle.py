@@ -685,8 +685,13 @@ def remote_plan(opened: OpenedBundle, participant_id: str) -> RemotePlan | None:
     try:
         mine = people[participant_id]
         row, rows = int(mine["row"]), int(data["rows"])
-        plans = [TrialPlan(i, str(sid), (str(slots[0]), str(slots[1]), str(slots[2])), bool(prac), bool(check), row)
-                 for i, (sid, slots, prac, check) in enumerate(mine["trials"])]
+        # a trial is [stimulus, slots, practice, check] and, since the response paradigms, {block, paradigm}
+        plans = [TrialPlan(i, str(t[0]), tuple(str(c) for c in t[1]), bool(t[2]), bool(t[3]), row,
+                           (1,) * len(t[1]), *((str(t[4]["block"]), str(t[4]["paradigm"])) if len(t) > 4
+                                               else ("main", "rank")))
+                 for i, t in enumerate(mine["trials"])]
+        if any(len(p.slots) not in (2, 3, 4) for p in plans):
+            raise ValueError("a trial with a number of slots no paradigm shows")
     except (ValueError, KeyError, TypeError, IndexError) as exc:
         raise unreadable(exc) from None
     return RemotePlan(row=row, n_rows=rows, plans=plans)
@@ -696,7 +701,8 @@ def remote_plan(opened: OpenedBundle, participant_id: str) -> RemotePlan | None:
 def _participant_rows(db: Any, pid: str) -> dict[str, list[dict[str, Any]]]:
     con = db.connection
     rows = {}
-    for table in ("participants", "sessions", "trials", "responses", "plays", "questionnaire"):
+    for table in ("participants", "sessions", "trials", "trial_slots", "responses", "judgements", "plays",
+                  "questionnaire"):
         col = "id" if table == "participants" else "participant"
         rows[table] = [dict(r) for r in con.execute(f"SELECT * FROM {table} WHERE {col} = ?", (pid,))]
     return rows
@@ -941,8 +947,13 @@ def _same_as_stored(db: Any, pid: str, payload: dict[str, Any]) -> bool:
     def ranks(rows: Iterable[dict[str, Any]]) -> set[tuple[Any, ...]]:
         return {(r["trial_index"], r["criterion"], r["slot"], r["condition"], float(r["rank"])) for r in rows}
 
+    def judged(rows: Iterable[dict[str, Any]]) -> set[tuple[Any, ...]]:
+        return {(r["trial_index"], r["criterion"], r["slot"], r["condition"], float(r["value"]), r["reasons"])
+                for r in rows}
+
     return (trials(db.trials(pid)) == trials(payload["trials"])
-            and ranks(db.responses(pid)) == ranks(payload["responses"]))
+            and ranks(db.responses(pid)) == ranks(payload["responses"])
+            and judged(db.judgements(pid)) == judged(payload.get("judgements", [])))
 
 
 def _merge_one(db: Any, design: Any, path: Path, got: _Returned, batch: dict[str, list[dict[str, Any]]],
@@ -981,7 +992,8 @@ def _merge_one(db: Any, design: Any, path: Path, got: _Returned, batch: dict[str
 
     try:
         db.import_participant({**p, "groups": json.dumps(groups, sort_keys=True)}, payload["sessions"],
-                              payload["trials"], payload["responses"], payload["plays"], payload["questionnaire"])
+                              payload["trials"], payload["responses"], payload["plays"], payload["questionnaire"],
+                              payload.get("trial_slots", []), payload.get("judgements", []))
     except DuplicateAnswerError as exc:  # two processes merging at once
         raise StudyappError(str(exc)) from None
     return MergeReport(path, True, f"participant {pid}", pid)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import hashlib
 from itertools import permutations
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
@@ -81,18 +81,20 @@ def participant_seed(design_seed: int, participant_id: str, stream: str = "") ->
     return int.from_bytes(digest[:8], "little") >> 1
 
 
-def latin_row(design: "Design", row: int, participant_id: str | None = None) -> list[str]:
-    """Order of the rotation stimuli (ids) for one design row.
+def latin_row(design: "Design", row: int, participant_id: str | None = None, ids: Sequence[str] | None = None,
+              stream: str = "order") -> list[str]:
+    """Order of the rotation stimuli (ids; or of ``ids``, a block's stimuli) for one design row.
 
     ``balanced-latin-square`` uses Williams row ``row mod n_rows``; ``fixed`` the design order; ``random``
-    a permutation seeded by (design seed, ``participant_id``), falling back to the row when no id is given.
+    a permutation seeded by (design seed, ``participant_id``, ``stream``), falling back to the row when no id
+    is given.
     """
-    ids = design.rotation_stimuli
+    ids = design.rotation_stimuli if ids is None else list(ids)
     if design.ordering == "fixed" or len(ids) <= 1:
         return list(ids)
     if design.ordering == "random":
         key = participant_id if participant_id is not None else f"row{row}"
-        rng = np.random.default_rng(participant_seed(design.seed, key, "order"))
+        rng = np.random.default_rng(participant_seed(design.seed, key, stream))
         return [ids[i] for i in rng.permutation(len(ids))]
     square = williams_square(len(ids))
     return [ids[i] for i in square[row % len(square)]]

@@ -15,9 +15,16 @@ opaque ids back to the real condition and stimulus ids):
   :func:`studyapp.study.schedule.participant_schedule` from the design's seed, the id and the row -- the
   same function the session runs, never a second implementation; answered trials are ``0 .. k-1`` (the
   session answers in order), all of them for a participant who finished;
-* **answers**: every trial has, for every criterion of the design, one rank per slot for the condition in
+* **slots** (results of schema 6): every trial's ``trial_slots`` rows are the scheduled slots: condition,
+  the stimulus whose motion each played (a mismatch trial's other clip) and sample, and its ``block`` and
+  ``paradigm`` are the scheduled ones (a file without them is one rank block "main");
+* **answers**: every rank trial has, for every criterion of its block, one rank per slot for the condition in
   that slot, and the ranks are what the session stores (:func:`studyapp.study.session.is_stored_ranking`:
-  a permutation of 1..3, or with ties allowed their average ranks); attention checks are re-scored with
+  a permutation of 1..3, or with ties allowed their average ranks); every pairwise and mismatch trial has,
+  per criterion, the two slots' preferences ``-p`` and ``p`` with ``p`` a level of the block's scale, and
+  reasons from the block's list (none when every level is 0, none in a mismatch block), the same on both
+  rows; every rating trial has, per criterion, a rating in 0..100 for every slot (every slider moved); no
+  trial has answers of another paradigm; attention checks are re-scored with
   :func:`studyapp.study.session.attention_passed` and must say what the file says, and a participant
   past the design's failure limit must have ended early, with no answers after that; questionnaire
   answers are the design's items, Likert values in 1..points;
@@ -51,7 +58,8 @@ from datetime import datetime
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from studyapp.study.design import FROZEN_PREFIX, Design
-from studyapp.study.schedule import TrialPlan, n_rows, participant_schedule
+from studyapp.study.design.schema import PREFERENCE_LEVELS
+from studyapp.study.schedule import TrialPlan, n_rows, participant_schedule, three_slots
 from studyapp.study.session import attention_passed, is_stored_ranking
 
 #: Seconds of timer resolution allowed when an answer must come after a whole clip was watched: the
@@ -63,13 +71,17 @@ _PLAN_FIELDS: tuple[tuple[str, Callable[[TrialPlan], Any]], ...] = (
     ("stimulus", lambda p: p.stimulus_id),
     ("is_practice", lambda p: int(p.is_practice)),
     ("is_attention_check", lambda p: int(p.is_attention_check)),
-    ("slot_left", lambda p: p.slots[0]),
-    ("slot_middle", lambda p: p.slots[1]),
-    ("slot_right", lambda p: p.slots[2]),
-    ("sample_left", lambda p: p.samples[0]),
-    ("sample_middle", lambda p: p.samples[1]),
-    ("sample_right", lambda p: p.samples[2]),
+    ("slot_left", lambda p: three_slots(p.slots)[0]),
+    ("slot_middle", lambda p: three_slots(p.slots)[1]),
+    ("slot_right", lambda p: three_slots(p.slots)[2]),
+    ("sample_left", lambda p: three_slots(p.samples, None)[0]),
+    ("sample_middle", lambda p: three_slots(p.samples, None)[1]),
+    ("sample_right", lambda p: three_slots(p.samples, None)[2]),
+    ("block", lambda p: p.block),
+    ("paradigm", lambda p: p.paradigm),
 )
+#: What a trial row without the field (a file written before schema 6) means.
+_ABSENT = {"block": "main", "paradigm": "rank"}
 
 Row = Mapping[str, Any]
 
@@ -151,11 +163,21 @@ def map_ids(payload: Mapping[str, Any], conditions: Mapping[str, str], stimuli: 
         return s
 
     slots = ("slot_left", "slot_middle", "slot_right")
+    # a two-slot trial's empty middle slot is no id
     trials = [{**t, "stimulus": stim(t.get("stimulus"), _trial_name(t)),
-               **{k: cond(t.get(k), _trial_name(t)) for k in slots}} for t in payload["trials"]]
+               **{k: cond(t.get(k), _trial_name(t)) if t.get(k) != "" else "" for k in slots}}
+              for t in payload["trials"]]
     responses = [{**r, "condition": cond(r.get("condition"), f"responses of {_trial_name(r)}")}
                  for r in payload["responses"]]
-    return {**payload, "trials": trials, "responses": responses}, list(found.values())
+    out = {**payload, "trials": trials, "responses": responses}
+    if "trial_slots" in payload:
+        out["trial_slots"] = [{**r, "condition": cond(r.get("condition"), f"slots of {_trial_name(r)}"),
+                               "motion_stimulus": stim(r.get("motion_stimulus"), f"slots of {_trial_name(r)}")}
+                              for r in payload["trial_slots"]]
+    if "judgements" in payload:
+        out["judgements"] = [{**r, "condition": cond(r.get("condition"), f"answers of {_trial_name(r)}")}
+                             for r in payload["judgements"]]
+    return out, list(found.values())
 
 
 def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, Any]]) -> tuple[dict[str, Any], list[Finding]]:
@@ -167,7 +189,7 @@ def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, An
     samples = ("sample_left", "sample_middle", "sample_right")
 
     def cond(entry: Mapping[str, Any] | None, c: Any, where: str) -> Any:
-        if entry is None or not isinstance(c, str):
+        if entry is None or not isinstance(c, str) or c == "":  # "": a two-slot trial's empty middle slot
             return c
         frozen = c.startswith(FROZEN_PREFIX)
         real = entry["conditions"].get(c.removeprefix(FROZEN_PREFIX))
@@ -201,7 +223,7 @@ def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, An
         row = {**t, "stimulus": entry["stimulus"], **{k: cond(entry, c, where) for k, c in zip(slots, shown)}}
         for k, c in zip(samples, shown):
             tok = c.removeprefix(FROZEN_PREFIX) if isinstance(c, str) else c
-            row[k] = entry["samples"].get(tok, t.get(k)) if isinstance(tok, str) else t.get(k)
+            row[k] = entry["samples"].get(tok, t.get(k)) if isinstance(tok, str) and tok else t.get(k)
         mapped_trials.append(row)
     for other, idx in foreign.items():
         found.append(Finding(f"participant {pid}", f"{len(idx)} of {len(payload['trials'])} trials are those the "
@@ -212,8 +234,24 @@ def _map_trials(payload: Mapping[str, Any], trials: Mapping[str, Mapping[str, An
                                                                        "trial: the file was edited"))
     responses = [{**r, "condition": cond(by_index.get(r.get("trial_index")), r.get("condition"),
                                          f"responses of {_trial_name(r)}")} for r in payload["responses"]]
+    out = {**payload, "trials": mapped_trials, "responses": responses}
+    if "trial_slots" in payload:
+        # a token stands for (condition, the clip whose motion it plays, sample) within its own trial
+        slot_rows = []
+        for r in payload["trial_slots"]:
+            entry, tok = by_index.get(r.get("trial_index")), r.get("condition")
+            row = {**r, "condition": cond(entry, tok, f"slots of {_trial_name(r)}")}
+            if entry is not None and isinstance(tok, str):
+                bare = tok.removeprefix(FROZEN_PREFIX)
+                row["motion_stimulus"] = entry.get("motions", {}).get(bare, entry["stimulus"])
+                row["sample"] = entry["samples"].get(bare, r.get("sample"))
+            slot_rows.append(row)
+        out["trial_slots"] = slot_rows
+    if "judgements" in payload:
+        out["judgements"] = [{**r, "condition": cond(by_index.get(r.get("trial_index")), r.get("condition"),
+                                                     f"answers of {_trial_name(r)}")} for r in payload["judgements"]]
     unique = list(dict.fromkeys(found))
-    return {**payload, "trials": mapped_trials, "responses": responses}, unique
+    return out, unique
 
 
 # ------------------------------------------------------------------------------------------ roster and row
@@ -244,8 +282,9 @@ def check_participant(participant: Row, roster: Mapping[str, int] | None, allow_
 
 def check_rows_belong(pid: str, payload: Mapping[str, Any]) -> list[Finding]:
     """Every row names the file's participant (a file edited to a new id in one place only disagrees)."""
-    names = {r.get("participant") for table in ("sessions", "trials", "responses", "plays", "questionnaire")
-             for r in payload[table]}
+    names = {r.get("participant") for table in ("sessions", "trials", "responses", "plays", "questionnaire",
+                                                "trial_slots", "judgements")
+             for r in payload.get(table, [])}
     names |= {payload.get("participant")}
     other = sorted(str(n) for n in names - {pid})
     return [Finding("participant", f"rows of participant(s) {', '.join(other)} in the file of participant "
@@ -269,7 +308,7 @@ def check_schedule(trials: Sequence[Row], plans: Sequence[TrialPlan], status: An
         seen.add(i)
         plan = plans[i]
         wrong = [f"{name} is {t.get(name)!r}, the schedule has {want(plan)!r}"
-                 for name, want in _PLAN_FIELDS if t.get(name) != want(plan)]
+                 for name, want in _PLAN_FIELDS if t.get(name, _ABSENT.get(name)) != want(plan)]
         if wrong:
             out.append(Finding(f"trial {i}", "not the scheduled trial: " + "; ".join(wrong)))
     if seen:
@@ -282,12 +321,107 @@ def check_schedule(trials: Sequence[Row], plans: Sequence[TrialPlan], status: An
     return out
 
 
+def check_slots(trials: Sequence[Row], slot_rows: Sequence[Row], plans: Sequence[TrialPlan]) -> list[Finding]:
+    """Each trial's ``trial_slots`` rows are its scheduled slots: condition, whose motion, sample (schema 6)."""
+    out = []
+    by_trial: dict[Any, list[Row]] = {}
+    for r in slot_rows:
+        by_trial.setdefault(r.get("trial_index"), []).append(r)
+    answered = {t.get("trial_index") for t in trials}
+    for i in sorted((k for k in by_trial if k not in answered), key=repr):
+        out.append(Finding(f"slots of trial {i!r}", "slots of a trial the file does not contain"))
+    for t in trials:
+        i = t.get("trial_index")
+        if not _is_int(i) or not 0 <= i < len(plans):
+            continue  # the schedule check's finding
+        plan = plans[i]
+        got = sorted(((r.get("slot"), r.get("condition"), r.get("motion_stimulus"), r.get("sample"))
+                      for r in by_trial.get(i, [])), key=repr)
+        want = [(k, c, plan.motion_stimulus(k), plan.samples[k]) for k, c in enumerate(plan.slots)]
+        if got != sorted(want, key=repr):
+            out.append(Finding(f"trial {i}", f"its slots (condition, motion of which clip, sample) are {got!r}, the "
+                                             f"schedule has {want!r}"))
+    return out
+
+
+def _block_of(design: Design, plan: TrialPlan) -> Any:
+    try:
+        return design.block(plan.block)
+    except KeyError:
+        return None  # the schedule check says the trial is not the scheduled one
+
+
+def check_judgements(trials: Sequence[Row], judgements: Sequence[Row], plans: Sequence[TrialPlan],
+                     design: Design) -> list[Finding]:
+    """Pairwise, mismatch and rating answers as the session stores them (see the module notes)."""
+    out = []
+    by_trial: dict[Any, list[Row]] = {}
+    for r in judgements:
+        by_trial.setdefault(r.get("trial_index"), []).append(r)
+    answered = {t.get("trial_index") for t in trials}
+    for i in sorted((k for k in by_trial if k not in answered), key=repr):
+        out.append(Finding(f"answers of trial {i!r}", "answers for a trial the file does not contain"))
+    for t in sorted((t for t in trials if _is_int(t.get("trial_index")) and 0 <= t["trial_index"] < len(plans)),
+                    key=lambda t: t["trial_index"]):
+        i = t["trial_index"]
+        plan, rows = plans[i], by_trial.get(i, [])
+        block = _block_of(design, plan)
+        if plan.paradigm == "rank" or block is None:
+            if rows:
+                out.append(Finding(f"trial {i}", f"preferences or ratings on a {plan.paradigm} trial"))
+            continue
+        for crit in sorted({r.get("criterion") for r in rows} - set(block.criteria), key=repr):
+            out.append(Finding(f"trial {i}", f"answers on {crit!r}, which block {block.id!r} does not ask"))
+        n = len(plan.slots)
+        for crit in block.criteria:
+            given = {r.get("slot"): r for r in rows if r.get("criterion") == crit}
+            if len(given) != len([r for r in rows if r.get("criterion") == crit]) or set(given) != set(range(n)):
+                out.append(Finding(f"trial {i}, {crit}", f"needs one answer for each of the {n} slots, the file has "
+                                                         f"slots {sorted(given, key=repr)}"))
+                continue
+            wrong = [k for k in range(n) if given[k].get("condition") != plan.slots[k]]
+            if wrong:
+                out.append(Finding(f"trial {i}, {crit}", "answers are given to " + ", ".join(
+                    f"{given[k].get('condition')!r} in slot {k}" for k in wrong) + ", but the trial's slots show "
+                    + ", ".join(f"{plan.slots[k]!r}" for k in wrong)))
+                continue
+            values = [given[k].get("value") for k in range(n)]
+            if plan.paradigm == "rating":
+                if not all(_is_number(v) and 0 <= v <= 100 for v in values):
+                    out.append(Finding(f"trial {i}, {crit}", f"ratings {values!r} are not all in 0..100"))
+                continue
+            allowed = PREFERENCE_LEVELS.get(block.levels, PREFERENCE_LEVELS[5])
+            if not (all(_is_number(v) for v in values) and values[1] in allowed and values[0] == -values[1]):
+                out.append(Finding(f"trial {i}, {crit}", f"preferences {values!r} are not a preference: the two "
+                                                         f"slots get -p and p, p one of {list(allowed)}"))
+        if plan.paradigm in ("pairwise", "mismatch") and rows:
+            out += _check_reasons(i, rows, block)
+    return out
+
+
+def _check_reasons(i: int, rows: Sequence[Row], block: Any) -> list[Finding]:
+    texts = {r.get("reasons") for r in rows}
+    if len(texts) != 1:
+        return [Finding(f"trial {i}", "the reasons differ between the answer's rows")]
+    text = next(iter(texts))
+    try:
+        chosen = json.loads(text) if text is not None else []
+    except (TypeError, ValueError):
+        return [Finding(f"trial {i}", f"reasons {text!r} are not a JSON list")]
+    offered = list(block.reasons)
+    if not isinstance(chosen, list) or any(c not in offered for c in chosen) or \
+            chosen != [r for r in offered if r in chosen]:
+        return [Finding(f"trial {i}", f"reasons {chosen!r} are not some of the block's reasons, in its order")]
+    if chosen and all(r.get("value") == 0 for r in rows):
+        return [Finding(f"trial {i}", "reasons given without a preference (the session asks them only for one)")]
+    return []
+
+
 # ------------------------------------------------------------------------------------------ answers
 def check_answers(trials: Sequence[Row], responses: Sequence[Row], plans: Sequence[TrialPlan], design: Design,
                   status: Any) -> list[Finding]:
     """Complete, valid rankings for the scheduled conditions; attention checks scored as the session scores."""
     out = []
-    criteria = design.criterion_ids
     allow_ties = bool(design.playback.allow_ties)
     by_trial: dict[Any, list[Row]] = {}
     for r in responses:
@@ -308,6 +442,12 @@ def check_answers(trials: Sequence[Row], responses: Sequence[Row], plans: Sequen
             break
         ranks: dict[str, tuple[float, float, float]] = {}
         rows = by_trial.get(i, [])
+        block = _block_of(design, plan)
+        if plan.paradigm != "rank" or block is None:  # answered in judgements (check_judgements)
+            if rows:
+                out.append(Finding(f"trial {i}", f"ranks on a {plan.paradigm} trial"))
+            continue
+        criteria = list(block.criteria)
         # Ranks must name the conditions of the trial row's own slots; whether those are the scheduled ones is
         # the schedule check's finding, so a consistent edit of one trial is one message, not four.
         slots = (t.get("slot_left"), t.get("slot_middle"), t.get("slot_right"))
@@ -543,7 +683,10 @@ def check_returned(payload: Mapping[str, Any], design: Design, *, roster: Mappin
     plans = participant_schedule(design, pid, row)
     trials, status = payload["trials"], p.get("status")
     out += check_schedule(trials, plans, status)
+    if "trial_slots" in payload:  # a file of schema 6 or later
+        out += check_slots(trials, payload["trial_slots"], plans)
     out += check_answers(trials, payload["responses"], plans, design, status)
+    out += check_judgements(trials, payload.get("judgements", []), plans, design)
     out += check_questionnaire(payload["questionnaire"], design, status)
     durations = {t["trial_index"]: duration_of(plans[t["trial_index"]]) for t in trials
                  if _is_int(t.get("trial_index")) and 0 <= t["trial_index"] < len(plans)}

@@ -29,6 +29,31 @@ Trial sequence, in this order (``trial_index`` counts from 0 over all of them):
 A ``frozen`` attention check replaces the condition in slot ``(row + i) mod 3`` by
 ``"frozen:<that condition's id>"`` (see :class:`studyapp.study.design.AttentionCheck`).
 
+Blocks (``[[blocks]]``, see :class:`studyapp.study.design.Block`). A design without blocks is the one rank
+block ``"main"`` above, trial for trial. With blocks, the sequence is: the practice clips (trials of the FIRST
+block's paradigm, its conditions; a rank block's practice is as above), then each block in design order, its
+stimuli in the row's order (a Williams row over the block's stimuli, ``row mod L_b``); attention checks go
+into the first ``rank`` block as above. ``trial_index`` counts over everything. Per block, with ``s`` the
+position of the trial's stimulus in the block's ``stimuli`` and ``r`` the row:
+
+* ``rank``: as above (slot rotation ``row mod 6``); its period is ``lcm(L_b, 6)`` (``L_b`` for random slots).
+* ``pairwise``: the ``P = n(n-1)/2`` unordered pairs of the block's ``n`` conditions in
+  ``itertools.combinations`` order; stimulus ``s`` shows pair ``(r + s) mod P``, in design order when
+  ``(r // P + s)`` is even, swapped when odd (random slots: a seeded coin). Period ``lcm(L_b, 2P)``: over
+  it every stimulus shows every pair equally often, each condition on the left as often as on the right.
+* ``mismatch``: stimulus ``s`` shows condition ``(r + s) mod n`` in both slots; one slot plays the
+  stimulus's own motion (``motion_stimuli`` = the stimulus), the other the same condition's motion for a
+  source clip, ``O_s[(r // 2n) mod |O_s|]`` where ``O_s`` lists the block's other stimuli with the same
+  ``match_tag`` value in block order; the matched motion is on the left when ``(r // n + s)`` is even. The
+  audio and face are the trial's stimulus's in both slots. Period ``lcm(L_b, 2n * lcm(|O_s|))``: over it
+  every condition x stimulus is matched-left as often as matched-right, with each source equally often on
+  each side.
+* ``rating``: the block's figures (conditions, then the hidden reference) rotated left by ``(r + s) mod k``
+  (random slots: a seeded permutation). Period ``lcm(L_b, k)``: every figure in every slot equally often per
+  stimulus; the reference is in every trial.
+
+:func:`n_rows` is the lcm of every block's period (and of the conditions' ``samples``).
+
 >>> from studyapp.resources import demo_design
 >>> from studyapp.study.design import load_design
 >>> d = load_design(demo_design())
@@ -40,9 +65,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import combinations
 from typing import TYPE_CHECKING
 
-from studyapp.study.design import FROZEN_PREFIX, Design
+import numpy as np
+
+from studyapp.study.design import FROZEN_PREFIX, Block, Design
 from studyapp.study.ordering import latin_row, n_latin_rows, participant_seed, slot_permutations
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: loading a design must not pay ~0.3-1 s for it
@@ -51,6 +79,22 @@ if TYPE_CHECKING:  # pandas is imported where a table is built: loading a design
 SLOT_NAMES = ("left", "middle", "right")
 SCHEDULE_COLUMNS = ["participant", "row", "trial_index", "stimulus", "is_practice", "is_attention_check",
                     "slot_left", "slot_middle", "slot_right", "sample_left", "sample_middle", "sample_right"]
+#: Columns a design with ``[[blocks]]`` adds to its schedule table (slots and motion stimuli ``;``-joined).
+BLOCK_COLUMNS = ["block", "paradigm", "slots", "motion_stimuli"]
+
+
+def three_slots(values: tuple, empty: object = "") -> tuple:
+    """A trial's per-slot values in the three left/middle/right columns of the results and schedule tables:
+    three slots as they are; two slots (pairwise, mismatch, a two-figure rating) as ``(left, empty, right)``;
+    more than three, the first three (the full list is stored per slot elsewhere).
+
+    >>> three_slots(("a", "b")), three_slots(("a", "b", "c", "d"))
+    (('a', '', 'b'), ('a', 'b', 'c'))
+    """
+    values = tuple(values)
+    if len(values) == 2:
+        return (values[0], empty, values[1])
+    return tuple(values[:3]) + (empty,) * max(0, 3 - len(values))
 
 
 @dataclass(frozen=True)
@@ -59,27 +103,47 @@ class TrialPlan:
 
     Attributes
     ----------
-    trial_index: 0-based position in the participant's sequence (practice and checks included).
-    stimulus_id: the clip.
-    slots: condition ids in left, middle, right order (a frozen check slot is ``"frozen:<id>"``).
+    trial_index: 0-based position in the participant's sequence (practice and checks included, all blocks).
+    stimulus_id: the clip: its audio and face play for every slot.
+    slots: condition ids per slot, left to right: 3 for rank (a frozen check slot is ``"frozen:<id>"``), 2 for
+        pairwise and mismatch (mismatch: the same condition twice), every figure for rating.
     is_practice: a practice trial (answers stored but marked, excluded from analysis by default).
     is_attention_check: an attention-check trial (see ``attention_check``).
     row: the participant's design row.
     samples: per slot, the 1-based sample of the slot's condition shown (1 for a condition with one sample).
+    block: the id of the trial's block (``"main"`` in a design without blocks).
+    paradigm: ``"rank"``, ``"pairwise"``, ``"mismatch"`` or ``"rating"``: which answer the trial asks.
+    motion_stimuli: per slot, the stimulus whose motion the slot plays; ``()`` means ``stimulus_id`` for all
+        (mismatch trials name the source clip of the mismatched slot).
     """
 
     trial_index: int
     stimulus_id: str
-    slots: tuple[str, str, str]
+    slots: tuple[str, ...]
     is_practice: bool
     is_attention_check: bool
     row: int
     samples: tuple[int, ...] = (1, 1, 1)
+    block: str = "main"
+    paradigm: str = "rank"
+    motion_stimuli: tuple[str, ...] = ()
 
     @property
     def slot_of(self) -> dict[str, int]:
-        """Condition id -> slot index (0 left, 1 middle, 2 right)."""
+        """Condition id -> slot index (0 left, 1 middle, 2 right); a mismatch trial's one condition maps to
+        its last slot, so use :attr:`matched_slot` there."""
         return {c: i for i, c in enumerate(self.slots)}
+
+    def motion_stimulus(self, slot: int) -> str:
+        """The stimulus whose motion slot ``slot`` plays."""
+        return self.motion_stimuli[slot] if self.motion_stimuli else self.stimulus_id
+
+    @property
+    def matched_slot(self) -> int | None:
+        """A mismatch trial's slot that plays the clip's own motion (None for other paradigms)."""
+        if self.paradigm != "mismatch":
+            return None
+        return next(i for i in range(len(self.slots)) if self.motion_stimulus(i) == self.stimulus_id)
 
 
 def latin_rows(design: Design) -> int:
@@ -91,9 +155,37 @@ def latin_rows(design: Design) -> int:
 
 def n_rows(design: Design) -> int:
     """Number of distinct design rows: after this many participants clip order and slots are balanced."""
-    rows = latin_rows(design)
-    rows = math.lcm(rows, 6) if design.slot_assignment == "balanced" else rows
+    rows = math.lcm(*(block_period(design, b) for b in design.trial_blocks))
     return math.lcm(rows, *(max(1, c.samples) for c in design.conditions))
+
+
+def block_latin_rows(design: Design, block: Block) -> int:
+    """Clip orders a block cycles through (Williams rows over its stimuli, 1 for random or fixed order)."""
+    return n_latin_rows(len(block.stimuli)) if design.ordering == "balanced-latin-square" else 1
+
+
+def mismatch_sources(design: Design, block: Block, stimulus_id: str) -> list[str]:
+    """The block's other stimuli sharing the stimulus's ``match_tag`` value, in block order (the clips whose
+    motion a mismatch trial of ``stimulus_id`` may play)."""
+    tags = {s.id: s.tags for s in design.stimuli}
+    value = tags[stimulus_id].get(block.match_tag)
+    return [o for o in block.stimuli if o != stimulus_id and value is not None
+            and tags[o].get(block.match_tag) == value]
+
+
+def block_period(design: Design, block: Block) -> int:
+    """Rows after which the block is balanced (see the module notes)."""
+    rows = block_latin_rows(design, block)
+    balanced = design.slot_assignment == "balanced"
+    if block.paradigm == "rank":
+        return math.lcm(rows, 6) if balanced else rows
+    if block.paradigm == "pairwise":
+        return math.lcm(rows, 2 * max(1, math.comb(len(block.conditions), 2)))
+    if block.paradigm == "mismatch":
+        n = max(1, len(block.conditions))
+        sources = [len(mismatch_sources(design, block, s)) or 1 for s in block.stimuli]
+        return math.lcm(rows, 2 * n * math.lcm(*sources))
+    return math.lcm(rows, len(block.figures)) if balanced else rows
 
 
 def sample_for(design: Design, row: int, stimulus_id: str, condition_id: str) -> int:
@@ -153,37 +245,84 @@ def participant_schedule(design: Design, participant_id: str, row: int | None = 
     row = int(row)
     if row < 0:
         raise ValueError(f"design row must be >= 0, got {row}")
-    conds = design.condition_ids
+    blocks = design.trial_blocks
+    first_rank = next((b for b in blocks if b.paradigm == "rank"), None)
+    # entries: (stimulus, slots, practice, check, block, motion stimuli)
+    entries: list[tuple[str, tuple[str, ...], bool, bool, Block, tuple[str, ...]]] = []
+    for sid, slots, motions in _block_trials(design, blocks[0], participant_id, row, list(design.practice),
+                                             practice=True):
+        entries.append((sid, slots, True, False, blocks[0], motions))
+    for n, block in enumerate(blocks):
+        suffix = "" if n == 0 else f":{block.id}"  # a design without blocks draws exactly as it always did
+        order = latin_row(design, row % block_latin_rows(design, block), participant_id, block.stimuli,
+                          "order" + suffix)
+        trials = _block_trials(design, block, participant_id, row, order, practice=False, stream=suffix)
+        checks = design.attention_checks if block is first_rank else []
+        after = [place_check(k, order, c.stimulus)
+                 for k, c in zip(attention_positions(len(order), len(checks)), checks)]
+        check_perms = slot_permutations(len(checks), participant_seed(design.seed, participant_id, "checks" + suffix),
+                                        row % 6 + 1, design.slot_assignment)
+        conds = block.conditions
+        for t, (sid, slots, motions) in enumerate(trials):
+            entries.append((sid, slots, False, False, block, motions))
+            for i, check in enumerate(checks):
+                if after[i] == t + 1:
+                    perm = check_perms[i]
+                    cslots = [conds[perm[0]], conds[perm[1]], conds[perm[2]]]
+                    if check.kind == "frozen":
+                        s = (row + i) % 3
+                        cslots[s] = FROZEN_PREFIX + cslots[s]
+                    entries.append((check.stimulus, tuple(cslots), False, True, block, ()))
+    plans = []
+    for i, (sid, slots, prac, att, block, motions) in enumerate(entries):
+        shown = motions or (sid,) * len(slots)
+        samples = tuple(sample_for(design, row, m, c) for m, c in zip(shown, slots))
+        plans.append(TrialPlan(i, sid, slots, prac, att, row, samples, block.id, block.paradigm, motions))
+    return plans
+
+
+def _block_trials(design: Design, block: Block, participant_id: str, row: int, order: list[str], *,
+                  practice: bool, stream: str = "") -> list[tuple[str, tuple[str, ...], tuple[str, ...]]]:
+    """``(stimulus, slots, motion stimuli)`` of a block's trials on the stimuli ``order`` (see the module
+    notes); ``practice``: the practice clips, drawn from their own streams so they leave the balance alone."""
     mode = design.slot_assignment
+    conds = block.conditions
     k = row % 6
-
-    def arrange(perm: tuple[int, int, int]) -> tuple[str, str, str]:
-        return (conds[perm[0]], conds[perm[1]], conds[perm[2]])
-
-    order = latin_row(design, row % latin_rows(design), participant_id)
-    # Practice and checks draw from shifted streams so they do not eat into the rated trials' balance.
-    rated_perms = slot_permutations(len(order), participant_seed(design.seed, participant_id, "slots"), k, mode)
-    practice_perms = slot_permutations(len(design.practice),
-                                       participant_seed(design.seed, participant_id, "practice"), k + 3, mode)
-    check_perms = slot_permutations(len(design.attention_checks),
-                                    participant_seed(design.seed, participant_id, "checks"), k + 1, mode)
-
-    entries: list[tuple[str, tuple[str, str, str], bool, bool]] = []
-    for sid, perm in zip(design.practice, practice_perms):
-        entries.append((sid, arrange(perm), True, False))
-    after = [place_check(k, order, c.stimulus)
-             for k, c in zip(attention_positions(len(order), len(design.attention_checks)), design.attention_checks)]
-    for t, (sid, perm) in enumerate(zip(order, rated_perms)):
-        entries.append((sid, arrange(perm), False, False))
-        for i, check in enumerate(design.attention_checks):
-            if after[i] == t + 1:
-                slots = list(arrange(check_perms[i]))
-                if check.kind == "frozen":
-                    s = (row + i) % 3
-                    slots[s] = FROZEN_PREFIX + slots[s]
-                entries.append((check.stimulus, (slots[0], slots[1], slots[2]), False, True))
-    return [TrialPlan(i, sid, slots, prac, att, row, tuple(sample_for(design, row, sid, c) for c in slots))
-            for i, (sid, slots, prac, att) in enumerate(entries)]
+    if block.paradigm == "rank":
+        if practice:
+            perms = slot_permutations(len(order), participant_seed(design.seed, participant_id, "practice" + stream),
+                                      k + 3, mode)
+        else:
+            perms = slot_permutations(len(order), participant_seed(design.seed, participant_id, "slots" + stream),
+                                      k, mode)
+        return [(sid, (conds[p[0]], conds[p[1]], conds[p[2]]), ()) for sid, p in zip(order, perms)]
+    rng = np.random.default_rng(participant_seed(design.seed, participant_id,
+                                                 ("practice:" if practice else "sides:") + block.id))
+    out: list[tuple[str, tuple[str, ...], tuple[str, ...]]] = []
+    for j, sid in enumerate(order):
+        # practice clips are placed by their position; rated ones by the stimulus's place in the block
+        s = j if practice or sid not in block.stimuli else block.stimuli.index(sid)
+        if block.paradigm == "pairwise":
+            pairs = list(combinations(conds, 2))
+            p = len(pairs)
+            pair = pairs[(row + s) % p]
+            swap = bool(rng.integers(2)) if mode == "random" else (row // p + s) % 2 == 1
+            out.append((sid, pair[::-1] if swap else pair, ()))
+        elif block.paradigm == "mismatch":
+            n = len(conds)
+            cond = conds[(row + s) % n]
+            sources = mismatch_sources(design, block, sid)
+            source = sources[(row // (2 * n)) % len(sources)]
+            left = (row // n + s) % 2 == 0
+            out.append((sid, (cond, cond), (sid, source) if left else (source, sid)))
+        else:  # rating
+            figs = block.figures
+            if mode == "random":
+                out.append((sid, tuple(figs[i] for i in rng.permutation(len(figs))), ()))
+            else:
+                rot = (row + s) % len(figs)
+                out.append((sid, tuple(figs[rot:] + figs[:rot]), ()))
+    return out
 
 
 def participant_ids(n_participants: int) -> list[str]:
@@ -193,14 +332,18 @@ def participant_ids(n_participants: int) -> list[str]:
 
 
 def schedule_frame(plans: dict[str, list[TrialPlan]]) -> pd.DataFrame:
-    """One row per participant x trial, columns :data:`SCHEDULE_COLUMNS`."""
+    """One row per participant x trial, columns :data:`SCHEDULE_COLUMNS` (slots as :func:`three_slots` puts
+    them), plus :data:`BLOCK_COLUMNS` for a design with ``[[blocks]]``."""
     import pandas as pd
 
+    blocked = any(p.block != "main" or p.paradigm != "rank" for trials in plans.values() for p in trials)
     records = [
-        (pid, p.row, p.trial_index, p.stimulus_id, p.is_practice, p.is_attention_check, *p.slots, *p.samples)
+        (pid, p.row, p.trial_index, p.stimulus_id, p.is_practice, p.is_attention_check, *three_slots(p.slots),
+         *three_slots(p.samples, None))
+        + ((p.block, p.paradigm, ";".join(p.slots), ";".join(p.motion_stimuli)) if blocked else ())
         for pid, trials in plans.items() for p in trials
     ]
-    return pd.DataFrame.from_records(records, columns=SCHEDULE_COLUMNS)
+    return pd.DataFrame.from_records(records, columns=SCHEDULE_COLUMNS + (BLOCK_COLUMNS if blocked else []))
 
 
 def full_schedule(design: Design, n_participants: int) -> pd.DataFrame:
@@ -228,6 +371,8 @@ def balance_counts(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
     import pandas as pd
 
     rated = df[~df["is_practice"].astype(bool) & ~df["is_attention_check"].astype(bool)].copy()
+    if "paradigm" in rated:  # these counts are the rank blocks'; other paradigms are counted by their tests
+        rated = rated[rated["paradigm"] == "rank"]
     rated["position"] = rated.groupby("participant").cumcount() + 1
     pos = pd.crosstab(rated["position"], rated["stimulus"])
     long = rated.melt(id_vars=["participant"], value_vars=[f"slot_{s}" for s in SLOT_NAMES],

@@ -27,6 +27,23 @@ participants run. Rules the machine enforces:
   and therefore with the same schedule; a finished participant is refused unless ``allow_rerun``, which
   records a new participant ``<id>-rerun<k>`` on the same row (earlier answers are never touched).
 
+Response paradigms (``[[blocks]]``, see :class:`~studyapp.study.design.Block`): each trial's plan says its
+``paradigm``, and the answer goes through that paradigm's method, under the rules above (no going back, watch
+once, one transaction, resume at the first unanswered trial):
+
+* ``rank``: :meth:`Session.submit_ranking` (stored in ``responses``);
+* ``pairwise`` and ``mismatch``: :meth:`Session.submit_preference` with ``{criterion: level}``, level in
+  -2..2 (5 levels) or -1..1 (3 levels), NEGATIVE = the LEFT figure preferred, POSITIVE = the RIGHT one, 0 = no
+  preference; ``reasons`` a subset of the block's ``reasons``, allowed only when some level is not 0. Stored in
+  ``judgements`` as the preference FOR each slot (left ``-level``, right ``+level``), the reasons on both rows;
+* ``rating``: :meth:`Session.submit_ratings` with ``{criterion: {slot: 0..100}}`` for every slot: the UI
+  passes only sliders the participant moved, so a missing one is refused with a message for the participant.
+
+Every trial also stores its slots (``trial_slots``: condition, whose motion, sample). A block with
+``instructions`` shows them before its first trial: :meth:`Session.block_instructions` returns the text while
+they are due, and playing or answering waits for :meth:`Session.finish_block_instructions`; a participant
+resumed inside a block does not see them again (one who resumes at the block's first trial does).
+
 Attention checks (``design.attention_checks``): a trial whose plan has ``is_attention_check`` is scored by
 :func:`attention_passed`; when more checks fail than ``design.max_attention_failures`` allows, the session
 ends early with a polite message.
@@ -51,6 +68,7 @@ from studyapp.errors import InputError, StudyappError
 from studyapp.study.design.texts import EN as EN_TEXTS
 from studyapp.study.design.texts import text as design_text
 from studyapp.study.storage import (
+    Judgement,
     ParticipantRecord,
     Response,
     ResultsDB,
@@ -189,6 +207,86 @@ def is_stored_ranking(values: Sequence[float], allow_ties: bool) -> bool:
     if tuple(values) != _average_ranks(values):
         return False
     return allow_ties or len(set(values)) == 3
+
+
+def normalise_preference(levels: Mapping[str, Any], reasons: Sequence[str], criteria: Sequence[str],
+                         n_levels: int = 5, offered: Sequence[str] = ()) -> dict[str, int]:
+    """Check a pairwise/mismatch answer and return ``{criterion: level}`` (see the module notes).
+
+    Raises :class:`RankingError` with a message for the participant when a criterion is missing, a level is
+    outside the block's scale, or reasons are not the block's or come with "no preference" on every criterion.
+
+    >>> normalise_preference({"realism": -2}, ["Hands"], ["realism"], 5, ["Hands", "Timing"])
+    {'realism': -2}
+    >>> normalise_preference({"realism": 2}, [], ["realism"], 3)
+    Traceback (most recent call last):
+    ...
+    studyapp.study.session.RankingError: 'realism': choose one of -1, 0, 1
+    """
+    from studyapp.study.design.schema import PREFERENCE_LEVELS
+
+    allowed = PREFERENCE_LEVELS.get(int(n_levels), PREFERENCE_LEVELS[5])
+    unknown = sorted(set(levels) - set(criteria))
+    if unknown:
+        raise RankingError(f"unknown question(s): {', '.join(unknown)}")
+    out: dict[str, int] = {}
+    for crit in criteria:
+        if crit not in levels or levels[crit] is None:
+            raise RankingError(f"Please choose an answer for '{crit}'.")
+        v = levels[crit]
+        try:
+            level = int(v)
+            ok = not isinstance(v, bool) and float(v) == level and level in allowed
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok:
+            raise RankingError(f"'{crit}': choose one of {', '.join(str(a) for a in allowed)}")
+        out[crit] = level
+    given = list(reasons or ())
+    strange = [r for r in given if r not in offered]
+    if strange:
+        raise RankingError(f"unknown reason(s): {', '.join(map(str, strange))}")
+    if len(set(given)) != len(given):
+        raise RankingError("each reason can be chosen once")
+    if given and all(level == 0 for level in out.values()):
+        raise RankingError("Reasons are asked only when you prefer one of the two.")
+    return out
+
+
+def normalise_ratings(ratings: Mapping[str, Mapping[Any, Any]], criteria: Sequence[str],
+                      n_slots: int) -> dict[str, tuple[float, ...]]:
+    """Check a rating answer and return ``{criterion: (rating of slot 0, slot 1, ...)}``, each in 0..100.
+
+    >>> normalise_ratings({"realism": {0: 80, "1": 12.5}}, ["realism"], 2)
+    {'realism': (80.0, 12.5)}
+    >>> normalise_ratings({"realism": {0: 80}}, ["realism"], 2)
+    Traceback (most recent call last):
+    ...
+    studyapp.study.session.RankingError: Please move every slider for 'realism' (1 not yet moved).
+    """
+    import math
+
+    unknown = sorted(set(ratings) - set(criteria))
+    if unknown:
+        raise RankingError(f"unknown question(s): {', '.join(unknown)}")
+    out: dict[str, tuple[float, ...]] = {}
+    for crit in criteria:
+        by_slot: dict[int, float] = {}
+        for k, v in (ratings.get(crit) or {}).items():
+            try:
+                slot, value = int(k), float(v)
+            except (TypeError, ValueError, OverflowError):
+                raise RankingError(f"'{crit}': {k!r} -> {v!r} is not a slot and a rating") from None
+            if not 0 <= slot < n_slots:
+                raise RankingError(f"'{crit}': there is no slot {slot}")
+            if isinstance(v, bool) or not math.isfinite(value) or not 0 <= value <= 100:
+                raise RankingError(f"'{crit}': ratings go from 0 to 100, not {v!r}")
+            by_slot[slot] = value
+        missing = n_slots - len(by_slot)
+        if missing:
+            raise RankingError(f"Please move every slider for '{crit}' ({missing} not yet moved).")
+        out[crit] = tuple(by_slot[i] for i in range(n_slots))
+    return out
 
 
 def attention_passed(design: Any, plan: Any, ranks: Mapping[str, tuple[float, float, float]]) -> bool | None:
@@ -335,6 +433,7 @@ class Session:
         self._pos = next((i for i, p in enumerate(self.plans) if p.trial_index not in answered), len(self.plans))
         self.session_id: int = db.start_session(self.participant_id, {**machine_basics(), "app_version": __version__})
         self.state: State = State.WELCOME
+        self._intro_seen: set[str] = set()  # blocks whose instructions were dismissed in this session
         #: The results file to send back (remote bundle runs), set when the session ends; the final screen shows it.
         self.results_file: Any = None
         self._reset_trial()
@@ -343,11 +442,21 @@ class Session:
     def _check_same_schedule(self) -> None:
         # A resumed participant must see the rest of the schedule they started; if the stored answers do
         # not match today's plan (scheduling code or design order changed), continuing would mix orders.
+        from studyapp.study.schedule import three_slots
+
         by_index = {p.trial_index: p for p in self.plans}
+        slots: dict[int, list[tuple[str, str]]] = {}
+        for r in self.db.trial_slots(self.participant_id):
+            slots.setdefault(r["trial_index"], []).append((r["condition"], r["motion_stimulus"]))
         for t in self.db.trials(self.participant_id):
             plan = by_index.get(t["trial_index"])
-            stored = (t["stimulus"], (t["slot_left"], t["slot_middle"], t["slot_right"]))
-            if plan is None or stored != (plan.stimulus_id, tuple(plan.slots)):
+            stored = (t["stimulus"], (t["slot_left"], t["slot_middle"], t["slot_right"]),
+                      t.get("block") or "main", t.get("paradigm") or "rank")
+            same = plan is not None and stored == (plan.stimulus_id, three_slots(plan.slots), getattr(plan, "block", "main"),
+                                                   getattr(plan, "paradigm", "rank"))
+            if same and t["trial_index"] in slots:  # schema 6 stores every slot and whose motion it played
+                same = slots[t["trial_index"]] == [(c, plan.motion_stimulus(i)) for i, c in enumerate(plan.slots)]
+            if not same:
                 raise InputError(self.db.path, f"participant {self.participant_id}, trial {t['trial_index']}",
                                  "the stored answer does not match this participant's schedule (was the design's "
                                  "order or the studyapp version changed?); continue with the original version, "
@@ -501,6 +610,8 @@ class Session:
             raise SessionError("the clip is already playing")
         if not self.can_play():
             raise SessionError("this study allows each clip to be played only once")
+        if self.block_instructions() is not None:
+            raise SessionError("the block's instructions come first (finish_block_instructions)")
         plan = self.plans[self._pos]
         self._play_id = self.db.start_play(self.participant_id, plan.trial_index, self.session_id)
         self._plays += 1
@@ -530,6 +641,15 @@ class Session:
             w = abs(float(s["worst_av_offset_ms"]))
             self._worst_av = w if self._worst_av is None else max(self._worst_av, w)
 
+    def abandon_play(self) -> None:
+        """The front end lost the open play (a browser page reloaded mid-clip): it is recorded as not
+        completed and, as after a restart, does not count against ``allow_replay = false``."""
+        self._expect(State.PRACTICE, State.TRIALS)
+        if self._play_id is None:
+            raise SessionError("no clip is playing")
+        self.record_play_finished(False)
+        self._plays -= 1
+
     def can_rank(self) -> bool:
         """True when the ranking may be submitted (the clip was watched fully once, if the design asks)."""
         if self.current_trial() is None or self._play_id is not None:
@@ -537,27 +657,61 @@ class Session:
         return self._completed_plays > 0 or not bool(self.playback.must_watch_fully)
 
     # ------------------------------------------------------------------ answers
-    def submit_ranking(
-        self,
-        ranks: Mapping[str, Mapping[Any, Any]],
-        stats: PlayStats | Mapping[str, Any] | None = None,
-    ) -> State:
-        """Validate, commit (one transaction) and advance to the next trial; returns the new state.
+    # ------------------------------------------------------------------ blocks
+    def _block(self, plan: Any) -> Any:
+        """The trial's block (``"main"`` of a design without blocks, or a stand-in design without any)."""
+        finder = getattr(self.design, "block", None)
+        try:
+            return finder(getattr(plan, "block", "main")) if finder is not None else None
+        except KeyError:
+            return None
 
-        ``ranks`` is ``{criterion id: {slot index 0..2: rank 1..3}}``; ``stats`` may add playback figures
-        not reported through :meth:`record_play_finished`.
-        """
+    def criteria_of(self, plan: Any) -> list[str]:
+        """The criteria a trial asks (its block's)."""
+        block = self._block(plan)
+        return list(block.criteria) if block is not None else list(self.criteria)
+
+    def block_instructions(self) -> str | None:
+        """The current block's instructions while they are due (before its first trial), else None."""
+        plan = self.current_trial()
+        if plan is None:
+            return None
+        block = self._block(plan)
+        if block is None or not block.instructions or block.id in self._intro_seen:
+            return None
+        # every trial before the current one is answered: one of this block among them means it started
+        # before (in this session or an earlier one)
+        if any(getattr(p, "block", "main") == block.id for p in self.plans[:self._pos]):
+            return None
+        return block.instructions
+
+    def finish_block_instructions(self) -> None:
+        """The participant read the block's instructions; the block's first trial may play."""
         self._expect(State.PRACTICE, State.TRIALS)
+        plan = self.current_trial()
+        if self.block_instructions() is None:
+            raise SessionError("no block instructions are due")
+        self._intro_seen.add(getattr(plan, "block", "main"))
+
+    # ------------------------------------------------------------------ answers
+    def _ready_to_answer(self, paradigms: tuple[str, ...]) -> Any:
+        """The current plan, after the checks every answer shares (state, paradigm, watched once)."""
+        self._expect(State.PRACTICE, State.TRIALS)
+        plan = self.plans[self._pos]
+        paradigm = getattr(plan, "paradigm", "rank")
+        if paradigm not in paradigms:
+            raise SessionError(f"trial {plan.trial_index} is a {paradigm} trial; answer it with "
+                               + {"rank": "submit_ranking", "rating": "submit_ratings"}.get(paradigm, "submit_preference"))
+        if self.block_instructions() is not None:
+            raise SessionError("the block's instructions come first (finish_block_instructions)")
         if self._play_id is not None:
             raise RankingError("Please wait until the clip has finished playing.")
         if not self.can_rank():
-            raise RankingError("Please watch the clip to the end before ranking.")
-        allow_ties = bool(getattr(self.playback, "allow_ties", False))
-        clean = normalise_ranks(ranks, self.criteria, allow_ties)
-        self._add_stats(_stats_dict(stats))
-        plan = self.plans[self._pos]
-        passed = attention_passed(self.design, plan, clean)
-        record = TrialRecord(
+            raise RankingError("Please watch the clip to the end before answering.")
+        return plan
+
+    def _record(self, plan: Any, passed: bool | None) -> TrialRecord:
+        return TrialRecord(
             participant=self.participant_id,
             trial_index=int(plan.trial_index),
             stimulus=plan.stimulus_id,
@@ -576,18 +730,72 @@ class Session:
             attention_passed=passed,
             session=self.session_id,
             trial_duration_s=self._played_s if self._played_s is not None else trial_duration_s(self.design, plan),
+            block=getattr(plan, "block", "main"),
+            paradigm=getattr(plan, "paradigm", "rank"),
+            motion_stimuli=tuple(getattr(plan, "motion_stimuli", ()) or ()),
         )
-        responses = [
-            Response(criterion=crit, condition=plan.slots[slot], slot=slot, rank=r)
-            for crit in self.criteria
-            for slot, r in enumerate(clean[crit])
-        ]
-        self.db.save_trial(record, responses)  # durable when it returns
+
+    def _commit(self, plan: Any, record: TrialRecord, responses: Sequence[Response],
+                judgements: Sequence[Judgement] = ()) -> State:
+        self.db.save_trial(record, responses, judgements)  # durable when it returns
         self._pos += 1
         if self.on_saved is not None:
             self.on_saved(plan)
         self._advance()
         return self.state
+
+    def submit_ranking(
+        self,
+        ranks: Mapping[str, Mapping[Any, Any]],
+        stats: PlayStats | Mapping[str, Any] | None = None,
+    ) -> State:
+        """Validate, commit (one transaction) and advance to the next trial; returns the new state.
+
+        ``ranks`` is ``{criterion id: {slot index 0..2: rank 1..3}}``; ``stats`` may add playback figures
+        not reported through :meth:`record_play_finished`.
+        """
+        plan = self._ready_to_answer(("rank",))
+        allow_ties = bool(getattr(self.playback, "allow_ties", False))
+        clean = normalise_ranks(ranks, self.criteria_of(plan), allow_ties)
+        self._add_stats(_stats_dict(stats))
+        record = self._record(plan, attention_passed(self.design, plan, clean))
+        responses = [
+            Response(criterion=crit, condition=plan.slots[slot], slot=slot, rank=r)
+            for crit in self.criteria_of(plan)
+            for slot, r in enumerate(clean[crit])
+        ]
+        return self._commit(plan, record, responses)
+
+    def submit_preference(
+        self,
+        levels: Mapping[str, int],
+        reasons: Sequence[str] = (),
+        stats: PlayStats | Mapping[str, Any] | None = None,
+    ) -> State:
+        """Answer a pairwise or mismatch trial (see the module notes): ``levels[criterion]`` NEGATIVE = left
+        preferred, POSITIVE = right, 0 = none; ``reasons`` from the block's list, only when some level != 0."""
+        plan = self._ready_to_answer(("pairwise", "mismatch"))
+        block = self._block(plan)
+        clean = normalise_preference(levels, reasons, self.criteria_of(plan),
+                                     int(getattr(block, "levels", 5)), tuple(getattr(block, "reasons", ())))
+        self._add_stats(_stats_dict(stats))
+        chosen = tuple(r for r in getattr(block, "reasons", ()) if r in set(reasons))  # the block's order
+        judgements = [Judgement(crit, plan.slots[slot], slot, float(-level if slot == 0 else level), chosen)
+                      for crit, level in clean.items() for slot in (0, 1)]
+        return self._commit(plan, self._record(plan, None), (), judgements)
+
+    def submit_ratings(
+        self,
+        ratings: Mapping[str, Mapping[Any, float]],
+        stats: PlayStats | Mapping[str, Any] | None = None,
+    ) -> State:
+        """Answer a rating trial: ``ratings[criterion][slot]`` in 0..100 for every criterion and slot."""
+        plan = self._ready_to_answer(("rating",))
+        clean = normalise_ratings(ratings, self.criteria_of(plan), len(plan.slots))
+        self._add_stats(_stats_dict(stats))
+        judgements = [Judgement(crit, plan.slots[slot], slot, value)
+                      for crit, values in clean.items() for slot, value in enumerate(values)]
+        return self._commit(plan, self._record(plan, None), (), judgements)
 
     # ------------------------------------------------------------------ questionnaire
     @property

@@ -28,6 +28,15 @@ maps it back (kept by the experimenter):
   file once. Audio, face and head files are named by a salted hash of their bytes (shared by the trials of
   one clip; they are the same for every condition). A shipped stimulus's tags are the tokens' file hashes
   (``{x1 = "<hash>", ...}``, every token on every stimulus) plus ``speaker`` where the avatar depends on it.
+* **Response paradigms.** ``schedule.json`` gives each trial its ``block`` and ``paradigm``; the shipped
+  ``[[blocks]]`` keep what the participant's screens need (paradigm, criteria, instructions, levels, reasons,
+  anchors) and name tokens and shipped stimuli instead of conditions and clips (no ``reference``: the hidden
+  reference is a token like the others; a mismatch block's clips share one constant tag). A token stands
+  for (condition, the clip whose motion it plays, sample) within its trial: a mismatch trial has two tokens
+  for its one condition, one playing the clip's own motion and one the other clip's. The mismatched motion
+  is written as the lab session plays it under this trial (cut, held or looped to the trial's length) and
+  named by a salted hash of (condition, source clip, trial clip, sample), so its name links it to no other
+  file; a design whose only blocks are mismatch blocks with one condition ships two tokens.
 * **No schedule inputs.** The shipped design has no ``seed``, ``ordering``, ``slot_assignment``,
   ``practice`` or stimulus order (stimuli are listed by opaque id); attention checks name their shipped
   trial and, for a ``known-worst`` check, that trial's token of the known-worst condition.
@@ -39,7 +48,10 @@ but a small seed can be guessed by trying them all and checking the guesses agai
 participants' trials share. For a remote study, give the design a large random ``seed`` (``python -c "import
 secrets; print(secrets.randbits(62))"``) before its first participant; ``bundle`` says so when it is small.
 A ``known-worst`` attention check tells which file of that one check clip is the known-worst condition, as
-the session must score it.
+the session must score it. A mismatch trial shows two motions of one condition by design (participants are
+told so); its mismatched file is a file of its own, but its frames are those of the source clip's file, so
+someone comparing the numbers inside BVH files (not their names) could link the two clips' files of that
+condition.
 """
 from __future__ import annotations
 
@@ -73,7 +85,7 @@ class Shipped:
     #: ``schedule.json``: participant id -> {"row": r, "trials": [[stimulus, [slots], practice, check], ...]}
     schedules: dict[str, dict[str, Any]]
     #: key part: shipped stimulus -> {participant, trial_index, stimulus, conditions {token: real},
-    #: samples {token: sample}}
+    #: samples {token: sample}, motions {token: real stimulus whose motion the token plays}}
     trials: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
@@ -96,8 +108,15 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
         return hashlib.sha256(f"{salt}\0{kind}\0{text}".encode()).hexdigest()[:n]
 
     conds = list(design.conditions)
-    toks = tokens(len(conds))
+    # a mismatch trial shows its one condition twice: with a single condition it needs a second token
+    any_mismatch = any(b.paradigm == "mismatch" for b in design.trial_blocks)
+    toks = tokens(max(len(conds), 2 if any_mismatch else 1))
     common, converted = _condition_settings(design, raw)
+    if any_mismatch:
+        # every motion shipped for a mismatch study is already as long as the trials it plays in (the
+        # mismatched ones are written fitted to theirs): "hold" only covers rounding, and tells the
+        # participant's validation that shipped clips, which share one match tag, may be of any length
+        common.setdefault("motion_end", "hold")
     media: dict[str, bytes] = {}
     origin: dict[str, str] = {}
 
@@ -108,6 +127,17 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
         return name
 
     motion_names: dict[tuple[str, str, int], str] = {}
+    mismatched_names: dict[tuple[str, str, str, int], str] = {}
+
+    def mismatched_file(cond: Condition, source: Stimulus, trial: Stimulus, k: int) -> str:
+        """The motion of ``cond`` for ``source`` as it plays under ``trial`` (see the module notes)."""
+        got = mismatched_names.get((cond.id, source.id, trial.id, k))
+        if got is None:
+            slot = f"mismatch\0{cond.id}\0{source.id}\0{trial.id}\0{k}\0"
+            label = f"{cond.id} on {source.id} under {trial.id}" + (f" sample {k}" if cond.samples > 1 else "")
+            got = add(convert(cond, source, k, _trial_seconds(trial)), ".bvh", label + " (as played)", slot)
+            mismatched_names[(cond.id, source.id, trial.id, k)] = got
+        return got
 
     def motion_file(cond: Condition, stim: Stimulus, k: int) -> str:
         got = motion_names.get((cond.id, stim.id, k))
@@ -136,22 +166,28 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
     schedules: dict[str, dict[str, Any]] = {}
     checks_raw = list(raw.get("attention_checks", []))
     checks: list[dict[str, Any]] = []
+    block_sids: dict[str, list[str]] = {}
     for pid, row in roster.items():
         entries = []
         for plan in participant_schedule(design, pid, row):
             sid = opaque("trial", f"{pid}\0{plan.trial_index}", 12)
-            order = [c.id for c in conds]
-            random.Random(opaque("tokens", f"{pid}\0{plan.trial_index}", 32)).shuffle(order)
-            real_of = dict(zip(toks, order))
-            token_of = {real: tok for tok, real in real_of.items()}
-            sample_of = {cid.removeprefix(FROZEN_PREFIX): k for cid, k in zip(plan.slots, plan.samples)}
             stim = design.stimulus(plan.stimulus_id)
+            sample_of = {cid.removeprefix(FROZEN_PREFIX): k for cid, k in zip(plan.slots, plan.samples)}
+            # what each token stands for in this trial: (condition, whose motion, sample)
+            figures = _trial_figures(plan, [c.id for c in conds], len(toks), sample_of)
+            random.Random(opaque("tokens", f"{pid}\0{plan.trial_index}", 32)).shuffle(figures)
+            real_of = {tok: f[0] for tok, f in zip(toks, figures)}
+            motion_of = {tok: f[1] for tok, f in zip(toks, figures)}
+            slot_tokens = _slot_tokens(plan, dict(zip(toks, figures)))
             tags: dict[str, str] = {}
             if needs_speaker and "speaker" in stim.tags:
                 tags["speaker"] = stim.tags["speaker"]
-            for tok, real in real_of.items():
-                name = motion_file(design.condition(real), stim, sample_of.get(real, 1))
+            for tok, (real, source, k) in zip(toks, figures):
+                name = (motion_file(design.condition(real), stim, k) if source == stim.id else
+                        mismatched_file(design.condition(real), design.stimulus(source), stim, k))
                 tags[tok] = Path(name).stem[len("m_"):]
+            if plan.paradigm == "mismatch":
+                tags[_MATCH_TAG] = "1"  # every shipped mismatch clip shares it: the shipped block validates
             entry: dict[str, Any] = {"id": sid, "audio": shared_file(stim.audio)}
             if stim.face is not None:
                 entry["face"] = shared_file(stim.face)
@@ -161,12 +197,13 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
                 entry["duration_s"] = stim.duration_s
             entry["tags"] = dict(sorted(tags.items()))
             stimuli[sid] = entry
-            slots = [(FROZEN_PREFIX if c.startswith(FROZEN_PREFIX) else "") + token_of[c.removeprefix(FROZEN_PREFIX)]
-                     for c in plan.slots]
-            entries.append([sid, slots, bool(plan.is_practice), bool(plan.is_attention_check)])
+            entries.append([sid, slot_tokens, bool(plan.is_practice), bool(plan.is_attention_check),
+                            {"block": plan.block, "paradigm": plan.paradigm}])
             trials[sid] = {"participant": pid, "trial_index": plan.trial_index, "stimulus": stim.id,
-                           "conditions": real_of, "samples": {tok: sample_of.get(real, 1)
-                                                              for tok, real in real_of.items()}}
+                           "conditions": real_of, "samples": {tok: f[2] for tok, f in zip(toks, figures)},
+                           "motions": motion_of}
+            block_sids.setdefault(plan.block, []).append(sid)
+            token_of = {real: tok for tok, real in real_of.items()}  # a known-worst check's token (rank trials)
             if plan.is_attention_check:
                 check = next(i for i, c in enumerate(design.attention_checks) if c.stimulus == plan.stimulus_id)
                 c_raw = dict(checks_raw[check])
@@ -181,6 +218,8 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
     out["stimuli"] = [stimuli[sid] for sid in sorted(stimuli)]
     if checks:
         out["attention_checks"] = sorted(checks, key=lambda c: c["stimulus"])
+    if design.blocks:
+        out["blocks"] = [_shipped_block(b, toks, sorted(block_sids.get(b.id, []))) for b in design.blocks]
     if "avatar" in raw:
         av = dict(raw["avatar"])
         if av.get("model", "builtin") != "builtin":
@@ -190,6 +229,55 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
                                 for k, v in av["by_speaker"].items()}
         out["avatar"] = av
     return Shipped(design=out, media=media, origin=origin, schedules=schedules, trials=trials)
+
+
+#: The tag every shipped mismatch clip carries (one value for all), the shipped mismatch blocks' match_tag.
+_MATCH_TAG = "match"
+
+
+def _trial_figures(plan: Any, conditions: list[str], n_tokens: int,
+                   sample_of: Mapping[str, int]) -> list[tuple[str, str, int]]:
+    """``(condition, stimulus whose motion, sample)`` for each token of a trial, in design order before the
+    shuffle: every condition on the trial's clip; a mismatch trial's condition also on its other clip (in
+    place of the last other condition, so the token count stays the design's)."""
+    own = [(c, plan.stimulus_id, sample_of.get(c, 1)) for c in conditions]
+    if plan.paradigm != "mismatch":
+        return own
+    cond = plan.slots[0]
+    other = next(i for i in range(len(plan.slots)) if plan.motion_stimulus(i) != plan.stimulus_id)
+    mismatched = (cond, plan.motion_stimulus(other), plan.samples[other])
+    kept = [f for f in own if f[0] == cond] + [f for f in own if f[0] != cond]
+    return kept[:n_tokens - 1] + [mismatched]
+
+
+def _slot_tokens(plan: Any, figure_of: Mapping[str, tuple[str, str, int]]) -> list[str]:
+    """The token shown in each slot of the plan (a frozen slot keeps its prefix)."""
+    out = []
+    for i, c in enumerate(plan.slots):
+        bare = c.removeprefix(FROZEN_PREFIX)
+        want = (bare, plan.motion_stimulus(i))
+        tok = next(t for t, f in figure_of.items() if (f[0], f[1]) == want)
+        out.append((FROZEN_PREFIX if c.startswith(FROZEN_PREFIX) else "") + tok)
+    return out
+
+
+def _shipped_block(block: Any, toks: list[str], sids: list[str]) -> dict[str, Any]:
+    """A block of the shipped design: what the screens need, tokens and shipped clips for ids (module notes)."""
+    n = {"rank": 3, "pairwise": 2, "mismatch": 1}.get(block.paradigm, len(block.figures))
+    out: dict[str, Any] = {"id": block.id, "paradigm": block.paradigm, "criteria": list(block.criteria),
+                           "conditions": toks[:max(n, 2) if block.paradigm == "pairwise" else n],
+                           "stimuli": sids}
+    if block.instructions:
+        out["instructions"] = block.instructions
+    if block.paradigm in ("pairwise", "mismatch"):
+        out["levels"] = block.levels
+    if block.paradigm == "pairwise" and block.reasons:
+        out["reasons"] = list(block.reasons)
+    if block.paradigm == "mismatch":
+        out["match_tag"] = _MATCH_TAG
+    if block.paradigm == "rating" and block.anchors:
+        out["anchors"] = list(block.anchors)
+    return out
 
 
 def _trial_seconds(stim: Stimulus) -> float:

@@ -56,14 +56,15 @@ class TrialMedia:
     ----------
     plan: the scheduled trial.
     audio: the clip's speech.
-    face: ARKit blendshapes shared by all three avatars (a neutral face when the stimulus has none).
-    motions: body motion per slot, left, middle, right.
+    face: ARKit blendshapes shared by every avatar (a neutral face when the stimulus has none).
+    motions: body motion per slot, left to right (3 for rank, 2 pairwise/mismatch, every figure for rating);
+    a slot plays the motion of ``plan.motion_stimulus(slot)`` (a mismatch trial's other clip).
     Audio, face and motions are already fitted to the trial's timeline (:mod:`studyapp.study.timeline`):
     cut to ``duration_s``, a short motion held or looped as its condition's ``motion_end`` says.
     avatar: ``"builtin"`` or the absolute path of a glTF/VRM avatar.
-    labels: slot labels shown to the participant (``("A", "B", "C")``) or None.
+    labels: slot labels shown to the participant (``("A", "B", "C")``; ``("A", "B")`` for two slots) or None.
     duration_s: how long the trial plays (the stimulus's ``duration_s`` or its audio's length).
-    criteria: the design's criterion ids, in order (what the participant ranks the slots on).
+    criteria: the trial's block's criterion ids, in order (what the participant judges the slots on).
     name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
     avatar_bone_map: the design's ``[avatar.bone_map]`` (avatar joint -> humanoid bone).
     framing: the design's ``[display] framing`` (``"upper-body"`` or ``"full-body"``).
@@ -72,12 +73,12 @@ class TrialMedia:
     plan: TrialPlan
     audio: AudioClip
     face: FaceAnimation
-    motions: tuple[Motion, Motion, Motion]
+    motions: tuple[Motion, ...]
     avatar: str
-    labels: tuple[str, str, str] | None
+    labels: tuple[str, ...] | None
     duration_s: float
     criteria: tuple[str, ...] = ()
-    name_maps: tuple[dict[str, str], dict[str, str], dict[str, str]] = ({}, {}, {})
+    name_maps: tuple[dict[str, str], ...] = ({}, {}, {})
     avatar_bone_map: dict[str, str] | None = None
     framing: str = "upper-body"
 
@@ -87,7 +88,7 @@ class TrialMedia:
         return self.avatar
 
     @property
-    def slots(self) -> tuple[str, str, str]:
+    def slots(self) -> tuple[str, ...]:
         return self.plan.slots
 
 
@@ -304,12 +305,18 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
     duration = trial_duration(stimulus.duration_s, audio.duration)
     face = fit_face(load_stimulus_face(stimulus, duration), duration)
     conds = [design.condition(cid.removeprefix(FROZEN_PREFIX)) for cid in plan.slots]
-    motions = tuple(fit_motion(slot_motion(design, cid, stimulus, duration, k), duration, cond.motion_end)
-                    for cid, cond, k in zip(plan.slots, conds, plan.samples))
+    # A slot plays the motion of its motion stimulus (a mismatch trial's other clip) on this trial's
+    # timeline: cut, held or looped like any motion, under the trial's audio and face.
+    motions = tuple(fit_motion(slot_motion(design, cid, design.stimulus(plan.motion_stimulus(i)), duration, k),
+                               duration, cond.motion_end)
+                    for i, (cid, cond, k) in enumerate(zip(plan.slots, conds, plan.samples)))
     maps = tuple(dict(cond.name_map) for cond in conds)
+    # a dry run's plan (validate) belongs to no block: it shows every criterion
+    block = next((b for b in design.trial_blocks if b.id == plan.block), None)
     return TrialMedia(plan=plan, audio=cut_audio(audio, duration), face=face, motions=motions,  # type: ignore[arg-type]
-                      avatar=design.avatar_for(stimulus), labels=design.slot_labels, duration_s=float(duration),
-                      criteria=tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
+                      avatar=design.avatar_for(stimulus), labels=design.slot_labels_for(len(plan.slots)),
+                      duration_s=float(duration),
+                      criteria=block.criteria if block is not None else tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
                       avatar_bone_map=dict(design.avatar_bone_map), framing=design.display.framing)
 
 
@@ -451,6 +458,8 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                         dry_failures.setdefault(key, []).extend(failure)
     for (avatar, text), where in dry_failures.items():
         problems.append(_dry_run_problem(design, avatar, text, where))
+    if not problems:  # the combinations only mismatch trials make, once every file reads
+        problems += _check_mismatched(design)
     for ci in sorted(array_settings_missing):
         c = design.conditions[ci]
         problems += missing_array_settings(f"conditions[{ci}]", c.template, c.representation, c.fps)
@@ -473,6 +482,43 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
                          f"({', '.join(clips)}): the files' frame rate (BVH Frame Time) is probably wrong",
                          f"add fps = {rate:g} to this condition (it overrides the files' frame rate)"))
     return problems
+
+
+def _check_mismatched(design: Design) -> list[tuple[str, str, str]]:
+    """Each mismatch block's motions played under another clip's speech: a motion shorter than the trial it
+    is mismatched into needs its condition's ``motion_end`` (one problem per condition, naming the pairs)."""
+    from studyapp.study.schedule import mismatch_sources
+
+    short: dict[int, list[str]] = {}
+    seconds: dict[tuple[str, str, int], float] = {}  # each motion's length, read once however often mismatched
+
+    def length(cond: Condition, source: str, k: int) -> float:
+        if (cond.id, source, k) not in seconds:
+            seconds[cond.id, source, k] = load_condition_motion(design, cond, design.stimulus(source), k).duration
+        return seconds[cond.id, source, k]
+
+    for n, block in enumerate(design.trial_blocks):
+        if block.paradigm != "mismatch":
+            continue
+        clips = list(block.stimuli) + ([p for p in design.practice if p not in block.stimuli] if n == 0 else [])
+        for sid in clips:
+            stim = design.stimulus(sid)
+            trial_s = trial_duration(stim.duration_s, load_audio(stim.audio).duration)
+            for source in mismatch_sources(design, block, sid):
+                for cid in block.conditions:
+                    ci = design.condition_ids.index(cid)
+                    cond = design.conditions[ci]
+                    if cond.motion_end is not None:
+                        continue  # held or looped: never too short
+                    for k in range(1, cond.samples + 1):
+                        if medium_end(length(cond, source, k), trial_s, cond.motion_end) == "short":
+                            short.setdefault(ci, []).append(f"{source} ({length(cond, source, k):.2f} s) under "
+                                                            f"{sid} ({trial_s:.2f} s)")
+    return [(f"conditions[{ci}].motion_end", f"condition {design.conditions[ci].id!r} is mismatched with clips "
+             f"longer than its motion: {', '.join(pairs[:3])}{' ...' if len(pairs) > 3 else ''}; it would freeze",
+             'set motion_end = "hold" or "loop" on the condition (mismatched motion is cut, held or looped to '
+             "the trial), or give the block clips of similar length")
+            for ci, pairs in short.items()]
 
 
 def _motion_label(cond: Condition, sample: int) -> str:

@@ -50,7 +50,7 @@ from studyapp.study import row_checksums, sql_backend
 from studyapp.study.sql_backend import sqlite_problem  # noqa: F401  (its home was here; callers import it from here)
 
 #: Bumped whenever the tables change; a database with another version is refused, never guessed at.
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 #: Older schema versions this version upgrades in place when it opens them (see ``_MIGRATIONS``).
 #: Version 2 added ``trials.trial_duration_s``; a version 1 trial keeps it NULL (not recorded).
 #: Version 3 added ``trials.sample_left/middle/right`` (the sample each slot showed, see ``samples`` in
@@ -61,6 +61,12 @@ SCHEMA_VERSION = 5
 #: besides its SQL: once the table exists, :meth:`ResultsDB._migrate` verifies every row before each later
 #: step and seals every row after it, so the upgrade that creates the table computes the checksums of the
 #: rows already there (they are trusted as the file holds them then, after ``PRAGMA integrity_check``).
+#: Version 6 added the response paradigms (see :class:`~studyapp.study.design.Block`): ``trials.block`` and
+#: ``trials.paradigm`` (NULL in an upgraded database: block ``"main"``, paradigm ``"rank"``), table
+#: ``trial_slots`` (every slot of every trial: condition, whose motion it played, sample) and table
+#: ``judgements`` (pairwise/mismatch preferences and ratings, one row per slot). New parts use portable SQL
+#: only (INTEGER/REAL/TEXT, no AUTOINCREMENT, no SQLite-only functions), so the same statements run on
+#: PostgreSQL.
 _MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",),
                2: ("ALTER TABLE trials ADD COLUMN sample_left INTEGER",
                    "ALTER TABLE trials ADD COLUMN sample_middle INTEGER",
@@ -145,6 +151,10 @@ CREATE TABLE trials (
     sample_left INTEGER,
     sample_middle INTEGER,
     sample_right INTEGER,
+    -- the trial's block and paradigm (schema 6, NULL in an upgraded database: "main", "rank"). Slots of a
+    -- two-slot trial are (left, '', right), of a four-slot one the first three: trial_slots has them all
+    block TEXT,
+    paradigm TEXT,
     PRIMARY KEY (participant, trial_index)
 );
 CREATE TABLE responses (
@@ -180,6 +190,36 @@ CREATE TABLE questionnaire (
     app_version TEXT NOT NULL,
     PRIMARY KEY (participant, item)
 );
+-- Every slot of every trial (schema 6): its condition, the stimulus whose motion it played (a mismatch
+-- trial's other clip) and the sample shown: the full truth for trials of 2 or 4 slots.
+CREATE TABLE trial_slots (
+    participant TEXT NOT NULL,
+    trial_index INTEGER NOT NULL,
+    slot INTEGER NOT NULL,
+    condition TEXT NOT NULL,
+    motion_stimulus TEXT NOT NULL,
+    sample INTEGER,
+    design_hash TEXT NOT NULL,
+    app_version TEXT NOT NULL,
+    PRIMARY KEY (participant, trial_index, slot),
+    FOREIGN KEY (participant, trial_index) REFERENCES trials(participant, trial_index)
+);
+-- Answers of pairwise, mismatch and rating trials, one row per criterion x slot (schema 6): the preference
+-- FOR that slot (+2 clearly this one .. -2 clearly the other, a trial's two rows are p and -p) or its rating
+-- 0..100. reasons: a JSON list of the reasons chosen (pairwise), on both rows of a trial.
+CREATE TABLE judgements (
+    participant TEXT NOT NULL,
+    trial_index INTEGER NOT NULL,
+    criterion TEXT NOT NULL,
+    slot INTEGER NOT NULL,
+    condition TEXT NOT NULL,
+    value REAL NOT NULL,
+    reasons TEXT,
+    design_hash TEXT NOT NULL,
+    app_version TEXT NOT NULL,
+    PRIMARY KEY (participant, trial_index, criterion, slot),
+    FOREIGN KEY (participant, trial_index) REFERENCES trials(participant, trial_index)
+);
 -- Keys of remote bundles made from this study: opaque condition ids -> real ids (see bundle.py).
 CREATE TABLE bundles (
     design_hash TEXT PRIMARY KEY,
@@ -189,11 +229,26 @@ CREATE TABLE bundles (
 -- The checksum of every row of every other table (see row_checksums.py).
 """ + row_checksums.CREATE_TABLE + ";\n"
 
+
+def _create_statement(table: str) -> str:
+    """The ``CREATE TABLE`` statement of ``table`` in :data:`_SCHEMA` (so a migration creates it identically)."""
+    start = _SCHEMA.index(f"CREATE TABLE {table} (")
+    return _SCHEMA[start:_SCHEMA.index(";", start)]
+
+
+_MIGRATIONS[5] = ("ALTER TABLE trials ADD COLUMN block TEXT", "ALTER TABLE trials ADD COLUMN paradigm TEXT",
+                  _create_statement("trial_slots"), _create_statement("judgements"))
+
+assert not any(";" in ln for ln in _SCHEMA.splitlines() if ln.strip().startswith("--")), \
+    "a ';' in a comment of _SCHEMA would split its statement"
+
 #: Tables (and their columns) a valid database must have; used to recognise a foreign schema.
 _EXPECTED_TABLES = {
     "schema_version", "study", "stimuli", "conditions", "participants", "sessions", "trials",
     "responses", "plays", "questionnaire", "bundles",
 }
+#: Tables a database of the current version has besides those (an older one gains them when upgraded).
+_NEW_TABLES = ("trial_slots", "judgements")
 
 
 _log = logging.getLogger(__name__)
@@ -226,8 +281,8 @@ class ParticipantRecord:
 class TrialRecord:
     """Everything stored about one answered trial besides the ranks themselves.
 
-    ``slots`` are condition ids in left, middle, right order, ``samples`` the 1-based sample each slot
-    showed; ``attention_passed`` is ``None`` for a trial that is not an attention check.
+    ``slots`` are condition ids left to right (3 for rank, 2 pairwise/mismatch, k rating), ``samples`` the
+    1-based sample each slot showed; ``attention_passed`` is ``None`` for a trial that is not an attention check.
     """
 
     participant: str
@@ -235,7 +290,7 @@ class TrialRecord:
     stimulus: str
     is_practice: bool
     is_attention_check: bool
-    slots: tuple[str, str, str]
+    slots: tuple[str, ...]
     answered_at: str
     shown_at: str | None = None
     response_time_s: float | None = None
@@ -248,6 +303,22 @@ class TrialRecord:
     session: int | None = None
     trial_duration_s: float | None = None
     samples: tuple[int | None, ...] = (1, 1, 1)
+    block: str = "main"
+    paradigm: str = "rank"
+    #: per slot, the stimulus whose motion it played; () = ``stimulus`` for every slot
+    motion_stimuli: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """One slot's answer on one criterion of a pairwise, mismatch or rating trial (table ``judgements``):
+    ``value`` is the preference for this slot (-2..2) or its rating (0..100); ``reasons`` the chosen reasons."""
+
+    criterion: str
+    condition: str
+    slot: int
+    value: float
+    reasons: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -277,8 +348,11 @@ _WRITTEN: dict[str, tuple[str, ...]] = {
     "trials": ("participant", "trial_index", "session", "stimulus", "is_practice", "is_attention_check", "slot_left",
                "slot_middle", "slot_right", "shown_at", "answered_at", "response_time_s", "plays", "frames_shown",
                "dropped_frames", "refresh_hz", "worst_av_offset_ms", "attention_passed", "app_version",
-               "trial_duration_s", "sample_left", "sample_middle", "sample_right"),
+               "trial_duration_s", "sample_left", "sample_middle", "sample_right", "block", "paradigm"),
+    "trial_slots": ("participant", "trial_index", "slot", "condition", "motion_stimulus", "sample", "app_version"),
     "responses": ("participant", "trial_index", "criterion", "condition", "slot", "rank", "app_version"),
+    "judgements": ("participant", "trial_index", "criterion", "slot", "condition", "value", "reasons",
+                   "app_version"),
     "plays": ("participant", "trial_index", "session", "started", "ended", "completed", "app_version"),
     "questionnaire": ("participant", "item", "kind", "scale", "value", "app_version"),
 }
@@ -421,9 +495,10 @@ class ResultsDB:
             raise InputError(self.path, "schema_version", f"schema version {found} is not the version this "
                              f"studyapp {__version__} writes ({SCHEMA_VERSION}); use the studyapp version "
                              "that created the file")
-        if not self._has_table(row_checksums.TABLE):
-            raise InputError(self.path, "schema", f"table {row_checksums.TABLE} is missing: the file is damaged or "
-                             "not a complete studyapp results database. Keep a copy of it for recovery")
+        for table in (row_checksums.TABLE, *_NEW_TABLES):
+            if not self._has_table(table):
+                raise InputError(self.path, "schema", f"table {table} is missing: the file is damaged or not a "
+                                 "complete studyapp results database. Keep a copy of it for recovery")
 
     def _has_table(self, name: str) -> bool:
         return self._con.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
@@ -698,31 +773,58 @@ class ResultsDB:
              + " ORDER BY participant, trial_index, criterion, slot")
         return [dict(r) for r in self._con.execute(q, (participant_id,) if participant_id else ())]
 
-    def save_trial(self, trial: TrialRecord, responses: Iterable[Response]) -> None:
-        """Commit one trial and all its ranks in a single transaction (durable when this returns).
+    def trial_slots(self, participant_id: str | None = None) -> list[dict[str, Any]]:
+        q = ("SELECT * FROM trial_slots" + (" WHERE participant = ?" if participant_id else "")
+             + " ORDER BY participant, trial_index, slot")
+        return [dict(r) for r in self._con.execute(q, (participant_id,) if participant_id else ())]
+
+    def judgements(self, participant_id: str | None = None) -> list[dict[str, Any]]:
+        q = ("SELECT * FROM judgements" + (" WHERE participant = ?" if participant_id else "")
+             + " ORDER BY participant, trial_index, criterion, slot")
+        return [dict(r) for r in self._con.execute(q, (participant_id,) if participant_id else ())]
+
+    def save_trial(self, trial: TrialRecord, responses: Iterable[Response],
+                   judgements: Iterable[Judgement] = ()) -> None:
+        """Commit one trial, its slots and all its answers (ranks or judgements) in a single transaction
+        (durable when this returns).
 
         Raises :class:`DuplicateAnswerError` when the trial already has an answer: answers are never
         overwritten, so a double submit (or a resumed session racing an old one) cannot change data.
         """
+        from studyapp.study.schedule import three_slots
+
         t = trial
+        left, middle, right = three_slots(t.slots)
+        s_left, s_middle, s_right = three_slots(t.samples, None)
         row = {"participant": t.participant, "trial_index": t.trial_index, "session": t.session,
                "stimulus": t.stimulus, "is_practice": int(t.is_practice), "is_attention_check": int(t.is_attention_check),
-               "slot_left": t.slots[0], "slot_middle": t.slots[1], "slot_right": t.slots[2], "shown_at": t.shown_at,
+               "slot_left": left, "slot_middle": middle, "slot_right": right, "shown_at": t.shown_at,
                "answered_at": t.answered_at, "response_time_s": t.response_time_s, "plays": t.plays,
                "frames_shown": t.frames_shown, "dropped_frames": t.dropped_frames, "refresh_hz": t.refresh_hz,
                "worst_av_offset_ms": t.worst_av_offset_ms,
                "attention_passed": None if t.attention_passed is None else int(t.attention_passed),
                "app_version": __version__, "trial_duration_s": t.trial_duration_s,
-               "sample_left": t.samples[0], "sample_middle": t.samples[1], "sample_right": t.samples[2]}
+               "sample_left": s_left, "sample_middle": s_middle, "sample_right": s_right,
+               "block": t.block, "paradigm": t.paradigm}
+        motions = t.motion_stimuli or (t.stimulus,) * len(t.slots)
+        slots = [{"participant": t.participant, "trial_index": t.trial_index, "slot": i, "condition": c,
+                  "motion_stimulus": m, "sample": t.samples[i] if i < len(t.samples) else None,
+                  "app_version": __version__} for i, (c, m) in enumerate(zip(t.slots, motions))]
         answers = [{"participant": t.participant, "trial_index": t.trial_index, "criterion": r.criterion,
                     "condition": r.condition, "slot": r.slot, "rank": float(r.rank), "app_version": __version__}
                    for r in responses]
+        judged = [{"participant": t.participant, "trial_index": t.trial_index, "criterion": j.criterion,
+                   "slot": j.slot, "condition": j.condition, "value": float(j.value),
+                   "reasons": json.dumps(list(j.reasons), ensure_ascii=False), "app_version": __version__}
+                  for j in judgements]
         with self.transaction() as con:
             if con.execute("SELECT 1 FROM trials WHERE participant = ? AND trial_index = ?",
                            (t.participant, t.trial_index)).fetchone():
                 raise DuplicateAnswerError(f"trial {t.trial_index} of participant {t.participant!r} is already answered")
             self._insert(con, "trials", [row])
+            self._insert(con, "trial_slots", slots)
             self._insert(con, "responses", answers)
+            self._insert(con, "judgements", judged)
 
     def _insert(self, con: sqlite3.Connection, table: str, rows: list[dict[str, Any]]) -> list[int]:
         """Insert rows of one table, every row stamped with this database's design hash; the row ids."""
@@ -735,7 +837,8 @@ class ResultsDB:
 
     def import_participant(self, participant: dict[str, Any], sessions: list[dict[str, Any]],
                            trials: list[dict[str, Any]], responses: list[dict[str, Any]], plays: list[dict[str, Any]],
-                           questionnaire: list[dict[str, Any]]) -> None:
+                           questionnaire: list[dict[str, Any]], trial_slots: list[dict[str, Any]] | None = None,
+                           judgements: list[dict[str, Any]] | None = None) -> None:
         """Add one participant recorded elsewhere (a remote participant's results file), in one transaction.
 
         Rows are plain dicts keyed by column name, already in this study's condition and stimulus ids; session
@@ -752,7 +855,9 @@ class ResultsDB:
             session_ids = {s["id"]: i for s, i in zip(sessions, new_ids)}
             self._insert(con, "trials", [{**t, "participant": pid, "session": session_ids.get(t["session"])}
                                          for t in trials])
+            self._insert(con, "trial_slots", [{**r, "participant": pid} for r in trial_slots or []])
             self._insert(con, "responses", [{**r, "participant": pid} for r in responses])
+            self._insert(con, "judgements", [{**r, "participant": pid} for r in judgements or []])
             self._insert(con, "plays", [{**r, "participant": pid, "session": session_ids.get(r["session"])}
                                         for r in plays])
             self._insert(con, "questionnaire", [{**q, "participant": pid, "kind": q.get("kind", "likert")}

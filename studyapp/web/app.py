@@ -6,7 +6,7 @@ Routes (nothing else is served: no directory listing, no file by path)::
                                  an unfinished participant's pages, or a refusal
     POST /start                  consent given or declined -> {"go": "/s/<token>/"}
     GET  /s/<token>/             the participant's current page (reload-safe)
-    POST /s/<token>/<action>     continue | sound | play | ended | answer | questionnaire -> the next page
+    POST /s/<token>/<action>     continue | sound | block | play | ended | answer | questionnaire -> the next page
     GET  /s/<token>/<name>.mp4   the current trial's video (byte ranges), name opaque per participant + trial
     GET  /a/<asset>              the page's script, style sheet and test tone (a fixed list)
     GET  /dashboard ...          the experimenter's pages (:mod:`studyapp.web.dashboard`)
@@ -46,7 +46,7 @@ _log = logging.getLogger(__name__)
 ASSETS = {"app.js": ("app.js", "text/javascript; charset=utf-8"),
           "app.css": ("app.css", "text/css; charset=utf-8"),
           "dashboard.js": ("dashboard.js", "text/javascript; charset=utf-8")}
-ACTIONS = ("continue", "sound", "play", "ended", "answer", "questionnaire")
+ACTIONS = ("continue", "sound", "block", "play", "ended", "answer", "questionnaire")
 
 
 def asset_text(name: str) -> str:

@@ -99,7 +99,7 @@ class Dashboard:
         if request.method == "GET" and rest == "":
             if not self._logged_in(request):
                 return self._page({"screen": "login", "title": self.flow.design.title})
-            self.flow.sweep()
+            self.flow.sweep(force=True)
             from studyapp.study.schedule import n_rows
 
             return self._page({"screen": "dashboard", "title": self.flow.design.title,

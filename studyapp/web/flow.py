@@ -23,11 +23,19 @@ Coming back
 
 Abandonment
     A browser participant with no activity for the design's ``[online] abandon_after_min`` is abandoned when the
-    server next assigns a row or shows the dashboard (:meth:`Flow.sweep`): status ``ended_early``, and the
+    server next assigns a row (looking at most once per :data:`SWEEP_EVERY_S`) or shows the dashboard
+    (:meth:`Flow.sweep`): status ``ended_early``, and the
     last session's machine record gets :data:`~studyapp.study.storage.ABANDONED` (the time) and
     ``abandon_after_min``. Their answers are kept; their row is given out again. Coming back later, they read
     that the session was closed. Activity is the latest session start or end, play start or end, and answer, or
     any request this server process saw.
+
+Paradigms
+    A trial's page carries its paradigm (``rank``, ``pairwise``, ``mismatch``, ``rating``) and the answer goes to
+    the session's method for it (``submit_ranking``, ``submit_preference``, ``submit_ratings``), which checks
+    it; a block's instructions come first (``block`` action, ``Session.finish_block_instructions``). An answer
+    the session refuses is a 422 with its message for the participant; a request the session's state does not
+    allow (a stale or forged page) is a 400.
 
 Must watch once
     The page reports when the video starts (``play``) and when it fires ``ended``; the server counts the play
@@ -57,6 +65,9 @@ PROLIFIC_PARAMS = ("PROLIFIC_PID", "STUDY_ID", "SESSION_ID")
 _PARAM_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 #: A completed play may end this much sooner than the video's length (timer granularity, start latency).
 WATCH_SLACK_S = 0.5
+#: Abandonment is looked for at most this often (it reads every unfinished participant's record); the
+#: timeout itself is minutes to hours.
+SWEEP_EVERY_S = 60.0
 #: The longest text answer kept (a questionnaire comment).
 MAX_TEXT_CHARS = 5000
 
@@ -119,6 +130,8 @@ class Flow:
         self._plays: dict[str, _Play] = {}
         self._seen: dict[str, float] = {}
         self._lengths: dict[Path, float] = {}
+        self._minutes: int | None = None
+        self._swept: float | None = None
 
     # ------------------------------------------------------------------ texts
     def t(self, key: str, **values: Any) -> str:
@@ -149,13 +162,16 @@ class Flow:
             decline_back=self.t("welcome.decline_back"))
 
     def estimated_minutes(self) -> int:
-        """About how long the study takes: each trial's timeline plus 40 s to answer (as the desktop says)."""
-        from studyapp.study.schedule import participant_schedule
+        """About how long the study takes: each trial's timeline plus 40 s to answer (as the desktop says);
+        worked out once (it reads every clip's audio header)."""
+        if self._minutes is None:
+            from studyapp.study.schedule import participant_schedule
 
-        total = 0.0
-        for plan in participant_schedule(self.design, "estimate", 0):
-            total += (trial_duration_s(self.design, plan) or 30.0) + 40.0
-        return max(2, int(round(total / 60.0)))
+            total = 0.0
+            for plan in participant_schedule(self.design, "estimate", 0):
+                total += (trial_duration_s(self.design, plan) or 30.0) + 40.0
+            self._minutes = max(2, int(round(total / 60.0)))
+        return self._minutes
 
     def start(self, body: Mapping[str, Any]) -> str:
         """The consent page's answer: create the participant (or find the one coming back) and return their
@@ -222,11 +238,15 @@ class Flow:
         times += [_seconds(t["answered_at"]) for t in self.db.trials(pid)]
         return max((t for t in times if t is not None), default=0.0)
 
-    def sweep(self) -> list[str]:
+    def sweep(self, force: bool = False) -> list[str]:
         """Mark every browser participant inactive for longer than ``abandon_after_min`` abandoned (see the
-        module docstring); returns their ids."""
+        module docstring); returns their ids. It reads every unfinished participant's record, so it runs at
+        most once per :data:`SWEEP_EVERY_S` unless ``force`` (the dashboard)."""
         limit_s = float(self.design.online.abandon_after_min) * 60.0
         now = self.clock()
+        if not force and self._swept is not None and now - self._swept < SWEEP_EVERY_S:
+            return []
+        self._swept = now
         out = []
         for rec in self.db.participants():
             if rec.status != "active":
@@ -273,7 +293,7 @@ class Flow:
             return self._page("instructions", heading=self.t("instructions.title"),
                               text=self.design.instructions, questions_title=self.t("instructions.questions"),
                               criteria=self._criteria(), how_title=self.t("instructions.how_title"),
-                              how=self.t("instructions.how", keys="1, 2, 3"),
+                              how="\n\n".join(self._how()),
                               ties=self.t("instructions.ties") if self.design.playback.allow_ties else "",
                               button=self.t("page.continue"), **common)
         if st is State.ENV_CHECK:
@@ -301,9 +321,25 @@ class Flow:
         text = self.t("online.expired") if self._abandoned(pid) else self.t("final.ended_early_text")
         return self._page("ended", heading=self.t("final.ended_early"), text=text)
 
-    def _criteria(self) -> list[dict[str, str]]:
+    def _criteria(self, ids: list[str] | None = None) -> list[dict[str, str]]:
         return [{"id": c.id, "label": c.label, "question": c.question, "explanation": c.explanation}
-                for c in self.design.criteria]
+                for c in self.design.criteria if ids is None or c.id in ids]
+
+    def _how(self) -> list[str]:
+        """How to answer, for each paradigm the design's blocks use (in their order)."""
+        out: list[str] = []
+        for block in self.design.trial_blocks:
+            if block.paradigm == "rank":
+                text = self.t("instructions.how", keys="1, 2, 3")
+            elif block.paradigm in ("pairwise", "mismatch"):
+                text = self.t("instructions.how_pref", n=block.levels)
+                if block.reasons:
+                    text += "\n\n" + self.t("instructions.how_reasons")
+            else:
+                text = self.t("instructions.how_rating", n=max(2, len(block.anchors) or 5))
+            if text not in out:
+                out.append(text)
+        return out
 
     def _items(self) -> list[dict[str, Any]]:
         out = []
@@ -325,6 +361,10 @@ class Flow:
 
     def _trial(self, session: Session, pid: str, tok: str, common: dict[str, Any]) -> dict[str, Any]:
         plan = session.current_trial()
+        intro = session.block_instructions()
+        if intro is not None:
+            return self._page("block", heading=self.t("block.title"), text=intro, button=self.t("block.continue"),
+                              **common)
         pos = session.plans.index(plan)
         nxt = session.plans[pos + 1] if pos + 1 < len(session.plans) else None
         if nxt is None:
@@ -333,20 +373,50 @@ class Flow:
             next_key = "rank.start_study"
         else:
             next_key = "rank.next_practice" if plan.is_practice else "rank.next"
-        labels = list(self.design.slot_labels or ("1", "2", "3"))
+        n = len(plan.slots)
+        labels = list(self.design.slot_labels_for(n) or [str(k + 1) for k in range(n)])
+        paradigm = getattr(plan, "paradigm", "rank")
+        block = self.design.block(getattr(plan, "block", "main"))
         pb = self.design.playback
+        texts = {k: self.t(k) for k in ("trial.play", "trial.replay", "trial.ready", "trial.watch", "rank.wait",
+                                        "rank.next_ok", "trial.loading")}
+        if paradigm == "rank":
+            texts |= {k: self.t(k) for k in ("trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
+                                             "rank.third", "rank.drop_here", "rank.tie_on", "rank.tie_off")}
+            texts |= {"start_hint": self.t("rank.start_hint", keys="1, 2, 3"), "still": self.t("rank.still", criteria="{criteria}")}
+            answer: dict[str, Any] = {}
+        elif paradigm in ("pairwise", "mismatch"):
+            texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),
+                      "reasons": self.t("pref.reasons"), "still": self.t("pref.still", criteria="{criteria}"),
+                      "start_hint": self.t("pref.start_hint", n=block.levels)}
+            answer = {"options": self._preference_options(block.levels, labels), "reasons": list(block.reasons)}
+        else:
+            texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),
+                      "unset": self.t("rating.unset"), "still": self.t("rating.still", sliders="{criteria}"),
+                      "start_hint": self.t("rating.start_hint", n=max(2, len(block.anchors) or 5))}
+            answer = {"anchors": list(block.anchors)}
+        texts["next"] = self.t(next_key)
         return self._page(
-            "trial", progress=session.progress_label(), practice_note=self.t("trial.practice_note") if plan.is_practice else "",
+            "trial", paradigm=paradigm, progress=session.progress_label(),
+            practice_note=self.t("trial.practice_note") if plan.is_practice else "",
             video=f"/s/{tok}/{self.tokens.media(pid, plan.trial_index)}.mp4", labels=labels,
-            criteria=self._criteria(), can_play=session.can_play(), can_rank=session.can_rank(),
-            allow_replay=bool(pb.allow_replay), allow_ties=bool(pb.allow_ties),
-            texts={k: self.t(k) for k in ("trial.play", "trial.replay", "trial.ready", "trial.watch",
-                                          "trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
-                                          "rank.third", "rank.drop_here", "rank.wait", "rank.next_ok",
-                                          "rank.tie_on", "rank.tie_off", "trial.loading")}
-            | {"start_hint": self.t("rank.start_hint", keys="1, 2, 3"), "next": self.t(next_key),
-               "still": self.t("rank.still", criteria="{criteria}")},
-            **common)
+            criteria=self._criteria(session.criteria_of(plan)),
+            # a play still open here belongs to a page that was reloaded: the next "play" closes it
+            can_play=session.can_play() or session.playing, can_rank=session.can_rank(),
+            allow_replay=bool(pb.allow_replay), allow_ties=bool(pb.allow_ties), texts=texts, **answer, **common)
+
+    def _preference_options(self, levels: int, labels: list[str]) -> list[dict[str, Any]]:
+        """The answers of a preference question, left to right: (value, text); NEGATIVE = the left figure."""
+        left, right = labels[0], labels[-1]
+        if int(levels) == 3:
+            return [{"value": -1, "text": self.t("pref.better", figure=left)},
+                    {"value": 0, "text": self.t("pref.equal")},
+                    {"value": 1, "text": self.t("pref.better", figure=right)}]
+        return [{"value": -2, "text": self.t("pref.clearly", figure=left)},
+                {"value": -1, "text": self.t("pref.slightly", figure=left)},
+                {"value": 0, "text": self.t("pref.equal")},
+                {"value": 1, "text": self.t("pref.slightly", figure=right)},
+                {"value": 2, "text": self.t("pref.clearly", figure=right)}]
 
     # ------------------------------------------------------------------ media
     def media(self, pid: str, name: str) -> Path:
@@ -390,21 +460,50 @@ class Flow:
                 self._play(session, pid)
             elif action == "ended":
                 self._ended(session, pid)
+            elif action == "block":
+                session.finish_block_instructions()
             elif action == "answer":
-                ranks = body.get("ranks")
-                if not isinstance(ranks, dict) or not all(isinstance(v, dict) for v in ranks.values()):
-                    raise BadRequest("ranks must map each question to {slot: rank}")
-                session.submit_ranking(ranks)
+                self._answer(session, body)
                 self._plays.pop(pid, None)
             elif action == "questionnaire":
                 session.submit_questionnaire(self._answers(body))
             else:
                 raise BadRequest(f"unknown action {action!r}")
-        except (RankingError, SessionError) as exc:
+        except RankingError as exc:          # the participant's answer breaks a rule: they can fix it
             raise NotSaved(str(exc)) from None
+        except SessionError as exc:          # not possible in this state: a stale or forged page
+            raise BadRequest(str(exc)) from None
         if session.finished:
             self._sessions.pop(pid, None)
         return self.state(pid)
+
+    @staticmethod
+    def _answer(session: Session, body: Mapping[str, Any]) -> None:
+        """The current trial's answer, by its paradigm, through the session's method for it (which checks it)."""
+        plan = session.current_trial()
+        if plan is None:
+            raise BadRequest("no trial to answer now")
+        paradigm = getattr(plan, "paradigm", "rank")
+        if paradigm == "rank":
+            ranks = body.get("ranks")
+            if not isinstance(ranks, dict) or not all(isinstance(v, dict) for v in ranks.values()):
+                raise BadRequest("ranks must map each question to {slot: rank}")
+            session.submit_ranking(ranks)
+        elif paradigm in ("pairwise", "mismatch"):
+            levels, reasons = body.get("levels"), body.get("reasons", [])
+            if not isinstance(levels, dict) or not all(isinstance(v, int) and not isinstance(v, bool)
+                                                       for v in levels.values()):
+                raise BadRequest("levels must map each question to a whole number")
+            if not isinstance(reasons, list) or not all(isinstance(r, str) for r in reasons) or len(reasons) > 50:
+                raise BadRequest("reasons must be a list of texts")
+            session.submit_preference(levels, reasons)
+        else:
+            ratings = body.get("ratings")
+            if not isinstance(ratings, dict) or not all(
+                    isinstance(v, dict) and all(finite_number(x, -1e9, 1e9) is not None for x in v.values())
+                    for v in ratings.values()):
+                raise BadRequest("ratings must map each question to {slot: number}")
+            session.submit_ratings(ratings)
 
     @staticmethod
     def _env(body: Mapping[str, Any]) -> dict[str, Any]:
@@ -421,7 +520,7 @@ class Flow:
     def _play(self, session: Session, pid: str) -> None:
         if session.playing:
             # the page was reloaded (or lost) while a play was open: that play did not finish
-            session.record_play_finished(False)
+            session.abandon_play()
         plan = session.current_trial()
         if plan is None:
             raise BadRequest("no clip to play now")

@@ -24,16 +24,25 @@ class TrialVideos(Protocol):
 
 
 class PrerenderedVideos:
-    """The videos of :mod:`studyapp.study.prerender`, rendered into ``cache_dir`` when not there yet."""
+    """The videos of :mod:`studyapp.study.prerender` in ``cache_dir`` (``studyapp prerender``'s ``--cache``),
+    rendered with ``settings``; a video not there yet is rendered when first asked for (``studyapp serve``
+    renders every missing one before it starts listening, so none is rendered while a participant waits)."""
 
-    def __init__(self, design: Any, cache_dir: Path) -> None:
+    def __init__(self, design: Any, cache_dir: Path, settings: Any = None) -> None:
+        from studyapp.study.prerender import RenderSettings
+
         self.design = design
         self.cache_dir = Path(cache_dir)
+        self.settings = settings or RenderSettings()
+        self._paths: dict[tuple, Path] = {}
 
     def video(self, plan: Any) -> Path:
-        from studyapp.study.prerender import video_for
+        from studyapp.study.prerender import trial_identity, video_for
 
-        return Path(video_for(self.design, plan, self.cache_dir))
+        key = trial_identity(plan)
+        if key not in self._paths:   # the cache key hashes every input file: computed once per trial
+            self._paths[key] = Path(video_for(self.design, plan, self.cache_dir, self.settings))
+        return self._paths[key]
 
 
 def duration_s(path: Path) -> float:

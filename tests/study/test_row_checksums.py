@@ -196,6 +196,10 @@ def test_a_schema_3_database_is_upgraded_in_place_with_checksums(bot_db: Path, t
     with sqlite3.connect(path) as con:  # what studyapp wrote before labels (4) and checksums (5)
         con.execute(f"DROP TABLE {row_checksums.TABLE}")
         con.execute("ALTER TABLE conditions DROP COLUMN label")
+        for table in ("trial_slots", "judgements"):  # added by 6
+            con.execute(f"DROP TABLE {table}")
+        for column in ("block", "paradigm"):  # added by 6
+            con.execute(f"ALTER TABLE trials DROP COLUMN {column}")
         con.execute("UPDATE schema_version SET version = 3")
     con.close()
     before = export_dataframe_raw(path)

@@ -25,3 +25,12 @@ def study(web_study_files, tmp_path) -> Study:
 @pytest.fixture
 def browser_for() -> Callable[[Any, Study], Browser]:
     return Browser
+
+
+@pytest.fixture
+def chrome():
+    from fixtures.web_serve import headless_chrome
+
+    driver = headless_chrome()
+    yield driver
+    driver.quit()

@@ -13,7 +13,8 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from starlette.testclient import TestClient
 
-from fixtures.web_study import COMPLETION_CODE, secret_names
+from fixtures.web_study import COMPLETION_CODE, ClipVideos, Clock, Study, secret_names
+from studyapp.study.design import load_design
 from studyapp.study.design.blinding import conditions_named_in
 from studyapp.study.schedule import n_rows
 
@@ -124,6 +125,7 @@ def test_a_reload_mid_trial_and_a_server_restart_resume_at_the_first_unanswered_
         b.act("play")                      # the page is reloaded while the clip plays
         page = b.reload()
         assert page["screen"] == "trial" and page["progress"] == "Clip 2 of 3" and not page["can_rank"]
+        assert page["can_play"]            # the reloaded page may play the clip again
         b.act("play")                      # the play left open by the reload is closed as not completed
         study.clock.now += 1.0
         b.act("ended")
@@ -268,7 +270,7 @@ def test_invalid_answers_are_refused_and_nothing_is_stored(study, browser_for) -
                         headers={"X-CSRF-Token": b.csrf, "content-type": "application/json"})
         assert r.status_code == 400
         b.act("nonsense", {}, expect=400)
-        b.act("questionnaire", {"answers": {}}, expect=422)   # not in that state: refused, nothing stored
+        b.act("questionnaire", {"answers": {}}, expect=400)   # not in that state: refused, nothing stored
     db = study.db()
     assert db.trials("5f0c0ffee0ddba11") == [] and db.questionnaire("5f0c0ffee0ddba11") == []
     db.close()
@@ -289,3 +291,52 @@ def test_questionnaire_answers_are_checked_per_kind(study, browser_for) -> None:
         b.act("questionnaire", {"answers": {**good, "age": {"x": 1}}}, expect=400)
         b.act("questionnaire", {"answers": good})
         assert b.state["screen"] == "done"
+
+
+def test_a_reload_mid_clip_keeps_a_play_once_clip_playable(web_study_files, tmp_path, browser_for) -> None:
+    """With ``allow_replay = false`` the clip plays once; a page reloaded mid-clip lost that play, and the
+    clip may be played again (as after a restart on the desktop), once."""
+    path, _ = web_study_files
+    once = path.with_name("once.toml")
+    once.write_text(path.read_text().replace("[playback]\n", "[playback]\nallow_replay = false\n"))
+    design = load_design(once)
+    assert not design.playback.allow_replay
+    study = Study(once, design, tmp_path / "results.sqlite", ClipVideos(path.parent / "videos"), Clock())
+    with TestClient(study.app()) as client:
+        b = browser_for(client, study)
+        _to_first_trial(b)
+        b.act("play")
+        page = b.reload()
+        assert page["can_play"] and not page["can_rank"]
+        b.watch()
+        assert not b.state["can_play"]     # watched once: no replay in this design
+        b.act("play", expect=400)
+        b.answer_well()
+    db = study.db()
+    assert [(p["trial_index"], p["completed"]) for p in db.plays("5f0c0ffee0ddba11")] == [(0, 0), (0, 1)]
+    db.close()
+
+
+def test_the_demo_is_served(tmp_path, browser_for) -> None:
+    """The shipped demo design through the server (stand-in videos): every page, the frozen attention check
+    passed, its questionnaire, done."""
+    from studyapp.resources import demo_design
+
+    design = load_design(demo_design(), check_files=False)
+    study = Study(demo_design(), design, tmp_path / "demo.sqlite", ClipVideos(tmp_path / "videos"), Clock())
+    with TestClient(study.app()) as client:
+        b = browser_for(client, study)
+        _to_first_trial(b, "PROLIFIC_PID=demo1")
+        assert "Practice clip 1 of 1" == b.state["progress"] and b.state["labels"] == ["A", "B", "C"]
+        while b.state["screen"] == "trial":
+            b.watch()
+            b.answer_well()
+        assert b.state["screen"] == "questionnaire"
+        b.act("questionnaire", {"answers": {q["id"]: 5 for q in b.state["items"]}})
+        assert b.state["screen"] == "done"
+        for url, headers, body in b.seen:
+            assert conditions_named_in(design, " ".join([url, json.dumps(headers), body.decode("latin-1")])) == []
+    db = study.db()
+    assert db.participant("demo1").status == "done"
+    assert [t["attention_passed"] for t in db.trials("demo1") if t["is_attention_check"]] == [1]
+    db.close()

@@ -33,16 +33,18 @@ from studyapp.study.design import validated
 from studyapp.study.design.blinding import conditions_named_in, visible_text_leaks
 from studyapp.study.design.files import (SAMPLE_FIELD, design_hash, fill_sample, has_sample_field, model_path, motion_key, motion_path,
                                          pattern_fields, referenced_files, resolve)
-from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design,
-                                         DesignError, Display, Playback, Problem, QuestionItem, Stimulus)
+from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Block, Condition, Criterion, Design,
+                                         DesignError, DesignWarning, Display, Playback, Problem, QuestionItem,
+                                         Stimulus, criterion_aspect)
 from studyapp.study.design.parse import REPRESENTATIONS, TABLES, condition_from_settings, parse_design
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE, FROZEN_PREFIX,
-                                          MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
-                                          SLOT_LABELS)
+                                          MOTION_SUFFIXES, ORDERINGS, PARADIGMS, PREFERENCE_LEVELS, QUESTION_KINDS,
+                                          SLOT_ASSIGNMENTS, SLOT_LABELS)
 
 __all__ = [
     "SAMPLE_FIELD", "fill_sample", "has_sample_field", "motion_key", "ATTENTION_KINDS", "AVATAR_SUFFIXES", "BUILTIN_REFERENCE", "DEFAULT_CRITERIA", "FROZEN_PREFIX",
     "MOTION_SUFFIXES", "ORDERINGS", "QUESTION_KINDS", "REPRESENTATIONS", "SLOT_ASSIGNMENTS", "SLOT_LABELS", "TABLES",
+    "PARADIGMS", "PREFERENCE_LEVELS", "Block", "DesignWarning", "criterion_aspect",
     "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Display", "Playback", "Problem", "QuestionItem",
     "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",
     "pattern_fields", "problems_to_json", "referenced_files", "resolve", "validate_design", "visible_text_leaks",

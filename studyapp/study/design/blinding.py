@@ -37,6 +37,8 @@ def visible_text_leaks(design: Design) -> list[tuple[str, str]]:
         texts[f"criteria[{i}]"] = " ".join((c.label, c.question, c.explanation))
     for i, q in enumerate(design.questionnaire):
         texts[f"questionnaire[{i}]"] = " ".join((q.text, *q.anchors, *q.options))
+    for i, b in enumerate(design.blocks):  # a block's id is recorded, never shown
+        texts[f"blocks[{i}]"] = " ".join((b.instructions, *b.reasons, *b.anchors))
     return [(key, cid) for key, text in texts.items() for cid in conditions_named_in(design, text)]
 
 

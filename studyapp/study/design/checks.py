@@ -29,6 +29,10 @@ class Collector:
     def add(self, key: str, message: str, fix: str = "") -> None:
         self.problems.append(Problem(self.path, key, message, fix, self._line_of(key)))
 
+    def line_of(self, key: str) -> int | None:
+        """The line of a dotted key (None when it cannot be placed)."""
+        return self._line_of(key)
+
     def _line_of(self, key: str) -> int | None:
         """Best-effort line number of a dotted key like ``stimuli[2].audio`` or ``slots.labels``."""
         parts = re.findall(r"([A-Za-z0-9_\-]+)(?:\[(\d+)\])?", key)

@@ -117,18 +117,95 @@ class Criterion:
     label: str = key(STR)                # default: the id, capitalised
     question: str = key(STR, required=True)
     explanation: str = key(STR, default="")
+    #: what the criterion judges: "motion" (quality: realism, human-likeness, diversity) or "speech"
+    #: (appropriateness, synchronization); None: guessed from its id and label (see :func:`criterion_aspect`)
+    aspect: str | None = key(STR, default=None)
 
 
 #: The three criteria of the published study; used when a design has no ``[[criteria]]``.
 DEFAULT_CRITERIA: tuple[Criterion, ...] = (
     Criterion("realism", "Realism", "Which motion looks most realistic?",
-              "Natural human movement: no odd body orientation, no jitter, no frozen or robotic poses."),
+              "Natural human movement: no odd body orientation, no jitter, no frozen or robotic poses.",
+              aspect="motion"),
     Criterion("synchronization", "Synchronization", "Which motion is best synchronized with the speech?",
               "The gestures follow the rhythm and intonation of the speech: emphasis in the voice comes with "
-              "movement, pauses with calm."),
+              "movement, pauses with calm.", aspect="speech"),
     Criterion("diversity", "Diversity", "Which motion is most diverse?",
-              "Rich and varied gestures: not motionless, not the same movement repeated over and over."),
+              "Rich and varied gestures: not motionless, not the same movement repeated over and over.",
+              aspect="motion"),
 )
+
+#: Words that mark a criterion (id or label) as judging the speech, or the motion itself, when it gives no
+#: ``aspect``.
+_SPEECH_WORDS = ("sync", "speech", "appropriate", "timing", "rhythm", "semantic", "match", "fit")
+_MOTION_WORDS = ("real", "natural", "human", "quality", "smooth", "divers", "plausib", "jitter")
+
+
+def criterion_aspect(c: Criterion) -> str | None:
+    """``"motion"``, ``"speech"`` or None (unknown): the criterion's ``aspect``, else a guess from its words.
+
+    >>> criterion_aspect(Criterion("appropriateness", "Appropriateness", "Which fits the speech?"))
+    'speech'
+    >>> criterion_aspect(Criterion("human_likeness", "Human-likeness", "Which looks human?"))
+    'motion'
+    """
+    if c.aspect is not None:
+        return c.aspect
+    words = f"{c.id} {c.label}".lower()
+    if any(w in words for w in _SPEECH_WORDS):
+        return "speech"
+    if any(w in words for w in _MOTION_WORDS):
+        return "motion"
+    return None
+
+
+@dataclass(frozen=True)
+class Block:
+    """One block of trials asked with one response paradigm (``[[blocks]]``).
+
+    A design without ``[[blocks]]`` has one block ``"main"`` of paradigm ``"rank"`` over all its criteria,
+    conditions and rotation stimuli: today's study, its schedule and hash unchanged.
+
+    Attributes
+    ----------
+    id: unique; recorded with every answer.
+    paradigm: ``rank`` (three figures ranked 1..3 per criterion), ``pairwise`` (two figures, a preference on
+        ``levels`` levels per criterion, optional ``reasons``), ``mismatch`` (the same condition twice: one
+        figure moves to the clip's own speech, the other plays the motion made for another clip sharing the
+        stimulus's ``match_tag``; a preference as in pairwise) or ``rating`` (every figure on a 0..100 slider
+        per criterion, MUSHRA-style, each slider moved before the answer counts).
+    criteria, conditions, stimuli: the block's subsets of the design's (ids, in design order).
+    instructions: a page shown before the block's first trial ("" = none).
+    levels: pairwise/mismatch: 5 (clearly/slightly left, equal, slightly/clearly right) or 3.
+    reasons: pairwise: reasons offered when the answer is not "equal" (may be empty).
+    match_tag: mismatch: the stimulus tag the mismatched clip shares with the trial's clip.
+    reference: rating: a hidden reference condition shown in every trial (None: none).
+    anchors: rating: slider labels spread evenly over 0..100 (may be empty).
+    """
+
+    id: str
+    paradigm: str
+    criteria: tuple[str, ...]
+    conditions: tuple[str, ...]
+    stimuli: tuple[str, ...]
+    instructions: str = ""
+    levels: int = 5
+    reasons: tuple[str, ...] = ()
+    match_tag: str = "speaker"
+    reference: str | None = None
+    anchors: tuple[str, ...] = ()
+
+    @property
+    def figures(self) -> tuple[str, ...]:
+        """The conditions a trial of the block shows: a rating block's conditions plus its reference."""
+        if self.paradigm == "rating" and self.reference is not None and self.reference not in self.conditions:
+            return self.conditions + (self.reference,)
+        return self.conditions
+
+    @property
+    def n_slots(self) -> int:
+        """Figures side by side in one trial: 3 rank, 2 pairwise and mismatch, every figure for rating."""
+        return {"rank": 3, "pairwise": 2, "mismatch": 2}.get(self.paradigm, len(self.figures))
 
 
 @dataclass
@@ -326,12 +403,47 @@ class Design:
     #: ``language`` and every built-in participant text after the design's ``[texts]`` (see :mod:`.texts`)
     language: str = "en"
     texts: dict[str, str] = field(default_factory=lambda: dict(EN_TEXTS))
+    #: ``[[blocks]]`` as given (empty: one implicit rank block, see :attr:`trial_blocks`)
+    blocks: list[Block] = field(default_factory=list)
     #: ``[online]``: the browser study server's settings (abandonment timeout, completion code and URL)
     online: OnlineTable = field(default_factory=OnlineTable)
 
     def text(self, key: str, **values: object) -> str:
         """The participant text ``key`` in this design's language, its ``{fields}`` filled from ``values``."""
         return fill(self.texts.get(key, EN_TEXTS[key]), **values)
+
+    @property
+    def trial_blocks(self) -> list[Block]:
+        """The blocks in order: the design's ``[[blocks]]``, else the one implicit ``rank`` block ``"main"``."""
+        if self.blocks:
+            return list(self.blocks)
+        return [Block("main", "rank", tuple(self.criterion_ids), tuple(self.condition_ids),
+                      tuple(self.rotation_stimuli), "")]
+
+    def block(self, block_id: str) -> Block:
+        """The block of that id (``"main"``: the implicit block of a design without ``[[blocks]]``)."""
+        for b in self.trial_blocks:
+            if b.id == block_id:
+                return b
+        raise KeyError(f"no block {block_id!r} in {self.path.name}; have {[b.id for b in self.trial_blocks]}")
+
+    def slot_labels_for(self, n: int) -> tuple[str, ...] | None:
+        """The labels of ``n`` slots in the style of ``[slots] labels``: ABC -> A, B, (C, D); 123 -> 1, 2, ...;
+        LMR -> L, R for two slots, L, M, R for three, and 1..n beyond; None for ``labels = "none"``.
+
+        >>> Design(Path("x"), "", "", [], [], [], slot_labels=("L", "M", "R")).slot_labels_for(2)
+        ('L', 'R')
+        """
+        base = self.slot_labels
+        if base is None:
+            return None
+        if n == 3:
+            return tuple(base)
+        if base[0] == "L":
+            return ("L", "R") if n == 2 else tuple(str(i + 1) for i in range(n))
+        if base[0] == "1":
+            return tuple(str(i + 1) for i in range(n))
+        return tuple(chr(ord("A") + i) for i in range(n))
 
     def condition(self, cid: str) -> Condition:
         for c in self.conditions:
@@ -382,6 +494,10 @@ class Problem:
 
     def to_json(self) -> dict:
         return {"file": self.path, "key": self.key, "line": self.line, "message": self.message, "fix": self.fix}
+
+
+class DesignWarning(UserWarning):
+    """Something a design may do but probably should not (validate prints it as a note; the design runs)."""
 
 
 class DesignError(InputError):

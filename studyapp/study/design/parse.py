@@ -17,11 +17,13 @@ from studyapp.study.design.blinding import visible_text_leaks
 from studyapp.study.design.checks import Collector, check_array, check_ids, check_table, did_you_mean
 from studyapp.study.design.files import (design_hash, has_sample_field, pattern_fields, pattern_problem, referenced_files,
                                          resolve)
-from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Condition, Criterion, Design, Display,
-                                             Playback, Problem, QuestionItem, Stimulus)
-from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
-                                              MOTION_SUFFIXES, ORDERINGS, QUESTION_KINDS, SLOT_ASSIGNMENTS,
-                                              SLOT_LABELS, AttentionCheckTable, AvatarTable,
+from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Block, Condition, Criterion, Design,
+                                             DesignWarning, Display, Playback, Problem, QuestionItem, Stimulus,
+                                             criterion_aspect)
+from studyapp.study.design.schema import (ASPECTS, ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE,
+                                              MOTION_SUFFIXES, ORDERINGS, PARADIGMS, PREFERENCE_LEVELS,
+                                              QUESTION_KINDS, RATING_FIGURES, SLOT_ASSIGNMENTS,
+                                              SLOT_LABELS, AttentionCheckTable, AvatarTable, BlockTable,
                                               DesignFile, OnlineTable, OrderingTable, ParticipantsTable, SlotsTable,
                                               key_default)
 from studyapp.study.design.texts import LANGUAGES
@@ -40,7 +42,7 @@ TABLES: dict[str, type] = {"": DesignFile, "conditions": Condition, "stimuli": S
                            "avatar": AvatarTable, "ordering": OrderingTable, "slots": SlotsTable,
                            "attention_checks": AttentionCheckTable, "playback": Playback,
                            "questionnaire": QuestionItem, "participants": ParticipantsTable,
-                           "display": Display, "online": OnlineTable}
+                           "display": Display, "blocks": BlockTable, "online": OnlineTable}
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -51,6 +53,9 @@ def _conditions(col: Collector, top: dict, conds: list[tuple[int, dict]]) -> lis
     conditions: list[Condition] = []
     if "conditions" not in top:
         pass  # reported as a missing required key
+    elif top.get("blocks"):  # each block checks how many of the conditions it shows (see _blocks)
+        if not conds:
+            col.add("conditions", "no conditions", "add [[conditions]] blocks")
     elif len(conds) < 2:
         col.add("conditions", f"{len(conds)} condition(s) given; a comparison needs at least 2, and the "
                 "three-slot viewer needs exactly 3", "add [[conditions]] blocks until there are 3")
@@ -292,10 +297,15 @@ def _criteria(col: Collector, top: dict, crits: list[tuple[int, dict]],
     if "criteria" not in top and texts is not None:
         # the default three, worded in the design's language
         return [Criterion(c.id, texts[f"criteria.{c.id}.label"], texts[f"criteria.{c.id}.question"],
-                          texts[f"criteria.{c.id}.explanation"]) for c in DEFAULT_CRITERIA]
+                          texts[f"criteria.{c.id}.explanation"], aspect=c.aspect) for c in DEFAULT_CRITERIA]
     if "criteria" in top:
+        for i, e in crits:
+            if e.get("aspect") is not None and e["aspect"] not in ASPECTS:
+                col.add(f"criteria[{i}].aspect", f"unknown aspect {e['aspect']!r}",
+                        'use "motion" (realism, human-likeness) or "speech" (appropriateness, synchronization)')
         criteria = [Criterion(e["id"], e.get("label", e["id"].capitalize()), e["question"],
-                              e.get("explanation", key_default(Criterion, "explanation")))
+                              e.get("explanation", key_default(Criterion, "explanation")),
+                              e.get("aspect") if e.get("aspect") in ASPECTS else None)
                     for _, e in crits if e.get("id") and "question" in e]
     else:
         criteria = [replace(c) for c in DEFAULT_CRITERIA]  # copies: an edit to one design must not reach others
@@ -387,6 +397,114 @@ def _attention_checks(col: Collector, checks: list[tuple[int, dict]], stim_ids: 
         if "stimulus" in e:
             attention.append(AttentionCheck(e["stimulus"], kind, expected))
     return attention
+
+
+#: Keys of ``[[blocks]]`` that only some paradigms read: given to another paradigm they would do nothing.
+_BLOCK_KEY_PARADIGMS = {"levels": ("pairwise", "mismatch"), "reasons": ("pairwise",), "match_tag": ("mismatch",),
+                        "reference": ("rating",), "anchors": ("rating",)}
+
+
+def _id_list(col: Collector, key: str, given: list, known: list[str], what: str) -> list[str]:
+    """The ids of ``given`` that name one of ``known`` (problems for the others, once each)."""
+    out: list[str] = []
+    for j, x in enumerate(given):
+        if not isinstance(x, str) or x not in known:
+            col.add(f"{key}[{j}]", f"unknown {what} {x!r}", did_you_mean(str(x), known).replace("allowed keys", what))
+        elif x in out:
+            col.add(f"{key}[{j}]", f"{what} {x!r} is listed twice", "list each once")
+        else:
+            out.append(x)
+    return out
+
+
+def _strings(col: Collector, key: str, given: list, example: str) -> tuple[str, ...]:
+    if not all(isinstance(x, str) and x.strip() for x in given) or len(set(given)) != len(given):
+        col.add(key, "must be a list of different, non-empty strings", example)
+        return ()
+    return tuple(x.strip() for x in given)
+
+
+def _blocks(col: Collector, blocks: list[tuple[int, dict]], cond_ids: list[str], stimuli: list[Stimulus],
+            stim_ids: list[str], criteria: list[Criterion]) -> list[Block]:
+    """``[[blocks]]`` checked against the conditions, stimuli and criteria they name (see :class:`Block`)."""
+    out: list[Block] = []
+    crit_ids = [c.id for c in criteria]
+    rotation = [s.id for s in stimuli if s.in_rotation]
+    tags = {s.id: s.tags for s in stimuli}
+    for i, e in blocks:
+        key = f"blocks[{i}]"
+        paradigm = e.get("paradigm", key_default(BlockTable, "paradigm"))
+        if paradigm not in PARADIGMS:
+            col.add(f"{key}.paradigm", f"unknown paradigm {paradigm!r}",
+                    "use " + ", ".join(f'"{p}"' for p in PARADIGMS))
+        for name, kinds in _BLOCK_KEY_PARADIGMS.items():
+            if name in e and paradigm in PARADIGMS and paradigm not in kinds:
+                col.add(f"{key}.{name}", f"only {' and '.join(kinds)} blocks have {name}",
+                        f'remove {name}, or set paradigm = "{kinds[0]}"')
+        crits = _id_list(col, f"{key}.criteria", e["criteria"], crit_ids, "criteria") if "criteria" in e else crit_ids
+        if "criteria" in e and not e["criteria"]:
+            col.add(f"{key}.criteria", "empty list of criteria", "name at least one criterion, or remove criteria")
+        conds = _id_list(col, f"{key}.conditions", e["conditions"], cond_ids, "conditions") \
+            if "conditions" in e else list(cond_ids)
+        stims = _id_list(col, f"{key}.stimuli", e["stimuli"], stim_ids, "stimuli") if "stimuli" in e else rotation
+        if not stims:
+            col.add(f"{key}.stimuli", "the block has no stimuli", "name at least one stimulus, or remove stimuli")
+        levels = e.get("levels", key_default(BlockTable, "levels"))
+        if levels not in PREFERENCE_LEVELS:
+            col.add(f"{key}.levels", f"levels must be 5 or 3, got {levels}",
+                    "5: clearly/slightly left, equal, slightly/clearly right; 3: left, equal, right")
+            levels = 5
+        reasons = _strings(col, f"{key}.reasons", e.get("reasons", []), 'reasons = ["Hand movements", "Timing"]')
+        anchors = _strings(col, f"{key}.anchors", e.get("anchors", []), 'anchors = ["Bad", "Poor", "Fair", "Good", '
+                           '"Excellent"]')
+        if len(anchors) == 1:
+            col.add(f"{key}.anchors", "one anchor cannot be spread over 0..100", "give two or more, or none")
+        reference = e.get("reference")
+        if reference is not None and reference not in cond_ids:
+            col.add(f"{key}.reference", f"unknown condition {reference!r}",
+                    did_you_mean(reference, cond_ids).replace("allowed keys", "conditions"))
+            reference = None
+        match_tag = e.get("match_tag", key_default(BlockTable, "match_tag"))
+        n = len(conds)
+        if "conditions" in e and not e["conditions"]:
+            col.add(f"{key}.conditions", "empty list of conditions", "name the block's conditions, or remove it")
+        elif paradigm == "rank" and n != 3:
+            col.add(f"{key}.conditions", f"a rank block shows exactly 3 conditions per trial, got {n}",
+                    "name exactly 3 conditions for this block")
+        elif paradigm == "pairwise" and n < 2:
+            col.add(f"{key}.conditions", f"a pairwise block compares at least 2 conditions, got {n}",
+                    "name two or more conditions")
+        elif paradigm == "rating":
+            k = n + (reference is not None and reference not in conds)
+            if not RATING_FIGURES[0] <= k <= RATING_FIGURES[1]:
+                col.add(f"{key}.conditions", f"a rating trial shows {RATING_FIGURES[0]} to {RATING_FIGURES[1]} "
+                        f"figures (the conditions and the reference), this block would show {k}",
+                        "name fewer conditions (make one block per group)" if k > RATING_FIGURES[1]
+                        else "name more conditions")
+        if paradigm == "mismatch":
+            for sid in stims:
+                value = tags.get(sid, {}).get(match_tag)
+                if value is None:
+                    col.add(f"{key}.match_tag", f"stimulus {sid!r} has no tag {match_tag!r}, so no clip can be "
+                            "mismatched with it", f'add tags.{match_tag} to stimulus {sid!r}, or set match_tag')
+                elif not any(o != sid and tags.get(o, {}).get(match_tag) == value for o in stims):
+                    col.add(f"{key}.stimuli", f"stimulus {sid!r} is the block's only one with {match_tag} = "
+                            f"{value!r}: its mismatched motion must come from another of the block's clips "
+                            "with that tag", f"add another clip with {match_tag} = {value!r} to the block, "
+                            f"or drop {sid!r}")
+        aspects = {criterion_aspect(c) for c in criteria if c.id in crits} - {None}
+        if aspects == set(ASPECTS):
+            import warnings
+
+            where = col.path + (f":{col.line_of(f'{key}.criteria')}" if col.line_of(f"{key}.criteria") else "")
+            warnings.warn(DesignWarning(
+                f"{where}: {key}.criteria: block {e.get('id', i)!r} asks about motion quality and about speech "
+                "together; Nagy et al. 2025 found such judgements influence each other -- consider one block "
+                "per aspect"), stacklevel=2)
+        if e.get("id"):
+            out.append(Block(e["id"], paradigm, tuple(crits), tuple(conds), tuple(stims),
+                             e.get("instructions", "").strip(), levels, reasons, match_tag, reference, anchors))
+    return out
 
 
 def _questionnaire(col: Collector, questions: list[tuple[int, dict]]) -> list[QuestionItem]:
@@ -528,6 +646,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     crits = check_array(col, top, "criteria", Criterion)
     checks = check_array(col, top, "attention_checks", AttentionCheckTable)
     questions = check_array(col, top, "questionnaire", QuestionItem)
+    block_entries = check_array(col, top, "blocks", BlockTable)
     avatar = AvatarTable(**check_table(col, top.get("avatar", {}), AvatarTable, "avatar"))
     ordering = OrderingTable(**check_table(col, top.get("ordering", {}), OrderingTable, "ordering"))
     slots = SlotsTable(**check_table(col, top.get("slots", {}), SlotsTable, "slots"))
@@ -540,6 +659,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     check_ids(col, "stimuli", stims, "stimulus")
     check_ids(col, "criteria", crits, "criterion")
     check_ids(col, "questionnaire", questions, "questionnaire item")
+    check_ids(col, "blocks", block_entries, "block")
 
     conditions = _conditions(col, top, conds)
     ids_ok = [e.get("id") for _, e in conds if e.get("id")]
@@ -560,7 +680,21 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
         if sid not in stim_ids:
             col.add(f"practice[{j}]", f"unknown stimulus {sid!r}",
                     did_you_mean(str(sid), stim_ids).replace("allowed keys", "stimuli"))
-    attention = _attention_checks(col, checks, stim_ids, crit_ids, ids_ok)
+    blocks = _blocks(col, block_entries, ids_ok, stimuli, stim_ids, criteria)
+    rank_blocks = [b for b in blocks if b.paradigm == "rank"]
+    if blocks and checks and not rank_blocks:
+        col.add("attention_checks", "attention checks are asked in the first rank block, and this design has none",
+                'add a [[blocks]] entry with paradigm = "rank", or remove the attention checks')
+    if blocks and blocks[0].paradigm == "mismatch":  # practice clips are trials of the first block
+        first = blocks[0]
+        tag_of = {s.id: s.tags.get(first.match_tag) for s in stimuli}
+        for j, sid in enumerate(top.get("practice", [])):
+            if sid in tag_of and not any(o != sid and tag_of.get(o) == tag_of[sid] is not None for o in first.stimuli):
+                col.add(f"practice[{j}]", f"practice clip {sid!r} opens the mismatch block {first.id!r}, but none of "
+                        f"that block's clips shares its {first.match_tag} to mismatch it with",
+                        f"give it tags.{first.match_tag} of one of the block's clips, or drop it from practice")
+    attention = _attention_checks(col, checks, stim_ids, crit_ids,
+                                  list(rank_blocks[0].conditions) if rank_blocks else ids_ok)
     items = _questionnaire(col, questions)
     maxfail, groups = _participants(col, participants)
 
@@ -572,7 +706,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
         avatar_by_speaker=by_speaker, avatar_bone_map=bone_map, ordering=ordering.method, slot_assignment=slots.assignment,
         slot_labels=labels, practice=[str(p) for p in practice], attention_checks=attention,
         playback=Playback(**playback), display=display, questionnaire=items, max_attention_failures=maxfail,
-        seed=int(ordering.seed), groups=groups, online=online,
+        seed=int(ordering.seed), groups=groups, blocks=blocks, online=online,
     )
     for key, cid in visible_text_leaks(design):
         col.add(key, f"participants read this text and it names condition {cid!r}: that unblinds the study",

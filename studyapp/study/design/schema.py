@@ -2,8 +2,8 @@
 
 The runtime classes (:mod:`.model`) declare the keys of the tables that mirror them (``[[conditions]]``,
 ``[[stimuli]]``, ``[[criteria]]``, ``[playback]``, ``[[questionnaire]]``); the tables that only feed the
-design (``[avatar]``, ``[ordering]``, ``[slots]``, ``[[attention_checks]]``, ``[participants]`` and the top
-level) are declared here. The parser checks a table against :func:`toml_keys` of its class and takes
+design (``[avatar]``, ``[ordering]``, ``[slots]``, ``[[attention_checks]]``, ``[participants]``,
+``[[blocks]]`` and the top level) are declared here. The parser checks a table against :func:`toml_keys` of its class and takes
 defaults from the class, so adding a key is adding one field.
 
 >>> toml_keys(OrderingTable)
@@ -35,6 +35,16 @@ ATTENTION_KINDS = ("frozen", "known-worst")
 BUILTIN_REFERENCE = "builtin:reference"
 #: Prefix of the pseudo condition id of a frozen attention-check slot.
 FROZEN_PREFIX = "frozen:"
+#: Response paradigms of a ``[[blocks]]`` entry (see :class:`~.model.Block`).
+PARADIGMS = ("rank", "pairwise", "mismatch", "rating")
+#: Preference scales of pairwise and mismatch blocks: the number of levels and the values a level takes
+#: (negative = the LEFT figure preferred, positive = the RIGHT one, 0 = no preference).
+PREFERENCE_LEVELS = {5: (-2, -1, 0, 1, 2), 3: (-1, 0, 1)}
+#: How many figures a rating trial shows (its conditions plus the hidden reference).
+RATING_FIGURES = (2, 4)
+#: Criterion aspects (``[[criteria]] aspect``): Nagy et al. 2025 ask for motion quality and speech
+#: alignment to be judged in separate blocks.
+ASPECTS = ("motion", "speech")
 
 
 def key(types: tuple[type, ...], *, required: bool = False, default: Any = MISSING,
@@ -85,6 +95,7 @@ class DesignFile:
     questionnaire: list = key(LIST, default_factory=list)
     participants: dict = key(TABLE, default_factory=dict)
     display: dict = key(TABLE, default_factory=dict)
+    blocks: list = key(LIST, default_factory=list)
     online: dict = key(TABLE, default_factory=dict)
 
 
@@ -131,6 +142,24 @@ class ParticipantsTable:
 
     max_attention_failures: int | None = key(INT, default=None)
     groups: dict = key(TABLE, default_factory=dict)
+
+
+@dataclass
+class BlockTable:
+    """``[[blocks]]``: one block of trials and its response paradigm (see :class:`~.model.Block` for the
+    meaning of each key; a design without blocks is one ``rank`` block ``"main"`` over everything)."""
+
+    id: str = key(STR, required=True, default="")
+    paradigm: str = key(STR, default="rank")
+    criteria: list | None = key(LIST, default=None)
+    conditions: list | None = key(LIST, default=None)
+    stimuli: list | None = key(LIST, default=None)
+    instructions: str = key(STR, default="")
+    levels: int = key(INT, default=5)
+    reasons: list = key(LIST, default_factory=list)
+    match_tag: str = key(STR, default="speaker")
+    reference: str | None = key(STR, default=None)
+    anchors: list = key(LIST, default_factory=list)
 
 
 @dataclass

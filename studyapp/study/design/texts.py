@@ -127,6 +127,37 @@ EN: dict[str, str] = {
     "rank.next_practice": "Next practice clip",
     "rank.start_study": "Start the study",
     "rank.finish": "Finish",
+    # the other answer panels (pairwise and mismatch: a preference; rating: sliders) and a block's own page
+    "trial.answer_now": "Now answer the questions below.",
+    "trial.answer_replay": "Answer the questions below. You may replay the clip as often as you like.",
+    "pref.clearly": "Clearly {figure}",
+    "pref.slightly": "Slightly {figure}",
+    "pref.better": "{figure} is better",
+    "pref.equal": "No preference",
+    "pref.reasons": "What made the difference? (optional, tick any)",
+    "pref.start_hint": "Click an answer for each question, or press its key 1-{n}; Up/Down change question.",
+    "pref.still": "Still to answer: {criteria}",
+    "rating.unset": "not rated yet",
+    "rating.start_hint": "Set every slider: click or drag it, or press Left/Right or 1-{n}; Up/Down change slider.",
+    "rating.still": "Still to rate: {sliders}",
+    "block.title": "The next part",
+    "block.continue": "Start this part",
+    "instructions.how_answer_title": "How to answer",
+    "instructions.how_pref": (
+        "After a clip has played to the end, a panel opens below the two figures. For each question, say which "
+        "figure you prefer, and how clearly: click one of the answers, or press its number key, shown above it "
+        "(1 = clearly the left figure ... {n} = clearly the right one; the middle one means no preference). "
+        "Left/Right move the answer one step, Up/Down change question, Backspace clears it, Enter goes to the "
+        "next clip. Space pauses and resumes the clip."),
+    "instructions.how_reasons": (
+        "When you prefer one figure, you may also tick what made the difference (optional): click the boxes, or "
+        "press Down to reach them and their number keys."),
+    "instructions.how_rating": (
+        "After a clip has played to the end, a slider appears below each figure for each question. Rate every "
+        "figure from 0 (worst) to 100 (best): click or drag on its slider. Every slider must be set before you "
+        "can go on. Keyboard: Up/Down choose a slider, Left/Right move it by 1, Page Up/Page Down by 10, the "
+        "number keys 1-{n} jump along the scale from low to high (onto the labels, when it has some); Enter "
+        "goes to the next clip. Space pauses and resumes the clip."),
     # the criteria used when a design has none
     "criteria.realism.label": "Realism",
     "criteria.realism.question": "Which motion looks most realistic?",
@@ -277,6 +308,30 @@ ZH: dict[str, str] = {
     "rank.next_practice": "下一个练习片段",
     "rank.start_study": "开始正式实验",
     "rank.finish": "完成",
+    "trial.answer_now": "现在请回答下面的问题。",
+    "trial.answer_replay": "请回答下面的问题。您可以随意重播这个片段。",
+    "pref.clearly": "明显{figure}更好",
+    "pref.slightly": "稍微{figure}更好",
+    "pref.better": "{figure}更好",
+    "pref.equal": "没有偏好",
+    "pref.reasons": "是什么造成了差别？（可选，可多选）",
+    "pref.start_hint": "为每个问题点击一个答案，或按对应的按键 1-{n}；上/下方向键切换问题。",
+    "pref.still": "尚未回答：{criteria}",
+    "rating.unset": "尚未评分",
+    "rating.start_hint": "请设置每个滑块：点击或拖动，或按左/右方向键或 1-{n}；上/下方向键切换滑块。",
+    "rating.still": "尚未评分：{sliders}",
+    "block.title": "下一部分",
+    "block.continue": "开始这一部分",
+    "instructions.how_answer_title": "如何作答",
+    "instructions.how_pref": (
+        "片段播放完毕后，两个人物下方会出现一个面板。请针对每个问题，说明您更喜欢哪个人物以及程度：点击其中一个答案，"
+        "或按答案上方显示的数字键（1 = 明显左边的人物更好 …… {n} = 明显右边的人物更好；中间的表示没有偏好）。"
+        "左/右方向键把答案移动一格，上/下方向键切换问题，退格键清除答案，回车键进入下一个片段。空格键暂停和继续播放。"),
+    "instructions.how_reasons": "当您更喜欢其中一个人物时，还可以勾选造成差别的原因（可选）：点击方框，或按下方向键移到原因处再按数字键。",
+    "instructions.how_rating": (
+        "片段播放完毕后，每个人物下方会针对每个问题出现一个滑块。请给每个人物从 0（最差）到 100（最好）评分："
+        "点击或拖动它的滑块。必须设置每个滑块后才能继续。键盘：上/下方向键选择滑块，左/右方向键移动 1，"
+        "Page Up/Page Down 移动 10，数字键 1-{n} 从低到高跳到刻度上的位置（有标签时即标签处）；回车键进入下一个片段。空格键暂停和继续播放。"),
     "criteria.realism.label": "真实感",
     "criteria.realism.question": "哪个动作看起来最真实？",
     "criteria.realism.explanation": "自然的人体动作：没有奇怪的身体朝向，没有抖动，没有僵住或机械的姿势。",

@@ -2,7 +2,8 @@
 // The server decides everything (what comes next, whether a clip was watched, whether an answer is valid);
 // this script only shows it. Ranking: drag a figure's label into a box, click labels in order, or press the
 // figure's number key (it goes into the next free box); Up/Down change question, Backspace clears one,
-// Enter goes on.
+// Enter goes on. Preference (pairwise, mismatch): click an answer or press its number, Left/Right move it.
+// Rating: one slider per figure and question, each must be moved.
 "use strict";
 (function () {
   var root = document.getElementById("app");
@@ -100,6 +101,12 @@
     b.appendChild(button("continue", S.button, function () { post("continue"); }));
     onEnter(function () { post("continue"); });
   }
+  function block() {
+    var b = shell(S.heading);
+    b.appendChild(paragraphs(S.text));
+    b.appendChild(button("continue", S.button, function () { post("block"); }));
+    onEnter(function () { post("block"); });
+  }
   function instructions() {
     var b = shell(S.heading);
     b.appendChild(paragraphs(S.text));
@@ -142,6 +149,9 @@
   }
 
   // ------------------------------------------------------------------ a trial
+  // The page around the video is the same for every paradigm; the answer panel is the paradigm's:
+  // rankPanel (rank), preferencePanel (pairwise, mismatch), ratingPanel (rating). A panel draws itself into
+  // its element and says which questions are still open, what to send, and which keys it takes.
   function trial() {
     var b = shell(S.progress);
     if (S.practice_note) b.appendChild(el("p", {"class": "note", text: S.practice_note}));
@@ -150,16 +160,14 @@
     var play = button("play", S.texts["trial.play"], startPlay, "secondary");
     b.appendChild(el("div", {"class": "stage"}, video));
     b.appendChild(el("div", {"class": "buttons"}, play, status));
-    var panel = el("div", {id: "panel", "class": "panel"});
-    b.appendChild(panel);
+    var box = el("div", {id: "panel", "class": "panel"});
+    b.appendChild(box);
     var next = button("next", S.texts.next, submit);
     var hint = el("p", {id: "hint", "class": "note"});
     b.appendChild(el("div", {"class": "buttons"}, next, hint));
-    var n = S.labels.length;
-    var order = S.criteria.map(function () { return [null, null, null]; });   // per question: slot in each box
-    var tied = S.criteria.map(function () { return [false, false]; });        // box i tied with box i+1
-    var active = 0;
     var playing = false;
+    var panel = (S.paradigm === "pairwise" || S.paradigm === "mismatch") ? preferencePanel(box, refresh) :
+      (S.paradigm === "rating" ? ratingPanel(box, refresh) : rankPanel(box, refresh));
 
     function refresh() {
       var watched = S.can_rank;
@@ -167,9 +175,9 @@
       play.disabled = playing || !S.can_play;
       status.textContent = playing ? S.texts["trial.watch"] :
         (watched ? (S.allow_replay ? S.texts["trial.rank_replay"] : S.texts["trial.rank_now"]) : S.texts["trial.ready"]);
-      panel.classList.toggle("locked", !watched);
-      drawPanel();
-      var missing = S.criteria.filter(function (c, i) { return order[i].indexOf(null) >= 0; }).map(function (c) { return c.label; });
+      box.classList.toggle("locked", !watched);
+      panel.draw();
+      var missing = panel.missing();
       next.disabled = !watched || missing.length > 0 || playing;
       hint.textContent = !watched ? S.texts["rank.wait"] :
         (missing.length ? S.texts.still.replace("{criteria}", missing.join(", ")) : S.texts["rank.next_ok"]);
@@ -190,6 +198,28 @@
       if (!playing) return;
       post("ended", {}, function (next) { S = next; return true; }).then(function () { playing = false; refresh(); });
     });
+    function submit() {
+      if (next.disabled) return;
+      post("answer", panel.answer());
+    }
+    document.onkeydown = function (ev) {
+      if (ev.key === " " && ev.target.tagName !== "INPUT") {
+        ev.preventDefault();
+        if (playing) { if (video.paused) video.play(); else video.pause(); } else startPlay();
+        return;
+      }
+      if (!S.can_rank) return;
+      if (ev.key === "Enter") { ev.preventDefault(); submit(); return; }
+      if (panel.key(ev)) ev.preventDefault();
+    };
+    refresh();
+  }
+
+  function rankPanel(panel, refresh) {
+    var n = S.labels.length;
+    var order = S.criteria.map(function () { return [null, null, null]; });   // per question: slot in each box
+    var tied = S.criteria.map(function () { return [false, false]; });        // box i tied with box i+1
+    var active = 0;
     function place(ci, slot, box) {
       if (!S.can_rank) return;
       var o = order[ci];
@@ -210,46 +240,6 @@
         r[String(order[ci][box])] = first + 1;
       }
       return r;
-    }
-    function submit() {
-      if (next.disabled) return;
-      var ranks = {};
-      S.criteria.forEach(function (c, i) { ranks[c.id] = ranksOf(i); });
-      post("answer", {ranks: ranks});
-    }
-    function drawPanel() {
-      panel.textContent = "";
-      S.criteria.forEach(function (c, ci) {
-        var row = el("div", {"class": "criterion" + (ci === active ? " active" : ""), "data-criterion": c.id});
-        row.appendChild(el("h3", {text: c.label + ": " + c.question}));
-        var chips = el("div", {"class": "chips"});
-        for (var s = 0; s < n; s++) {
-          var chip = el("span", {"class": "chip" + (order[ci].indexOf(s) >= 0 ? " used" : ""), "data-slot": String(s),
-            id: "chip-" + c.id + "-" + s, text: S.labels[s], tabindex: "-1"});
-          dragSource(chip, ci, s);
-          chips.appendChild(chip);
-        }
-        row.appendChild(chips);
-        var boxes = el("div", {"class": "boxes"});
-        var names = [S.texts["rank.first"], S.texts["rank.second"], S.texts["rank.third"]];
-        for (var bx = 0; bx < 3; bx++) {
-          var slot = order[ci][bx];
-          var box = el("span", {"class": "box" + (slot === null ? "" : " filled"), "data-box": String(bx),
-            id: "box-" + c.id + "-" + bx},
-            el("small", {text: names[bx]}), el("strong", {text: slot === null ? S.texts["rank.drop_here"] : S.labels[slot]}));
-          box.addEventListener("click", (function (i, b) { return function () {
-            if (order[i][b] !== null) { order[i][b] = null; active = i; refresh(); } }; })(ci, bx));
-          boxes.appendChild(box);
-          if (bx < 2 && S.allow_ties) {
-            var t = tied[ci][bx];
-            boxes.appendChild(el("button", {type: "button", "class": "tie", id: "tie-" + c.id + "-" + bx,
-              title: t ? S.texts["rank.tie_on"] : S.texts["rank.tie_off"], text: t ? "=" : ">",
-              on: {click: (function (i, b) { return function () { tied[i][b] = !tied[i][b]; refresh(); }; })(ci, bx)}}));
-          }
-        }
-        row.appendChild(boxes);
-        panel.appendChild(row);
-      });
     }
     // pointer dragging (mouse, pen, touch): a copy of the label follows the pointer; dropped on a box, it goes there
     function dragSource(chip, ci, slot) {
@@ -275,17 +265,175 @@
         document.addEventListener("pointerup", up);
       });
     }
-    document.onkeydown = function (ev) {
-      if (ev.key === " ") { ev.preventDefault(); if (playing) { if (video.paused) video.play(); else video.pause(); } else startPlay(); return; }
-      if (!S.can_rank) return;
-      var k = Number(ev.key);
-      if (k >= 1 && k <= n) { ev.preventDefault(); place(active, k - 1); }
-      else if (ev.key === "ArrowDown") { ev.preventDefault(); active = Math.min(active + 1, S.criteria.length - 1); refresh(); }
-      else if (ev.key === "ArrowUp") { ev.preventDefault(); active = Math.max(active - 1, 0); refresh(); }
-      else if (ev.key === "Backspace") { ev.preventDefault(); order[active] = [null, null, null]; tied[active] = [false, false]; refresh(); }
-      else if (ev.key === "Enter") { ev.preventDefault(); submit(); }
+    return {
+      draw: function () {
+        panel.textContent = "";
+        S.criteria.forEach(function (c, ci) {
+          var row = el("div", {"class": "criterion" + (ci === active ? " active" : ""), "data-criterion": c.id});
+          row.appendChild(el("h3", {text: c.label + ": " + c.question}));
+          var chips = el("div", {"class": "chips"});
+          for (var s = 0; s < n; s++) {
+            var chip = el("span", {"class": "chip" + (order[ci].indexOf(s) >= 0 ? " used" : ""), "data-slot": String(s),
+              id: "chip-" + c.id + "-" + s, text: S.labels[s], tabindex: "-1"});
+            dragSource(chip, ci, s);
+            chips.appendChild(chip);
+          }
+          row.appendChild(chips);
+          var boxes = el("div", {"class": "boxes"});
+          var names = [S.texts["rank.first"], S.texts["rank.second"], S.texts["rank.third"]];
+          for (var bx = 0; bx < 3; bx++) {
+            var slot = order[ci][bx];
+            var box = el("span", {"class": "box" + (slot === null ? "" : " filled"), "data-box": String(bx),
+              id: "box-" + c.id + "-" + bx},
+              el("small", {text: names[bx]}), el("strong", {text: slot === null ? S.texts["rank.drop_here"] : S.labels[slot]}));
+            box.addEventListener("click", (function (i, b) { return function () {
+              if (order[i][b] !== null) { order[i][b] = null; active = i; refresh(); } }; })(ci, bx));
+            boxes.appendChild(box);
+            if (bx < 2 && S.allow_ties) {
+              var t = tied[ci][bx];
+              boxes.appendChild(el("button", {type: "button", "class": "tie", id: "tie-" + c.id + "-" + bx,
+                title: t ? S.texts["rank.tie_on"] : S.texts["rank.tie_off"], text: t ? "=" : ">",
+                on: {click: (function (i, b) { return function () { tied[i][b] = !tied[i][b]; refresh(); }; })(ci, bx)}}));
+            }
+          }
+          row.appendChild(boxes);
+          panel.appendChild(row);
+        });
+      },
+      missing: function () {
+        return S.criteria.filter(function (c, i) { return order[i].indexOf(null) >= 0; }).map(function (c) { return c.label; });
+      },
+      answer: function () {
+        var ranks = {};
+        S.criteria.forEach(function (c, i) { ranks[c.id] = ranksOf(i); });
+        return {ranks: ranks};
+      },
+      key: function (ev) {
+        var k = Number(ev.key);
+        if (k >= 1 && k <= n) { place(active, k - 1); return true; }
+        if (ev.key === "ArrowDown") { active = Math.min(active + 1, S.criteria.length - 1); refresh(); return true; }
+        if (ev.key === "ArrowUp") { active = Math.max(active - 1, 0); refresh(); return true; }
+        if (ev.key === "Backspace") { order[active] = [null, null, null]; tied[active] = [false, false]; refresh(); return true; }
+        return false;
+      }
     };
-    refresh();
+  }
+
+  function preferencePanel(panel, refresh) {
+    var chosen = S.criteria.map(function () { return null; });   // per question: index into S.options
+    var reasons = {};
+    var active = 0;
+    function choose(ci, k) {
+      chosen[ci] = k;
+      active = ci + 1 < S.criteria.length && chosen[ci + 1] === null ? ci + 1 : ci;
+      refresh();
+    }
+    function preferring() {
+      return chosen.some(function (k) { return k !== null && S.options[k].value !== 0; });
+    }
+    return {
+      draw: function () {
+        panel.textContent = "";
+        S.criteria.forEach(function (c, ci) {
+          var row = el("div", {"class": "criterion" + (ci === active ? " active" : ""), "data-criterion": c.id});
+          row.appendChild(el("h3", {text: c.label + ": " + c.question}));
+          var opts = el("div", {"class": "options"});
+          S.options.forEach(function (o, k) {
+            opts.appendChild(el("button", {type: "button", id: "opt-" + c.id + "-" + o.value,
+              "class": "option" + (chosen[ci] === k ? " chosen" : ""), "aria-pressed": String(chosen[ci] === k),
+              text: (k + 1) + ". " + o.text, on: {click: function () { choose(ci, k); }}}));
+          });
+          row.appendChild(opts);
+          panel.appendChild(row);
+        });
+        if (S.reasons.length && preferring()) {
+          var box = el("fieldset", {"class": "reasons"}, el("legend", {text: S.texts.reasons}));
+          S.reasons.forEach(function (r, i) {
+            var input = el("input", {type: "checkbox", id: "reason-" + i});
+            input.checked = !!reasons[r];
+            input.addEventListener("change", function () { reasons[r] = input.checked; });
+            box.appendChild(el("label", {"class": "option"}, input, el("span", {text: r})));
+          });
+          panel.appendChild(box);
+        }
+      },
+      missing: function () {
+        return S.criteria.filter(function (c, i) { return chosen[i] === null; }).map(function (c) { return c.label; });
+      },
+      answer: function () {
+        var levels = {};
+        S.criteria.forEach(function (c, i) { levels[c.id] = S.options[chosen[i]].value; });
+        var why = preferring() ? S.reasons.filter(function (r) { return reasons[r]; }) : [];
+        return {levels: levels, reasons: why};
+      },
+      key: function (ev) {
+        var k = Number(ev.key);
+        if (k >= 1 && k <= S.options.length) { choose(active, k - 1); return true; }
+        if (ev.key === "ArrowLeft" || ev.key === "ArrowRight") {
+          var at = chosen[active] === null ? (S.options.length - 1) / 2 : chosen[active];
+          chosen[active] = Math.max(0, Math.min(S.options.length - 1, at + (ev.key === "ArrowLeft" ? -1 : 1)));
+          refresh(); return true;
+        }
+        if (ev.key === "ArrowDown") { active = Math.min(active + 1, S.criteria.length - 1); refresh(); return true; }
+        if (ev.key === "ArrowUp") { active = Math.max(active - 1, 0); refresh(); return true; }
+        if (ev.key === "Backspace") { chosen[active] = null; refresh(); return true; }
+        return false;
+      }
+    };
+  }
+
+  function ratingPanel(panel, refresh) {
+    var n = S.labels.length;
+    var values = S.criteria.map(function () { return S.labels.map(function () { return null; }); });  // null: not moved
+    var drawn = false;
+    var shown = [];
+    function draw() {
+      // drawn once: sliders keep focus and position while the participant moves them
+      if (drawn) {
+        shown.forEach(function (s) { s.out.textContent = values[s.ci][s.slot] === null ? S.texts.unset : String(values[s.ci][s.slot]); });
+        return;
+      }
+      drawn = true;
+      S.criteria.forEach(function (c, ci) {
+        var row = el("div", {"class": "criterion", "data-criterion": c.id});
+        row.appendChild(el("h3", {text: c.label + ": " + c.question}));
+        for (var slot = 0; slot < n; slot++) {
+          var input = el("input", {type: "range", min: "0", max: "100", step: "1", value: "50",
+            id: "rate-" + c.id + "-" + slot, "aria-label": S.labels[slot]});
+          var out = el("output", {id: "value-" + c.id + "-" + slot, text: S.texts.unset});
+          (function (input, ci, slot) {
+            input.addEventListener("input", function () { values[ci][slot] = Number(input.value); refresh(); });
+          })(input, ci, slot);
+          shown.push({ci: ci, slot: slot, out: out});
+          row.appendChild(el("div", {"class": "slider"}, el("strong", {text: S.labels[slot]}), input, out));
+        }
+        if (S.anchors.length) {
+          var scale = el("div", {"class": "anchors"});
+          S.anchors.forEach(function (a) { scale.appendChild(el("span", {text: a})); });
+          row.appendChild(scale);
+        }
+        panel.appendChild(row);
+      });
+    }
+    return {
+      draw: draw,
+      missing: function () {
+        var out = [];
+        S.criteria.forEach(function (c, ci) {
+          values[ci].forEach(function (v, slot) { if (v === null) out.push(c.label + " " + S.labels[slot]); });
+        });
+        return out;
+      },
+      answer: function () {
+        var ratings = {};
+        S.criteria.forEach(function (c, ci) {
+          ratings[c.id] = {};
+          values[ci].forEach(function (v, slot) { if (v !== null) ratings[c.id][String(slot)] = v; });
+        });
+        return {ratings: ratings};
+      },
+      key: function () { return false; }   // the sliders take the arrow keys themselves
+    };
   }
 
   // ------------------------------------------------------------------ the questionnaire
@@ -343,6 +491,7 @@
     switch (S.screen) {
       case "welcome": return welcome();
       case "back": return back();
+      case "block": return block();
       case "instructions": return instructions();
       case "soundcheck": return soundcheck();
       case "trial": return trial();
