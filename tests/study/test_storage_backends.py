@@ -363,3 +363,21 @@ def test_missing_postgresql_binaries_fail_with_what_to_install(tmp_path: Path, m
     for tool in ("initdb", "pg_ctl"):
         (tmp_path / "15" / "bin" / tool).write_text("")
     assert find_bin(lib_root=tmp_path, search_path=str(tmp_path)) == tmp_path / "15" / "bin"
+
+
+@pytest.mark.parametrize("paradigm", ["pairwise", "mismatch", "rating"])
+def test_paradigm_answers_export_the_same_from_postgresql(paradigm: str, tmp_path: Path, postgres_server) -> None:
+    """Each paradigm example answered through the Session with the same seeds into an SQLite file and a
+    PostgreSQL database: the tidy export (judgements, trial slots, blocks) is the same from both."""
+    import test_paradigms  # the same folder: the examples and the scripted answers of the paradigm tests
+    from studyapp.study.design import load_design
+
+    design = load_design(test_paradigms.EXAMPLES[paradigm], check_files=False)
+    url = postgres_server.new_database(f"paradigm_{paradigm}")
+    for target in (tmp_path / "r.sqlite", url):
+        with ResultsDB(target, design) as db:
+            for k in range(2):
+                test_paradigms._run(design, db, f"P{k}", k)
+    sqlite_table, pg_table = _export_without_timing(tmp_path / "r.sqlite"), _export_without_timing(url)
+    assert len(pg_table) > 0 and set(pg_table["paradigm"]) == {paradigm} | ({"rank"} & set(sqlite_table["paradigm"]))
+    pd.testing.assert_frame_equal(pg_table, sqlite_table, check_exact=True)
