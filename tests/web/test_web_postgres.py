@@ -1,8 +1,9 @@
-"""The browser flow's tests (test_web_flow.py), every one of them, on a PostgreSQL results database: the study
-server with ``--db postgresql://...`` behaves exactly as on SQLite (the server from the ``postgres_server``
-fixture, a new database per test)."""
+"""The browser flow's tests (test_web_flow.py), every one that runs on its ``study`` fixture, on a PostgreSQL
+results database: the study server with ``--db postgresql://...`` behaves exactly as on SQLite (the server from
+the ``postgres_server`` fixture, a new database per test)."""
 from __future__ import annotations
 
+import inspect
 import uuid
 
 import pytest
@@ -10,7 +11,9 @@ import pytest
 import test_web_flow as flow_tests  # the same folder (pytest puts it on sys.path); its tests are not collected twice
 from fixtures.web_study import ClipVideos, Clock, Study
 
-FLOW_TESTS = sorted(name for name in dir(flow_tests) if name.startswith("test_"))
+# every flow test that runs on the ``study`` fixture (the others build their own study on a file)
+FLOW_TESTS = sorted(name for name in dir(flow_tests) if name.startswith("test_")
+                    and list(inspect.signature(getattr(flow_tests, name)).parameters) == ["study", "browser_for"])
 
 
 @pytest.fixture
