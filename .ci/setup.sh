@@ -11,11 +11,12 @@ VENV="${STUDYAPP_VENV:-$ROOT/.venv}"
 #  headless OpenGL (EGL on Mesa llvmpipe); libosmesa6: the OSMesa fallback; xvfb + xdotool + imagemagick:
 #  the window tests; pulseaudio (+utils, alsa plugins): a null audio sink on machines without a sound card;
 #  fonts-wqy-microhei: a CJK font, so designs in Chinese render (and their test has a font to find);
+#  postgresql: the tests of the PostgreSQL results backend start a throw-away server from its binaries;
 #  chromium + chromium-driver: the headless browser (and its WebDriver) the study server's real-browser test
 #  drives through selenium (tests/web/test_web_browser.py).
 DEB_PKGS=(python3 python3-venv python3-pip libportaudio2 libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0
           libosmesa6 xvfb xauth xdotool imagemagick pulseaudio pulseaudio-utils libasound2-plugins
-          fonts-wqy-microhei chromium chromium-driver)
+          fonts-wqy-microhei postgresql chromium chromium-driver)
 missing=()
 if command -v dpkg-query >/dev/null 2>&1; then
   for p in "${DEB_PKGS[@]}"; do

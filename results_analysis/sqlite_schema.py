@@ -1,6 +1,8 @@
 """Build the tidy results frame straight from a studyapp results database (schema versions 1 to 6).
 
-Reads only with sqlite3 + pandas (no studyapp import): responses joined with their trials, stimulus tags
+Reads with pandas and any DB-API connection that speaks SQLite's SQL (no studyapp import): an
+:class:`sqlite3.Connection`, or studyapp's PostgreSQL connection, which answers the same statements (``studyapp
+export`` of a ``postgresql://`` database runs this query through it). Responses joined with their trials, stimulus tags
 (JSON in ``stimuli.tags``) and participant groups (JSON in ``participants.groups``) spread into columns,
 exactly the columns of ``studyapp export``.
 
@@ -107,17 +109,17 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
               if {"sample_left", "sample_middle", "sample_right"} <= trial_cols else "NULL")
     # Version 6 records each trial's block and paradigm and every slot's motion; older files are one rank block.
     v6 = {"block", "paradigm"} <= trial_cols and "trial_slots" in tables
-    df = pd.read_sql_query(_QUERY.format(
+    df = _frame(con, _QUERY.format(
         trial_duration=duration, sample=sample,
         block="COALESCE(t.block, 'main')" if v6 else "'main'",
         paradigm="COALESCE(t.paradigm, 'rank')" if v6 else "'rank'",
         motion="COALESCE(s.motion_stimulus, t.stimulus)" if v6 else "t.stimulus",
         slots_join=("LEFT JOIN trial_slots s ON s.participant = r.participant AND s.trial_index = r.trial_index "
-                    "AND s.slot = r.slot") if v6 else ""), con)
+                    "AND s.slot = r.slot") if v6 else ""))
     df["_table"] = "responses"
     df["reasons"] = ""
     if v6 and "judgements" in tables:
-        judged = pd.read_sql_query(_JUDGEMENTS, con)
+        judged = _frame(con, _JUDGEMENTS)
         if len(judged):
             judged["_table"] = "judgements"
             df = pd.concat([df, judged], ignore_index=True) if len(df) else judged
@@ -159,6 +161,14 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
     if not include_practice:
         df = df[~df["is_practice"]].reset_index(drop=True)
     return df
+
+
+def _frame(con: sqlite3.Connection, sql: str) -> pd.DataFrame:
+    """A query's rows as a frame, as :func:`pandas.read_sql_query` makes it, from any DB-API connection
+    (pandas reads only sqlite3 and SQLAlchemy connections itself)."""
+    cur = con.execute(sql)
+    columns = [d[0] for d in cur.description]
+    return pd.DataFrame.from_records([tuple(r) for r in cur.fetchall()], columns=columns, coerce_float=True)
 
 
 def tidy_from_connection(con: sqlite3.Connection, path: str | Path) -> pd.DataFrame:

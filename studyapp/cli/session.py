@@ -19,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("design", type=Path, help="study design (.toml) or study bundle (.zip)")
     p.add_argument("--participant", required=True, help="participant id (e.g. P01)")
-    p.add_argument("--results", type=Path, help="results database (default: <design>.results.sqlite next to the "
+    p.add_argument("--results", type=_results_arg, help="results database: a file, or postgresql://USER@HOST/DB "
+                   "(default: <design>.results.sqlite next to the "
                    "design; for a bundle, in your user data folder)")
     p.add_argument("--row", type=int, help="Latin-square row for a new participant (default: the least used row)")
     p.add_argument("--group", action="append", default=[], metavar="KEY=VALUE",
@@ -47,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "x questionnaire item; with neither, the long table is printed to stdout. Practice trials are kept and flagged "
         "unless --exclude-practice.",
     )
-    e.add_argument("db", type=Path, help="results database (.sqlite)")
+    e.add_argument("db", type=_results_arg, help="results database (.sqlite, or postgresql://USER@HOST/DB)")
     e.add_argument("--csv", type=Path, help="long table: participant x trial x criterion x condition")
     e.add_argument("--questionnaire-csv", type=Path, help="questionnaire answers, one row per participant x item")
     e.add_argument("--exclude-practice", action="store_true",
@@ -96,7 +97,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "imports nothing and each problem is one line. Damaged files and results of another design are refused "
         "too; a file merged before is reported as already merged. The exit status is 1 when any file was refused.",
     )
-    m.add_argument("db", type=Path, help="the experimenter's results database")
+    m.add_argument("db", type=_results_arg, help="the experimenter's results database (a file, or "
+                   "postgresql://USER@HOST/DB)")
     m.add_argument("files", type=Path, nargs="+", help="results-*.zip files sent back by participants")
     m.add_argument("--key", type=Path, help="a bundle key file (from `bundle --export-key` or `studyapp key`) "
                    "when the database does not hold it")
@@ -106,6 +108,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="accept participant ids that are not on the bundle's roster (bundles made before bundles "
                    "carried each participant's trials, whose participants could choose their own ids)")
     m.set_defaults(func=_cmd_merge)
+
+
+def _results_arg(text: str) -> Path | str:
+    """A results database on the command line: a path, ``sqlite:///path`` or a ``postgresql://`` URL."""
+    from studyapp.study.sql_backend import results_target
+
+    return results_target(text)
 
 
 def default_results_path(design_path: Path) -> Path:
@@ -123,7 +132,7 @@ def parse_groups(items: list[str]) -> dict[str, str]:
     return groups
 
 
-def load_design_for_run(design_path: Path, results: Path) -> Any:
+def load_design_for_run(design_path: Path, results: Path | str) -> Any:
     """The design, fully validated (every stimulus file read and checked) before its first session, or found
     recorded as validated with exactly the same files.
 
@@ -134,7 +143,7 @@ def load_design_for_run(design_path: Path, results: Path) -> Any:
     """
     from studyapp.study.design import load_design
 
-    if results.exists() and results.stat().st_size > 0:
+    if isinstance(results, Path) and results.exists() and results.stat().st_size > 0:
         return load_design(design_path, check_files=False)  # ResultsDB compares the hash
     # A design validated before (`studyapp validate`) with exactly these files is not read again
     # (studyapp.study.design.validated); any changed file means a full check here.
@@ -167,9 +176,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise StudyappError("--bot needs a mode: --offscreen (through the real UI, rendered offscreen) or "
                             "--no-render (session only, fast)")
     design = load_design_for_run(design_path, results)
-    new_db = not (results.exists() and results.stat().st_size > 0)
+    # a server database (postgresql://) is never deleted here, only the participant this run registered
+    new_db = isinstance(results, Path) and not (results.exists() and results.stat().st_size > 0)
     db = ResultsDB(results, design)
-    print(f"Results database: {results}", flush=True)
+    print(f"Results database: {db.path}", flush=True)  # a URL without its password
     finished_files: list[Path] = []
     known = {p.id for p in db.participants()}
     schedule: dict[str, Any] = {}

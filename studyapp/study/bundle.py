@@ -830,14 +830,15 @@ def _is_bundle(path: Path) -> bool:
     return isinstance(manifest, dict) and manifest.get("format") == BUNDLE_FORMAT
 
 
-def _merge_design(db: Any, db_path: Path, design_path: str | Path | None) -> Any:
+def _merge_design(db: Any, db_path: Path | str, design_path: str | Path | None) -> Any:
     """The study design the database was made for, to recompute every returned participant's schedule:
     ``design_path``, else ``<name>.toml`` next to ``<name>.results.sqlite`` (where ``run`` and ``bundle`` put it)."""
     from studyapp.study.design import load_design
 
     if design_path is None:
-        name = db_path.name
-        guess = db_path.with_name(name[: -len(".results.sqlite")] + ".toml") if name.endswith(".results.sqlite") else None
+        name = db_path.name if isinstance(db_path, Path) else ""  # a server database (URL) has no design beside it
+        guess = db_path.with_name(name[: -len(".results.sqlite")] + ".toml") \
+            if isinstance(db_path, Path) and name.endswith(".results.sqlite") else None
         if guess is None or not guess.is_file():
             raise InputError(db_path, None, "merge checks every returned answer against the study's schedule and "
                              "needs the design: give it with --design STUDY.toml" +
@@ -882,7 +883,7 @@ def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file:
     db = ResultsDB(db_path, create=False)
     reports = []
     try:
-        lab = _merge_design(db, Path(db_path), design)
+        lab = _merge_design(db, db.path, design)
         read: list[tuple[Path, _Returned | MergeReport]] = []
         for f in map(Path, files):
             read.append((f, _guarded(f, lambda: _prepare(db, f, extra_keys))))

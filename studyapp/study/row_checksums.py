@@ -23,6 +23,12 @@ agree). The checksum of one row is the lowercase hex SHA-256 of::
 ``row_checksums(tbl, rid, sha256)`` holds one row per row of every other table (tables named ``sqlite_*``
 are SQLite's own). A row whose checksum differs, a row without a checksum (written by another program) and
 a checksum without its row (a row lost) are each reported, naming the table and the row's key.
+
+On PostgreSQL (:class:`~studyapp.study.sql_backend.PgConnection`) the encoding is the same, with ``rowid``
+the ``rowid`` column every table has there, and ``type_i`` the SQLite type the value would have: ``null``
+for NULL, ``integer`` for an integer column, ``real`` for a double, ``text`` (UTF-8 bytes) for text,
+``blob`` for bytes. The changed rows come from permanent row triggers into
+``sql_backend.PG_DIRTY_TABLE``, keyed by the writing transaction's id (temporary triggers do not exist there).
 """
 from __future__ import annotations
 
@@ -38,6 +44,10 @@ CREATE_TABLE = (f"CREATE TABLE {TABLE} (tbl TEXT NOT NULL, rid INTEGER NOT NULL,
 _PREFIX = b"studyapp-row-v1"
 #: Temporary (per-connection) table of the rows a transaction touched; sealed and emptied at commit.
 _DIRTY = "temp._studyapp_dirty_rows"
+
+
+def _is_sqlite(con: object) -> bool:
+    return isinstance(con, sqlite3.Connection)
 
 
 def _field(b: bytes) -> bytes:
@@ -107,11 +117,38 @@ def _digest(table: str, columns: list[str], row: tuple) -> str:
     return _digester(table, columns)(row)
 
 
+def _typed(value: object) -> tuple[str, object]:
+    """A PostgreSQL value as (SQLite storage class, value as :func:`_value_bytes` reads it)."""
+    if value is None:
+        return "null", None
+    if isinstance(value, (bool, int)):
+        return "integer", int(value)
+    if isinstance(value, float):
+        return "real", value
+    if isinstance(value, str):
+        return "text", value.encode("utf-8")
+    return "blob", bytes(value)  # type: ignore[call-overload]
+
+
+def _read(con: sqlite3.Connection, table: str, columns: list[str], where: str = "",
+          params: tuple = ()) -> Iterator[tuple]:
+    """Rows as ``(rowid, type_1, value_1, ...)`` (what :func:`_digester` reads), on either engine."""
+    if _is_sqlite(con):
+        yield from con.execute(_select(table, columns, where), params)
+        return
+    cols = ", ".join(_quote(c) for c in columns)
+    for row in con.execute(f"SELECT rowid{', ' if cols else ''}{cols} FROM {_quote(table)}{where}", params):
+        out: list[object] = [row[0]]
+        for v in tuple(row)[1:]:
+            out += _typed(v)
+        yield tuple(out)
+
+
 def row_digests(con: sqlite3.Connection, table: str) -> Iterator[tuple[int, str]]:
     """``(rowid, checksum)`` of every row of ``table`` as it is stored now."""
     columns = _columns(con, table)
     digest = _digester(table, columns)
-    for row in con.execute(_select(table, columns)):
+    for row in _read(con, table, columns):
         yield int(row[0]), digest(row)
 
 
@@ -121,6 +158,8 @@ def prepare(con: sqlite3.Connection) -> None:
 
     ``recursive_triggers`` makes ``INSERT OR REPLACE`` report the row it replaces to the delete trigger.
     """
+    if not _is_sqlite(con):
+        return  # PostgreSQL: a permanent table, made with the first table (sql_backend)
     con.execute("PRAGMA recursive_triggers = ON")
     con.execute(f"CREATE TABLE IF NOT EXISTS {_DIRTY} (tbl TEXT NOT NULL, rid INTEGER NOT NULL, "
                 "PRIMARY KEY (tbl, rid))")
@@ -131,7 +170,10 @@ def install_triggers(con: sqlite3.Connection) -> None:
 
     Temporary triggers (this connection only, nothing stored in the file), made from the tables as they are
     when the database is opened (after any migration), so a table or column added later is covered.
+    PostgreSQL has no temporary triggers: there each table gets its trigger when it is created (sql_backend).
     """
+    if not _is_sqlite(con):
+        return
     for table in covered_tables(con):
         lit = "'" + table.replace("'", "''") + "'"
         for event, refs in (("INSERT", ("NEW",)), ("UPDATE", ("OLD", "NEW")), ("DELETE", ("OLD",))):
@@ -143,9 +185,11 @@ def install_triggers(con: sqlite3.Connection) -> None:
 
 def _seal(con: sqlite3.Connection, table: str, rids: Iterable[int]) -> None:
     columns = _columns(con, table)
-    sql = _select(table, columns, " WHERE rowid = ?")
+    if not _is_sqlite(con):
+        _seal_together(con, table, columns, list(rids))
+        return
     for rid in rids:
-        row = con.execute(sql, (rid,)).fetchone()
+        row = next(_read(con, table, columns, " WHERE rowid = ?", (rid,)), None)
         if row is None:
             con.execute(f"DELETE FROM {TABLE} WHERE tbl = ? AND rid = ?", (table, rid))
         else:
@@ -153,15 +197,34 @@ def _seal(con: sqlite3.Connection, table: str, rids: Iterable[int]) -> None:
                         (table, rid, _digest(table, columns, row)))
 
 
+def _seal_together(con: sqlite3.Connection, table: str, columns: list[str], rids: list[int]) -> None:
+    """:func:`_seal` in three statements whatever the number of rows (a server is a round trip away)."""
+    digest = _digester(table, columns)
+    found = {int(r[0]): digest(r) for r in _read(con, table, columns, " WHERE rowid = ANY(?)", (rids,))}
+    gone = [rid for rid in rids if rid not in found]
+    if gone:
+        con.execute(f"DELETE FROM {TABLE} WHERE tbl = ? AND rid = ANY(?)", (table, gone))
+    if found:
+        con.executemany(f"INSERT OR REPLACE INTO {TABLE} (tbl, rid, sha256) VALUES (?, ?, ?)",
+                        [(table, rid, d) for rid, d in found.items()])
+
+
 def seal_dirty(con: sqlite3.Connection) -> None:
     """Write the checksums of the rows changed in the open transaction (call just before COMMIT)."""
     dirty: dict[str, list[int]] = {}
-    for table, rid in con.execute(f"SELECT tbl, rid FROM {_DIRTY}"):
+    if _is_sqlite(con):
+        listed, clear = f"SELECT tbl, rid FROM {_DIRTY}", f"DELETE FROM {_DIRTY}"
+    else:
+        from studyapp.study.sql_backend import PG_DIRTY_TABLE
+
+        mine = " WHERE xid = txid_current()"  # this transaction's rows only: another program's stay unsealed
+        listed, clear = f"SELECT DISTINCT tbl, rid FROM {PG_DIRTY_TABLE}{mine}", f"DELETE FROM {PG_DIRTY_TABLE}{mine}"
+    for table, rid in con.execute(listed):
         dirty.setdefault(table, []).append(rid)
     for table, rids in dirty.items():
         _seal(con, table, rids)
     if dirty:
-        con.execute(f"DELETE FROM {_DIRTY}")
+        con.execute(clear)
 
 
 def seal_all(con: sqlite3.Connection) -> None:
@@ -180,7 +243,7 @@ def _key_text(con: sqlite3.Connection, table: str, rid: int) -> str:
         return f"rowid {rid}"
     cols = [c for _, c in pk]
     try:
-        row = con.execute(_select(table, cols, " WHERE rowid = ?"), (rid,)).fetchone()
+        row = next(_read(con, table, cols, " WHERE rowid = ?", (rid,)), None)
     except sqlite3.Error:
         row = None
     if row is None:

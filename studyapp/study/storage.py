@@ -1,4 +1,11 @@
-"""SQLite storage of study results: one database per study, every answer durable before the next clip.
+"""Storage of study results: one database per study, every answer durable before the next clip.
+
+The database is an SQLite file (the default) or a PostgreSQL database (a study server with several processes):
+:func:`open_results` takes a path, ``sqlite:///path`` or ``postgresql://...``, and the same code writes the same
+tables on both; what differs between the engines lives in :mod:`studyapp.study.sql_backend` (connecting, the
+write lock, error messages, the SQL dialect). On PostgreSQL every commit waits for the server's WAL on disk
+(``synchronous_commit = on``) and write transactions run one at a time, as on SQLite. What follows describes
+the SQLite file; on PostgreSQL the same checks run, except the file's own (header, ``PRAGMA integrity_check``).
 
 Why these settings: ``journal_mode=WAL`` + ``synchronous=FULL`` make each committed transaction survive
 a killed process or a power cut (the WAL is fsynced at commit), and a trial's ranks are written in one
@@ -26,13 +33,10 @@ Example
 """
 from __future__ import annotations
 
-import errno
 import json
 import logging
-import os
 import platform
 import random
-import shutil
 import sqlite3
 import time
 from dataclasses import dataclass, field
@@ -42,7 +46,8 @@ from typing import Any, Iterable
 
 from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
-from studyapp.study import row_checksums
+from studyapp.study import row_checksums, sql_backend
+from studyapp.study.sql_backend import sqlite_problem  # noqa: F401  (its home was here; callers import it from here)
 
 #: Bumped whenever the tables change; a database with another version is refused, never guessed at.
 SCHEMA_VERSION = 6
@@ -68,8 +73,6 @@ _MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",),
                    "ALTER TABLE trials ADD COLUMN sample_right INTEGER"),
                3: ("ALTER TABLE conditions ADD COLUMN label TEXT",),
                4: (row_checksums.CREATE_TABLE,)}
-
-_SQLITE_MAGIC = b"SQLite format 3\x00"
 
 PARTICIPANT_STATUSES = ("active", "done", "ended_early")
 #: The key of a session's ``machine`` record that marks its participant abandoned: a browser participant who
@@ -253,72 +256,6 @@ _log = logging.getLogger(__name__)
 _NOT_SAVED = "the last change (e.g. the answer just given) was not saved; everything saved before it is kept"
 
 
-def _kind(exc: sqlite3.Error | UnicodeDecodeError) -> str:
-    """What an SQLite error means for the user: full, readonly, busy, io, damaged or other."""
-    name = str(getattr(exc, "sqlite_errorname", "") or "")
-    text = str(exc).lower()
-    if name.startswith("SQLITE_FULL") or "disk is full" in text:
-        return "full"
-    if name.startswith(("SQLITE_READONLY", "SQLITE_CANTOPEN", "SQLITE_PERM", "SQLITE_AUTH")) or "readonly" in text \
-            or "unable to open" in text:
-        return "readonly"
-    if name.startswith(("SQLITE_BUSY", "SQLITE_LOCKED")) or "locked" in text or "busy" in text:
-        return "busy"
-    if name.startswith("SQLITE_IOERR") or "disk i/o error" in text:
-        return "io"
-    if name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")) or isinstance(exc, UnicodeDecodeError) \
-            or "malformed" in text or "not a database" in text:
-        return "damaged"
-    return "other"
-
-
-def _nearly_full(path: Path) -> bool:
-    # SQLite reports some writes on a full disk as I/O errors (e.g. growing the -shm file): ask the disk
-    try:
-        return shutil.disk_usage(path.parent).free < _NEARLY_FULL_BYTES
-    except OSError:
-        return False
-
-
-#: Free space under which an I/O error while writing is taken for a full disk.
-_NEARLY_FULL_BYTES = 1 << 20
-
-
-def sqlite_problem(path: Path, exc: sqlite3.Error | UnicodeDecodeError, what: str) -> InputError:
-    """The one-line message for an SQLite error on the results database: a full disk, a read-only file or
-    folder, a lock and a failing drive each say so and what to do, kept apart from a damaged file."""
-    kind = _kind(exc)
-    if kind == "io" and _nearly_full(path):
-        kind = "full"
-    if kind == "full":
-        return InputError(path, None, f"the disk is full ({exc}): {what}. Free some disk space, then start again "
-                          "(a session resumes where it stopped)")
-    if kind == "readonly":
-        return InputError(path, None, f"cannot write the results database or its folder ({exc}): {what}. studyapp "
-                          "writes the file and its journal files (-wal, -shm) next to it: make the folder and the "
-                          "file writable, or copy the file to a writable folder. Nothing in the file was changed")
-    if kind == "busy":
-        # Another program holds a lock (a database browser or notebook mid-write): the file is fine, and a
-        # new --results file would split the study, so never advise that here.
-        return InputError(path, None, f"the results database is in use by another program ({exc}); {what}. "
-                          "Close that program (or let it finish) and start again")
-    if kind == "io":
-        return InputError(path, None, f"the drive reported an error ({exc}): {what}. Check the drive (a removed "
-                          "USB stick, a network drive gone away) and start again")
-    return InputError(path, None, f"the results database is damaged or not a studyapp database ({exc}); "
-                      "keep a copy of the file and start a new one with --results")
-
-
-def _os_problem(path: Path, exc: OSError) -> InputError:
-    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
-        return InputError(path, None, f"the disk is full ({exc.strerror}): the results database could not be "
-                          "created. Free some disk space, then start again")
-    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        return InputError(path, None, f"cannot write the results folder ({exc.strerror}): make it writable or "
-                          "choose another place with --results")
-    return InputError(path, None, f"cannot create or read the results database ({exc.strerror or exc})")
-
-
 def now_iso() -> str:
     """Current UTC time as ISO 8601 with milliseconds (sortable text, unambiguous across machines)."""
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
@@ -421,13 +358,21 @@ _WRITTEN: dict[str, tuple[str, ...]] = {
 }
 
 
+def open_results(target: str | Path, design: Any = None, **options: Any) -> "ResultsDB":
+    """The results database ``target`` names: a path or ``sqlite:///path`` (an SQLite file) or
+    ``postgresql://USER@HOST:PORT/DATABASE`` (an existing PostgreSQL database; its tables are created on first
+    use). ``design`` and ``options`` are :class:`ResultsDB`'s."""
+    return ResultsDB(sql_backend.results_target(target) if isinstance(target, str) else target, design, **options)
+
+
 class ResultsDB:
     """The results database of one study.
 
     Parameters
     ----------
     path:
-        The SQLite file; created (with its folder) when missing and ``create`` is true.
+        The SQLite file; created (with its folder) when missing and ``create`` is true. A ``postgresql://``
+        URL opens a PostgreSQL database instead (see :func:`open_results`).
     design:
         The loaded design (anything with ``design_hash``, ``title`` and, optionally, ``stimuli`` /
         ``conditions``). A new database is stamped with its hash; an existing one must carry the same hash.
@@ -450,32 +395,19 @@ class ResultsDB:
         title: str | None = None,
         create: bool = True,
     ) -> None:
-        self.path = Path(path)
+        self._backend = sql_backend.backend_for(path)
+        #: The file, or (PostgreSQL) the URL without its password: what messages name.
+        self.path: Path | str = self._backend.target
         if design is not None:
             design_hash = design.design_hash
             title = design.title
-        exists = self.path.exists() and self.path.stat().st_size > 0
+        exists = self._backend.exists()
         if not exists and not create:
             raise InputError(self.path, None, "results database not found; check the path")
         if not exists and design_hash is None:
             raise InputError(self.path, None, "results database not found, and no design was given to create one")
-        if exists and design_hash is not None and not os.access(self.path, os.W_OK):
-            # a session is about to write; say why before the first answer rather than at it
-            raise InputError(self.path, None, "the results database is read-only: studyapp cannot save answers in "
-                             "it. Make the file (and its folder) writable, or copy it to a writable folder. Nothing "
-                             "in the file was changed")
-        try:
-            if exists:
-                self._check_header()
-            else:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise _os_problem(self.path, exc) from None
-        try:
-            self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=self.LOCK_TIMEOUT_S)
-        except sqlite3.Error as exc:
-            raise sqlite_problem(self.path, exc, "the results database could not be opened") from None
-        self._con.row_factory = sqlite3.Row
+        self._backend.check_before_open(exists, writing=design_hash is not None)
+        self._con: Any = self._backend.connect(self.LOCK_TIMEOUT_S)
         # Some lock conflicts of a brand-new file (switching it to WAL while another process creates it) are
         # reported at once, without SQLite's busy wait: every step below is safe to repeat, so wait and retry
         # for as long as a held lock may take, then say it is locked.
@@ -484,12 +416,13 @@ class ResultsDB:
             try:
                 row = self._open_steps(exists, design_hash, title)
                 break
-            except (sqlite3.Error, UnicodeDecodeError) as exc:  # damaged text in SQLite's own tables cannot decode
-                if isinstance(exc, sqlite3.Error) and _kind(exc) == "busy" and time.monotonic() < give_up:
+            except (*self._backend.errors, UnicodeDecodeError) as exc:  # damaged text in SQLite's tables cannot decode
+                if isinstance(exc, self._backend.errors) and self._backend.kind(exc) == "busy" \
+                        and time.monotonic() < give_up:
                     time.sleep(0.05 + 0.05 * random.random())
                     continue
                 self._con.close()
-                raise sqlite_problem(self.path, exc, "the results database could not be created or opened") from None
+                raise self._backend.problem(exc, "the results database could not be created or opened") from None
             except BaseException:
                 self._con.close()
                 raise
@@ -533,25 +466,11 @@ class ResultsDB:
         row_checksums.install_triggers(self._con)
         return self._con.execute("SELECT design_hash, title FROM study WHERE id = 1").fetchone()
 
-    def _check_header(self) -> None:
-        with open(self.path, "rb") as fh:
-            head = fh.read(len(_SQLITE_MAGIC))
-        if head != _SQLITE_MAGIC:
-            raise InputError(self.path, "file header", "not an SQLite database (wrong file, or damaged); "
-                             "pass a studyapp results file (.sqlite)")
-
     def _configure(self) -> None:
-        con = self._con
-        mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
-        if str(mode).lower() != "wal":
-            raise InputError(self.path, None, f"cannot switch the database to WAL journaling (got {mode!r}); "
-                             "is it on a read-only or network drive?")
-        con.execute("PRAGMA synchronous=FULL")
-        con.execute("PRAGMA foreign_keys=ON")
-        row_checksums.prepare(con)
+        self._backend.configure(self._con)
 
     def _check_integrity(self) -> None:
-        rows = [str(r[0]) for r in self._con.execute("PRAGMA integrity_check").fetchall()]
+        rows = self._backend.integrity_check(self._con)
         if rows != ["ok"]:
             # One result row may hold dozens of lines (one per damaged cell): count lines, show only a few,
             # so the message stays readable while still saying how much is wrong.
@@ -659,22 +578,29 @@ class ResultsDB:
     # ------------------------------------------------------------------ plumbing
     @property
     def connection(self) -> sqlite3.Connection:
-        """The raw connection, for read-only queries (export); write through the methods."""
+        """The raw connection, for read-only queries (export); write through the methods. On PostgreSQL a
+        :class:`~studyapp.study.sql_backend.PgConnection`, which reads the same SQL."""
         return self._con
 
+    @property
+    def backend(self) -> str:
+        """Where the database lives: ``"sqlite"`` or ``"postgresql"``."""
+        return self._backend.name
+
     class _Tx:
-        def __init__(self, con: sqlite3.Connection, path: Path, what: str) -> None:
+        def __init__(self, con: sqlite3.Connection, backend: sql_backend.Backend, what: str) -> None:
             self.con = con
-            self.path = path
+            self.backend = backend
             self.what = what
 
         def __enter__(self) -> sqlite3.Connection:
-            # IMMEDIATE takes the write lock up front, so two processes on one database serialise
+            # the write lock up front (SQLite: BEGIN IMMEDIATE), so two processes on one database serialise
             # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
             try:
-                self.con.execute("BEGIN IMMEDIATE")
-            except sqlite3.Error as exc:
-                raise sqlite_problem(self.path, exc, self.what) from None
+                self.backend.begin_write(self.con)
+            except self.backend.errors as exc:
+                self._rollback()
+                raise self.backend.problem(exc, self.what) from None
             return self.con
 
         def __exit__(self, exc_type, exc, tb) -> None:
@@ -684,12 +610,12 @@ class ResultsDB:
                     row_checksums.seal_dirty(self.con)
                     self.con.execute("COMMIT")
                     return
-                except sqlite3.Error as failed:
+                except self.backend.errors as failed:
                     exc = failed
             self._rollback()
-            if isinstance(exc, sqlite3.Error) and _kind(exc) != "other":
+            if isinstance(exc, self.backend.errors) and self.backend.kind(exc) != "other":
                 # a full disk, a read-only folder, a lock held too long: one line that says what to do
-                raise sqlite_problem(self.path, exc, self.what) from None
+                raise self.backend.problem(exc, self.what) from None
             if exc_type is None:
                 raise exc
 
@@ -698,19 +624,19 @@ class ResultsDB:
             try:
                 if self.con.in_transaction:
                     self.con.execute("ROLLBACK")
-            except sqlite3.Error:
+            except self.backend.errors:
                 pass
 
     def transaction(self, what: str = _NOT_SAVED) -> "ResultsDB._Tx":
         """``with db.transaction() as con:`` — all statements inside commit together or not at all, with the
         checksums of every row they wrote; a full disk, a read-only file or a lock held too long raise
         :class:`InputError` (nothing of the transaction is stored; ``what`` says so in the message)."""
-        return ResultsDB._Tx(self._con, self.path, what)
+        return ResultsDB._Tx(self._con, self._backend, what)
 
     def close(self) -> None:
         try:
             self._con.close()
-        except sqlite3.Error:
+        except self._backend.errors:
             pass
 
     def __enter__(self) -> "ResultsDB":

@@ -3,7 +3,8 @@
 * a path, or ``sqlite:///PATH`` (``sqlite:////abs/path`` for an absolute one): SQLite, the embedded default
   (WAL, every answer fsynced: see :mod:`studyapp.study.storage`); one server process;
 * ``postgresql://...`` / ``postgres://...``: PostgreSQL, for many server processes, through the PostgreSQL
-  storage backend.
+  storage backend (:mod:`studyapp.study.sql_backend`): create the database (``createdb``); the tables are made on
+  first use.
 
 >>> sqlite_path("sqlite:///results/study.sqlite"), sqlite_path("sqlite:////srv/s.sqlite"), sqlite_path("a.sqlite")
 ('results/study.sqlite', '/srv/s.sqlite', 'a.sqlite')
@@ -15,6 +16,7 @@ from typing import Any
 
 from studyapp.errors import InputError
 from studyapp.study.storage import ResultsDB
+from studyapp.study.storage import open_results as storage_open_results
 
 
 def sqlite_path(url: str) -> str:
@@ -25,10 +27,7 @@ def sqlite_path(url: str) -> str:
 def open_results(url: str | Path, design: Any) -> ResultsDB:
     """The results database ``url`` names, opened (or created) for ``design``."""
     text = str(url)
-    if text.startswith(("postgresql://", "postgres://")):
-        raise InputError(None, "--db", "PostgreSQL storage is not part of this studyapp version; use a SQLite file "
-                         "(a path or sqlite:///PATH)")
-    if "://" in text and not text.startswith("sqlite:///"):
+    if "://" in text and not text.startswith(("sqlite:///", "postgresql://", "postgres://")):
         raise InputError(None, "--db", f"{text.split('://')[0]}:// is not a database this server can use; give a "
                          "file path, sqlite:///PATH or postgresql://USER@HOST/DB")
-    return ResultsDB(sqlite_path(text), design)
+    return storage_open_results(text if "://" in text else Path(text), design)
