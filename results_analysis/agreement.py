@@ -24,7 +24,7 @@ import pandas as pd
 
 from results_analysis.adjust import ADJUSTMENT_NAMES, adjust_pvalues
 from results_analysis.friedman import friedman_ranks
-from results_analysis.ranks import rank_blocks
+from results_analysis.ranks import rank_blocks_by
 from results_analysis.validate import trial_key
 
 AGREEMENT_COLUMNS = ["criterion", "stimulus", "n_raters", "kendall_w", "chi2", "df", "p", "p_adjusted",
@@ -51,8 +51,9 @@ def stimulus_agreement(df: pd.DataFrame, *, conditions: list[str], criteria: Seq
         sub = df.loc[df["criterion"].to_numpy(dtype=object) == crit,
                      [*trial_key(df), "stimulus", "criterion", "condition", "rank"]]
         first = len(rows)
-        for stim, part in sub.groupby(sub["stimulus"].astype(str), sort=True):
-            b = rank_blocks(part, crit, block="participant", conditions=conditions)
+        # one trials x conditions matrix per criterion, split by stimulus (sorted)
+        for stim, (b, _) in rank_blocks_by(sub, crit, sub["stimulus"].astype(str), block="participant",
+                                           conditions=conditions).items():
             row = {"criterion": crit, "stimulus": stim, "n_raters": b.n, "df": k - 1}
             if b.n >= 2:
                 fr = friedman_ranks(b.ranks)

@@ -41,11 +41,11 @@ from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
-from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
+from results_analysis.ranks import RankBlocks, place_shares, rank_blocks, rank_blocks_by, rank_blocks_with_trials
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
-from results_analysis.validate import check_complete, trial_key, validate_structure
+from results_analysis.validate import check_complete, validate_structure
 
 
 @dataclass
@@ -126,12 +126,12 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     if skillings_mack_test:
         sm = skillings_mack(rank_blocks(df, criterion, block="trial", conditions=conditions,
                                         complete_only=False).values, n_perm=sm_permutations, seed=seed)
-    blocks = rank_blocks(df, criterion, block=block, conditions=conditions)
+    other = "participant" if block == "trial" else "trial"
+    by_participant, by_trial = rank_blocks_with_trials(df, criterion, block="participant", conditions=conditions)
+    blocks, other_blocks = (by_trial, by_participant) if block == "trial" else (by_participant, by_trial)
     if blocks.n < 2:
         raise AnalysisInputError(df.attrs.get("source"), f"criterion {criterion}",
                                  f"only {blocks.n} complete block(s) left after exclusions: nothing to test")
-    other = "participant" if block == "trial" else "trial"
-    other_blocks = rank_blocks(df, criterion, block=other, conditions=conditions)
     sens = friedman_ranks(other_blocks.ranks) if other_blocks.n >= 2 else None
     trial_blocks = blocks if block == "trial" else other_blocks
     fr = friedman_ranks(blocks.ranks)
@@ -160,10 +160,11 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
     levels = df[column].fillna("(none)").astype(str)
-    df = df[[*trial_key(df), "criterion", "condition", "rank"]]  # what rank_blocks reads: smaller copies per level
-    for level, sub in df.groupby(levels, sort=True):
+    # each criterion's trials x conditions matrix is built once and split by level (sorted, as groupby sorts)
+    split = {crit: rank_blocks_by(df, crit, levels, block=block, conditions=conditions) for crit in criteria}
+    for level in sorted(split[criteria[0]]) if criteria else []:
         for crit in criteria:
-            b = rank_blocks(sub, crit, block=block, conditions=conditions)
+            b, tb = split[crit][level]
             row = {"group": column, "level": level, "criterion": crit, "n_blocks": b.n,
                    "n_participants": int(np.unique(b.participants).size)}
             if b.n >= 2:
@@ -175,7 +176,6 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
                 row.update({f"mean_rank_{c}": (float(b.ranks[0, i]) if b.n else np.nan)
                             for i, c in enumerate(conditions)})
             if b.n:
-                tb = b if block == "trial" else rank_blocks(sub, crit, block="trial", conditions=conditions)
                 first = place_shares(tb.ranks)[:, 0]  # a tie for first counts half (or a third ...)
                 row.update({f"share_rank_1_{c}": float(first[i]) for i, c in enumerate(conditions)})
             rows.append(row)

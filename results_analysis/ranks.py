@@ -83,17 +83,90 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
     sub = df.loc[df["criterion"].to_numpy(dtype=object) == criterion, [*key, "condition", "rank"]]
     if conditions is None:
         conditions = sorted(df["condition"].unique())
-    trials, raw = _wide(sub, key, list(conditions))
+    trials, raw, _ = _wide(sub, key, list(conditions))
     # Blocks that lack a condition are dropped (listwise deletion) unless ``complete_only`` is false, for
     # the Skillings-Mack test, which reads the NaNs; validation decides whether incomplete blocks may exist.
     if complete_only:
         complete = ~np.isnan(raw).any(axis=1)
         trials, raw = [t[complete] for t in trials], raw[complete]
-    # Within-trial average ranks first: the tie coding (1,1,3 or 1.5,1.5,3) is gone from here on.
+    return _blocks(trials[0], _trial_ranks(raw), list(conditions), block, complete_only)
+
+
+def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndarray, *,
+                   block: str = "participant", conditions: list[str]) -> dict[str, tuple[RankBlocks, RankBlocks]]:
+    """Per distinct value of ``levels`` (one per row of ``df``; sorted): the blocks at ``block`` and the trial
+    blocks of ``criterion`` in the rows of that level, complete trials only: what ``rank_blocks`` gives for
+    ``df[levels == level]`` with ``block=block`` and with ``block='trial'``, built from one trials x conditions
+    matrix instead of two per level (a breakdown by stimulus or speaker of a large study).
+
+    A trial whose answers lie in two levels is incomplete in each (in a validated frame, without duplicated
+    answers): should one exist, every level is computed on its own rows, as ``rank_blocks`` would.
+
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"participant": ["P1"] * 6, "trial_index": [0, 0, 0, 1, 1, 1], "criterion": "realism",
+    ...                    "condition": list("ABC") * 2, "rank": [1, 2, 3, 3, 2, 1], "stimulus": ["c1"] * 3 + ["c2"] * 3})
+    >>> {lv: b.ranks.tolist() for lv, (b, _) in rank_blocks_by(df, "realism", df["stimulus"], conditions=list("ABC")).items()}
+    {'c1': [[1.0, 2.0, 3.0]], 'c2': [[3.0, 2.0, 1.0]]}
+    """
+    if block not in BLOCKS:
+        raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
+    levels = np.asarray(levels, dtype=object)
+    level_codes, names = pd.factorize(levels, sort=True)
+    key = trial_key(df)
+    rows = df["criterion"].to_numpy(dtype=object) == criterion
+    sub = df.loc[rows, [*key, "condition", "rank"]]
+    trials, raw, level = _wide(sub, key, list(conditions), level_codes[rows])
+    # an incomplete trial is incomplete in every level's rows too: only a complete trial's level matters
+    complete = ~np.isnan(raw).any(axis=1)
+    if (level[complete] < 0).any():  # a complete trial split between levels (duplicated answers): each level
+        out = {}  # on its own rows, as rank_blocks would
+        for name in names:
+            part = df[levels == name]
+            b = rank_blocks(part, criterion, block=block, conditions=conditions)
+            out[str(name)] = (b, b if block == "trial" else rank_blocks(part, criterion, block="trial",
+                                                                        conditions=conditions))
+        return out
+    owner, values, level = trials[0][complete], _trial_ranks(raw[complete]), level[complete]
+    out = {}
+    for code, name in enumerate(names):
+        mine = level == code
+        tb = _blocks(owner[mine], values[mine], list(conditions), "trial", True)
+        out[str(name)] = (tb if block == "trial" else _blocks(owner[mine], values[mine], list(conditions), block,
+                                                              True), tb)
+    return out
+
+
+def rank_blocks_with_trials(df: pd.DataFrame, criterion: str, *, block: str = "participant",
+                            conditions: list[str]) -> tuple[RankBlocks, RankBlocks]:
+    """``rank_blocks`` at ``block`` and at ``'trial'`` (complete trials), from one trials x conditions matrix.
+
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"participant": ["P1"] * 6, "trial_index": [0, 0, 0, 1, 1, 1], "criterion": "realism",
+    ...                    "condition": list("ABC") * 2, "rank": [1, 2, 3, 3, 2, 1]})
+    >>> b, t = rank_blocks_with_trials(df, "realism", conditions=list("ABC"))
+    >>> b.values.tolist(), t.n
+    ([[2.0, 2.0, 2.0]], 2)
+    """
+    if len(df):
+        return rank_blocks_by(df, criterion, np.zeros(len(df), dtype=np.int64), block=block,
+                              conditions=conditions)[str(0)]
+    b = rank_blocks(df, criterion, block=block, conditions=conditions)
+    return b, b if block == "trial" else rank_blocks(df, criterion, block="trial", conditions=conditions)
+
+
+def _trial_ranks(raw: np.ndarray) -> np.ndarray:
+    """Within-trial average ranks of a trials x conditions matrix of answers (NaN stays NaN): the tie coding
+    (1,1,3 or 1.5,1.5,3) is gone from here on."""
+    if not raw.size:
+        return raw
     missing = np.isnan(raw)
-    values = np.where(missing, np.nan, rankdata(np.where(missing, np.inf, raw), axis=1, method="average")) \
-        if raw.size else raw
-    owner = trials[0]
+    return np.where(missing, np.nan, rankdata(np.where(missing, np.inf, raw), axis=1, method="average"))
+
+
+def _blocks(owner: np.ndarray, values: np.ndarray, conditions: list[str], block: str,
+            complete_only: bool) -> RankBlocks:
+    """The blocks of trials sorted by participant (``owner``: each trial's participant; ``values``: its
+    within-trial ranks)."""
     if block == "participant":
         # a participant's mean of its trials' ranks (trials are sorted by participant); the sums of average
         # ranks (multiples of 1/2) are exact, so this is the number a pandas group mean gives
@@ -110,13 +183,16 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
                       block=block)
 
 
-def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str]) -> tuple[list[np.ndarray], np.ndarray]:
+def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str], levels: np.ndarray | None = None,
+          ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray | None]:
     """The trials x conditions matrix of ranks that ``sub.pivot_table(index=key, columns="condition",
     values="rank", aggfunc="first", observed=True).reindex(columns=conditions)`` gives, without pandas' group
     machinery (a 10,000-participant study builds dozens of these): trials sorted by ``key``, each trial's
     first non-missing rank per condition, trials with no rank at all (in any condition) left out.
 
-    Returns the trials' key values (one array per key column, aligned with the rows) and the matrix.
+    Returns the trials' key values (one array per key column, aligned with the rows), the matrix and, given
+    ``levels`` (a code >= 0 per row of ``sub``), each trial's level: the code all its answers in the matrix
+    share, -1 where they differ (or a trial has none).
     """
     rank = sub["rank"].to_numpy(dtype=float)
     codes, uniques = zip(*(pd.factorize(sub[c], sort=True) for c in key)) if len(sub) else ((), ())
@@ -136,13 +212,20 @@ def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str]) -> tuple[lis
     cell = row_of[inside] * len(conditions) + col_of[inside]
     _, first = np.unique(cell, return_index=True)  # the first answer of each trial x condition
     out.flat[cell[first]] = rank[ok][inside][first]
+    level = None
+    if levels is not None:
+        code = np.asarray(levels)[ok][inside]
+        lo, hi = np.full(rows.size, np.iinfo(np.int64).max), np.full(rows.size, -1)
+        np.minimum.at(lo, row_of[inside], code)
+        np.maximum.at(hi, row_of[inside], code)
+        level = np.where(lo == hi, hi, -1)
     keys = []
     for c, u in zip(codes[::-1], uniques[::-1]):  # undo the lexicographic code, last column first
         size = max(len(u), 1)
         keys.append(np.asarray(u)[rows % size])
         rows = rows // size
     keys = keys[::-1] or [np.zeros(0, dtype=object) for _ in key]
-    return keys, out
+    return keys, out, level
 
 
 def as_blocks(data: RankBlocks | pd.DataFrame, criterion: str | None = None, *, block: str = "trial") -> RankBlocks:
