@@ -159,7 +159,7 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
         raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
-    levels = df[column].fillna("(none)").astype(str)
+    levels = pd.Categorical(df[column].fillna("(none)").astype(str).to_numpy(dtype=object))  # sorted levels
     # each criterion's trials x conditions matrix is built once and split by level (sorted, as groupby sorts)
     split = {crit: rank_blocks_by(df, crit, levels, block=block, conditions=conditions) for crit in criteria}
     for level in sorted(split[criteria[0]]) if criteria else []:

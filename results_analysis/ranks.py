@@ -92,12 +92,12 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
     return _blocks(trials[0], _trial_ranks(raw), list(conditions), block, complete_only)
 
 
-def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndarray, *,
+def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndarray | pd.Categorical, *,
                    block: str = "participant", conditions: list[str]) -> dict[str, tuple[RankBlocks, RankBlocks]]:
-    """Per distinct value of ``levels`` (one per row of ``df``; sorted): the blocks at ``block`` and the trial
-    blocks of ``criterion`` in the rows of that level, complete trials only: what ``rank_blocks`` gives for
-    ``df[levels == level]`` with ``block=block`` and with ``block='trial'``, built from one trials x conditions
-    matrix instead of two per level (a breakdown by stimulus or speaker of a large study).
+    """Per distinct value of ``levels`` (one per row of ``df``, sorted; or each category of a Categorical): the
+    blocks at ``block`` and the trial blocks of ``criterion`` in the rows of that level, complete trials only:
+    what ``rank_blocks`` gives for ``df[levels == level]`` with ``block=block`` and with ``block='trial'``,
+    built from one trials x conditions matrix instead of two per level (a breakdown by stimulus or speaker).
 
     A trial whose answers lie in two levels is incomplete in each (in a validated frame, without duplicated
     answers): should one exist, every level is computed on its own rows, as ``rank_blocks`` would.
@@ -110,8 +110,9 @@ def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndar
     """
     if block not in BLOCKS:
         raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
-    levels = np.asarray(levels, dtype=object)
-    level_codes, names = pd.factorize(levels, sort=True)
+    if not isinstance(levels, pd.Categorical):  # a breakdown's caller may pass one: factorized once for all criteria
+        levels = pd.Categorical(np.asarray(levels, dtype=object))
+    level_codes, names = levels.codes, levels.categories
     key = trial_key(df)
     rows = df["criterion"].to_numpy(dtype=object) == criterion
     sub = df.loc[rows, [*key, "condition", "rank"]]
