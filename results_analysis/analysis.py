@@ -31,7 +31,7 @@ from results_analysis.adjust import ADJUSTMENTS
 from results_analysis.agreement import agreement_summary, stimulus_agreement
 from results_analysis.bootstrap import INTERVALS, resample_weights, shared_resamples
 from results_analysis.bradley_terry import bradley_terry
-from results_analysis.descriptives import bootstrap_weights, condition_summary
+from results_analysis.descriptives import condition_summary
 from results_analysis.effect_sizes import EffectSizes, effect_sizes
 from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions, attention_summary
@@ -239,13 +239,13 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         control = by_label[control]
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
-    # shared_resamples: the criteria and intervals resample the same participants with the same seed, so each
-    # resample matrix is drawn once; the two large ones are drawn in the background (for every participant, as
-    # the criteria's blocks normally hold them all) while the breakdowns, which need none, are computed
+    # shared_resamples: the criteria and intervals resample the same participants with the same seed, so the
+    # resample matrix is drawn once (mean-rank, Bradley-Terry and effect-size intervals alike); it is drawn in
+    # the background (for every participant, as the criteria's blocks normally hold them all) while the
+    # breakdowns, which need none, are computed
     with shared_resamples():
         n_part = int(kept["participant"].nunique())
         if n_boot > 0 and n_part >= 2:
-            bootstrap_weights(n_part, n_boot, seed, background=True)
             resample_weights(n_part, n_boot, seed, background=True)
         by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block)
                     for g in groups}
