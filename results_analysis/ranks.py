@@ -215,11 +215,10 @@ def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str], levels: np.n
     out.flat[cell[first]] = rank[ok][inside][first]
     level = None
     if levels is not None:
-        code = np.asarray(levels)[ok][inside]
-        lo, hi = np.full(rows.size, np.iinfo(np.int64).max), np.full(rows.size, -1)
-        np.minimum.at(lo, row_of[inside], code)
-        np.maximum.at(hi, row_of[inside], code)
-        level = np.where(lo == hi, hi, -1)
+        code, row = np.asarray(levels, dtype=np.int64)[ok][inside], row_of[inside]
+        level = np.full(rows.size, -1, dtype=np.int64)
+        level[row] = code  # one of each trial's codes (the last written) ...
+        level[row[level[row] != code]] = -1  # ... and -1 where another answer of the trial has another
     keys = []
     for c, u in zip(codes[::-1], uniques[::-1]):  # undo the lexicographic code, last column first
         size = max(len(u), 1)
