@@ -60,7 +60,18 @@ def within_block_ranks(values: np.ndarray) -> np.ndarray:
     >>> within_block_ranks(np.array([[1, 1, 3], [3.0, 1.0, 2.0]])).tolist()
     [[1.5, 1.5, 3.0], [3.0, 1.0, 2.0]]
     """
-    return rankdata(np.asarray(values, dtype=float), axis=1, method="average")
+    return _row_ranks(np.asarray(values, dtype=float))
+
+
+def _row_ranks(x: np.ndarray) -> np.ndarray:
+    """``rankdata(x, axis=1, method="average")``, the same numbers: for the few conditions of a study, by
+    comparing each cell with the others in its row (a cell with L smaller and t equal cells, itself included,
+    has the average rank L + (t + 1) / 2, exact in floating point) instead of sorting every row. A row with
+    NaN, or a very wide matrix, goes to rankdata."""
+    if x.ndim != 2 or x.shape[1] > 16 or not x.size or np.isnan(x).any():
+        return rankdata(x, axis=1, method="average")
+    a, b = x[:, :, None], x[:, None, :]
+    return (b < a).sum(axis=2) + ((b == a).sum(axis=2) + 1) / 2.0
 
 
 def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
@@ -161,7 +172,7 @@ def _trial_ranks(raw: np.ndarray) -> np.ndarray:
     if not raw.size:
         return raw
     missing = np.isnan(raw)
-    return np.where(missing, np.nan, rankdata(np.where(missing, np.inf, raw), axis=1, method="average"))
+    return np.where(missing, np.nan, _row_ranks(np.where(missing, np.inf, raw)))
 
 
 def _blocks(owner: np.ndarray, values: np.ndarray, conditions: list[str], block: str,
@@ -175,11 +186,13 @@ def _blocks(owner: np.ndarray, values: np.ndarray, conditions: list[str], block:
         per = np.diff(np.r_[first, len(owner)])
         owner = owner[first]
         values = np.add.reduceat(values, first, axis=0) / per[:, None] if len(values) else values
-    participants = pd.Index(owner).astype(str).to_numpy()
+    # participant ids as text (a normalized frame's already are: no conversion of 10,000 strings per block)
+    participants = owner if owner.dtype == object and len(owner) and \
+        pd.api.types.infer_dtype(owner, skipna=False) == "string" else pd.Index(owner).astype(str).to_numpy()
     ranks = values
     if len(values) and block == "participant":
         ranks = within_block_ranks(values) if complete_only else np.where(
-            np.isnan(values), np.nan, rankdata(np.where(np.isnan(values), np.inf, values), axis=1, method="average"))
+            np.isnan(values), np.nan, _row_ranks(np.where(np.isnan(values), np.inf, values)))
     return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants,
                       block=block)
 

@@ -95,3 +95,19 @@ def test_breakdown_and_agreement_unchanged(seed: int) -> None:
         assert row["n_raters"] == b.n
         if b.n >= 2:
             assert row["kendall_w"] == friedman_ranks(b.ranks).kendall_w
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 5, 16, 17])
+def test_row_ranks_equal_rankdata(k: int) -> None:
+    """Average ranks by comparison within the row: the very numbers of scipy's rankdata (ties, inf, NaN)."""
+    from scipy.stats import rankdata
+
+    from results_analysis.ranks import _row_ranks, within_block_ranks
+
+    rng = np.random.default_rng(k)
+    for x in (rng.integers(1, 4, (400, k)).astype(float), rng.random((400, k)), np.round(rng.random((400, k)) * 4) / 2,
+              np.where(rng.random((400, k)) < 0.2, np.inf, rng.integers(1, 4, (400, k))),
+              np.where(rng.random((400, k)) < 0.1, np.nan, rng.random((400, k))), np.zeros((0, k))):
+        ref = rankdata(x, axis=1, method="average")
+        for got in (_row_ranks(x), within_block_ranks(x)):
+            assert got.dtype == ref.dtype and np.array_equal(got, ref, equal_nan=True)
