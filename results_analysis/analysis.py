@@ -41,7 +41,8 @@ from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
-from results_analysis.ranks import RankBlocks, place_shares, rank_blocks, rank_blocks_by, rank_blocks_with_trials
+from results_analysis.ranks import (RankBlocks, place_shares, rank_blocks, rank_blocks_by, rank_blocks_with_trials,
+                                    shared_trial_tables)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
@@ -243,7 +244,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     # resample matrix is drawn once (mean-rank, Bradley-Terry and effect-size intervals alike); it is drawn in
     # the background (for every participant, as the criteria's blocks normally hold them all) while the
     # breakdowns, which need none, are computed
-    with shared_resamples():
+    with shared_resamples(), shared_trial_tables():
         n_part = int(kept["participant"].nunique())
         if n_boot > 0 and n_part >= 2:
             resample_weights(n_part, n_boot, seed, background=True)

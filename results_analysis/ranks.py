@@ -14,6 +14,9 @@ computed: no statistic depends on how ties were written.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,7 +97,7 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
     sub = df.loc[df["criterion"].to_numpy(dtype=object) == criterion, [*key, "condition", "rank"]]
     if conditions is None:
         conditions = sorted(df["condition"].unique())
-    trials, raw, _ = _wide(sub, key, list(conditions))
+    trials, raw, _, _ = _wide(sub, key, list(conditions))
     # Blocks that lack a condition are dropped (listwise deletion) unless ``complete_only`` is false, for
     # the Skillings-Mack test, which reads the NaNs; validation decides whether incomplete blocks may exist.
     if complete_only:
@@ -124,13 +127,14 @@ def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndar
     if not isinstance(levels, pd.Categorical):  # a breakdown's caller may pass one: factorized once for all criteria
         levels = pd.Categorical(np.asarray(levels, dtype=object))
     level_codes, names = levels.codes, levels.categories
-    key = trial_key(df)
-    rows = df["criterion"].to_numpy(dtype=object) == criterion
-    sub = df.loc[rows, [*key, "condition", "rank"]]
-    trials, raw, level = _wide(sub, key, list(conditions), level_codes[rows])
+    rows, n_trials, (answer, trial), complete, owner, values = _criterion_table(df, criterion, list(conditions))
+    of_answer = level_codes[rows][answer]
+    level = np.full(n_trials, -1, dtype=np.int64)
+    level[trial] = of_answer  # one of each trial's codes (the last written) ...
+    level[trial[level[trial] != of_answer]] = -1  # ... and -1 where another answer of the trial has another
     # an incomplete trial is incomplete in every level's rows too: only a complete trial's level matters
-    complete = ~np.isnan(raw).any(axis=1)
-    if (level[complete] < 0).any():  # a complete trial split between levels (duplicated answers): each level
+    level = level[complete]
+    if (level < 0).any():  # a complete trial split between levels (duplicated answers): each level
         out = {}  # on its own rows, as rank_blocks would
         for name in names:
             part = df[levels == name]
@@ -138,7 +142,6 @@ def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndar
             out[str(name)] = (b, b if block == "trial" else rank_blocks(part, criterion, block="trial",
                                                                         conditions=conditions))
         return out
-    owner, values, level = trials[0][complete], _trial_ranks(raw[complete]), level[complete]
     out = {}
     for code, name in enumerate(names):
         mine = level == code
@@ -164,6 +167,41 @@ def rank_blocks_with_trials(df: pd.DataFrame, criterion: str, *, block: str = "p
                               conditions=conditions)[str(0)]
     b = rank_blocks(df, criterion, block=block, conditions=conditions)
     return b, b if block == "trial" else rank_blocks(df, criterion, block="trial", conditions=conditions)
+
+
+#: (id of the frame, criterion, conditions) -> (the frame, its table); set only inside :func:`shared_trial_tables`.
+_TABLES: ContextVar[dict | None] = ContextVar("results_analysis_trial_tables", default=None)
+
+
+@contextmanager
+def shared_trial_tables() -> Iterator[None]:
+    """Within this block each criterion's trials x conditions matrix of a frame is built once, for every
+    breakdown that splits it (:func:`rank_blocks_by`): the frame must not change inside the block."""
+    if _TABLES.get() is not None:
+        yield
+        return
+    token = _TABLES.set({})
+    try:
+        yield
+    finally:
+        _TABLES.reset(token)
+
+
+def _criterion_table(df: pd.DataFrame, criterion: str, conditions: list[str]) -> tuple:
+    """The rows of ``criterion`` (mask), the number of trials, the answers the matrix holds (positions among
+    those rows, trial of each), which trials are complete, and their participants and within-trial ranks."""
+    cache = _TABLES.get()
+    tag = (id(df), criterion, tuple(conditions))
+    if cache is not None and tag in cache and cache[tag][0] is df:
+        return cache[tag][1]
+    key = trial_key(df)
+    rows = df["criterion"].to_numpy(dtype=object) == criterion
+    trials, raw, n_trials, answers = _wide(df.loc[rows, [*key, "condition", "rank"]], key, conditions)
+    complete = ~np.isnan(raw).any(axis=1)
+    table = (rows, n_trials, answers, complete, trials[0][complete], _trial_ranks(raw[complete]))
+    if cache is not None:
+        cache[tag] = (df, table)  # the frame is kept with it: its id cannot be reused while the block lasts
+    return table
 
 
 def _trial_ranks(raw: np.ndarray) -> np.ndarray:
@@ -197,16 +235,15 @@ def _blocks(owner: np.ndarray, values: np.ndarray, conditions: list[str], block:
                       block=block)
 
 
-def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str], levels: np.ndarray | None = None,
-          ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray | None]:
+def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str],
+          ) -> tuple[list[np.ndarray], np.ndarray, int, tuple[np.ndarray, np.ndarray]]:
     """The trials x conditions matrix of ranks that ``sub.pivot_table(index=key, columns="condition",
     values="rank", aggfunc="first", observed=True).reindex(columns=conditions)`` gives, without pandas' group
     machinery (a 10,000-participant study builds dozens of these): trials sorted by ``key``, each trial's
     first non-missing rank per condition, trials with no rank at all (in any condition) left out.
 
-    Returns the trials' key values (one array per key column, aligned with the rows), the matrix and, given
-    ``levels`` (a code >= 0 per row of ``sub``), each trial's level: the code all its answers in the matrix
-    share, -1 where they differ (or a trial has none).
+    Returns the trials' key values (one array per key column, aligned with the rows), the matrix, the number
+    of trials and the answers it was built from: their positions in ``sub`` and the trial (row) of each.
     """
     rank = sub["rank"].to_numpy(dtype=float)
     codes, uniques = zip(*(pd.factorize(sub[c], sort=True) for c in key)) if len(sub) else ((), ())
@@ -226,19 +263,14 @@ def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str], levels: np.n
     cell = row_of[inside] * len(conditions) + col_of[inside]
     _, first = np.unique(cell, return_index=True)  # the first answer of each trial x condition
     out.flat[cell[first]] = rank[ok][inside][first]
-    level = None
-    if levels is not None:
-        code, row = np.asarray(levels, dtype=np.int64)[ok][inside], row_of[inside]
-        level = np.full(rows.size, -1, dtype=np.int64)
-        level[row] = code  # one of each trial's codes (the last written) ...
-        level[row[level[row] != code]] = -1  # ... and -1 where another answer of the trial has another
+    n_trials, answers = rows.size, (np.flatnonzero(ok)[inside], row_of[inside])
     keys = []
     for c, u in zip(codes[::-1], uniques[::-1]):  # undo the lexicographic code, last column first
         size = max(len(u), 1)
         keys.append(np.asarray(u)[rows % size])
         rows = rows // size
     keys = keys[::-1] or [np.zeros(0, dtype=object) for _ in key]
-    return keys, out, level
+    return keys, out, n_trials, answers
 
 
 def as_blocks(data: RankBlocks | pd.DataFrame, criterion: str | None = None, *, block: str = "trial") -> RankBlocks:

@@ -111,3 +111,22 @@ def test_row_ranks_equal_rankdata(k: int) -> None:
         ref = rankdata(x, axis=1, method="average")
         for got in (_row_ranks(x), within_block_ranks(x)):
             assert got.dtype == ref.dtype and np.array_equal(got, ref, equal_nan=True)
+
+
+def test_one_matrix_per_criterion_in_an_analysis(monkeypatch) -> None:
+    """run_analysis builds each criterion's matrix once for its blocks, breakdowns and agreement table, and
+    the shared matrices give the numbers each function gives on its own."""
+    import results_analysis.ranks as ranks
+    from results_analysis.analysis import run_analysis
+
+    df = simulate_results(12, 3, seed=4, n_practice=0, n_attention=0)
+    calls = []
+    real = ranks._wide
+    monkeypatch.setattr(ranks, "_wide", lambda *a, **k: calls.append(1) or real(*a, **k))
+    a = run_analysis(df, groups=["speaker", "device"], n_boot=0)
+    assert len(calls) == 3  # realism, synchronization, diversity
+    monkeypatch.undo()
+    alone = stimulus_agreement(df, conditions=a.conditions, criteria=list(a.criteria))
+    pd.testing.assert_frame_equal(alone, a.agreement, check_exact=True)
+    pd.testing.assert_frame_equal(group_breakdown(df, "device", conditions=a.conditions, criteria=list(a.criteria)),
+                                  a.groups["device"], check_exact=True)
