@@ -163,8 +163,8 @@ def rank_blocks_with_trials(df: pd.DataFrame, criterion: str, *, block: str = "p
     ([[2.0, 2.0, 2.0]], 2)
     """
     if len(df):
-        return rank_blocks_by(df, criterion, np.zeros(len(df), dtype=np.int64), block=block,
-                              conditions=conditions)[str(0)]
+        one_level = pd.Categorical.from_codes(np.zeros(len(df), dtype=np.int8), categories=["all"])
+        return rank_blocks_by(df, criterion, one_level, block=block, conditions=conditions)["all"]
     b = rank_blocks(df, criterion, block=block, conditions=conditions)
     return b, b if block == "trial" else rank_blocks(df, criterion, block="trial", conditions=conditions)
 
