@@ -11,6 +11,10 @@ computed: no statistic depends on how ties were written.
   independent block (pseudo-replication when a participant ranks several stimuli).
 
 :func:`place_shares` splits a tied answer over the places it spans (half each for a two-way tie).
+
+:func:`rank_blocks_by` gives every level of a breakdown (stimulus, speaker, participant group) its blocks
+from one trials x conditions matrix per criterion, and within :func:`shared_trial_tables` (one analysis)
+that matrix is built once for all of them: the same numbers as :func:`rank_blocks` on each level's rows.
 """
 from __future__ import annotations
 
