@@ -41,8 +41,8 @@ from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
-from results_analysis.ranks import (RankBlocks, place_shares, rank_blocks, rank_blocks_by, rank_blocks_with_trials,
-                                    shared_trial_tables)
+from results_analysis.ranks import (RankBlocks, participant_index, place_shares, rank_blocks, rank_blocks_by,
+                                    rank_blocks_with_trials, shared_trial_tables)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
@@ -167,7 +167,7 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
         for crit in criteria:
             b, tb = split[crit][level]
             row = {"group": column, "level": level, "criterion": crit, "n_blocks": b.n,
-                   "n_participants": int(np.unique(b.participants).size)}
+                   "n_participants": int(participant_index(b.participants)[0].size)}
             if b.n >= 2:
                 fr = friedman_ranks(b.ranks)
                 row.update(chi2=fr.chi2, df=fr.df, p=fr.p, kendall_w=fr.kendall_w)

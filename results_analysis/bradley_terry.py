@@ -24,7 +24,7 @@ import pandas as pd
 from scipy.sparse.csgraph import connected_components
 
 from results_analysis.descriptives import bootstrap_weights
-from results_analysis.ranks import RankBlocks, as_blocks
+from results_analysis.ranks import RankBlocks, as_blocks, participant_index
 
 #: Pseudo-count (wins each way per pair) that keeps bootstrap resamples with a never-winning condition finite.
 BOOT_PRIOR = 1e-3
@@ -177,7 +177,7 @@ def bradley_terry(blocks: RankBlocks | pd.DataFrame, criterion: str | None = Non
     out = pd.DataFrame({"condition": blocks.conditions, "strength": p})
     lo, hi = np.full(k, np.nan), np.full(k, np.nan)
     if n_boot > 0 and blocks.n and keep.size:
-        ids, inverse = np.unique(blocks.participants, return_inverse=True)
+        ids, inverse = participant_index(blocks.participants)
         r = blocks.ranks
         per = ((r[:, :, None] < r[:, None, :]) + 0.5 * np.isclose(r[:, :, None], r[:, None, :])).astype(float)
         per[:, np.arange(k), np.arange(k)] = 0.0

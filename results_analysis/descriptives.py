@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 
 from results_analysis.bootstrap import resample_weights
-from results_analysis.ranks import RankBlocks, as_blocks, place_shares
+from results_analysis.ranks import RankBlocks, as_blocks, participant_index, place_shares
 
 
 def bootstrap_weights(n_participants: int, n_boot: int, seed: int, *, background: bool = False) -> np.ndarray | None:
@@ -26,7 +26,7 @@ def bootstrap_weights(n_participants: int, n_boot: int, seed: int, *, background
 def per_participant_sums(blocks: RankBlocks, values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Participants (sorted), the (P, k) sums of ``values`` (default: the block ranks) and (P,) block counts."""
     values = blocks.ranks if values is None else values
-    ids, inverse = np.unique(blocks.participants, return_inverse=True)
+    ids, inverse = participant_index(blocks.participants)
     sums = np.zeros((ids.size, values.shape[1]))
     np.add.at(sums, inverse, values)
     counts = np.bincount(inverse, minlength=ids.size).astype(float)
@@ -53,7 +53,7 @@ def condition_summary(blocks: RankBlocks | pd.DataFrame, criterion: str | None =
     ranks = blocks.ranks
     n, k = ranks.shape
     out = pd.DataFrame({"condition": blocks.conditions, "n": n,
-                        "n_participants": int(np.unique(blocks.participants).size)})
+                        "n_participants": int(participant_index(blocks.participants)[0].size)})
     out["mean_rank"] = ranks.mean(axis=0) if n else np.nan
     lo, hi = bootstrap_mean_rank_ci(blocks, n_boot=n_boot, ci=ci, seed=seed)
     out["ci_low"], out["ci_high"] = lo, hi

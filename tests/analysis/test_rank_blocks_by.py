@@ -130,3 +130,14 @@ def test_one_matrix_per_criterion_in_an_analysis(monkeypatch) -> None:
     pd.testing.assert_frame_equal(alone, a.agreement, check_exact=True)
     pd.testing.assert_frame_equal(group_breakdown(df, "device", conditions=a.conditions, criteria=list(a.criteria)),
                                   a.groups["device"], check_exact=True)
+
+
+def test_participant_index_is_np_unique() -> None:
+    from results_analysis.ranks import participant_index
+
+    rng = np.random.default_rng(3)
+    names = np.array([f"P{i:03d}" for i in rng.integers(0, 50, 300)], dtype=object)
+    for p in (np.sort(names), names, names[:1], names[:0], np.array(["P2", "P10", "P10"], dtype=object)):
+        ids, which = participant_index(p)
+        ref_ids, ref_which = np.unique(p, return_inverse=True)
+        assert ids.tolist() == ref_ids.tolist() and np.array_equal(which, ref_which)
