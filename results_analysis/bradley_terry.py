@@ -24,7 +24,7 @@ import pandas as pd
 from scipy.sparse.csgraph import connected_components
 
 from results_analysis.descriptives import bootstrap_weights
-from results_analysis.ranks import RankBlocks, as_blocks, participant_index
+from results_analysis.ranks import RankBlocks, as_blocks, participant_index, ties
 
 #: Pseudo-count (wins each way per pair) that keeps bootstrap resamples with a never-winning condition finite.
 BOOT_PRIOR = 1e-3
@@ -43,7 +43,7 @@ def pairwise_wins(ranks: np.ndarray) -> np.ndarray:
     r = np.asarray(ranks, dtype=float)
     a = r[:, :, None]
     b = r[:, None, :]
-    w = (a < b).sum(axis=0) + 0.5 * np.isclose(a, b).sum(axis=0)
+    w = (a < b).sum(axis=0) + 0.5 * ties(a, b).sum(axis=0)
     np.fill_diagonal(w, 0.0)
     return w.astype(float)
 
@@ -179,7 +179,7 @@ def bradley_terry(blocks: RankBlocks | pd.DataFrame, criterion: str | None = Non
     if n_boot > 0 and blocks.n and keep.size:
         ids, inverse = participant_index(blocks.participants)
         r = blocks.ranks
-        per = ((r[:, :, None] < r[:, None, :]) + 0.5 * np.isclose(r[:, :, None], r[:, None, :])).astype(float)
+        per = ((r[:, :, None] < r[:, None, :]) + 0.5 * ties(r[:, :, None], r[:, None, :])).astype(float)
         per[:, np.arange(k), np.arange(k)] = 0.0
         by_participant = np.zeros((ids.size, k, k))
         np.add.at(by_participant, inverse, per)

@@ -82,6 +82,16 @@ def participant_index(participants: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return np.unique(p, return_inverse=True)
 
 
+def ties(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.isclose(a, b)`` (broadcast), by plain equality where that is the same answer: ranks that are all
+    finite multiples of 1/2 below 1,000 differ by at least 1/2 when they differ, far beyond isclose's
+    tolerance (1e-8 + 1e-5 |b|), so equal is close. Other values go to isclose."""
+    x = np.concatenate([np.ravel(a), np.ravel(b)])
+    if x.size and np.isfinite(x).all() and np.abs(x).max() < 1000 and (x * 2 == np.floor(x * 2)).all():
+        return a == b
+    return np.isclose(a, b)
+
+
 def within_block_ranks(values: np.ndarray) -> np.ndarray:
     """Average ranks within each row (1 = smallest): ties share the mean of the ranks they span.
 
@@ -338,7 +348,7 @@ def place_shares(ranks: np.ndarray) -> np.ndarray:
     n, k = r.shape
     if n == 0:
         return np.full((k, k), np.nan)
-    tie_size = np.isclose(r[:, :, None], r[:, None, :]).sum(axis=2)       # (n, k): size of each cell's tie
+    tie_size = ties(r[:, :, None], r[:, None, :]).sum(axis=2)             # (n, k): size of each cell's tie
     first = r - (tie_size - 1) / 2.0                                       # the first place a cell spans
     places = np.arange(1, k + 1, dtype=float)
     spans = (places[None, None, :] >= first[:, :, None] - 1e-9) & \

@@ -141,3 +141,15 @@ def test_participant_index_is_np_unique() -> None:
         ids, which = participant_index(p)
         ref_ids, ref_which = np.unique(p, return_inverse=True)
         assert ids.tolist() == ref_ids.tolist() and np.array_equal(which, ref_which)
+
+
+def test_ties_is_isclose() -> None:
+    """Equality stands in for isclose only where the two agree (half-integer ranks); elsewhere isclose."""
+    from results_analysis.ranks import ties
+
+    rng = np.random.default_rng(5)
+    half = rng.integers(2, 12, (200, 4)) / 2.0
+    for r in (half, half + 1e-9, rng.random((200, 4)), np.where(half > 3, np.nan, half), half * 1000,
+              np.zeros((0, 4))):
+        a, b = r[:, :, None], r[:, None, :]
+        assert np.array_equal(ties(a, b), np.isclose(a, b))
