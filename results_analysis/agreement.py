@@ -24,8 +24,7 @@ import pandas as pd
 
 from results_analysis.adjust import ADJUSTMENT_NAMES, adjust_pvalues
 from results_analysis.friedman import friedman_ranks
-from results_analysis.ranks import rank_blocks
-from results_analysis.validate import trial_key
+from results_analysis.ranks import rank_blocks_by
 
 AGREEMENT_COLUMNS = ["criterion", "stimulus", "n_raters", "kendall_w", "chi2", "df", "p", "p_adjusted",
                      "adjustment"]
@@ -46,13 +45,15 @@ def stimulus_agreement(df: pd.DataFrame, *, conditions: list[str], criteria: Seq
     """
     k = len(conditions)
     rows = []
+    # one trials x conditions matrix per criterion (shared with the rest of the analysis within
+    # shared_trial_tables), split by stimulus (sorted); the stimuli factorized once for every criterion
+    stimuli = pd.Categorical(df["stimulus"].astype(str).to_numpy(dtype=object))
     for crit in criteria:
-        # the columns rank_blocks reads: a stimulus's part is not a copy of every column of a large study
-        sub = df.loc[df["criterion"].to_numpy(dtype=object) == crit,
-                     [*trial_key(df), "stimulus", "criterion", "condition", "rank"]]
+        rated = stimuli.categories[np.unique(stimuli.codes[df["criterion"].to_numpy(dtype=object) == crit])]
         first = len(rows)
-        for stim, part in sub.groupby(sub["stimulus"].astype(str), sort=True):
-            b = rank_blocks(part, crit, block="participant", conditions=conditions)
+        for stim, (b, _) in rank_blocks_by(df, crit, stimuli, block="participant", conditions=conditions).items():
+            if stim not in rated:  # a stimulus that was never rated on this criterion has no row
+                continue
             row = {"criterion": crit, "stimulus": stim, "n_raters": b.n, "df": k - 1}
             if b.n >= 2:
                 fr = friedman_ranks(b.ranks)

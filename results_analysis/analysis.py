@@ -31,7 +31,7 @@ from results_analysis.adjust import ADJUSTMENTS
 from results_analysis.agreement import agreement_summary, stimulus_agreement
 from results_analysis.bootstrap import INTERVALS, resample_weights, shared_resamples
 from results_analysis.bradley_terry import bradley_terry
-from results_analysis.descriptives import bootstrap_weights, condition_summary
+from results_analysis.descriptives import condition_summary
 from results_analysis.effect_sizes import EffectSizes, effect_sizes
 from results_analysis.errors import AnalysisInputError
 from results_analysis.exclusions import apply_exclusions, attention_summary
@@ -43,11 +43,12 @@ from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
-from results_analysis.ranks import RankBlocks, place_shares, rank_blocks
+from results_analysis.ranks import (RankBlocks, participant_index, place_shares, rank_blocks, rank_blocks_by,
+                                    rank_blocks_with_trials, shared_trial_tables)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
-from results_analysis.validate import check_complete, trial_key, validate_structure
+from results_analysis.validate import check_complete, validate_structure
 
 
 @dataclass
@@ -132,12 +133,12 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     if skillings_mack_test:
         sm = skillings_mack(rank_blocks(df, criterion, block="trial", conditions=conditions,
                                         complete_only=False).values, n_perm=sm_permutations, seed=seed)
-    blocks = rank_blocks(df, criterion, block=block, conditions=conditions)
+    other = "participant" if block == "trial" else "trial"
+    by_participant, by_trial = rank_blocks_with_trials(df, criterion, block="participant", conditions=conditions)
+    blocks, other_blocks = (by_trial, by_participant) if block == "trial" else (by_participant, by_trial)
     if blocks.n < 2:
         raise AnalysisInputError(df.attrs.get("source"), f"criterion {criterion}",
                                  f"only {blocks.n} complete block(s) left after exclusions: nothing to test")
-    other = "participant" if block == "trial" else "trial"
-    other_blocks = rank_blocks(df, criterion, block=other, conditions=conditions)
     sens = friedman_ranks(other_blocks.ranks) if other_blocks.n >= 2 else None
     trial_blocks = blocks if block == "trial" else other_blocks
     fr = friedman_ranks(blocks.ranks)
@@ -165,13 +166,14 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
         raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
-    levels = df[column].fillna("(none)").astype(str)
-    df = df[[*trial_key(df), "criterion", "condition", "rank"]]  # what rank_blocks reads: smaller copies per level
-    for level, sub in df.groupby(levels, sort=True):
+    levels = pd.Categorical(df[column].fillna("(none)").astype(str).to_numpy(dtype=object))  # sorted levels
+    # each criterion's trials x conditions matrix is built once and split by level (sorted, as groupby sorts)
+    split = {crit: rank_blocks_by(df, crit, levels, block=block, conditions=conditions) for crit in criteria}
+    for level in sorted(split[criteria[0]]) if criteria else []:
         for crit in criteria:
-            b = rank_blocks(sub, crit, block=block, conditions=conditions)
+            b, tb = split[crit][level]
             row = {"group": column, "level": level, "criterion": crit, "n_blocks": b.n,
-                   "n_participants": int(np.unique(b.participants).size)}
+                   "n_participants": int(participant_index(b.participants)[0].size)}
             if b.n >= 2:
                 fr = friedman_ranks(b.ranks)
                 row.update(chi2=fr.chi2, df=fr.df, p=fr.p, kendall_w=fr.kendall_w)
@@ -181,7 +183,6 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
                 row.update({f"mean_rank_{c}": (float(b.ranks[0, i]) if b.n else np.nan)
                             for i, c in enumerate(conditions)})
             if b.n:
-                tb = b if block == "trial" else rank_blocks(sub, crit, block="trial", conditions=conditions)
                 first = place_shares(tb.ranks)[:, 0]  # a tie for first counts half (or a third ...)
                 row.update({f"share_rank_1_{c}": float(first[i]) for i, c in enumerate(conditions)})
             rows.append(row)
@@ -262,13 +263,13 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         control = by_label[control]
     criteria = list(dict.fromkeys(kept["criterion"]))
     sm = incomplete == "skillings-mack"
-    # shared_resamples: the criteria and intervals resample the same participants with the same seed, so each
-    # resample matrix is drawn once; the two large ones are drawn in the background (for every participant, as
-    # the criteria's blocks normally hold them all) while the breakdowns, which need none, are computed
-    with shared_resamples():
+    # shared_resamples: the criteria and intervals resample the same participants with the same seed, so the
+    # resample matrix is drawn once (mean-rank, Bradley-Terry and effect-size intervals alike); it is drawn in
+    # the background (for every participant, as the criteria's blocks normally hold them all) while the
+    # breakdowns, which need none, are computed
+    with shared_resamples(), shared_trial_tables():
         n_part = int(kept["participant"].nunique())
         if n_boot > 0 and n_part >= 2:
-            bootstrap_weights(n_part, n_boot, seed, background=True)
             resample_weights(n_part, n_boot, seed, background=True)
         by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block)
                     for g in groups}

@@ -24,7 +24,7 @@ import pandas as pd
 from scipy.sparse.csgraph import connected_components
 
 from results_analysis.descriptives import bootstrap_weights
-from results_analysis.ranks import RankBlocks, as_blocks
+from results_analysis.ranks import RankBlocks, as_blocks, participant_index, ties
 
 #: Pseudo-count (wins each way per pair) that keeps bootstrap resamples with a never-winning condition finite.
 BOOT_PRIOR = 1e-3
@@ -43,7 +43,7 @@ def pairwise_wins(ranks: np.ndarray) -> np.ndarray:
     r = np.asarray(ranks, dtype=float)
     a = r[:, :, None]
     b = r[:, None, :]
-    w = (a < b).sum(axis=0) + 0.5 * np.isclose(a, b).sum(axis=0)
+    w = (a < b).sum(axis=0) + 0.5 * ties(a, b).sum(axis=0)
     np.fill_diagonal(w, 0.0)
     return w.astype(float)
 
@@ -177,14 +177,16 @@ def bradley_terry(blocks: RankBlocks | pd.DataFrame, criterion: str | None = Non
     out = pd.DataFrame({"condition": blocks.conditions, "strength": p})
     lo, hi = np.full(k, np.nan), np.full(k, np.nan)
     if n_boot > 0 and blocks.n and keep.size:
-        ids, inverse = np.unique(blocks.participants, return_inverse=True)
+        ids, inverse = participant_index(blocks.participants)
         r = blocks.ranks
-        per = ((r[:, :, None] < r[:, None, :]) + 0.5 * np.isclose(r[:, :, None], r[:, None, :])).astype(float)
+        per = ((r[:, :, None] < r[:, None, :]) + 0.5 * ties(r[:, :, None], r[:, None, :])).astype(float)
         per[:, np.arange(k), np.arange(k)] = 0.0
         by_participant = np.zeros((ids.size, k, k))
         np.add.at(by_participant, inverse, per)
         weights = bootstrap_weights(ids.size, n_boot, seed)
-        resampled = np.einsum("bp,pij->bij", weights, by_participant)[:, keep][:, :, keep]
+        # one matrix product (BLAS) rather than einsum's own loop; the counts are multiples of 1/2 and the
+        # weights integers, so every sum is exact whatever the order of additions
+        resampled = (weights @ by_participant.reshape(ids.size, k * k)).reshape(-1, k, k)[:, keep][:, :, keep]
         boot = fit_bradley_terry(resampled, prior=BOOT_PRIOR, tol=1e-8)
         a = (1.0 - ci) / 2.0
         lo[keep], hi[keep] = np.quantile(boot, a, axis=0), np.quantile(boot, 1.0 - a, axis=0)

@@ -33,7 +33,7 @@ from scipy import stats
 
 from results_analysis.bootstrap import ClusterSums, cluster_bootstrap
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, pairs
-from results_analysis.ranks import RankBlocks
+from results_analysis.ranks import RankBlocks, participant_index
 
 #: Differences closer than this to zero are zero differences; |d| equal to this many decimals are ties.
 _DECIMALS = 10
@@ -197,7 +197,7 @@ def hodges_lehmann(d: np.ndarray, *, ci: float = 0.95) -> HodgesLehmann:
 
 def _row_weights(blocks: RankBlocks) -> tuple[int, np.ndarray]:
     """Number of clusters (participants) and each block's cluster index."""
-    _, inverse = np.unique(blocks.participants, return_inverse=True)
+    _, inverse = participant_index(blocks.participants)
     return int(inverse.max()) + 1 if inverse.size else 0, inverse
 
 

@@ -52,7 +52,7 @@ def apply_exclusions(df: pd.DataFrame, *, exclude_failed_attention: bool = False
         out |= df["is_practice"].astype(bool)
     if "is_attention_check" in df.columns:
         out |= df["is_attention_check"].astype(bool)
-    kept = df.loc[~out].copy()
+    kept = df.loc[~out]  # a new frame already (copy-on-write): no second copy of every column
     kept.attrs.update(attrs)
     kept.attrs["n_practice_rows"] = int(df["is_practice"].astype(bool).sum()) if "is_practice" in df.columns else 0
     table = pd.DataFrame([{"participant": p, "reason": "; ".join(r)} for p, r in sorted(reasons.items())],

@@ -77,9 +77,13 @@ def save(fig, out_dir: Path, name: str) -> list[Path]:
 
     Each file is one draw of the figure: every figure lays itself out with ``tight_layout`` when it is built,
     so a plain ``savefig`` keeps its labels inside the canvas (``bbox_inches="tight"`` would draw the whole
-    figure a second time just to measure it).
+    figure a second time just to measure it). ``tight_layout`` leaves a placeholder layout engine behind, for
+    which ``savefig`` would also draw the figure once without rendering before each file: the layout is done,
+    so the engine is removed.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
+    with matplotlib.rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+        fig.set_layout_engine(None)  # with both rc settings off: no engine at all
     paths = [out_dir / f"{name}.png", out_dir / f"{name}.svg"]
     for p in paths:
         fig.savefig(p, facecolor="white", dpi=200)

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from results_analysis.ranks import within_block_ranks
+from results_analysis.ranks import ties, within_block_ranks
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ def _tie_sum(ranks: np.ndarray) -> float:
     n, k = s.shape
     # Run lengths of equal values per row, vectorized over rows.
     starts = np.ones((n, k), dtype=bool)
-    starts[:, 1:] = ~np.isclose(s[:, 1:], s[:, :-1])
+    starts[:, 1:] = ~ties(s[:, 1:], s[:, :-1])
     run_id = np.cumsum(starts, axis=1) - 1 + (np.arange(n) * k)[:, None]
     t = np.bincount(run_id.ravel(), minlength=n * k).astype(float)
     return float(np.sum(t ** 3 - t))

@@ -76,8 +76,9 @@ def load_results(path: str | Path) -> pd.DataFrame:
             df = pd.read_csv(path, dtype=dtype, keep_default_na=False, na_values=[""])
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
             raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
-        # Line numbers as a text editor shows them: the header is line 1.
-        df["_where"] = [f"line {i + 2}" for i in range(len(df))]
+        # Line numbers as a text editor shows them: the header is line 1. Plain Python strings (object): a
+        # million of them would take longer to convert to pandas' str dtype than to write.
+        df["_where"] = pd.Series([f"line {i + 2}" for i in range(len(df))], index=df.index, dtype=object)
     return normalize_results(df, source=path)
 
 
@@ -88,18 +89,24 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
     :class:`AnalysisInputError` naming the column and row when a value cannot be read.
     """
     src = str(source) if source is not None else df.attrs.get("source")
-    df = df.copy()
+    df = df.copy(deep=False)  # copy-on-write: the caller's frame is never changed, and no column is copied
     if "_where" not in df.columns:
-        df["_where"] = [f"row {i + 1}" for i in range(len(df))]
+        df["_where"] = pd.Series([f"row {i + 1}" for i in range(len(df))], index=df.index, dtype=object)
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
         found = [str(c) for c in df.columns if c not in INTERNAL_COLUMNS]
         raise AnalysisInputError(src, f"column(s) {', '.join(missing)}",
                                  f"missing required column(s); found: {', '.join(found) or 'no columns'}")
+    whole = set()  # text columns without a gap: no isna (slow on object columns) needed
     for col in _TEXT_COLUMNS:
         if col in df.columns:
+            if df[col].dtype == object and _all_text(df[col]):  # e.g. normalized before: kept as it is
+                whole.add(col)
+                continue
             df[col] = _as_text(df[col])
     for col in ("participant", "stimulus", "criterion", "condition"):
+        if col in whole:
+            continue
         bad = df[col].isna()
         if bad.any():
             raise AnalysisInputError(src, f"{df['_where'].iloc[int(np.argmax(bad.to_numpy()))]}, column '{col}'",
@@ -113,8 +120,8 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
     df["reasons"] = df["reasons"].fillna("")
     for col in _NUMBER_COLUMNS:
         if col in df.columns:
-            num = _to_number(df[col])
-            bad = num.isna() & df[col].notna()
+            num, missing = _number_column(df[col])
+            bad = num.isna() & ~missing
             if col == "trial_index":
                 bad |= num.isna()
             elif col == "rank":  # a rank row needs its rank; other paradigms' rows have none
@@ -276,15 +283,26 @@ def _as_text(col: pd.Series) -> pd.Series:
     return col.map(lambda v: None if _isna(v) else str(v)).astype(object)
 
 
+def _all_text(col: pd.Series) -> bool:
+    """Every value is a ``str`` (none missing), by one C pass over the column."""
+    return len(col) > 0 and pd.api.types.infer_dtype(col.to_numpy(dtype=object), skipna=False) == "string"
+
+
 def _to_number(col: pd.Series) -> pd.Series:
     """``pd.to_numeric(col, errors="coerce")`` as floats. A text column of a large study holds few distinct
     values (ranks, trial numbers, slots) in millions of cells: each distinct text is parsed once."""
+    return _number_column(col)[0]
+
+
+def _number_column(col: pd.Series) -> tuple[pd.Series, np.ndarray]:
+    """:func:`_to_number` and where ``col`` is missing (``col.isna()``, read from the same factorization:
+    isna of a million-cell object column costs as much again)."""
     if col.dtype.kind in "iufb":
-        return pd.to_numeric(col, errors="coerce").astype(float)
+        return pd.to_numeric(col, errors="coerce").astype(float), col.isna().to_numpy()
     codes, uniques = pd.factorize(col.to_numpy(dtype=object), use_na_sentinel=True)
     parsed = pd.to_numeric(pd.Series(uniques, dtype=object), errors="coerce").to_numpy(dtype=float)
     out = np.append(parsed, np.nan)[codes]  # code -1 (missing) picks the appended NaN
-    return pd.Series(out, index=col.index)
+    return pd.Series(out, index=col.index), codes < 0
 
 
 def _flag_value(v, default: bool) -> bool | None:

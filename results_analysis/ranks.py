@@ -11,9 +11,16 @@ computed: no statistic depends on how ties were written.
   independent block (pseudo-replication when a participant ranks several stimuli).
 
 :func:`place_shares` splits a tied answer over the places it spans (half each for a two-way tie).
+
+:func:`rank_blocks_by` gives every level of a breakdown (stimulus, speaker, participant group) its blocks
+from one trials x conditions matrix per criterion, and within :func:`shared_trial_tables` (one analysis)
+that matrix is built once for all of them: the same numbers as :func:`rank_blocks` on each level's rows.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,13 +61,55 @@ class RankBlocks:
         return int(self.ranks.shape[1])
 
 
+def participant_index(participants: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(participants, return_inverse=True)``: the sorted distinct participants and each block's
+    index among them. Blocks come sorted by participant, so the runs are read off without sorting 80,000
+    strings again (any other order is sorted by np.unique).
+
+    >>> ids, which = participant_index(np.array(["P1", "P1", "P2"], dtype=object))
+    >>> ids.tolist(), which.tolist()
+    (['P1', 'P2'], [0, 0, 1])
+    """
+    p = np.asarray(participants)
+    if p.ndim == 1 and len(p) > 1:
+        try:
+            ordered = bool(np.all(p[1:] >= p[:-1]))
+        except TypeError:  # values that do not compare: np.unique says so
+            ordered = False
+        if ordered:
+            first = np.r_[True, p[1:] != p[:-1]]
+            return p[first], np.cumsum(first) - 1
+    return np.unique(p, return_inverse=True)
+
+
+def ties(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.isclose(a, b)`` (broadcast), by plain equality where that is the same answer: ranks that are all
+    finite multiples of 1/2 below 1,000 differ by at least 1/2 when they differ, far beyond isclose's
+    tolerance (1e-8 + 1e-5 |b|), so equal is close. Other values go to isclose."""
+    x = np.concatenate([np.ravel(a), np.ravel(b)])
+    if x.size and np.isfinite(x).all() and np.abs(x).max() < 1000 and (x * 2 == np.floor(x * 2)).all():
+        return a == b
+    return np.isclose(a, b)
+
+
 def within_block_ranks(values: np.ndarray) -> np.ndarray:
     """Average ranks within each row (1 = smallest): ties share the mean of the ranks they span.
 
     >>> within_block_ranks(np.array([[1, 1, 3], [3.0, 1.0, 2.0]])).tolist()
     [[1.5, 1.5, 3.0], [3.0, 1.0, 2.0]]
     """
-    return rankdata(np.asarray(values, dtype=float), axis=1, method="average")
+    return _row_ranks(np.asarray(values, dtype=float))
+
+
+def _row_ranks(x: np.ndarray) -> np.ndarray:
+    """``rankdata(x, axis=1, method="average")``, the same numbers: for the few conditions of a study, by
+    comparing each cell with the others in its row (a cell with L smaller and t equal cells, itself included,
+    has the average rank L + (t + 1) / 2, exact in floating point) instead of sorting every row. A row with
+    NaN, or a very wide matrix, goes to rankdata."""
+    if x.ndim != 2 or x.shape[1] > 16 or not x.size or np.isnan(x).any():
+        return rankdata(x, axis=1, method="average")
+    a, b = x[:, :, None], x[:, None, :]
+    return (b < a).sum(axis=2) + ((b == a).sum(axis=2) + 1) / 2.0
 
 
 def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
@@ -83,17 +132,126 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
     sub = df.loc[df["criterion"].to_numpy(dtype=object) == criterion, [*key, "condition", "rank"]]
     if conditions is None:
         conditions = sorted(df["condition"].unique())
-    trials, raw = _wide(sub, key, list(conditions))
+    trials, raw, _, _ = _wide(sub, key, list(conditions))
     # Blocks that lack a condition are dropped (listwise deletion) unless ``complete_only`` is false, for
     # the Skillings-Mack test, which reads the NaNs; validation decides whether incomplete blocks may exist.
     if complete_only:
         complete = ~np.isnan(raw).any(axis=1)
         trials, raw = [t[complete] for t in trials], raw[complete]
-    # Within-trial average ranks first: the tie coding (1,1,3 or 1.5,1.5,3) is gone from here on.
+    return _blocks(trials[0], _trial_ranks(raw), list(conditions), block, complete_only)
+
+
+def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndarray | pd.Categorical, *,
+                   block: str = "participant", conditions: list[str]) -> dict[str, tuple[RankBlocks, RankBlocks]]:
+    """Per distinct value of ``levels`` (one per row of ``df``, sorted; or each category of a Categorical): the
+    blocks at ``block`` and the trial blocks of ``criterion`` in the rows of that level, complete trials only:
+    what ``rank_blocks`` gives for ``df[levels == level]`` with ``block=block`` and with ``block='trial'``,
+    built from one trials x conditions matrix instead of two per level (a breakdown by stimulus or speaker).
+
+    A trial whose answers lie in two levels is incomplete in each (in a validated frame, without duplicated
+    answers): should one exist, every level is computed on its own rows, as ``rank_blocks`` would.
+
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"participant": ["P1"] * 6, "trial_index": [0, 0, 0, 1, 1, 1], "criterion": "realism",
+    ...                    "condition": list("ABC") * 2, "rank": [1, 2, 3, 3, 2, 1], "stimulus": ["c1"] * 3 + ["c2"] * 3})
+    >>> {lv: b.ranks.tolist() for lv, (b, _) in rank_blocks_by(df, "realism", df["stimulus"], conditions=list("ABC")).items()}
+    {'c1': [[1.0, 2.0, 3.0]], 'c2': [[3.0, 2.0, 1.0]]}
+    """
+    if block not in BLOCKS:
+        raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
+    if not isinstance(levels, pd.Categorical):  # a breakdown's caller may pass one: factorized once for all criteria
+        levels = pd.Categorical(np.asarray(levels, dtype=object))
+    level_codes, names = levels.codes, levels.categories
+    rows, n_trials, (answer, trial), complete, owner, values = _criterion_table(df, criterion, list(conditions))
+    of_answer = level_codes[rows][answer]
+    level = np.full(n_trials, -1, dtype=np.int64)
+    level[trial] = of_answer  # one of each trial's codes (the last written) ...
+    level[trial[level[trial] != of_answer]] = -1  # ... and -1 where another answer of the trial has another
+    # an incomplete trial is incomplete in every level's rows too: only a complete trial's level matters
+    level = level[complete]
+    if (level < 0).any():  # a complete trial split between levels (duplicated answers): each level
+        out = {}  # on its own rows, as rank_blocks would
+        for name in names:
+            part = df[levels == name]
+            b = rank_blocks(part, criterion, block=block, conditions=conditions)
+            out[str(name)] = (b, b if block == "trial" else rank_blocks(part, criterion, block="trial",
+                                                                        conditions=conditions))
+        return out
+    out = {}
+    for code, name in enumerate(names):
+        mine = level == code
+        tb = _blocks(owner[mine], values[mine], list(conditions), "trial", True)
+        out[str(name)] = (tb if block == "trial" else _blocks(owner[mine], values[mine], list(conditions), block,
+                                                              True), tb)
+    return out
+
+
+def rank_blocks_with_trials(df: pd.DataFrame, criterion: str, *, block: str = "participant",
+                            conditions: list[str]) -> tuple[RankBlocks, RankBlocks]:
+    """``rank_blocks`` at ``block`` and at ``'trial'`` (complete trials), from one trials x conditions matrix.
+
+    >>> import pandas as pd
+    >>> df = pd.DataFrame({"participant": ["P1"] * 6, "trial_index": [0, 0, 0, 1, 1, 1], "criterion": "realism",
+    ...                    "condition": list("ABC") * 2, "rank": [1, 2, 3, 3, 2, 1]})
+    >>> b, t = rank_blocks_with_trials(df, "realism", conditions=list("ABC"))
+    >>> b.values.tolist(), t.n
+    ([[2.0, 2.0, 2.0]], 2)
+    """
+    if len(df):
+        one_level = pd.Categorical.from_codes(np.zeros(len(df), dtype=np.int8), categories=["all"])
+        return rank_blocks_by(df, criterion, one_level, block=block, conditions=conditions)["all"]
+    b = rank_blocks(df, criterion, block=block, conditions=conditions)
+    return b, b if block == "trial" else rank_blocks(df, criterion, block="trial", conditions=conditions)
+
+
+#: (id of the frame, criterion, conditions) -> (the frame, its table); set only inside :func:`shared_trial_tables`.
+_TABLES: ContextVar[dict | None] = ContextVar("results_analysis_trial_tables", default=None)
+
+
+@contextmanager
+def shared_trial_tables() -> Iterator[None]:
+    """Within this block each criterion's trials x conditions matrix of a frame is built once, for every
+    breakdown that splits it (:func:`rank_blocks_by`): the frame must not change inside the block."""
+    if _TABLES.get() is not None:
+        yield
+        return
+    token = _TABLES.set({})
+    try:
+        yield
+    finally:
+        _TABLES.reset(token)
+
+
+def _criterion_table(df: pd.DataFrame, criterion: str, conditions: list[str]) -> tuple:
+    """The rows of ``criterion`` (mask), the number of trials, the answers the matrix holds (positions among
+    those rows, trial of each), which trials are complete, and their participants and within-trial ranks."""
+    cache = _TABLES.get()
+    tag = (id(df), criterion, tuple(conditions))
+    if cache is not None and tag in cache and cache[tag][0] is df:
+        return cache[tag][1]
+    key = trial_key(df)
+    rows = df["criterion"].to_numpy(dtype=object) == criterion
+    trials, raw, n_trials, answers = _wide(df.loc[rows, [*key, "condition", "rank"]], key, conditions)
+    complete = ~np.isnan(raw).any(axis=1)
+    table = (rows, n_trials, answers, complete, trials[0][complete], _trial_ranks(raw[complete]))
+    if cache is not None:
+        cache[tag] = (df, table)  # the frame is kept with it: its id cannot be reused while the block lasts
+    return table
+
+
+def _trial_ranks(raw: np.ndarray) -> np.ndarray:
+    """Within-trial average ranks of a trials x conditions matrix of answers (NaN stays NaN): the tie coding
+    (1,1,3 or 1.5,1.5,3) is gone from here on."""
+    if not raw.size:
+        return raw
     missing = np.isnan(raw)
-    values = np.where(missing, np.nan, rankdata(np.where(missing, np.inf, raw), axis=1, method="average")) \
-        if raw.size else raw
-    owner = trials[0]
+    return np.where(missing, np.nan, _row_ranks(np.where(missing, np.inf, raw)))
+
+
+def _blocks(owner: np.ndarray, values: np.ndarray, conditions: list[str], block: str,
+            complete_only: bool) -> RankBlocks:
+    """The blocks of trials sorted by participant (``owner``: each trial's participant; ``values``: its
+    within-trial ranks)."""
     if block == "participant":
         # a participant's mean of its trials' ranks (trials are sorted by participant); the sums of average
         # ranks (multiples of 1/2) are exact, so this is the number a pandas group mean gives
@@ -101,22 +259,26 @@ def rank_blocks(df: pd.DataFrame, criterion: str, *, block: str = "participant",
         per = np.diff(np.r_[first, len(owner)])
         owner = owner[first]
         values = np.add.reduceat(values, first, axis=0) / per[:, None] if len(values) else values
-    participants = pd.Index(owner).astype(str).to_numpy()
+    # participant ids as text (a normalized frame's already are: no conversion of 10,000 strings per block)
+    participants = owner if owner.dtype == object and len(owner) and \
+        pd.api.types.infer_dtype(owner, skipna=False) == "string" else pd.Index(owner).astype(str).to_numpy()
     ranks = values
     if len(values) and block == "participant":
         ranks = within_block_ranks(values) if complete_only else np.where(
-            np.isnan(values), np.nan, rankdata(np.where(np.isnan(values), np.inf, values), axis=1, method="average"))
+            np.isnan(values), np.nan, _row_ranks(np.where(np.isnan(values), np.inf, values)))
     return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants,
                       block=block)
 
 
-def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str]) -> tuple[list[np.ndarray], np.ndarray]:
+def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str],
+          ) -> tuple[list[np.ndarray], np.ndarray, int, tuple[np.ndarray, np.ndarray]]:
     """The trials x conditions matrix of ranks that ``sub.pivot_table(index=key, columns="condition",
     values="rank", aggfunc="first", observed=True).reindex(columns=conditions)`` gives, without pandas' group
     machinery (a 10,000-participant study builds dozens of these): trials sorted by ``key``, each trial's
     first non-missing rank per condition, trials with no rank at all (in any condition) left out.
 
-    Returns the trials' key values (one array per key column, aligned with the rows) and the matrix.
+    Returns the trials' key values (one array per key column, aligned with the rows), the matrix, the number
+    of trials and the answers it was built from: their positions in ``sub`` and the trial (row) of each.
     """
     rank = sub["rank"].to_numpy(dtype=float)
     codes, uniques = zip(*(pd.factorize(sub[c], sort=True) for c in key)) if len(sub) else ((), ())
@@ -136,13 +298,14 @@ def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str]) -> tuple[lis
     cell = row_of[inside] * len(conditions) + col_of[inside]
     _, first = np.unique(cell, return_index=True)  # the first answer of each trial x condition
     out.flat[cell[first]] = rank[ok][inside][first]
+    n_trials, answers = rows.size, (np.flatnonzero(ok)[inside], row_of[inside])
     keys = []
     for c, u in zip(codes[::-1], uniques[::-1]):  # undo the lexicographic code, last column first
         size = max(len(u), 1)
         keys.append(np.asarray(u)[rows % size])
         rows = rows // size
     keys = keys[::-1] or [np.zeros(0, dtype=object) for _ in key]
-    return keys, out
+    return keys, out, n_trials, answers
 
 
 def as_blocks(data: RankBlocks | pd.DataFrame, criterion: str | None = None, *, block: str = "trial") -> RankBlocks:
@@ -185,7 +348,7 @@ def place_shares(ranks: np.ndarray) -> np.ndarray:
     n, k = r.shape
     if n == 0:
         return np.full((k, k), np.nan)
-    tie_size = np.isclose(r[:, :, None], r[:, None, :]).sum(axis=2)       # (n, k): size of each cell's tie
+    tie_size = ties(r[:, :, None], r[:, None, :]).sum(axis=2)             # (n, k): size of each cell's tie
     first = r - (tie_size - 1) / 2.0                                       # the first place a cell spans
     places = np.arange(1, k + 1, dtype=float)
     spans = (places[None, None, :] >= first[:, :, None] - 1e-9) & \

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import scipy
 
-from results_analysis import effects_report, figures
+from results_analysis import effects_report
 from results_analysis.analysis import Analysis, CriterionAnalysis, run_analysis
 from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
@@ -205,6 +205,9 @@ def display_order(a: Analysis) -> list[str]:
 
 
 def write_figures(a: Analysis, out: Path) -> None:
+    # matplotlib is imported when the figures are drawn, not with the statistics (0.5-1 s of a cold start)
+    from results_analysis import figures
+
     order = display_order(a)
     summaries = {k: c.summary for k, c in a.criteria.items()}
     figures.save(figures.rank_share_figure(summaries, order), out, "rank_shares")

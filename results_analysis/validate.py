@@ -83,7 +83,9 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
         raise AnalysisInputError(src, f"{where.iloc[i]}, column 'rank'", "missing or non-numeric rank")
 
     key = trial_key(df)
-    dup = df.duplicated(key + ["criterion", "condition"], keep=False)
+    codes = _codes(df, key + ["criterion", "condition"])
+    dup = pd.Series(_sizes(codes) > 1, index=df.index) if codes is not None else \
+        df.duplicated(key + ["criterion", "condition"], keep=False)
     if dup.any():
         first = df.loc[dup].iloc[0]
         same = dup & (df["participant"] == first["participant"]) & (df["trial_index"] == first["trial_index"]) \
@@ -96,7 +98,8 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
     rated = rated_mask(df)
     k_rated = int(df.loc[rated, "condition"].nunique())
     # Rated trials: 1..k over the study's conditions; other trials: 1..(conditions shown in that trial).
-    per_trial = df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
+    per_trial = _sizes(codes[:-1]) if codes is not None else \
+        df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
     bound = np.where(rated, max(k_rated, 1), per_trial)
     bad = (rank < 1) | (rank > bound)
     if bad.any():
@@ -127,7 +130,9 @@ def check_complete(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFra
     conditions = sorted(df.loc[rated, "condition"].unique())
     k = len(conditions)
     key = trial_key(df)
-    counts = df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
+    codes = _codes(df, key + ["criterion"])
+    counts = _sizes(codes) if codes is not None else \
+        df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
     short = rated & (counts < k)
     attrs = dict(df.attrs)
     if short.any():
@@ -151,6 +156,29 @@ def check_complete(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFra
                                  "(use --incomplete drop for listwise deletion or --incomplete skillings-mack)")
     df.attrs["dropped_incomplete"] = 0
     return df
+
+
+def _codes(df: pd.DataFrame, cols: list[str]) -> list[tuple[np.ndarray, int]] | None:
+    """Each column's codes and number of distinct values, factorized once for the checks that group by them;
+    None when a value is missing or the combined key could overflow (pandas' own grouping decides then)."""
+    out, span = [], 1
+    for c in cols:
+        code, uniques = pd.factorize(df[c])
+        span *= max(len(uniques), 1)
+        if span >= 2 ** 62 or (code < 0).any():
+            return None
+        out.append((code, max(len(uniques), 1)))
+    return out
+
+
+def _sizes(codes: list[tuple[np.ndarray, int]]) -> np.ndarray:
+    """Per row, the number of rows with the same values in the columns of ``codes``: what
+    ``groupby(cols).transform("size")`` gives, from codes factorized once."""
+    key = np.zeros(len(codes[0][0]), dtype=np.int64)
+    for code, n in codes:
+        key = key * n + code
+    group, _ = pd.factorize(key)
+    return np.bincount(group)[group]
 
 
 def _fmt(v) -> str:

@@ -30,9 +30,9 @@ def test_one_draw_per_resample_matrix_and_the_same_intervals(monkeypatch):
     a = run_analysis(df, n_boot=300, seed=7)
     monkeypatch.undo()
     assert len(a.criteria) == 3
-    # one multinomial draw (mean-rank and Bradley-Terry intervals of every criterion) and one index draw
-    # (effect sizes of every criterion), instead of 3 x 3
-    assert counter.calls == 2
+    # one draw: the mean-rank, Bradley-Terry and effect-size intervals of every criterion share the resamples
+    # (instead of 3 x 3 draws, or one multinomial and one index draw before)
+    assert counter.calls == 1
     for crit, res in a.criteria.items():  # each statistic alone, drawing its own resamples
         trial = rank_blocks(df, crit, block="trial", conditions=a.conditions)
         alone = condition_summary(trial, n_boot=300, seed=7)
@@ -41,3 +41,17 @@ def test_one_draw_per_resample_matrix_and_the_same_intervals(monkeypatch):
         assert np.array_equal(bt[["ci_low", "ci_high"]].to_numpy(), res.bradley_terry[["ci_low", "ci_high"]].to_numpy())
         es = effect_sizes(res.blocks, n_boot=300, seed=7)
         assert es.pairs[["rb_ci_low", "rb_ci_high"]].equals(res.effect_sizes.pairs[["rb_ci_low", "rb_ci_high"]])
+
+
+def test_mean_rank_interval_is_scipy_bootstrap_percentile_interval():
+    """The mean-rank interval resamples participants exactly as scipy.stats.bootstrap does (the matrix the
+    effect sizes use): for one block per participant it is scipy's percentile interval of the mean."""
+    from scipy.stats import bootstrap as scipy_bootstrap
+
+    df = simulate_results(40, 3, seed=2, n_practice=0, n_attention=0)
+    blocks = rank_blocks(df, "realism", block="participant")
+    got = condition_summary(blocks, n_boot=400, ci=0.9, seed=11)
+    for c in range(blocks.k):
+        ref = scipy_bootstrap((blocks.ranks[:, c],), np.mean, n_resamples=400, confidence_level=0.9,
+                              method="percentile", rng=np.random.default_rng(11)).confidence_interval
+        assert np.allclose([got["ci_low"][c], got["ci_high"][c]], [ref.low, ref.high], rtol=0, atol=1e-12)
