@@ -72,6 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--export-key", type=Path, metavar="FILE",
                    help="also write the key to FILE (for `merge --key` on another machine); keep it private, "
                    "never send it with the bundle")
+    b.add_argument("--upload-url", metavar="URL",
+                   help="the study server (`studyapp serve` with --db the --results database) participants upload "
+                   "their answers to as they are committed, e.g. https://study.example.org (the results zip is "
+                   "still written as the fallback)")
     b.set_defaults(func=_cmd_bundle)
 
     k = sub.add_parser(
@@ -202,9 +206,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                   allow_rerun=args.allow_rerun, n_rows=schedule.get("n_rows"))
         if rec.id != args.participant:
             print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
+        uploader = None
+        if opened is not None and opened.upload is not None:
+            from studyapp.study.upload import Uploader
+
+            # its own read-only connection; it sends each answer once committed, off the session's thread
+            uploader = Uploader(results, opened.bundle_hash, opened.study, rec.id, opened.upload["url"],
+                                opened.upload["secret"])
+            uploader.start()
         try:
             code = _run_mode(args, design, db, rec.id, schedule)
         except BaseException:
+            if uploader is not None:
+                uploader.finish(0)
             _forget_unstarted(db, results, rec.id, known, new_db)
             raise
         final = db.participant(rec.id)
@@ -220,6 +234,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(ENDED_EARLY_MESSAGE + summary)
     elif final is not None and final.status == "done":
         print(f"Participant {rec.id} completed the study.{summary}")
+    if uploader is not None:
+        from studyapp.study.upload import final_message
+
+        outcome = uploader.finish()
+        print(final_message(outcome), flush=True)
+        for f in finished_files:
+            print(f"Your results file: {f}" + ("" if outcome.all_sent else "\nPlease send this file to the experimenter."))
+        return code
     for f in finished_files:
         print(f"Your results file: {f}\nPlease send this file to the experimenter.")
     return code
@@ -282,13 +304,16 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
 
     results = args.results or default_results_path(args.design)
     info = make_bundle(args.design, args.output, participants=args.participants, results=results,
-                       export_key=args.export_key)
+                       export_key=args.export_key, upload_url=args.upload_url)
     print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml, schedule.json and "
           f"manifest.json; {info.size_bytes / 1e6:.1f} MB)")
     print(f"The key (opaque ids -> conditions and files) is kept in {results}, so `studyapp merge` can map "
           "results back; it is not written next to the zip.")
     if info.key_path is not None:
         print(f"Key also written to {info.key_path}: keep it private, never send it with the bundle.")
+    if args.upload_url:
+        print(f"Participants upload their answers to {args.upload_url.rstrip('/')}/upload as they go; serve the study "
+              f"with `studyapp serve {args.design} --db {results}` there.")
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
     if info.small_seed:
