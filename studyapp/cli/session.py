@@ -151,7 +151,7 @@ def _print_saved(plan: Any) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from studyapp.study.session import prepare_participant
+    from studyapp.study.session import ParticipantFinishedError, prepare_participant
     from studyapp.study.storage import ResultsDB
 
     opened = None
@@ -202,18 +202,28 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 return path
 
             db.on_participant_finished = pack
-        rec = prepare_participant(design, db, args.participant, row=row, groups=groups,
-                                  allow_rerun=args.allow_rerun, n_rows=schedule.get("n_rows"))
-        if rec.id != args.participant:
-            print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
         uploader = None
         if opened is not None and opened.upload is not None:
             from studyapp.study.upload import Uploader
 
-            # its own read-only connection; it sends each answer once committed, off the session's thread
-            uploader = Uploader(results, opened.bundle_hash, opened.study, rec.id, opened.upload["url"],
+            # its own read-only connection; it sends each answer once committed, off the session's thread, and
+            # at once what an earlier run could not send
+            uploader = Uploader(results, opened.bundle_hash, opened.study, args.participant, opened.upload["url"],
                                 opened.upload["secret"])
             uploader.start()
+        try:
+            rec = prepare_participant(design, db, args.participant, row=row, groups=groups,
+                                      allow_rerun=args.allow_rerun, n_rows=schedule.get("n_rows"))
+        except ParticipantFinishedError:
+            if uploader is None:
+                raise
+            from studyapp.study.upload import final_message
+
+            outcome = uploader.finish()   # a finished participant's run only sends what is missing
+            print(f"Participant {args.participant} already finished this study. {final_message(outcome)}")
+            return 0 if outcome.all_sent else 1
+        if rec.id != args.participant:
+            print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
         try:
             code = _run_mode(args, design, db, rec.id, schedule)
         except BaseException:

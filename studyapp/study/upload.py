@@ -18,8 +18,9 @@ What was acknowledged
     acknowledged (answered trials, status, questionnaire answers), written atomically after each reply. A run
     started after a crash, a restart or a network outage compares it with the local database and sends what
     is missing at once; an unreachable server is tried again (every :data:`RETRY_S` .. :data:`RETRY_MAX_S`
-    seconds) for as long as the session runs. A refusal (the server's checks, a wrong secret) is recorded and
-    not retried: the results zip is then the way the answers reach the experimenter.
+    seconds) for as long as the session runs. A refusal (the server's checks, a wrong secret) is recorded with
+    the state refused, which is not sent again (a later commit is): the results zip is then the way those
+    answers reach the experimenter.
 
 Requests are signed: ``X-Studyapp-Signature`` is an HMAC-SHA256 (:func:`signature`), under the bundle's upload
 secret, of the bundle's hash, the participant id and the body. The secret is in the bundle, so anyone holding
@@ -145,10 +146,6 @@ class Outcome:
     refused: str | None = None
 
 
-class Refusal(Exception):
-    """The server refused the upload for good (its message is for the participant)."""
-
-
 class Uploader(threading.Thread):
     """The background worker of one participant's uploads (see the module docstring); ``finish`` ends it."""
 
@@ -161,31 +158,32 @@ class Uploader(threading.Thread):
         self._wake = threading.Event()
         self._lock = threading.Lock()
         self._current: dict[str, Any] | None = None
-        self._acked = {k: v for k, v in self.acks.get(participant).items() if k != "refused"}
-        self._refused: str | None = self.acks.get(participant).get("refused")
+        earlier = self.acks.get(participant)
+        self._acked = earlier.get("acknowledged") or {}
+        #: the message and the state of the last refusal: that state is not sent again, a newer one is
+        self._refused: tuple[str, dict[str, Any]] | None = (
+            (earlier["refused"], earlier.get("refused_state")) if isinstance(earlier.get("refused"), str) else None)
 
     def run(self) -> None:
         con = sqlite3.connect(f"file:{self.results}?mode=ro", uri=True, timeout=5.0, isolation_level=None)
         con.row_factory = sqlite3.Row
         version, wait = None, RETRY_S
         try:
-            while not self._refused:
+            while True:
                 seen = con.execute("PRAGMA data_version").fetchone()[0]
-                if seen != version or not self._up_to_date():
+                if seen != version:   # something was committed since the last look (or this is the first)
                     try:
                         self._send_if_new(con)
                         version, wait = seen, RETRY_S
                     except (OSError, urllib.error.URLError, ValueError, TimeoutError):
                         # unreachable, busy or a torn reply: the local database keeps everything; try again
-                        if self._stopping.wait(wait):
+                        # (once more at once when the session ends during the wait, then stop)
+                        if self._stopping.is_set():
                             return
+                        self._stopping.wait(wait)
                         wait = min(wait * 2, RETRY_MAX_S)
                         continue
-                    except Refusal as exc:
-                        self._refused = str(exc)
-                        self.acks.put(self.participant, {**self._acked, "refused": self._refused})
-                        return
-                if self._stopping.is_set() and self._up_to_date():
+                if self._stopping.is_set():
                     return
                 self._wake.wait(POLL_S)
                 self._wake.clear()
@@ -210,7 +208,7 @@ class Uploader(threading.Thread):
             state = self._acked   # no answer yet: nothing to send
         with self._lock:
             self._current = state
-        if state == self._acked:
+        if state == self._acked or (self._refused is not None and state == self._refused[1]):
             return
         body = json.dumps({"payload": payload}, sort_keys=True, default=str).encode("utf-8")
         req = urllib.request.Request(self.url, data=body, method="POST", headers={
@@ -220,25 +218,32 @@ class Uploader(threading.Thread):
             with urllib.request.urlopen(req, timeout=REQUEST_TIMEOUT_S) as reply:
                 json.loads(reply.read(64 * 1024))
         except urllib.error.HTTPError as exc:
-            if exc.code in (400, 401, 403, 409, 413, 422):
-                try:
-                    message = str(json.loads(exc.read(64 * 1024)).get("error", ""))[:500]
-                except (ValueError, AttributeError, OSError):
-                    message = ""
-                raise Refusal(message or f"HTTP {exc.code}") from None
-            raise   # 429, 5xx: try again later
+            if exc.code not in (400, 401, 403, 409, 413, 422):
+                raise   # 429, 5xx: try again later
+            try:
+                message = str(json.loads(exc.read(64 * 1024)).get("error", ""))[:500]
+            except (ValueError, AttributeError, OSError):
+                message = ""
+            # Not sent again as it is; a later commit is (the session writes a trial and then the participant's
+            # status in two transactions, and the checks may refuse what lies between)
+            self._refused = (message or f"HTTP {exc.code}", state)
+            self.acks.put(self.participant, {"acknowledged": self._acked, "refused": self._refused[0],
+                                             "refused_state": state})
+            return
         with self._lock:
-            self._acked = state
-        self.acks.put(self.participant, state)
+            self._acked, self._refused = state, None
+        self.acks.put(self.participant, {"acknowledged": state})
 
     def finish(self, wait_s: float = 15.0) -> Outcome:
         """Stop after everything committed so far was sent (waiting at most ``wait_s``); how it went."""
         self._stopping.set()
         self._wake.set()
         self.join(wait_s)
-        if self._refused:
-            return Outcome(False, self._refused)
-        return Outcome(self._up_to_date())
+        if self._up_to_date():
+            return Outcome(True)
+        with self._lock:
+            current = self._current
+        return Outcome(False, self._refused[0] if self._refused and self._refused[1] == current else None)
 
 
 def final_message(outcome: Outcome) -> str:
@@ -247,6 +252,6 @@ def final_message(outcome: Outcome) -> str:
         return "All your answers reached the study server."
     if outcome.refused:
         return (f"The study server did not accept your answers ({outcome.refused}). Your answers are saved on this "
-                "computer: please send the results file below to the experimenter.")
+                "computer: please send your results file to the experimenter.")
     return ("Not all your answers reached the study server (no connection). They are saved on this computer: run "
-            "the study again later to send them, or send the results file below to the experimenter.")
+            "the study again later to send them, or send your results file to the experimenter.")
