@@ -183,11 +183,11 @@ def test_a_tampered_upload_is_refused_with_a_clear_message_and_naming_no_conditi
     status, reply = _post(setup, "R04", json.dumps({"payload": moved}).encode())
     assert status == 422 and "problem" in reply["error"] and "nothing was stored" in reply["error"]
     replies = [reply]
-    # a rank no session stores, on a trial not stored yet
-    bad = json.loads(json.dumps(moved))
+    # a rank no session stores: the checks of merge come first
+    bad = json.loads(json.dumps(payload))
     bad["responses"][0]["rank"] = 7.0
-    status, reply = _post(setup, "R04", json.dumps({"payload": bad}).encode())
-    assert status == 422
+    status, reply = _post(setup, "R01", json.dumps({"payload": bad}).encode())
+    assert status == 422 and reply["error"].startswith("1 problem in the answers")
     replies.append(reply)
     # a wrong secret, and a participant signed for another id
     status, reply = _post(setup, "R01", json.dumps({"payload": payload}).encode(), secret="0" * 64)
@@ -197,6 +197,7 @@ def test_a_tampered_upload_is_refused_with_a_clear_message_and_naming_no_conditi
     replies += [reply, reply2]
     assert not any(name in json.dumps(r) for r in replies for name in secret_names())
     log = setup.server.log.read_text()
-    assert "refused an upload of participant R04" in log   # the findings are for the experimenter's log
+    # the findings are for the experimenter's log
+    assert "refused an upload of participant R04" in log and "are not a ranking" in log
     assert read_db(setup.lab, "SELECT * FROM responses WHERE participant = 'R01' ORDER BY trial_index, criterion, slot") == before
     assert read_db(setup.lab, "SELECT COUNT(*) FROM trials WHERE participant = 'R04'") == [(0,)]
