@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from studyapp.bots import POLICIES, run_bot
 from studyapp.errors import InputError, StudyappError
@@ -225,7 +225,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if rec.id != args.participant:
             print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
         try:
-            code = _run_mode(args, design, db, rec.id, schedule)
+            code = _run_mode(args, design, db, rec.id, schedule, uploader)
         except BaseException:
             if uploader is not None:
                 uploader.finish(0)
@@ -269,8 +269,10 @@ def _forget_unstarted(db: Any, results: Path, pid: str, known: set[str], new_db:
             Path(f"{results}{suffix}").unlink(missing_ok=True)
 
 
-def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule: dict[str, Any]) -> int:
-    """Run the session; ``schedule``: ``plans`` and ``n_rows`` a bundle carries for its participant (or empty)."""
+def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule: dict[str, Any],
+              uploader: Any = None) -> int:
+    """Run the session; ``schedule``: ``plans`` and ``n_rows`` a bundle carries for its participant (or empty);
+    ``uploader``: the bundle run's :class:`~studyapp.study.upload.Uploader` (its state on the window's final screen)."""
     if args.no_render or args.offscreen:
         # the offscreen participant shows its progress on screen (its PNGs), not as "saved trial" lines
         return run_bot(design, db, pid, args.bot, args.seed, render=args.offscreen,
@@ -285,7 +287,16 @@ def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule
     device = args.audio_device
     if device is not None and device.isdigit():
         device = int(device)
-    return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device, **schedule) or 0)
+    status = None if uploader is None else _upload_line(uploader)
+    return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device, upload_status=status,
+                          **schedule) or 0)
+
+
+def _upload_line(uploader: Any) -> Callable[[], str]:
+    """The window's final-screen line on the uploads, as it stands when drawn."""
+    from studyapp.study.upload import final_message
+
+    return lambda: final_message(uploader.outcome())
 
 
 def _cmd_export(args: argparse.Namespace) -> int:

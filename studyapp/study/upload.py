@@ -144,6 +144,8 @@ class Outcome:
 
     all_sent: bool
     refused: str | None = None
+    #: still trying (the last try reached the server): the final screen says it is sending
+    sending: bool = False
 
 
 class Uploader(threading.Thread):
@@ -158,6 +160,7 @@ class Uploader(threading.Thread):
         self._wake = threading.Event()
         self._lock = threading.Lock()
         self._current: dict[str, Any] | None = None
+        self._failing = False
         earlier = self.acks.get(participant)
         self._acked = earlier.get("acknowledged") or {}
         #: the message and the state of the last refusal: that state is not sent again, a newer one is
@@ -178,6 +181,7 @@ class Uploader(threading.Thread):
                     except (OSError, urllib.error.URLError, ValueError, TimeoutError):
                         # unreachable, busy or a torn reply: the local database keeps everything; try again
                         # (once more at once when the session ends during the wait, then stop)
+                        self._failing = True
                         if self._stopping.is_set():
                             return
                         self._stopping.wait(wait)
@@ -231,7 +235,7 @@ class Uploader(threading.Thread):
                                              "refused_state": state})
             return
         with self._lock:
-            self._acked, self._refused = state, None
+            self._acked, self._refused, self._failing = state, None, False
         self.acks.put(self.participant, {"acknowledged": state})
 
     def finish(self, wait_s: float = 15.0) -> Outcome:
@@ -239,17 +243,25 @@ class Uploader(threading.Thread):
         self._stopping.set()
         self._wake.set()
         self.join(wait_s)
-        if self._up_to_date():
-            return Outcome(True)
+        now = self.outcome()
+        return Outcome(now.all_sent, now.refused)   # the worker stops with the program: no longer sending
+
+    def outcome(self) -> Outcome:
+        """How the uploads stand now, without waiting (the final screen asks every frame)."""
         with self._lock:
-            current = self._current
-        return Outcome(False, self._refused[0] if self._refused and self._refused[1] == current else None)
+            current, acked, refused = self._current, self._acked, self._refused
+        if current is not None and current == acked:
+            return Outcome(True)
+        refused_now = refused[0] if refused and refused[1] == current else None
+        return Outcome(False, refused_now, sending=refused_now is None and not self._failing and self.is_alive())
 
 
 def final_message(outcome: Outcome) -> str:
     """What the participant reads at the end of a session with uploads."""
     if outcome.all_sent:
         return "All your answers reached the study server."
+    if outcome.sending:
+        return "Sending your answers to the study server..."
     if outcome.refused:
         return (f"The study server did not accept your answers ({outcome.refused}). Your answers are saved on this "
                 "computer: please send your results file to the experimenter.")
