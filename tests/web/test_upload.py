@@ -201,3 +201,19 @@ def test_a_tampered_upload_is_refused_with_a_clear_message_and_naming_no_conditi
     assert "refused an upload of participant R04" in log and "are not a ranking" in log
     assert read_db(setup.lab, "SELECT * FROM responses WHERE participant = 'R01' ORDER BY trial_index, criterion, slot") == before
     assert read_db(setup.lab, "SELECT COUNT(*) FROM trials WHERE participant = 'R04'") == [(0,)]
+
+
+def test_the_bundle_carries_the_server_address_and_a_secret_the_key_keeps(setup) -> None:
+    import zipfile
+
+    from studyapp.errors import InputError
+    from studyapp.study.storage import ResultsDB
+    from studyapp.study.upload import check_upload_url
+
+    manifest = json.loads(zipfile.ZipFile(setup.bundle).read("manifest.json"))
+    assert manifest["upload"]["url"] == setup.url and len(manifest["upload"]["secret"]) == 64
+    with ResultsDB(setup.lab, create=False) as db:
+        assert db.bundle_key(manifest["design_hash"])["upload_secret"] == manifest["upload"]["secret"]
+    for bad in ("http://study.example.org", "ftp://127.0.0.1/", "https://", "study.example.org"):
+        with pytest.raises(InputError, match="is not a study server address"):
+            check_upload_url(bad)
