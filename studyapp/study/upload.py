@@ -173,20 +173,20 @@ class Uploader(threading.Thread):
         version, wait = None, RETRY_S
         try:
             while True:
-                seen = con.execute("PRAGMA data_version").fetchone()[0]
-                if seen != version:   # something was committed since the last look (or this is the first)
-                    try:
+                try:
+                    seen = con.execute("PRAGMA data_version").fetchone()[0]
+                    if seen != version:   # something was committed since the last look (or this is the first)
                         self._send_if_new(con)
                         version, wait = seen, RETRY_S
-                    except (OSError, urllib.error.URLError, ValueError, TimeoutError):
-                        # unreachable, busy or a torn reply: the local database keeps everything; try again
-                        # (once more at once when the session ends during the wait, then stop)
-                        self._failing = True
-                        if self._stopping.is_set():
-                            return
-                        self._stopping.wait(wait)
-                        wait = min(wait * 2, RETRY_MAX_S)
-                        continue
+                except (OSError, urllib.error.URLError, ValueError, TimeoutError, sqlite3.Error):
+                    # unreachable, busy, a torn reply, the local database busy: nothing is lost (the local
+                    # database keeps everything); try again, once more at once when the session ends meanwhile
+                    self._failing = True
+                    if self._stopping.is_set():
+                        return
+                    self._stopping.wait(wait)
+                    wait = min(wait * 2, RETRY_MAX_S)
+                    continue
                 if self._stopping.is_set():
                     return
                 self._wake.wait(POLL_S)
