@@ -18,7 +18,7 @@ What was acknowledged
     acknowledged (answered trials, status, questionnaire answers), written atomically after each reply. A run
     started after a crash, a restart or a network outage compares it with the local database and sends what
     is missing at once; an unreachable server is tried again (every :data:`RETRY_S` .. :data:`RETRY_MAX_S`
-    seconds) for as long as the session runs. A refusal (the server's checks, a wrong secret) is recorded with
+    seconds) for as long as the session runs, and :data:`END_GRACE_S` after its end. A refusal (the server's checks, a wrong secret) is recorded with
     the state refused, which is not sent again (a later commit is): the results zip is then the way those
     answers reach the experimenter.
 
@@ -40,6 +40,7 @@ import json
 import os
 import sqlite3
 import threading
+import time
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -58,6 +59,9 @@ HEADER_SIGNATURE = "x-studyapp-signature"
 POLL_S = 0.2
 RETRY_S = 0.5
 RETRY_MAX_S = 5.0
+#: At the session's end an unreachable server is tried for this long more before the participant reads that not
+#: everything was sent.
+END_GRACE_S = 5.0
 #: Seconds one request may take before it counts as failed (and is tried again).
 REQUEST_TIMEOUT_S = 10.0
 _LOOPBACK = ("127.0.0.1", "localhost", "::1")
@@ -170,7 +174,7 @@ class Uploader(threading.Thread):
     def run(self) -> None:
         con = sqlite3.connect(f"file:{self.results}?mode=ro", uri=True, timeout=5.0, isolation_level=None)
         con.row_factory = sqlite3.Row
-        version, wait = None, RETRY_S
+        version, wait, give_up = None, RETRY_S, 0.0
         try:
             while True:
                 try:
@@ -180,10 +184,14 @@ class Uploader(threading.Thread):
                         version, wait = seen, RETRY_S
                 except (OSError, urllib.error.URLError, ValueError, TimeoutError, sqlite3.Error):
                     # unreachable, busy, a torn reply, the local database busy: nothing is lost (the local
-                    # database keeps everything); try again, once more at once when the session ends meanwhile
+                    # database keeps everything); try again, and at the session's end for END_GRACE_S more
                     self._failing = True
                     if self._stopping.is_set():
-                        return
+                        give_up = give_up or time.monotonic() + END_GRACE_S
+                        if time.monotonic() >= give_up:
+                            return
+                        time.sleep(1.0)
+                        continue
                     self._stopping.wait(wait)
                     wait = min(wait * 2, RETRY_MAX_S)
                     continue
