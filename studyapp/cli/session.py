@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from studyapp.bots import POLICIES, run_bot
 from studyapp.errors import InputError, StudyappError
@@ -73,6 +73,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--export-key", type=Path, metavar="FILE",
                    help="also write the key to FILE (for `merge --key` on another machine); keep it private, "
                    "never send it with the bundle")
+    b.add_argument("--upload-url", metavar="URL",
+                   help="the study server (`studyapp serve` with --db the --results database) participants upload "
+                   "their answers to as they are committed, e.g. https://study.example.org (the results zip is "
+                   "still written as the fallback)")
     b.set_defaults(func=_cmd_bundle)
 
     k = sub.add_parser(
@@ -156,7 +160,7 @@ def _print_saved(plan: Any) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from studyapp.study.session import prepare_participant
+    from studyapp.study.session import ParticipantFinishedError, prepare_participant
     from studyapp.study.storage import ResultsDB
 
     opened = None
@@ -208,13 +212,33 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 return path
 
             db.on_participant_finished = pack
-        rec = prepare_participant(design, db, args.participant, row=row, groups=groups,
-                                  allow_rerun=args.allow_rerun, n_rows=schedule.get("n_rows"))
+        uploader = None
+        if opened is not None and opened.upload is not None:
+            from studyapp.study.upload import Uploader
+
+            # its own read-only connection; it sends each answer once committed, off the session's thread, and
+            # at once what an earlier run could not send
+            uploader = Uploader(results, opened.bundle_hash, opened.study, args.participant, opened.upload["url"],
+                                opened.upload["secret"])
+            uploader.start()
+        try:
+            rec = prepare_participant(design, db, args.participant, row=row, groups=groups,
+                                      allow_rerun=args.allow_rerun, n_rows=schedule.get("n_rows"))
+        except ParticipantFinishedError:
+            if uploader is None:
+                raise
+            from studyapp.study.upload import final_message
+
+            outcome = uploader.finish()   # a finished participant's run only sends what is missing
+            print(f"Participant {args.participant} already finished this study. {final_message(outcome)}")
+            return 0 if outcome.all_sent else 1
         if rec.id != args.participant:
             print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
         try:
-            code = _run_mode(args, design, db, rec.id, schedule)
+            code = _run_mode(args, design, db, rec.id, schedule, uploader)
         except BaseException:
+            if uploader is not None:
+                uploader.finish(0)
             _forget_unstarted(db, results, rec.id, known, new_db)
             raise
         final = db.participant(rec.id)
@@ -230,6 +254,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(ENDED_EARLY_MESSAGE + summary)
     elif final is not None and final.status == "done":
         print(f"Participant {rec.id} completed the study.{summary}")
+    if uploader is not None:
+        from studyapp.study.upload import final_message
+
+        outcome = uploader.finish()
+        print(final_message(outcome), flush=True)
+        for f in finished_files:
+            print(f"Your results file: {f}" + ("" if outcome.all_sent else "\nPlease send this file to the experimenter."))
+        return code
     for f in finished_files:
         print(f"Your results file: {f}\nPlease send this file to the experimenter.")
     return code
@@ -247,8 +279,10 @@ def _forget_unstarted(db: Any, results: Path, pid: str, known: set[str], new_db:
             Path(f"{results}{suffix}").unlink(missing_ok=True)
 
 
-def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule: dict[str, Any]) -> int:
-    """Run the session; ``schedule``: ``plans`` and ``n_rows`` a bundle carries for its participant (or empty)."""
+def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule: dict[str, Any],
+              uploader: Any = None) -> int:
+    """Run the session; ``schedule``: ``plans`` and ``n_rows`` a bundle carries for its participant (or empty);
+    ``uploader``: the bundle run's :class:`~studyapp.study.upload.Uploader` (its state on the window's final screen)."""
     if args.no_render or args.offscreen:
         # the offscreen participant shows its progress on screen (its PNGs), not as "saved trial" lines
         return run_bot(design, db, pid, args.bot, args.seed, render=args.offscreen,
@@ -263,7 +297,16 @@ def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule
     device = args.audio_device
     if device is not None and device.isdigit():
         device = int(device)
-    return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device, **schedule) or 0)
+    status = None if uploader is None else _upload_line(uploader)
+    return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device, upload_status=status,
+                          **schedule) or 0)
+
+
+def _upload_line(uploader: Any) -> Callable[[], str]:
+    """The window's final-screen line on the uploads, as it stands when drawn."""
+    from studyapp.study.upload import final_message
+
+    return lambda: final_message(uploader.outcome())
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
@@ -292,13 +335,16 @@ def _cmd_bundle(args: argparse.Namespace) -> int:
 
     results = args.results or default_results_path(args.design)
     info = make_bundle(args.design, args.output, participants=args.participants, results=results,
-                       export_key=args.export_key)
+                       export_key=args.export_key, upload_url=args.upload_url)
     print(f"Wrote {info.path} ({info.n_files} files: {info.n_media} media files, study.toml, schedule.json and "
           f"manifest.json; {info.size_bytes / 1e6:.1f} MB)")
     print(f"The key (opaque ids -> conditions and files) is kept in {results}, so `studyapp merge` can map "
           "results back; it is not written next to the zip.")
     if info.key_path is not None:
         print(f"Key also written to {info.key_path}: keep it private, never send it with the bundle.")
+    if args.upload_url:
+        print(f"Participants upload their answers to {args.upload_url.rstrip('/')}/upload as they go; serve the study "
+              f"with `studyapp serve {args.design} --db {results}` there.")
     if info.roster:
         print("Remote participant ids and their rows: " + ", ".join(f"{k} (row {v})" for k, v in info.roster.items()))
     if info.small_seed:

@@ -137,14 +137,18 @@ def make_bundle(
     results: str | Path | None = None,
     salt: str | None = None,
     export_key: str | Path | None = None,
+    upload_url: str | None = None,
 ) -> BundleInfo:
     """Write ``output`` (a zip) with everything a remote participant needs; see the module docstring.
 
     ``participants`` (at least 1) pre-assigns Latin-square rows to ids ``R01..RN``, continuing the balance
     of the experimenter's database ``results`` (which also keeps the key); the bundle carries each of those
-    participants' trials (:mod:`studyapp.study.shipped`).
+    participants' trials (:mod:`studyapp.study.shipped`). ``upload_url``: the study server the participants'
+    answers are uploaded to as they are committed (:mod:`studyapp.study.upload`); the bundle then carries that
+    address and a secret of its own, which the key (in ``results``) keeps too.
     """
     from studyapp.study.design import conditions_named_in, load_design
+    from studyapp.study.upload import check_upload_url
     from studyapp.study.schedule import n_rows
     from studyapp.study.shipped import SAFE_SEED, converter, seed_matters, ship_design
     from studyapp.study.storage import ResultsDB
@@ -161,6 +165,7 @@ def make_bundle(
                          "it: that unblinds the study; choose a neutral name (e.g. the study's title)")
     raw = tomlfile.loads(design_path.read_text(encoding="utf-8"))
     salt = salt or secrets.token_hex(16)
+    upload = {"url": check_upload_url(upload_url), "secret": secrets.token_hex(32)} if upload_url else None
     results = Path(results) if results is not None else design_path.with_name(f"{design_path.stem}.results.sqlite")
     output.parent.mkdir(parents=True, exist_ok=True)
     db = ResultsDB(results, design)
@@ -202,6 +207,7 @@ def make_bundle(
             "format": "studyapp-bundle-key", "version": KEY_VERSION, "study": study, "bundle": output.name,
             "design_hash": design.design_hash, "bundle_hash": bundle_hash, "trials": shipped.trials,
             "files": shipped.origin, "roster": roster, "app_version": __version__,
+            **({"upload_secret": upload["secret"]} if upload else {}),
         }
         earlier = db.bundle_key(bundle_hash) or {}
 
@@ -211,6 +217,7 @@ def make_bundle(
             "format": BUNDLE_FORMAT, "version": FORMAT_VERSION, "study": study, "title": design.title,
             "design": "study.toml", "design_hash": bundle_hash, "app_version": __version__,
             "roster": roster, "files": {name: _sha256_bytes(data) for name, data in sorted(files.items())},
+            **({"upload": upload} if upload else {}),
         }
 
         def write_zip(fh: BinaryIO) -> None:
@@ -400,6 +407,8 @@ class OpenedBundle:
     roster: dict[str, int]
     default_results: Path
     results_dir: Path
+    #: the study server's address and this bundle's upload secret (``bundle --upload-url``), else None
+    upload: dict[str, str] | None = None
 
 
 #: the largest manifest.json read (a bundle's lists a sha256 per file: 20,000 files are about 2 MB)
@@ -466,7 +475,7 @@ def _open_bundle(zip_path: Path, cache: str | Path | None) -> OpenedBundle:
         zip_path=zip_path, folder=folder, design_path=folder / design_name, study=study,
         bundle_hash=manifest["design_hash"], roster=manifest["roster"],
         default_results=user_data_dir() / "studies" / f"{study}-{manifest['design_hash'][:12]}.results.sqlite",
-        results_dir=results_folder(),
+        results_dir=results_folder(), upload=manifest.get("upload"),
     )
 
 
@@ -511,6 +520,10 @@ def _bundle_manifest(path: Path, zf: SafeZip) -> dict[str, Any]:
     if not isinstance(roster, dict) or not all(isinstance(k, str) and type(v) is int and v >= 0
                                                for k, v in roster.items()):
         raise InputError(path, "manifest.json", "its roster is not participant ids with their rows: damaged")
+    upload = manifest.get("upload")
+    if upload is not None and not (isinstance(upload, dict) and isinstance(upload.get("url"), str)
+                                   and isinstance(upload.get("secret"), str) and len(upload["secret"]) >= 32):
+        raise InputError(path, "manifest.json", "its `upload` entry is not a server address with a secret: damaged")
     return {**manifest, "design": design, "roster": roster}
 
 
@@ -713,6 +726,17 @@ def _answer_key(trial: dict[str, Any]) -> tuple[Any, ...]:
     return trial.get("trial_index"), trial.get("stimulus"), trial.get("answered_at")
 
 
+def results_payload(db: Any, participant_id: str, study: str) -> dict[str, Any]:
+    """What ``results.json`` holds for one participant (also what an upload carries, :mod:`studyapp.study.upload`);
+    ``db``: anything with the results ``connection`` and its ``design_hash``."""
+    return {
+        "format": RESULTS_FORMAT, "version": FORMAT_VERSION, "study": study, "design_hash": db.design_hash,
+        "app_version": __version__, "participant": participant_id,
+        "stimuli": [dict(r) for r in db.connection.execute("SELECT * FROM stimuli")],
+        **_participant_rows(db, participant_id),
+    }
+
+
 def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened: OpenedBundle | None = None) -> Path:
     """Pack one participant's rows as ``results-<study>-<participant>-<hash>.zip`` (``results.json`` + manifest).
 
@@ -723,12 +747,7 @@ def write_results_file(db: Any, participant_id: str, out_dir: str | Path, opened
     session); any other file there is kept and the new one gets ``-2``, ``-3``, ... added to its name.
     """
     study = opened.study if opened is not None else _slug(db.title)
-    payload = {
-        "format": RESULTS_FORMAT, "version": FORMAT_VERSION, "study": study, "design_hash": db.design_hash,
-        "app_version": __version__, "participant": participant_id,
-        "stimuli": [dict(r) for r in db.connection.execute("SELECT * FROM stimuli")],
-        **_participant_rows(db, participant_id),
-    }
+    payload = results_payload(db, participant_id, study)
     data = json.dumps(payload, indent=1, sort_keys=True, default=str).encode("utf-8")
     manifest = {"format": RESULTS_FORMAT, "version": FORMAT_VERSION, "participant": participant_id, "study": study,
                 "design_hash": db.design_hash, "files": {"results.json": _sha256_bytes(data)}}

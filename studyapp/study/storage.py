@@ -838,18 +838,24 @@ class ResultsDB:
     def import_participant(self, participant: dict[str, Any], sessions: list[dict[str, Any]],
                            trials: list[dict[str, Any]], responses: list[dict[str, Any]], plays: list[dict[str, Any]],
                            questionnaire: list[dict[str, Any]], trial_slots: list[dict[str, Any]] | None = None,
-                           judgements: list[dict[str, Any]] | None = None) -> None:
+                           judgements: list[dict[str, Any]] | None = None, *, replace: bool = False) -> None:
         """Add one participant recorded elsewhere (a remote participant's results file), in one transaction.
 
         Rows are plain dicts keyed by column name, already in this study's condition and stimulus ids; session
         ids in ``trials`` and ``plays`` are the file's own and are renumbered here. Every row gets this
-        database's design hash; each keeps the app version it was recorded with.
+        database's design hash; each keeps the app version it was recorded with. ``replace``: the participant's
+        rows stored before are replaced in the same transaction (an upload that extends an earlier one; the
+        caller has checked that it keeps every stored answer, :mod:`studyapp.web.uploads`).
         """
         pid = participant["id"]
-        if self.participant(pid) is not None:
+        if self.participant(pid) is not None and not replace:
             raise DuplicateAnswerError(f"participant {pid!r} is already in {self.path} (duplicate: this file was "
                                        "merged before, or two participants used the same id)")
         with self.transaction() as con:
+            if replace:
+                for table in ("questionnaire", "plays", "judgements", "responses", "trial_slots", "trials", "sessions"):
+                    con.execute(f"DELETE FROM {table} WHERE participant = ?", (pid,))
+                con.execute("DELETE FROM participants WHERE id = ?", (pid,))
             self._insert(con, "participants", [participant])
             new_ids = self._insert(con, "sessions", [{**s, "participant": pid} for s in sessions])
             session_ids = {s["id"]: i for s, i in zip(sessions, new_ids)}

@@ -18,7 +18,7 @@ import logging
 import os
 import wave
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from studyapp.errors import StudyappError
 from studyapp.render.frames import FlipPredictor
@@ -111,6 +111,8 @@ class StudyApp:
         self.fullscreen_toggle = False
         self.error: str | None = None
         self.page_pad_x: float | None = None   # set by each page for its bottom row
+        #: one line on the final screen: whether a bundle run's answers reached the study server (None: no uploads)
+        self.upload_status: Callable[[], str] | None = None
 
     @property
     def results_file(self) -> Path | None:
@@ -398,13 +400,15 @@ class WindowRunner:
 
 def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: bool = False,
                audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720),
-               plans: Sequence[Any] | None = None, n_rows: int | None = None) -> int:
+               plans: Sequence[Any] | None = None, n_rows: int | None = None,
+               upload_status: Callable[[], str] | None = None) -> int:
     """Run the participant's session in a window. Returns 0 when the study was completed (or ended
     early by the attention rule), 1 when the window was closed before the end (run again to resume).
 
     ``audio_device``: output index or name (default: ``$STUDYAPP_AUDIO_DEVICE``, else the system
     default); without any output the study runs silently and says so (console and environment check).
     ``plans`` and ``n_rows``: a schedule given instead of the design's (a bundle's participant).
+    ``upload_status``: the final screen's line about the answers' uploads (:mod:`studyapp.study.upload`).
     """
     from studyapp.audio.playback import open_clock
     from studyapp.study.session import Session
@@ -418,6 +422,7 @@ def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: b
     try:
         # maximized: the figures get the whole screen; F11 switches to full screen and back
         runner = WindowRunner(design, session, clock, fullscreen=fullscreen, size=size, maximized=True)
+        runner.app.upload_status = upload_status
         runner.run()
     finally:
         if runner is not None:

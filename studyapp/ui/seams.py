@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 if TYPE_CHECKING:
     from studyapp.audio.clock import MediaClock
@@ -106,6 +106,7 @@ class ScreenApp(Protocol):
     declining: bool
     quit: bool
     page_pad_x: float | None   # the page's side margin, set by the page, read by its bottom row
+    upload_status: Callable[[], str] | None   # the final screen's line on a bundle run's uploads
 
     @property
     def renderer(self) -> Renderer: ...

@@ -6,5 +6,6 @@ database as the desktop app; the browser is just another front end. Participants
 
 Modules: :mod:`.flow` (the participant's pages as session states, assignment, abandonment), :mod:`.app` (HTTP
 routes), :mod:`.security` (headers, rate limits, request checks), :mod:`.dashboard` (the experimenter's side),
-:mod:`.database` (opening the results database from a ``--db`` URL), ``assets/`` (the pages' script and style).
+:mod:`.database` (opening the results database from a ``--db`` URL), :mod:`.uploads` (desktop bundle
+participants' answers, ``POST /upload``), ``assets/`` (the pages' script and style).
 """

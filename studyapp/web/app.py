@@ -10,6 +10,7 @@ Routes (nothing else is served: no directory listing, no file by path)::
     GET  /s/<token>/<name>.mp4   the current trial's video (byte ranges), name opaque per participant + trial
     GET  /a/<asset>              the page's script, style sheet and test tone (a fixed list)
     GET  /dashboard ...          the experimenter's pages (:mod:`studyapp.web.dashboard`)
+    POST /upload                 a desktop bundle participant's answers so far (:mod:`studyapp.web.uploads`)
 
 Every participant page is one HTML shell with the page's state as JSON (``<script type="application/json">``,
 not executed) and ``/a/app.js``, which draws it and posts actions; each action's reply is the next state.
@@ -39,6 +40,7 @@ from studyapp.web.dashboard import Dashboard
 from studyapp.web.flow import Flow, NotSaved, Refused
 from studyapp.web.security import SECURITY_HEADERS, BadRequest, RateLimiter, parse_json, same_origin
 from studyapp.web.tokens import same
+from studyapp.web.uploads import MAX_UPLOAD_BYTES, UploadDesk, UploadRefused
 
 _log = logging.getLogger(__name__)
 
@@ -111,6 +113,7 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
     state: dict[str, Any] = {}
     lim = {"action": RateLimiter(per_s=10.0, burst=40), "media": RateLimiter(per_s=20.0, burst=80),
            "start": RateLimiter(per_s=1.0, burst=30), "login": RateLimiter(per_s=5 / 60, burst=5),
+           "upload": RateLimiter(per_s=5.0, burst=40),
            **(limits or {})}
     tone = tone_wav()
 
@@ -119,6 +122,7 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         flow = open_flow()
         state["flow"] = flow
         state["dashboard"] = Dashboard(flow, password)
+        state["uploads"] = UploadDesk(flow.design, flow.db)
         try:
             yield
         finally:
@@ -222,6 +226,23 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
     async def dashboard(request: Request) -> Response:
         return await state["dashboard"].handle(request, request.path_params.get("rest", ""), lim["login"], body_of)
 
+    async def upload(request: Request) -> Response:
+        if not lim["upload"].allow(client(request)):
+            return too_many()
+        chunks, size = [], 0
+        async for chunk in request.stream():
+            size += len(chunk)
+            if size > MAX_UPLOAD_BYTES:
+                return JSONResponse({"error": f"upload over {MAX_UPLOAD_BYTES} bytes"}, status_code=413)
+            chunks.append(chunk)
+        try:
+            return JSONResponse(state["uploads"].receive(request.headers, b"".join(chunks)))
+        except UploadRefused as exc:
+            return JSONResponse({"error": str(exc)}, status_code=exc.status)
+        except InputError as exc:   # the database could not store it: nothing was saved, the sender tries again
+            _log.error("%s", exc)
+            return JSONResponse({"error": "server error"}, status_code=503)
+
     async def not_found(request: Request) -> Response:
         return Response(status_code=404)
 
@@ -232,6 +253,7 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         Route("/s/{token:str}/{name:str}.mp4", media, methods=["GET", "HEAD"]),
         Route("/s/{token:str}/{action:str}", action, methods=["POST"]),
         Route("/a/{name:str}", asset, methods=["GET"]),
+        Route("/upload", upload, methods=["POST"]),
         Route("/dashboard", dashboard, methods=["GET", "POST"]),
         Route("/dashboard/{rest:str}", dashboard, methods=["GET", "POST"]),
     ]

@@ -31,6 +31,9 @@ def draw(app: ScreenApp) -> None:
         ui.heading(t("final.saved_title"), 1.3)
         ui.wrapped(t("final.saved_db", path=app.db_path))
         ui.wrapped(t("final.saved_text"))
+    if app.upload_status is not None and state != "declined":
+        ui.text("")
+        ui.wrapped(app.upload_status())   # cheap: the upload worker's last known state, read under a lock
     ui.text("")
     ui.wrapped(t("final.close_window"))
     if primary_row(app, t("final.close"), "close", hint=t("page.press_enter")):
