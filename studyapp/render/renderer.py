@@ -63,6 +63,19 @@ def slot_viewports(viewport: tuple[int, int, int, int], n: int) -> list[tuple[in
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
 
+def skinned_program(ctx: moderngl.Context, vertex_lighting: bool) -> moderngl.Program:
+    """The avatar program: ``skinned.vert`` + ``skinned.frag`` with ``lighting.glsl`` pasted in after their
+    ``#version`` line (one definition of the lighting for both stages), lit per pixel, or per vertex when
+    ``vertex_lighting`` (``#define VERTEX_LIGHTING``)."""
+    head = ("#define VERTEX_LIGHTING\n" if vertex_lighting else "") + read_shader("lighting.glsl")
+
+    def source(name: str) -> str:
+        version, rest = read_shader(name).split("\n", 1)
+        return f"{version}\n{head}\n#line 2\n{rest}"
+
+    return ctx.program(vertex_shader=source("skinned.vert"), fragment_shader=source("skinned.frag"))
+
+
 def is_software_renderer(ctx: moderngl.Context) -> bool:
     """True for CPU rasterisers (Mesa llvmpipe/softpipe, SwiftShader), where MSAA is very expensive."""
     name = str(ctx.info.get("GL_RENDERER", "")).lower()
@@ -83,10 +96,21 @@ class Renderer:
         replaces MSAA by an FXAA pass around the figures, ``"msaa"`` keeps MSAA anyway. On GPUs MSAA is
         always used as asked. The choice is made once per renderer and logged once per process.
 
-    ``antialiasing`` tells which method is in use: ``"msaa"``, ``"fxaa"`` or ``"none"``.
+    lighting:
+        ``"pixel"`` lights every pixel; ``"vertex"`` lights every vertex and interpolates the colour
+        (a texture's albedo is still applied per pixel). ``None`` (default): per vertex on a software
+        rasteriser, per pixel on a GPU. The built-in avatar's triangles cover about three pixels each at
+        720p, and llvmpipe shades whole 4x4 blocks: per-pixel lighting cost about a fifth of its frame,
+        and per-vertex lighting differs from it by a level on average, most at the seams between
+        materials (tolerance in ``tests/render/test_vertex_lighting.py``). Double-sided avatars are
+        always lit per pixel (which side a pixel shows is known only there).
+
+    ``antialiasing`` tells which method is in use: ``"msaa"``, ``"fxaa"`` or ``"none"``; ``lighting``
+    which lighting: ``"pixel"`` or ``"vertex"``.
     """
 
-    def __init__(self, ctx: moderngl.Context, samples: int = 4, software_aa: str = "none") -> None:
+    def __init__(self, ctx: moderngl.Context, samples: int = 4, software_aa: str = "none",
+                 lighting: str | None = None) -> None:
         self.ctx = ctx
         if software_aa not in SOFTWARE_AA:
             raise ValueError(f"software_aa must be one of {', '.join(SOFTWARE_AA)}, got {software_aa!r}")
@@ -102,7 +126,11 @@ class Renderer:
                 log.info("software renderer %s: anti-aliasing %s instead of %dx MSAA", key[0], key[1], samples)
         self.frames_drawn = 0  # pictures drawn so far: a texture from render_texture is valid until the next
         vert = read_shader("fullscreen.vert")
-        self.prog = ctx.program(vertex_shader=read_shader("skinned.vert"), fragment_shader=read_shader("skinned.frag"))
+        if lighting not in (None, "pixel", "vertex"):
+            raise ValueError(f"lighting must be 'pixel', 'vertex' or None, got {lighting!r}")
+        self.lighting = lighting or ("vertex" if software else "pixel")
+        self.prog = self._skinned_program(self.lighting == "vertex")
+        self._pixel_prog: moderngl.Program | None = None if self.lighting == "vertex" else self.prog
         self.bg_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("background.frag"))
         self.blit_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("blit.frag"))
         self.fxaa_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa.frag"))
@@ -120,11 +148,6 @@ class Renderer:
         self.bg_prog["u_top"].value = BACKGROUND_TOP
         self.bg_prog["u_bottom"].value = BACKGROUND_BOTTOM
         self.floor_prog["u_floor"].value = FLOOR_COLOR
-        self.prog["Bones"].binding = 0
-        self.prog["u_morph_pos"].value = 1
-        self.prog["u_morph_nrm"].value = 2
-        self.prog["u_base_color"].value = 3
-        self.prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
         self._meshes: dict[int, AvatarMesh] = {}
         self._labels: dict[tuple[str, int], moderngl.Texture] = {}
         self._msaa: moderngl.Framebuffer | None = None
@@ -139,12 +162,31 @@ class Renderer:
         self._w = np.zeros(MAX_ACTIVE_MORPHS, np.float32)
 
     # -- resources ------------------------------------------------------------------------------
+    def _skinned_program(self, vertex_lighting: bool) -> moderngl.Program:
+        prog = skinned_program(self.ctx, vertex_lighting)
+        prog["Bones"].binding = 0
+        prog["u_morph_pos"].value = 1
+        prog["u_morph_nrm"].value = 2
+        prog["u_base_color"].value = 3
+        prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
+        return prog
+
+    def program_for(self, avatar: Avatar) -> moderngl.Program:
+        """The avatar program that draws ``avatar``: per-pixel lighting for a double-sided avatar even
+        when lighting per vertex (only a pixel knows which side of its surface it shows), else
+        :attr:`prog`."""
+        if not (avatar.double_sided and self.lighting == "vertex"):
+            return self.prog
+        if self._pixel_prog is None:
+            self._pixel_prog = self._skinned_program(False)
+        return self._pixel_prog
+
     def upload_avatar(self, avatar: Avatar) -> AvatarMesh:
         """GPU buffers of ``avatar`` (created once per avatar object and reused by every slot)."""
         key = id(avatar)
         mesh = self._meshes.pop(key, None)
         if mesh is None or mesh.avatar is not avatar:
-            mesh = AvatarMesh(self.ctx, avatar, self.prog)
+            mesh = AvatarMesh(self.ctx, avatar, self.program_for(avatar))
         self._meshes[key] = mesh  # most recently used last
         while len(self._meshes) > MAX_CACHED_AVATARS:
             self._meshes.pop(next(iter(self._meshes))).release()
@@ -343,9 +385,11 @@ class Renderer:
             pals.append(pal)
         for mesh in {id(m): m for m in meshes}.values():
             mesh.palette.upload()
-        self.prog["u_view_proj"].write(vp_bytes)
         # the eye of the camera as refitted to this viewport, the one the picture is taken from
-        self.prog["u_camera_pos"].value = tuple(float(v) for v in scene.camera.for_aspect(aspect).eye)
+        eye = tuple(float(v) for v in scene.camera.for_aspect(aspect).eye)
+        for prog in {id(p): p for p in map(self.program_for, scene.avatars)}.values():
+            prog["u_view_proj"].write(vp_bytes)
+            prog["u_camera_pos"].value = eye
         self.floor_prog["u_view_proj"].write(vp_bytes)
         self._aa_rects = []
         for i, vp in enumerate(vps):
@@ -373,10 +417,11 @@ class Renderer:
             # avatar
             ctx.enable(moderngl.DEPTH_TEST)
             mesh = meshes[i]
-            self._set_morphs(frames[i])
-            self.prog["u_morph_rows"].value = mesh.morph_rows
-            self.prog["u_has_texture"].value = mesh.has_texture
-            self.prog["u_base_factor"].value = tuple(float(v) for v in scene.avatars[i].base_color_factor)
+            prog = self.program_for(scene.avatars[i])
+            self._set_morphs(prog, frames[i])
+            prog["u_morph_rows"].value = mesh.morph_rows
+            prog["u_has_texture"].value = mesh.has_texture
+            prog["u_base_factor"].value = tuple(float(v) for v in scene.avatars[i].base_color_factor)
             mesh.palette.bind(i, 0)
             mesh.morph_pos.use(1)
             mesh.morph_nrm.use(2)
@@ -496,16 +541,16 @@ class Renderer:
                 rects.append((x0, int(b0), x1 - x0, int(b1 - b0)))
         return rects
 
-    def _set_morphs(self, weights: np.ndarray) -> None:
+    def _set_morphs(self, prog: moderngl.Program, weights: np.ndarray) -> None:
         active = np.flatnonzero(np.abs(weights) > MORPH_EPS)[:MAX_ACTIVE_MORPHS]
         n = len(active)
         self._ids[:] = 0
         self._w[:] = 0
         self._ids[:n] = active
         self._w[:n] = weights[active]
-        self.prog["u_morph_count"].value = n
-        self.prog["u_morph_ids"].write(self._ids.tobytes())
-        self.prog["u_morph_w"].write(self._w.tobytes())
+        prog["u_morph_count"].value = n
+        prog["u_morph_ids"].write(self._ids.tobytes())
+        prog["u_morph_w"].write(self._w.tobytes())
 
     def _draw_label(self, text: str, vp: tuple[int, int, int, int]) -> None:
         _, _, w, h = vp
