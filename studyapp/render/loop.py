@@ -203,6 +203,10 @@ class VirtualTimer:
 # -- the loop ------------------------------------------------------------------------------------------------
 
 DrawFn = Callable[[Any, tuple[int, int], float], None]
+#: A frame finished early is held until this many periods before its flip, then swapped: any time in the
+#: last period before a flip lands on it, and waking up early leaves room for a sleep that overshoots
+#: (tens of milliseconds with twice as many busy processes as cores).
+HOLD_PERIODS = 0.75
 
 
 class FrameLoop:
@@ -229,8 +233,9 @@ class FrameLoop:
         passed is dropped (not presented, no ``after_flip``) and counted in :attr:`dropped_late`. Frames
         are never shown late: each one is drawn for the audio time of its own flip, so a slow frame costs
         a skipped picture, not a picture that lags the sound (drop, never drift). Nor early: a frame done
-        more than half a period before its flip is held back until then (a vsync'd swap would otherwise
-        show it at the next flip, ahead of the sound).
+        well before its flip is held back until :data:`HOLD_PERIODS` before it (a vsync'd swap would
+        otherwise show it at the next flip, ahead of the sound); a hold that overshoots the flip (the
+        sleep of a loaded machine) drops the frame too.
     """
 
     def __init__(self, target: FrameTarget, timer: FrameTimer, draw: DrawFn,
@@ -273,8 +278,13 @@ class FrameLoop:
                 self.frames += 1
                 return True
             period = pacer.period
-            if pacer.aimed is not None and period and done < pacer.aimed - period / 2:
-                self.timer.wait_until(pacer.aimed - period / 2)  # the swap then lands on the aimed flip
+            hold = pacer.aimed - HOLD_PERIODS * period if pacer.aimed is not None and period else None
+            if hold is not None and done < hold:
+                self.timer.wait_until(hold)  # the swap then lands on the aimed flip
+                if self.timer.now() > pacer.aimed:  # the wait overshot the flip (a loaded machine): late
+                    self.dropped_late += 1
+                    self.frames += 1
+                    return True
         if self.capture:
             self.last_rgb = self.target.read_rgb()
         self.target.present()
