@@ -4,7 +4,8 @@ Three pipelines run interleaved in one process (rounds of a few frames each, the
 round), so a busy shared machine slows all of them alike:
 
 * **participant frame**: what the participant window draws on every trial frame -- the renderer's
-  picture (skinning, morphs, lighting, the anti-aliasing chosen for this GL, labels) through the scene
+  picture (skinning, morphs, lighting -- per vertex on a software rasteriser, see ``Renderer`` --, the
+  anti-aliasing chosen for this GL, labels) through the scene
   cache into the window's framebuffer, the ImGui overlay on top (panel, buttons, progress bar), read back;
 * **renderer only**: ``draw_trial`` straight into the target, read back;
 * **bare draw**: the same triangles in the same three viewports with a trivial shader, read back.
@@ -216,7 +217,7 @@ def main(argv: list[str]) -> int:
     cpu = {name: cpu_split(step, max(2, args.frames)) for name, step in pipelines.items()}
 
     print(f"GL: {ctx.info['GL_RENDERER']}  size {size[0]}x{size[1]}, 3 avatars, read-back every frame; "
-          f"anti-aliasing {renderer.antialiasing}")
+          f"anti-aliasing {renderer.antialiasing}, lighting per {renderer.lighting}")
     print(f"avatar: {avatar.n_triangles} triangles drawn per figure "
           f"(built-in: {avatar.n_triangles}); build {build_s * 1000:.0f} ms")
     print(f"{args.rounds} rounds x {args.frames} frames per pipeline, interleaved; load average "
@@ -234,7 +235,7 @@ def main(argv: list[str]) -> int:
            participant_ms=round(float(np.median(times["participant frame"])), 2),
            bare_ms=round(float(np.median(times["bare draw"])), 2),
            size=f"{size[0]}x{size[1]}", gl_renderer=ctx.info["GL_RENDERER"], antialiasing=renderer.antialiasing,
-           load_average=[min(loads), max(loads)], cpu_count=os.cpu_count())
+           lighting=renderer.lighting, load_average=[min(loads), max(loads)], cpu_count=os.cpu_count())
     overlay.layer.shutdown()
     return 0
 

@@ -325,11 +325,16 @@ class ScenePlayer:
         Start again from the beginning (with the sound) at the end (``view``).
     predictor:
         Flip prediction of a real display (windows); None offscreen.
+    flip_clock:
+        The clock flip times are given on (``time.perf_counter`` for :class:`WallTimer`), when a flip can
+        be reported before the thread gets to read the audio: the audio position recorded for a frame
+        is then the one at its flip (the position read, less the time since the flip), not the one at
+        whenever the thread ran again. None: the position read right after the flip.
     """
 
     def __init__(self, renderer: Renderer, scene: TrialScene, clock: MediaClock, *, audio: Any = None,
                  duration_s: float | None = None, loop: bool = False,
-                 predictor: FlipPredictor | None = None) -> None:
+                 predictor: FlipPredictor | None = None, flip_clock: Callable[[], float] | None = None) -> None:
         self.renderer = renderer
         self.scene = scene
         self.clock = clock
@@ -337,6 +342,7 @@ class ScenePlayer:
         self.duration_s = float(scene.duration if duration_s is None else duration_s)
         self.loop = loop
         self.predictor = predictor
+        self.flip_clock = flip_clock
         self.recorder = PlayRecorder(refresh_hz=predictor.nominal_hz if predictor is not None else None)
         self.plays = 0
         self._drawn: float | None = None
@@ -369,5 +375,8 @@ class ScenePlayer:
             self.predictor.flipped(flip_time)
         # Only frames shown while the clip runs count (before a device starts, picture and sound both wait).
         if self._drawn is not None and self.clock.started and not self.clock.paused:
-            self.recorder.flip(flip_time, self._drawn, self.clock.position_s())
+            audio = self.clock.position_s()
+            if self.flip_clock is not None:
+                audio = max(0.0, audio - max(0.0, self.flip_clock() - flip_time))
+            self.recorder.flip(flip_time, self._drawn, audio)
         self._drawn = None
