@@ -192,6 +192,10 @@ class AudioPlayer:
     latency:
         PortAudio latency hint (``"low"``, ``"high"`` or seconds). Low latency keeps the sound-to-picture
         delay short; the measured latency is compensated either way.
+
+    The stream lives in a child process started with ``multiprocessing``'s ``spawn`` (opening takes
+    about half a second more); as with any spawned process, a script that makes a player must keep its
+    top-level code under ``if __name__ == "__main__":`` (the ``studyapp`` command does).
     """
 
     def __init__(self, device: int | str | None = None, *, samplerate: float | None = None,
