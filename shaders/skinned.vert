@@ -26,16 +26,20 @@ uniform float u_morph_w[52];
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 
-out vec3 v_albedo;
-out vec2 v_uv;
 #ifdef VERTEX_LIGHTING
 uniform vec3 u_camera_pos;
 uniform vec4 u_base_factor;
 out vec3 v_colour;
+#ifndef UNTEXTURED  // (UNTEXTURED: the colour is all the fragment shader needs)
+out vec3 v_albedo;
+out vec2 v_uv;
 out vec3 v_light_diffuse;
 out vec3 v_light_rim;
 out vec3 v_light_spec;
+#endif
 #else
+out vec3 v_albedo;
+out vec2 v_uv;
 out vec3 v_world;
 out vec3 v_normal;
 flat out vec3 v_shading;
@@ -64,16 +68,20 @@ void main() {
     if (in_weights.w > 0.0) skin += in_weights.w * bone(in_joints.w);
     vec4 world = u_model * skin * vec4(p, 1.0);
     vec3 normal = mat3(u_model) * mat3(skin) * n;
+#if !(defined(VERTEX_LIGHTING) && defined(UNTEXTURED))
     v_albedo = in_color.rgb;
     v_uv = in_uv;
+#endif
 #ifdef VERTEX_LIGHTING
     vec3 nn = normalize(normal);
     vec3 v = normalize(u_camera_pos - world.xyz);
     // (a double-sided avatar is lit per pixel: a vertex cannot tell which side will be seen)
     Light l = light_at(nn, v, in_shading, int(in_color.a + 0.5));
+#ifndef UNTEXTURED
     v_light_diffuse = l.diffuse;
     v_light_rim = l.rim;
     v_light_spec = l.spec;
+#endif
     v_colour = tonemap(lit(l, in_color.rgb * u_base_factor.rgb));
 #else
     v_world = world.xyz;

@@ -63,11 +63,14 @@ def slot_viewports(viewport: tuple[int, int, int, int], n: int) -> list[tuple[in
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
 
-def skinned_program(ctx: moderngl.Context, vertex_lighting: bool) -> moderngl.Program:
+def skinned_program(ctx: moderngl.Context, vertex_lighting: bool, textured: bool = True) -> moderngl.Program:
     """The avatar program: ``skinned.vert`` + ``skinned.frag`` with ``lighting.glsl`` pasted in after their
     ``#version`` line (one definition of the lighting for both stages), lit per pixel, or per vertex when
-    ``vertex_lighting`` (``#define VERTEX_LIGHTING``)."""
-    head = ("#define VERTEX_LIGHTING\n" if vertex_lighting else "") + read_shader("lighting.glsl")
+    ``vertex_lighting`` (``#define VERTEX_LIGHTING``); ``textured=False`` there leaves out the texture
+    path and its varyings (``#define UNTEXTURED``)."""
+    defines = ("#define VERTEX_LIGHTING\n" if vertex_lighting else "") + \
+              ("#define UNTEXTURED\n" if vertex_lighting and not textured else "")
+    head = defines + read_shader("lighting.glsl")
 
     def source(name: str) -> str:
         version, rest = read_shader(name).split("\n", 1)
@@ -129,8 +132,9 @@ class Renderer:
         if lighting not in (None, "pixel", "vertex"):
             raise ValueError(f"lighting must be 'pixel', 'vertex' or None, got {lighting!r}")
         self.lighting = lighting or ("vertex" if software else "pixel")
-        self.prog = self._skinned_program(self.lighting == "vertex")
-        self._pixel_prog: moderngl.Program | None = None if self.lighting == "vertex" else self.prog
+        # per lighting ("pixel", "vertex", "vertex-untextured"), compiled when an avatar first needs it
+        self._progs: dict[str, moderngl.Program] = {}
+        self.prog = self._program(self.lighting)
         self.bg_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("background.frag"))
         self.blit_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("blit.frag"))
         self.fxaa_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa.frag"))
@@ -162,24 +166,30 @@ class Renderer:
         self._w = np.zeros(MAX_ACTIVE_MORPHS, np.float32)
 
     # -- resources ------------------------------------------------------------------------------
-    def _skinned_program(self, vertex_lighting: bool) -> moderngl.Program:
-        prog = skinned_program(self.ctx, vertex_lighting)
-        prog["Bones"].binding = 0
-        prog["u_morph_pos"].value = 1
-        prog["u_morph_nrm"].value = 2
-        prog["u_base_color"].value = 3
-        prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
+    def _program(self, kind: str) -> moderngl.Program:
+        prog = self._progs.get(kind)
+        if prog is None:
+            prog = skinned_program(self.ctx, kind != "pixel", textured=kind != "vertex-untextured")
+            prog["Bones"].binding = 0
+            prog["u_morph_pos"].value = 1
+            prog["u_morph_nrm"].value = 2
+            if "u_base_color" in prog:
+                prog["u_base_color"].value = 3
+            prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
+            self._progs[kind] = prog
         return prog
 
     def program_for(self, avatar: Avatar) -> moderngl.Program:
         """The avatar program that draws ``avatar``: per-pixel lighting for a double-sided avatar even
-        when lighting per vertex (only a pixel knows which side of its surface it shows), else
-        :attr:`prog`."""
-        if not (avatar.double_sided and self.lighting == "vertex"):
+        when lighting per vertex (only a pixel knows which side of its surface it shows); per vertex,
+        without the texture path for an avatar with no texture; else :attr:`prog`."""
+        if self.lighting != "vertex":
             return self.prog
-        if self._pixel_prog is None:
-            self._pixel_prog = self._skinned_program(False)
-        return self._pixel_prog
+        if avatar.double_sided:
+            return self._program("pixel")
+        if avatar.texture is None or avatar.uv is None:
+            return self._program("vertex-untextured")
+        return self.prog
 
     def upload_avatar(self, avatar: Avatar) -> AvatarMesh:
         """GPU buffers of ``avatar`` (created once per avatar object and reused by every slot)."""
@@ -420,7 +430,8 @@ class Renderer:
             prog = self.program_for(scene.avatars[i])
             self._set_morphs(prog, frames[i])
             prog["u_morph_rows"].value = mesh.morph_rows
-            prog["u_has_texture"].value = mesh.has_texture
+            if "u_has_texture" in prog:
+                prog["u_has_texture"].value = mesh.has_texture
             prog["u_base_factor"].value = tuple(float(v) for v in scene.avatars[i].base_color_factor)
             mesh.palette.bind(i, 0)
             mesh.morph_pos.use(1)
