@@ -38,6 +38,7 @@ from studyapp.render.pose import prepare_slot
 from studyapp.render.renderer import Renderer
 from studyapp.render.scene import make_scene
 from studyapp.resources import read_shader
+from studyapp.ui.app import BACKGROUND as APP_BACKGROUND
 
 GOAL = 1.3  # issue 20: the participant frame within 1.3x a bare draw of the same geometry
 
@@ -176,8 +177,7 @@ def main(argv: list[str]) -> int:
     def participant(t: float) -> None:  # studyapp.ui.app.StudyApp.frame on a trial
         fbo.use()
         ctx.viewport = (0, 0, *size)
-        fbo.clear(0.11, 0.12, 0.14, 1.0, depth=1.0)
-        cache.draw(renderer, scene, t, fbo, (0, 0, *size), size)
+        cache.draw(renderer, scene, t, fbo, (0, 0, *size), size, APP_BACKGROUND)  # fills the frame: no clear
         fbo.use()
         overlay.draw(size, t)
         target.read_rgb()

@@ -267,16 +267,39 @@ class Renderer:
             self.ctx.copy_framebuffer(self._resolve, self._msaa)
         return self._resolve.color_attachments[0]
 
-    def _draw_picture(self, scene, t: float, size: tuple[int, int], figures: bool) -> None:
-        """Draw the frame into the renderer's own buffer (``self._msaa``) of ``size``."""
+    @property
+    def draws_canvas(self) -> bool:
+        """Whether :meth:`draw_canvas` is available (not with FXAA, whose pass covers the whole buffer)."""
+        return not self.fxaa
+
+    def draw_canvas(self, scene, t: float, size: tuple[int, int], viewport: tuple[int, int, int, int],
+                    background: tuple[float, float, float], *, figures: bool = True) -> moderngl.Framebuffer:
+        """Draw ``scene`` at ``t`` into ``viewport`` (x, y, w, h) of the renderer's own buffer of ``size``,
+        the rest of it ``background`` (rgb), and return that framebuffer: ``ctx.copy_framebuffer`` puts
+        it into a target of the same size in one copy, with no clear and no textured quad -- on llvmpipe
+        a quad over the picture is a full shading pass, several times the cost of the copy. The picture
+        is :meth:`render_texture`'s, pixel for pixel, moved to ``viewport``. Valid until the renderer
+        draws again (:attr:`frames_drawn`). Not with FXAA (:attr:`draws_canvas`)."""
+        if not self.draws_canvas:
+            raise RuntimeError("draw_canvas is not available with FXAA")
+        w, h = (int(v) for v in size)
+        self._draw_picture(scene, t, (w, h), figures, tuple(int(v) for v in viewport), tuple(background))
+        return self._msaa
+
+    def _draw_picture(self, scene, t: float, size: tuple[int, int], figures: bool,
+                      viewport: tuple[int, int, int, int] | None = None,
+                      background: tuple[float, float, float] | None = None) -> None:
+        """Draw the frame into ``viewport`` (default: all) of the renderer's own buffer (``self._msaa``) of
+        ``size``; ``background`` fills the rest."""
         w, h = size
+        viewport = viewport or (0, 0, w, h)
         self.frames_drawn += 1
         self._ensure_buffers((w, h))
         fbo = self._msaa
         fbo.use()
-        backdrop = self._backdrop(scene.n_slots)
+        backdrop = self._backdrop(scene.n_slots, viewport, background)
         if backdrop is None:
-            fbo.clear(*BACKGROUND_BOTTOM, 1.0, depth=1.0)
+            fbo.clear(*(background or BACKGROUND_BOTTOM), 1.0, depth=1.0)
         else:
             # the backdrop never changes: copy the cached one and clear only the depth buffer
             self.ctx.copy_framebuffer(fbo, backdrop)
@@ -284,14 +307,16 @@ class Renderer:
             fbo.clear(depth=1.0)
             fbo.color_mask = (True, True, True, True)
             fbo.use()
-        self._draw_slots(scene, t, (0, 0, w, h), figures, backdrop=backdrop is None)
+        self._draw_slots(scene, t, viewport, figures, backdrop=backdrop is None)
 
-    def _backdrop(self, n_slots: int) -> moderngl.Framebuffer | None:
-        """The backdrop of every slot, drawn once per size and slot count into a texture (single-sampled
-        drawing only: a blit cannot fill a multisample buffer). None when it must be drawn per frame."""
+    def _backdrop(self, n_slots: int, viewport: tuple[int, int, int, int],
+                  background: tuple[float, float, float] | None) -> moderngl.Framebuffer | None:
+        """The backdrop of every slot in ``viewport`` (``background`` around it), drawn once per size,
+        viewport, background and slot count into a texture (single-sampled drawing only: a blit cannot
+        fill a multisample buffer). None when it must be drawn per frame."""
         if self.samples:
             return None
-        key = (self._size, n_slots)
+        key = (self._size, n_slots, viewport, background)
         if self._backdrop_key != key:
             if self._backdrop_fbo is None or self._backdrop_fbo.size != self._size:
                 if self._backdrop_fbo is not None:
@@ -300,9 +325,9 @@ class Renderer:
                 self._backdrop_fbo = self.ctx.framebuffer([self.ctx.texture(self._size, 4)])
             fbo = self._backdrop_fbo
             fbo.use()
-            fbo.clear(*BACKGROUND_BOTTOM, 1.0)
+            fbo.clear(*(background or BACKGROUND_BOTTOM), 1.0)
             self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
-            for vp in slot_viewports((0, 0, *self._size), n_slots):
+            for vp in slot_viewports(viewport, n_slots):
                 fbo.viewport = vp
                 self._empty_vao.render(moderngl.TRIANGLES, vertices=3)
             fbo.viewport = (0, 0, *self._size)
