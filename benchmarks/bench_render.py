@@ -6,7 +6,9 @@ round), so a busy shared machine slows all of them alike:
 * **participant frame**: what the participant window draws on every trial frame -- the renderer's
   picture (skinning, morphs, lighting -- per vertex on a software rasteriser, see ``Renderer`` --, the
   anti-aliasing chosen for this GL, labels) through the scene
-  cache into the window's framebuffer, the ImGui overlay on top (panel, buttons, progress bar), read back;
+  cache into the window's framebuffer (as ``StudyApp.frame`` does: the renderer's canvas, scene and the
+  app's background around it, in one framebuffer copy), the ImGui overlay on top (panel, buttons,
+  progress bar), read back;
 * **renderer only**: ``draw_trial`` straight into the target, read back;
 * **bare draw**: the same triangles in the same three viewports with a trivial shader, read back.
 

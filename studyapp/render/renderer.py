@@ -4,8 +4,9 @@ Per frame the CPU only blends two precomputed palettes per slot, writes them to 
 buffers and sets the handful of non-zero morph weights; skinning and morphing run in the vertex
 shader. Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
 caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's), or handed
-over as a texture (:meth:`Renderer.render_texture`, what the participant UI's scene cache shows, so the
-picture is not copied once more). On software rasterisers (llvmpipe) MSAA is replaced by default (see
+over as a texture (:meth:`Renderer.render_texture`, so the picture is not copied once more), or as a
+whole canvas of the window's size with the scene in its viewport (:meth:`Renderer.draw_canvas`, what the
+participant UI's scene cache copies in: one copy, no clear, no quad). On software rasterisers (llvmpipe) MSAA is replaced by default (see
 :class:`Renderer`): every full-frame pass there waits for the CPU raster threads while holding the
 Python interpreter (and with it the audio callback), so the software path draws with no extra pass.
 
