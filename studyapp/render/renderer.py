@@ -61,6 +61,33 @@ def slot_viewports(viewport: tuple[int, int, int, int], n: int) -> list[tuple[in
     return [(edges[i], y, edges[i + 1] - edges[i], h) for i in range(n)]
 
 
+FLOOR_EXTENT = 2.5  # half the side of the floor square (m) around the origin
+FLOOR_FADE = (1.6, 1.1)  # floor.frag: the floor's own alpha is 0 outside this ellipse (half axes, m)
+SHADOW_REACH = ((0.34, 0.24), (0.08, 0.14))  # floor.frag: hips' and feet's shadow scales (m)
+SHADOW_CUT = 2.0  # shadow scales beyond which a shadow's alpha is below 1e-4 (under half an 8-bit level)
+
+
+def floor_bounds(hips, feet) -> tuple[float, float, float, float]:
+    """``(x0, z0, x1, z1)``: the part of the floor square where ``floor.frag`` draws anything visible --
+    the fading ellipse and every contact shadow -- so the floor quad covers no pixel it leaves unchanged
+    (on llvmpipe the floor's per-pixel exponentials are a tenth of the figure-free frame).
+
+    >>> floor_bounds((0, 0.9, 0), [(-0.1, 0, 0.05), (0.1, 0, 0.05)])
+    (-1.6, -1.1, 1.6, 1.1)
+    >>> floor_bounds((2.3, 0.9, 0), [(2.2, 0, 0), (2.4, 0, 0)])  # a figure far to the side: its shadow
+    (-1.6, -1.1, 2.5, 1.1)
+    """
+    lo = [-FLOOR_FADE[0], -FLOOR_FADE[1]]
+    hi = [FLOOR_FADE[0], FLOOR_FADE[1]]
+    for (sx, sz), points in zip(SHADOW_REACH, ([hips], list(feet))):
+        for p in points:
+            x, z = float(p[0]), float(p[2])
+            lo = [min(lo[0], x - SHADOW_CUT * sx), min(lo[1], z - SHADOW_CUT * sz)]
+            hi = [max(hi[0], x + SHADOW_CUT * sx), max(hi[1], z + SHADOW_CUT * sz)]
+    e = FLOOR_EXTENT
+    return (max(lo[0], -e), max(lo[1], -e), min(hi[0], e), min(hi[1], e))
+
+
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
 
@@ -147,7 +174,7 @@ class Renderer:
         self._empty_vao = ctx.vertex_array(self.bg_prog, [])
         self._blit_vao = ctx.vertex_array(self.blit_prog, [])
         self._label_vao = ctx.vertex_array(self.label_prog, [])
-        quad = np.array([[-2.5, -2.5], [2.5, -2.5], [-2.5, 2.5], [2.5, 2.5]], np.float32)
+        quad = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32)  # mapped onto floor_bounds()
         self._floor_vbo = ctx.buffer(quad.tobytes())
         self._floor_vao = ctx.vertex_array(self.floor_prog, [(self._floor_vbo, "2f", "in_xz")])
         self.bg_prog["u_top"].value = BACKGROUND_TOP
@@ -448,6 +475,7 @@ class Renderer:
             self.floor_prog["u_shadow_centre"].value = (float(hips[0]), float(hips[2]))
             feet = [joints[sk.index(n)] if n in sk.names else hips for n in ("LeftFoot", "RightFoot")]
             self.floor_prog["u_feet"].write(np.array([[f[0], f[2]] for f in feet], np.float32).tobytes())
+            self.floor_prog["u_bounds"].value = floor_bounds(hips, feet)
             self._floor_vao.render(moderngl.TRIANGLE_STRIP)
             ctx.disable(moderngl.BLEND)
             # avatar

@@ -165,3 +165,24 @@ def test_scene_cache_with_a_background_fills_the_frame_like_clear_and_quad(gl_ct
     finally:
         target.release()
         cache.release()
+
+
+def test_floor_quad_covers_only_what_the_floor_changes(gl_ctx, avatar, monkeypatch):
+    """The floor is drawn over the fading ellipse and the contact shadows only (``floor_bounds``, whose
+    doctest covers a shadow reaching out of the ellipse): the same picture as the whole floor square, at
+    most a level apart on single pixels where a shadow's tail rounds differently."""
+    import studyapp.render.renderer as rr
+
+    scene = _scene(avatar)
+    size = (640, 360)
+    got = _frame(Renderer(gl_ctx), scene, size).astype(int)
+    bounds = []
+    real = rr.floor_bounds
+    monkeypatch.setattr(rr, "floor_bounds", lambda h, f: bounds.append(real(h, f)) or (-2.5, -2.5, 2.5, 2.5))
+    want = _frame(Renderer(gl_ctx), scene, size).astype(int)
+    d = np.abs(got - want).max(axis=2)
+    assert d.max() <= 1 and (d > 0).sum() <= 50, (d.max(), (d > 0).sum())
+    assert all(b[2] - b[0] < 4.0 for b in bounds)  # really less than the square
+    # the square's floor is visible: drawing none at all would differ a lot
+    monkeypatch.setattr(rr, "floor_bounds", lambda h, f: (0.0, 0.0, 0.0, 0.0))
+    assert np.abs(_frame(Renderer(gl_ctx), scene, size).astype(int) - want).max() > 20
