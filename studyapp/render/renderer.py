@@ -131,9 +131,11 @@ class Renderer:
         ``"pixel"`` lights every pixel; ``"vertex"`` lights every vertex and interpolates the colour
         (a texture's albedo is still applied per pixel). ``None`` (default): per vertex on a software
         rasteriser, per pixel on a GPU. The built-in avatar's triangles cover about three pixels each at
-        720p, and llvmpipe shades whole 4x4 blocks: per-pixel lighting cost about a fifth of its frame,
-        and per-vertex lighting differs from it by a level on average, most at the seams between
-        materials (tolerance in ``tests/render/test_vertex_lighting.py``). Double-sided avatars are
+        720p; llvmpipe shades whole 4x4 blocks and sets up every varying per triangle, so per-pixel
+        lighting and its six varyings made the renderer 1.7x a bare draw of the same triangles (CPU time),
+        per-vertex lighting with one varying (an untextured avatar) 1.15x. It differs from per-pixel
+        lighting by a level on average, most at the seams between materials (tolerance in
+        ``tests/render/test_vertex_lighting.py``). Double-sided avatars are
         always lit per pixel (which side a pixel shows is known only there).
 
     ``antialiasing`` tells which method is in use: ``"msaa"``, ``"fxaa"`` or ``"none"``; ``lighting``
