@@ -5,8 +5,10 @@ Plays a synthesized clip on a real audio output (the null PulseAudio sink starte
 server is running; it is paced in real time like a sound card) and runs the participant's frame loop
 (:class:`studyapp.render.loop.FrameLoop` with its pacer) on a simulated 60 Hz display: each frame the
 renderer draws three built-in avatars at 1280x720 offscreen for the audio time of the flip it aims at
-(``studyapp.render.frames``), presenting waits for the next vsync, and the audio clock is read at the
-flip. ``--load N`` busy processes (default: twice the core count) run meanwhile, as on a loaded laptop.
+(``studyapp.render.frames``), presenting waits for the next vsync, and the offset is against the audio
+clock at that vsync instant (read after it, less the time since: a thread on a loaded machine returns
+from the wait late, while a display flips on time). The audio stream runs in its own process
+(``studyapp.audio.output_process``). ``--load N`` busy processes (default: twice the core count) run meanwhile, as on a loaded laptop.
 
 Printed per 5 s window: mean and max offset against the 16.7 ms frame period, frames shown and dropped;
 then the share of shown frames within one frame period, the worst offset, and the slope of offset vs
@@ -71,6 +73,7 @@ class VsyncFrames(OffscreenFrames):
         super().__init__(ctx, size)
         self.period = period
         self.t0 = time.perf_counter()
+        self.last_flip = self.t0
 
     def present(self) -> None:
         now = time.perf_counter()
@@ -78,6 +81,18 @@ class VsyncFrames(OffscreenFrames):
         time.sleep(max(0.0, flip - time.perf_counter() - 0.001))
         while time.perf_counter() < flip:
             pass
+        self.last_flip = flip
+
+
+class VsyncTimer(WallTimer):
+    """Real time, with each flip at the simulated display's vsync instant (as a display flips in hardware),
+    not when the loaded thread got back from waiting for it."""
+
+    def __init__(self, target: VsyncFrames) -> None:
+        self.target = target
+
+    def flip_time(self) -> float:
+        return self.target.last_flip
 
 
 def busy_processes(n: int) -> list[subprocess.Popen]:
@@ -112,13 +127,15 @@ def main(argv: list[str]) -> int:
     busy: list[subprocess.Popen] = []
     try:
         flowing = player.wait_until_flowing(6.0)
+        underflows0 = player.underflows
         print(f"output: {player.device_name} @ {player.rate} Hz, measured latency {player.output_latency_s * 1000:.1f} ms"
               f"{'' if flowing else ' (stream still warming up)'}; GL: {ctx.info['GL_RENDERER']}, "
               f"anti-aliasing {renderer.antialiasing}, {SIZE[0]}x{SIZE[1]}, 3 avatars")
         clip = speech_like(args.seconds)
         predictor = FlipPredictor(REFRESH_HZ)
-        scene_player = ScenePlayer(renderer, scene, player, audio=clip, duration_s=args.seconds, predictor=predictor)
-        loop = FrameLoop(target, WallTimer(), scene_player.draw, scene_player.after_flip, pacer=predictor,
+        scene_player = ScenePlayer(renderer, scene, player, audio=clip, duration_s=args.seconds, predictor=predictor,
+                                   flip_clock=time.perf_counter)
+        loop = FrameLoop(target, VsyncTimer(target), scene_player.draw, scene_player.after_flip, pacer=predictor,
                          running=lambda: not player.finished)
         for k in range(3):  # warm up (shaders, uploads) and let the predictor learn the flips
             scene_player.draw(target.fbo, SIZE, time.perf_counter())
@@ -131,6 +148,7 @@ def main(argv: list[str]) -> int:
         t_start = time.perf_counter()
         loop.run()
         wall = time.perf_counter() - t_start
+        underflows = player.underflows - underflows0
         load_after = load_average()
     finally:
         for p in busy:
@@ -163,11 +181,12 @@ def main(argv: list[str]) -> int:
     slope = float(np.polyfit(flips, off, 1)[0] * 60.0)
     print(f"\nshown frames within one frame period of the sound: {within:.1f}% (goal >= 99%); worst offset "
           f"{worst:.2f} frame periods; mean |offset| {np.abs(off).mean():.2f} ms")
+    print(f"audio device underflows during the play: {underflows}")
     print(f"drift: offset slope {slope:+.3f} ms per minute (0 = no drift)")
     record("av_sync_max_offset_frames_under_render", round(worst, 3), 1.0, "display frame periods",
            within_one_frame_pct=round(within, 2), goal_within_pct=99.0, frames_drawn=drawn,
            frames_shown=rec.frames_shown, dropped_late=loop.dropped_late, fps=round(drawn / wall, 2),
-           drift_ms_per_min=round(slope, 3), busy_processes=args.load, audio_latency_s=args.latency,
+           drift_ms_per_min=round(slope, 3), underflows=underflows, busy_processes=args.load, audio_latency_s=args.latency,
            load_average=[load_before, load_after], cpu_count=os.cpu_count(), gl_renderer=ctx.info["GL_RENDERER"])
     return 0
 

@@ -4,8 +4,11 @@ Three pipelines run interleaved in one process (rounds of a few frames each, the
 round), so a busy shared machine slows all of them alike:
 
 * **participant frame**: what the participant window draws on every trial frame -- the renderer's
-  picture (skinning, morphs, lighting, the anti-aliasing chosen for this GL, labels) through the scene
-  cache into the window's framebuffer, the ImGui overlay on top (panel, buttons, progress bar), read back;
+  picture (skinning, morphs, lighting -- per vertex on a software rasteriser, see ``Renderer`` --, the
+  anti-aliasing chosen for this GL, labels) through the scene
+  cache into the window's framebuffer (as ``StudyApp.frame`` does: the renderer's canvas, scene and the
+  app's background around it, in one framebuffer copy), the ImGui overlay on top (panel, buttons,
+  progress bar), read back;
 * **renderer only**: ``draw_trial`` straight into the target, read back;
 * **bare draw**: the same triangles in the same three viewports with a trivial shader, read back.
 
@@ -37,6 +40,7 @@ from studyapp.render.pose import prepare_slot
 from studyapp.render.renderer import Renderer
 from studyapp.render.scene import make_scene
 from studyapp.resources import read_shader
+from studyapp.ui.app import BACKGROUND as APP_BACKGROUND
 
 GOAL = 1.3  # issue 20: the participant frame within 1.3x a bare draw of the same geometry
 
@@ -175,8 +179,7 @@ def main(argv: list[str]) -> int:
     def participant(t: float) -> None:  # studyapp.ui.app.StudyApp.frame on a trial
         fbo.use()
         ctx.viewport = (0, 0, *size)
-        fbo.clear(0.11, 0.12, 0.14, 1.0, depth=1.0)
-        cache.draw(renderer, scene, t, fbo, (0, 0, *size), size)
+        cache.draw(renderer, scene, t, fbo, (0, 0, *size), size, APP_BACKGROUND)  # fills the frame: no clear
         fbo.use()
         overlay.draw(size, t)
         target.read_rgb()
@@ -216,7 +219,7 @@ def main(argv: list[str]) -> int:
     cpu = {name: cpu_split(step, max(2, args.frames)) for name, step in pipelines.items()}
 
     print(f"GL: {ctx.info['GL_RENDERER']}  size {size[0]}x{size[1]}, 3 avatars, read-back every frame; "
-          f"anti-aliasing {renderer.antialiasing}")
+          f"anti-aliasing {renderer.antialiasing}, lighting per {renderer.lighting}")
     print(f"avatar: {avatar.n_triangles} triangles drawn per figure "
           f"(built-in: {avatar.n_triangles}); build {build_s * 1000:.0f} ms")
     print(f"{args.rounds} rounds x {args.frames} frames per pipeline, interleaved; load average "
@@ -234,7 +237,7 @@ def main(argv: list[str]) -> int:
            participant_ms=round(float(np.median(times["participant frame"])), 2),
            bare_ms=round(float(np.median(times["bare draw"])), 2),
            size=f"{size[0]}x{size[1]}", gl_renderer=ctx.info["GL_RENDERER"], antialiasing=renderer.antialiasing,
-           load_average=[min(loads), max(loads)], cpu_count=os.cpu_count())
+           lighting=renderer.lighting, load_average=[min(loads), max(loads)], cpu_count=os.cpu_count())
     overlay.layer.shutdown()
     return 0
 

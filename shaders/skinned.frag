@@ -1,62 +1,52 @@
 #version 330 core
-// Studio lighting shared by every slot: soft key, cool fill, rim, hemisphere ambient.
-// Colours are sRGB; lighting is done in linear space and tone-mapped back.
+// The avatar's pixels: lighting (lighting.glsl, pasted in before this) per pixel, or, with
+// VERTEX_LIGHTING, the colour lit per vertex by skinned.vert (and only a texture's albedo applied here);
+// with UNTEXTURED as well, only that colour (on llvmpipe every varying costs set-up per tiny triangle).
 
+#ifdef VERTEX_LIGHTING
+in vec3 v_colour;        // finished colour of an untextured vertex
+#ifndef UNTEXTURED
+in vec3 v_albedo;        // linear colour (converted per vertex: cheaper than per pixel)
+in vec2 v_uv;
+in vec3 v_light_diffuse;
+in vec3 v_light_rim;
+in vec3 v_light_spec;
+#endif
+#else
+in vec3 v_albedo;
+in vec2 v_uv;
 in vec3 v_world;
 in vec3 v_normal;
-in vec3 v_albedo;        // linear colour (converted per vertex: cheaper than per pixel)
 flat in vec3 v_shading;  // material: wrap, shininess, specular strength
 flat in int v_material;
-in vec2 v_uv;
-
 uniform vec3 u_camera_pos;
+#endif
+
+#ifndef UNTEXTURED
 uniform sampler2D u_base_color;
 uniform vec4 u_base_factor;
 uniform bool u_has_texture;
+#endif
 
 out vec4 frag_color;
 
-const vec3 KEY_DIR = normalize(vec3(-0.55, 0.75, 0.85));
-const vec3 KEY_COL = vec3(1.00, 0.95, 0.88) * 2.3;
-const vec3 FILL_DIR = normalize(vec3(0.80, 0.25, 0.70));
-const vec3 FILL_COL = vec3(0.80, 0.87, 1.00) * 0.75;
-const vec3 RIM_DIR = normalize(vec3(0.25, 0.55, -1.00));
-const vec3 RIM_COL = vec3(1.00, 0.98, 0.95) * 1.6;
-const vec3 SKY = vec3(0.62, 0.68, 0.78);
-const vec3 GROUND = vec3(0.32, 0.29, 0.27);
-
-vec3 to_linear(vec3 c) { return pow(max(c, 0.0), vec3(2.2)); }
-
-vec3 tonemap(vec3 x) {
-    // ACES filmic fit (Narkowicz), then display gamma
-    x *= 0.8;
-    vec3 y = clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0);
-    return pow(y, vec3(1.0 / 2.2));
-}
-
 void main() {
+#if defined(VERTEX_LIGHTING) && defined(UNTEXTURED)
+    frag_color = vec4(v_colour, 1.0);
+#elif defined(VERTEX_LIGHTING)
+    // uv < 0 marks parts of a textured avatar that have no texture
+    if (u_has_texture && v_uv.x >= 0.0) {
+        vec3 albedo = v_albedo * u_base_factor.rgb * to_linear(texture(u_base_color, v_uv).rgb);
+        frag_color = vec4(tonemap(lit(Light(v_light_diffuse, v_light_rim, v_light_spec), albedo)), 1.0);
+    } else {
+        frag_color = vec4(v_colour, 1.0);
+    }
+#else
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) n = -n;
     vec3 v = normalize(u_camera_pos - v_world);
     vec3 albedo = v_albedo * u_base_factor.rgb;
-    // uv < 0 marks parts of a textured avatar that have no texture
     if (u_has_texture && v_uv.x >= 0.0) albedo *= to_linear(texture(u_base_color, v_uv).rgb);
-    float wrap = v_shading.x, shin = v_shading.y, spec_k = v_shading.z;
-
-    float nk = dot(n, KEY_DIR);
-    float dk = max((nk + wrap) / (1.0 + wrap), 0.0);
-    float df = max((dot(n, FILL_DIR) + wrap) / (1.0 + wrap), 0.0);
-    vec3 diffuse = KEY_COL * dk + FILL_COL * df;
-    if (v_material == 0) {
-        // a touch of warm scattering at the light terminator reads as skin
-        diffuse += KEY_COL * vec3(0.25, 0.06, 0.03) * max(1.0 - abs(nk) * 2.0, 0.0);
-    }
-    vec3 hemi = mix(GROUND, SKY, 0.5 + 0.5 * n.y) * 0.55;
-    float f1 = 1.0 - max(dot(n, v), 0.0);
-    float fres = f1 * f1 * f1;
-    vec3 rim = RIM_COL * fres * max(dot(n, RIM_DIR) + 0.3, 0.0) * 0.6;
-    vec3 h = normalize(KEY_DIR + v);
-    float spec = pow(max(dot(n, h), 0.0), shin) * spec_k * (shin + 8.0) / 25.0;
-    vec3 col = albedo * (diffuse + hemi) + rim * mix(albedo, vec3(0.5), 0.5) + KEY_COL * spec * 0.5;
-    frag_color = vec4(tonemap(col), 1.0);
+    frag_color = vec4(tonemap(lit(light_at(n, v, v_shading, v_material), albedo)), 1.0);
+#endif
 }

@@ -3,6 +3,8 @@
 // The bone palette of the slot being drawn is a uniform block (one buffer per slot; std140 mat4 array).
 // Morph deltas live in a float texture indexed by (morph * rows + vertex's morph row), only for
 // vertices some morph moves; the CPU sends the list of morphs whose weight is non-zero this frame.
+// With VERTEX_LIGHTING (software rasterisers) the lighting of lighting.glsl, pasted in before this, is
+// done here per vertex instead of per pixel in skinned.frag.
 
 in vec3 in_position;
 in vec3 in_normal;
@@ -24,12 +26,25 @@ uniform float u_morph_w[52];
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 
+#ifdef VERTEX_LIGHTING
+uniform vec3 u_camera_pos;
+uniform vec4 u_base_factor;
+out vec3 v_colour;
+#ifndef UNTEXTURED  // (UNTEXTURED: the colour is all the fragment shader needs)
+out vec3 v_albedo;
+out vec2 v_uv;
+out vec3 v_light_diffuse;
+out vec3 v_light_rim;
+out vec3 v_light_spec;
+#endif
+#else
+out vec3 v_albedo;
+out vec2 v_uv;
 out vec3 v_world;
 out vec3 v_normal;
-out vec3 v_albedo;
 flat out vec3 v_shading;
 flat out int v_material;
-out vec2 v_uv;
+#endif
 
 const int MORPH_TEX_W = 2048;
 
@@ -52,11 +67,27 @@ void main() {
     if (in_weights.z > 0.0) skin += in_weights.z * bone(in_joints.z);
     if (in_weights.w > 0.0) skin += in_weights.w * bone(in_joints.w);
     vec4 world = u_model * skin * vec4(p, 1.0);
-    v_world = world.xyz;
-    v_normal = mat3(u_model) * mat3(skin) * n;
+    vec3 normal = mat3(u_model) * mat3(skin) * n;
+#if !(defined(VERTEX_LIGHTING) && defined(UNTEXTURED))
     v_albedo = in_color.rgb;
+    v_uv = in_uv;
+#endif
+#ifdef VERTEX_LIGHTING
+    vec3 nn = normalize(normal);
+    vec3 v = normalize(u_camera_pos - world.xyz);
+    // (a double-sided avatar is lit per pixel: a vertex cannot tell which side will be seen)
+    Light l = light_at(nn, v, in_shading, int(in_color.a + 0.5));
+#ifndef UNTEXTURED
+    v_light_diffuse = l.diffuse;
+    v_light_rim = l.rim;
+    v_light_spec = l.spec;
+#endif
+    v_colour = tonemap(lit(l, in_color.rgb * u_base_factor.rgb));
+#else
+    v_world = world.xyz;
+    v_normal = normal;
     v_material = int(in_color.a + 0.5);
     v_shading = in_shading;
-    v_uv = in_uv;
+#endif
     gl_Position = u_view_proj * world;
 }

@@ -2,12 +2,15 @@
 
 :class:`AudioPlayer` keeps one callback-driven ``sounddevice.OutputStream`` open for its whole life
 (silence between clips), because opening a stream costs time and PulseAudio delivers few callbacks for
-the first second after a stream starts. Its :meth:`AudioPlayer.position_s` is the clip time that is
-*audible right now*: the samples handed to the device so far, divided by the rate, minus the output
-latency. Each callback tells us which clip sample starts its buffer and the stream time at which that
-buffer reaches the DAC (``outputBufferDacTime``); between callbacks the position is interpolated with
-the stream's own clock (``Stream.time``), so it moves smoothly instead of in block-sized steps and
-never drifts from the audio hardware.
+the first second after a stream starts. The stream and its callback live in a process of their own
+(:mod:`studyapp.audio.output_process`), so the callback never waits for this interpreter's lock, which
+the render thread holds through long GL calls on a software renderer. Its
+:meth:`AudioPlayer.position_s` is the clip time that is *audible right now*: the samples handed to the
+device so far, divided by the rate, minus the output latency. Each callback publishes which clip
+sample starts its buffer and when that buffer reaches the DAC (``outputBufferDacTime``, moved onto
+``time.monotonic``, which both processes share); between callbacks the position is interpolated with
+that clock, so it moves smoothly instead of in block-sized steps and never drifts from the audio
+hardware.
 
 When no device is present, :func:`open_clock` returns a :class:`~studyapp.audio.clock.SilentClock`
 and a message saying so, so a study can still run (silently) and the experimenter can pick a device
@@ -30,6 +33,9 @@ from typing import Any
 import numpy as np
 
 from studyapp.audio.clock import SilentClock
+from studyapp.audio.output_process import (
+    CALLBACKS, DAC, FIRST, FRAMES, FRAMES_TOTAL, GEN, LATENCY, READ, UNDERFLOWS, SharedClock, run_output,
+)
 from studyapp.errors import StudyappError
 
 log = logging.getLogger(__name__)
@@ -186,75 +192,85 @@ class AudioPlayer:
     latency:
         PortAudio latency hint (``"low"``, ``"high"`` or seconds). Low latency keeps the sound-to-picture
         delay short; the measured latency is compensated either way.
+
+    The stream lives in a child process started with ``multiprocessing``'s ``spawn`` (opening takes
+    about half a second more); as with any spawned process, a script that makes a player must keep its
+    top-level code under ``if __name__ == "__main__":`` (the ``studyapp`` command does).
     """
 
     def __init__(self, device: int | str | None = None, *, samplerate: float | None = None,
                  channels: int = 2, latency: str | float = 0.1) -> None:
-        import sounddevice as sd
+        import multiprocessing as mp
 
         info = resolve_device(device)
         self.device = info
         self.device_name = info.name
         self.rate = int(samplerate or info.default_samplerate or 48000)
         self.channels = max(1, min(int(channels), info.max_output_channels))
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # commands to the output process go out in the order they were made
         self._buf = np.zeros((0, self.channels), np.float32)
-        self._read = 0            # next clip sample to hand to the device
-        self._running = False     # delivering clip samples (not paused, not stopped)
+        self._read = 0            # first clip sample of the current run
         self._active = False      # a clip is loaded and was started
-        self._gen = 0             # bumps on play/resume so stale timing from older buffers is ignored
+        self._gen = 0             # bumps on play/resume/stop so stale timing from older buffers is ignored
         self._start_s = 0.0       # position shown until the first buffer of this run reaches the callback
         self._paused_at: float | None = None
-        self._last: tuple[int, int, float, int] | None = None  # (gen, first sample, dac time, frames)
-        self._latencies: list[float] = []
         self._converted: tuple | None = None  # (key, clip, stream-format samples) of the last clip played
-        self.callbacks = 0
-        self.frames_total = 0     # frames the device asked for since the stream started (pacing check)
-        self.underflows = 0
+        self._loaded: np.ndarray | None = None  # the samples the output process holds
+        # The stream runs in a process of its own (studyapp.audio.output_process): its callback must
+        # not wait for this interpreter's lock, which the render thread holds during long GL calls.
+        self._clock = SharedClock()
+        spawn = mp.get_context("spawn")
+        self._conn, child = spawn.Pipe()
+        self._proc = spawn.Process(target=run_output, name="studyapp-audio", daemon=True,
+                                   args=(child, self._clock.name, info.index, self.rate, self.channels, latency))
+        self._proc.start()
+        child.close()
         try:
-            self._stream = sd.OutputStream(
-                samplerate=self.rate, channels=self.channels, dtype="float32", device=info.index,
-                latency=latency, callback=self._callback,
-            )
-            self._stream.start()
-        except Exception as exc:
-            raise AudioDeviceError(f"could not open audio output {info.name!r}: {exc}") from exc
+            ready = self._conn.recv() if self._conn.poll(30.0) else ("error", "no answer within 30 s")
+        except EOFError:
+            ready = ("error", f"the audio process ended (exit code {self._proc.exitcode})")
+        if ready[0] != "ok":
+            self._shutdown()
+            raise AudioDeviceError(f"could not open audio output {info.name!r}: {ready[1]}")
+        self._reported_latency = float(ready[1])
 
-    # -- audio thread ----------------------------------------------------------------------------
-    def _callback(self, outdata: np.ndarray, frames: int, time_info: Any, status: Any) -> None:
-        self.callbacks += 1
-        self.frames_total += frames
-        if status and status.output_underflow:
-            self.underflows += 1
-        with self._lock:
-            running, gen, start = self._running, self._gen, self._read
-            n = 0
-            if running:
-                n = max(0, min(frames, len(self._buf) - start))
-                outdata[:n] = self._buf[start:start + n]
-                self._read = start + n
-        outdata[n:] = 0.0
-        dac = float(time_info.outputBufferDacTime)
-        now = float(time_info.currentTime)
-        if dac <= 0.0:  # some host APIs leave it unset; fall back to the reported latency
-            dac = now + float(self._stream.latency)
-        elif now > 0.0 and len(self._latencies) < 4096:
-            self._latencies.append(dac - now)
-        if running and n > 0:  # anchor the clock only on buffers that carry clip samples
-            self._last = (gen, start, dac, n)
+    def _send(self, *msg: Any) -> None:
+        self._conn.send(msg)
+
+    @property
+    def callbacks(self) -> int:
+        return int(self._clock.snapshot()[CALLBACKS])
+
+    @property
+    def frames_total(self) -> int:
+        """Frames the device asked for since the stream started (pacing check)."""
+        return int(self._clock.snapshot()[FRAMES_TOTAL])
+
+    @property
+    def underflows(self) -> int:
+        return int(self._clock.snapshot()[UNDERFLOWS])
+
+    def _anchor(self) -> tuple[int, int, float, int] | None:
+        """(gen, first sample, monotonic DAC time, frames) of the last buffer that carried clip samples."""
+        a = self._clock.snapshot()
+        if a[GEN] < 0:
+            return None
+        return int(a[GEN]), int(a[FIRST]), float(a[DAC]), int(a[FRAMES])
 
     # -- clock -----------------------------------------------------------------------------------
     def position_s(self) -> float:
         """Clip time (seconds) audible now: delivered samples / rate minus the output latency."""
+        import time
+
         if not self._active:
             return self._start_s
         if self._paused_at is not None:
             return self._paused_at
-        last = self._last
+        last = self._anchor()
         if last is None or last[0] != self._gen:
             return self._start_s  # the device has not asked for this run's first buffer yet
         _, first, dac, frames = last
-        pos = first / self.rate + (float(self._stream.time) - dac)
+        pos = first / self.rate + (time.monotonic() - dac)
         # Never ahead of what was delivered, never before where this run started.
         pos = min(pos, (first + frames) / self.rate)
         return float(min(max(pos, self._start_s), self.duration_s))
@@ -262,25 +278,29 @@ class AudioPlayer:
     @property
     def delivered_s(self) -> float:
         """Clip time handed to the device so far (ahead of what is audible by the output latency)."""
-        return self._read / float(self.rate)
+        if not self._active:
+            return self._start_s
+        last = self._anchor()
+        if self._paused_at is not None or last is None or last[0] != self._gen:
+            return self._read / float(self.rate)
+        return self._clock.snapshot()[READ] / float(self.rate)
 
     @property
     def started(self) -> bool:
         """The device has taken this run's first samples: the clock moves with the sound from now on
         (before that, frames show the start and there is nothing to be in sync with yet)."""
-        last = self._last
+        last = self._anchor()
         return self._active and last is not None and last[0] == self._gen
 
     @property
     def output_latency_s(self) -> float:
         """Measured delay from callback to DAC (median), or PortAudio's reported latency before any."""
-        if self._latencies:
-            return float(np.median(self._latencies))
-        return float(self._stream.latency)
+        measured = float(self._clock.snapshot()[LATENCY])
+        return measured if measured > 0 else self._reported_latency
 
     @property
     def reported_latency_s(self) -> float:
-        return float(self._stream.latency)
+        return self._reported_latency
 
     # -- transport -------------------------------------------------------------------------------
     def play(self, clip: Any, start_s: float = 0.0, *, duration_s: float | None = None) -> None:
@@ -293,6 +313,9 @@ class AudioPlayer:
             self._converted = (key, clip, buf)
         with self._lock:
             self._buf = buf
+            if self._loaded is not buf:
+                self._send("load", buf)
+                self._loaded = buf
             self._start_pos(start_s)
 
     def _prepare(self, clip: Any, duration_s: float | None) -> np.ndarray:
@@ -310,14 +333,15 @@ class AudioPlayer:
         self._paused_at = None
         self._gen += 1
         self._active = True
-        self._running = True
+        self._send("start", self._read, self._gen)
 
     def pause(self) -> None:
         """Freeze the clock at the audible position (the last ~latency of sound still plays out)."""
         if self._active and self._paused_at is None:
             pos = self.position_s()
             with self._lock:
-                self._running = False
+                self._gen += 1
+                self._send("halt", self._gen)
                 self._paused_at = pos
 
     def resume(self) -> None:
@@ -328,11 +352,11 @@ class AudioPlayer:
 
     def stop(self) -> None:
         with self._lock:
-            self._running = False
             self._active = False
             self._paused_at = None
             self._start_s = 0.0
             self._gen += 1
+            self._send("halt", self._gen)
 
     def replay(self) -> None:
         with self._lock:
@@ -371,13 +395,22 @@ class AudioPlayer:
         return False
 
     def close(self) -> None:
-        stream = getattr(self, "_stream", None)
-        if stream is not None:
-            try:
-                stream.stop()
-                stream.close()
-            finally:
-                self._stream = None
+        if getattr(self, "_proc", None) is None:
+            return
+        try:
+            self._send("close")
+        except (OSError, ValueError):  # the process is gone already
+            pass
+        self._shutdown()
+
+    def _shutdown(self) -> None:
+        self._proc.join(5.0)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(2.0)
+        self._conn.close()
+        self._clock.close()
+        self._proc = None
 
     def __enter__(self) -> "AudioPlayer":
         return self

@@ -203,6 +203,10 @@ class VirtualTimer:
 # -- the loop ------------------------------------------------------------------------------------------------
 
 DrawFn = Callable[[Any, tuple[int, int], float], None]
+#: A frame finished early is held until this many periods before its flip, then swapped: any time in the
+#: last period before a flip lands on it, and waking up early leaves room for a sleep that overshoots
+#: (tens of milliseconds with twice as many busy processes as cores).
+HOLD_PERIODS = 0.75
 
 
 class FrameLoop:
@@ -229,8 +233,9 @@ class FrameLoop:
         passed is dropped (not presented, no ``after_flip``) and counted in :attr:`dropped_late`. Frames
         are never shown late: each one is drawn for the audio time of its own flip, so a slow frame costs
         a skipped picture, not a picture that lags the sound (drop, never drift). Nor early: a frame done
-        more than half a period before its flip is held back until then (a vsync'd swap would otherwise
-        show it at the next flip, ahead of the sound).
+        well before its flip is held back until :data:`HOLD_PERIODS` before it (a vsync'd swap would
+        otherwise show it at the next flip, ahead of the sound); a hold that overshoots the flip (the
+        sleep of a loaded machine) drops the frame too.
     """
 
     def __init__(self, target: FrameTarget, timer: FrameTimer, draw: DrawFn,
@@ -273,8 +278,13 @@ class FrameLoop:
                 self.frames += 1
                 return True
             period = pacer.period
-            if pacer.aimed is not None and period and done < pacer.aimed - period / 2:
-                self.timer.wait_until(pacer.aimed - period / 2)  # the swap then lands on the aimed flip
+            hold = pacer.aimed - HOLD_PERIODS * period if pacer.aimed is not None and period else None
+            if hold is not None and done < hold:
+                self.timer.wait_until(hold)  # the swap then lands on the aimed flip
+                if self.timer.now() > pacer.aimed:  # the wait overshot the flip (a loaded machine): late
+                    self.dropped_late += 1
+                    self.frames += 1
+                    return True
         if self.capture:
             self.last_rgb = self.target.read_rgb()
         self.target.present()
@@ -315,11 +325,16 @@ class ScenePlayer:
         Start again from the beginning (with the sound) at the end (``view``).
     predictor:
         Flip prediction of a real display (windows); None offscreen.
+    flip_clock:
+        The clock flip times are given on (``time.perf_counter`` for :class:`WallTimer`), when a flip can
+        be reported before the thread gets to read the audio: the audio position recorded for a frame
+        is then the one at its flip (the position read, less the time since the flip), not the one at
+        whenever the thread ran again. None: the position read right after the flip.
     """
 
     def __init__(self, renderer: Renderer, scene: TrialScene, clock: MediaClock, *, audio: Any = None,
                  duration_s: float | None = None, loop: bool = False,
-                 predictor: FlipPredictor | None = None) -> None:
+                 predictor: FlipPredictor | None = None, flip_clock: Callable[[], float] | None = None) -> None:
         self.renderer = renderer
         self.scene = scene
         self.clock = clock
@@ -327,6 +342,7 @@ class ScenePlayer:
         self.duration_s = float(scene.duration if duration_s is None else duration_s)
         self.loop = loop
         self.predictor = predictor
+        self.flip_clock = flip_clock
         self.recorder = PlayRecorder(refresh_hz=predictor.nominal_hz if predictor is not None else None)
         self.plays = 0
         self._drawn: float | None = None
@@ -359,5 +375,8 @@ class ScenePlayer:
             self.predictor.flipped(flip_time)
         # Only frames shown while the clip runs count (before a device starts, picture and sound both wait).
         if self._drawn is not None and self.clock.started and not self.clock.paused:
-            self.recorder.flip(flip_time, self._drawn, self.clock.position_s())
+            audio = self.clock.position_s()
+            if self.flip_clock is not None:
+                audio = max(0.0, audio - max(0.0, self.flip_clock() - flip_time))
+            self.recorder.flip(flip_time, self._drawn, audio)
         self._drawn = None

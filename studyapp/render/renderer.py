@@ -4,8 +4,9 @@ Per frame the CPU only blends two precomputed palettes per slot, writes them to 
 buffers and sets the handful of non-zero morph weights; skinning and morphing run in the vertex
 shader. Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
 caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's), or handed
-over as a texture (:meth:`Renderer.render_texture`, what the participant UI's scene cache shows, so the
-picture is not copied once more). On software rasterisers (llvmpipe) MSAA is replaced by default (see
+over as a texture (:meth:`Renderer.render_texture`, so the picture is not copied once more), or as a
+whole canvas of the window's size with the scene in its viewport (:meth:`Renderer.draw_canvas`, what the
+participant UI's scene cache copies in: one copy, no clear, no quad). On software rasterisers (llvmpipe) MSAA is replaced by default (see
 :class:`Renderer`): every full-frame pass there waits for the CPU raster threads while holding the
 Python interpreter (and with it the audio callback), so the software path draws with no extra pass.
 
@@ -60,7 +61,50 @@ def slot_viewports(viewport: tuple[int, int, int, int], n: int) -> list[tuple[in
     return [(edges[i], y, edges[i + 1] - edges[i], h) for i in range(n)]
 
 
+FLOOR_EXTENT = 2.5  # half the side of the floor square (m) around the origin
+FLOOR_FADE = (1.6, 1.1)  # floor.frag: the floor's own alpha is 0 outside this ellipse (half axes, m)
+SHADOW_REACH = ((0.34, 0.24), (0.08, 0.14))  # floor.frag: hips' and feet's shadow scales (m)
+SHADOW_CUT = 2.0  # shadow scales beyond which a shadow's alpha is below 1e-4 (under half an 8-bit level)
+
+
+def floor_bounds(hips, feet) -> tuple[float, float, float, float]:
+    """``(x0, z0, x1, z1)``: the part of the floor square where ``floor.frag`` draws anything visible --
+    the fading ellipse and every contact shadow -- so the floor quad covers no pixel it leaves unchanged
+    (on llvmpipe the floor's per-pixel exponentials are a tenth of the figure-free frame).
+
+    >>> floor_bounds((0, 0.9, 0), [(-0.1, 0, 0.05), (0.1, 0, 0.05)])
+    (-1.6, -1.1, 1.6, 1.1)
+    >>> floor_bounds((2.3, 0.9, 0), [(2.2, 0, 0), (2.4, 0, 0)])  # a figure far to the side: its shadow
+    (-1.6, -1.1, 2.5, 1.1)
+    """
+    lo = [-FLOOR_FADE[0], -FLOOR_FADE[1]]
+    hi = [FLOOR_FADE[0], FLOOR_FADE[1]]
+    for (sx, sz), points in zip(SHADOW_REACH, ([hips], list(feet))):
+        for p in points:
+            x, z = float(p[0]), float(p[2])
+            lo = [min(lo[0], x - SHADOW_CUT * sx), min(lo[1], z - SHADOW_CUT * sz)]
+            hi = [max(hi[0], x + SHADOW_CUT * sx), max(hi[1], z + SHADOW_CUT * sz)]
+    e = FLOOR_EXTENT
+    return (max(lo[0], -e), max(lo[1], -e), min(hi[0], e), min(hi[1], e))
+
+
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
+
+
+def skinned_program(ctx: moderngl.Context, vertex_lighting: bool, textured: bool = True) -> moderngl.Program:
+    """The avatar program: ``skinned.vert`` + ``skinned.frag`` with ``lighting.glsl`` pasted in after their
+    ``#version`` line (one definition of the lighting for both stages), lit per pixel, or per vertex when
+    ``vertex_lighting`` (``#define VERTEX_LIGHTING``); ``textured=False`` there leaves out the texture
+    path and its varyings (``#define UNTEXTURED``)."""
+    defines = ("#define VERTEX_LIGHTING\n" if vertex_lighting else "") + \
+              ("#define UNTEXTURED\n" if vertex_lighting and not textured else "")
+    head = defines + read_shader("lighting.glsl")
+
+    def source(name: str) -> str:
+        version, rest = read_shader(name).split("\n", 1)
+        return f"{version}\n{head}\n#line 2\n{rest}"
+
+    return ctx.program(vertex_shader=source("skinned.vert"), fragment_shader=source("skinned.frag"))
 
 
 def is_software_renderer(ctx: moderngl.Context) -> bool:
@@ -83,10 +127,23 @@ class Renderer:
         replaces MSAA by an FXAA pass around the figures, ``"msaa"`` keeps MSAA anyway. On GPUs MSAA is
         always used as asked. The choice is made once per renderer and logged once per process.
 
-    ``antialiasing`` tells which method is in use: ``"msaa"``, ``"fxaa"`` or ``"none"``.
+    lighting:
+        ``"pixel"`` lights every pixel; ``"vertex"`` lights every vertex and interpolates the colour
+        (a texture's albedo is still applied per pixel). ``None`` (default): per vertex on a software
+        rasteriser, per pixel on a GPU. The built-in avatar's triangles cover about three pixels each at
+        720p; llvmpipe shades whole 4x4 blocks and sets up every varying per triangle, so per-pixel
+        lighting and its six varyings made the renderer 1.7x a bare draw of the same triangles (CPU time),
+        per-vertex lighting with one varying (an untextured avatar) 1.15x. It differs from per-pixel
+        lighting by a level on average, most at the seams between materials (tolerance in
+        ``tests/render/test_vertex_lighting.py``). Double-sided avatars are
+        always lit per pixel (which side a pixel shows is known only there).
+
+    ``antialiasing`` tells which method is in use: ``"msaa"``, ``"fxaa"`` or ``"none"``; ``lighting``
+    which lighting: ``"pixel"`` or ``"vertex"``.
     """
 
-    def __init__(self, ctx: moderngl.Context, samples: int = 4, software_aa: str = "none") -> None:
+    def __init__(self, ctx: moderngl.Context, samples: int = 4, software_aa: str = "none",
+                 lighting: str | None = None) -> None:
         self.ctx = ctx
         if software_aa not in SOFTWARE_AA:
             raise ValueError(f"software_aa must be one of {', '.join(SOFTWARE_AA)}, got {software_aa!r}")
@@ -102,7 +159,12 @@ class Renderer:
                 log.info("software renderer %s: anti-aliasing %s instead of %dx MSAA", key[0], key[1], samples)
         self.frames_drawn = 0  # pictures drawn so far: a texture from render_texture is valid until the next
         vert = read_shader("fullscreen.vert")
-        self.prog = ctx.program(vertex_shader=read_shader("skinned.vert"), fragment_shader=read_shader("skinned.frag"))
+        if lighting not in (None, "pixel", "vertex"):
+            raise ValueError(f"lighting must be 'pixel', 'vertex' or None, got {lighting!r}")
+        self.lighting = lighting or ("vertex" if software else "pixel")
+        # per lighting ("pixel", "vertex", "vertex-untextured"), compiled when an avatar first needs it
+        self._progs: dict[str, moderngl.Program] = {}
+        self.prog = self._program(self.lighting)
         self.bg_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("background.frag"))
         self.blit_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("blit.frag"))
         self.fxaa_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa.frag"))
@@ -114,17 +176,12 @@ class Renderer:
         self._empty_vao = ctx.vertex_array(self.bg_prog, [])
         self._blit_vao = ctx.vertex_array(self.blit_prog, [])
         self._label_vao = ctx.vertex_array(self.label_prog, [])
-        quad = np.array([[-2.5, -2.5], [2.5, -2.5], [-2.5, 2.5], [2.5, 2.5]], np.float32)
+        quad = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32)  # mapped onto floor_bounds()
         self._floor_vbo = ctx.buffer(quad.tobytes())
         self._floor_vao = ctx.vertex_array(self.floor_prog, [(self._floor_vbo, "2f", "in_xz")])
         self.bg_prog["u_top"].value = BACKGROUND_TOP
         self.bg_prog["u_bottom"].value = BACKGROUND_BOTTOM
         self.floor_prog["u_floor"].value = FLOOR_COLOR
-        self.prog["Bones"].binding = 0
-        self.prog["u_morph_pos"].value = 1
-        self.prog["u_morph_nrm"].value = 2
-        self.prog["u_base_color"].value = 3
-        self.prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
         self._meshes: dict[int, AvatarMesh] = {}
         self._labels: dict[tuple[str, int], moderngl.Texture] = {}
         self._msaa: moderngl.Framebuffer | None = None
@@ -139,12 +196,37 @@ class Renderer:
         self._w = np.zeros(MAX_ACTIVE_MORPHS, np.float32)
 
     # -- resources ------------------------------------------------------------------------------
+    def _program(self, kind: str) -> moderngl.Program:
+        prog = self._progs.get(kind)
+        if prog is None:
+            prog = skinned_program(self.ctx, kind != "pixel", textured=kind != "vertex-untextured")
+            prog["Bones"].binding = 0
+            prog["u_morph_pos"].value = 1
+            prog["u_morph_nrm"].value = 2
+            if "u_base_color" in prog:
+                prog["u_base_color"].value = 3
+            prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
+            self._progs[kind] = prog
+        return prog
+
+    def program_for(self, avatar: Avatar) -> moderngl.Program:
+        """The avatar program that draws ``avatar``: per-pixel lighting for a double-sided avatar even
+        when lighting per vertex (only a pixel knows which side of its surface it shows); per vertex,
+        without the texture path for an avatar with no texture; else :attr:`prog`."""
+        if self.lighting != "vertex":
+            return self.prog
+        if avatar.double_sided:
+            return self._program("pixel")
+        if avatar.texture is None or avatar.uv is None:
+            return self._program("vertex-untextured")
+        return self.prog
+
     def upload_avatar(self, avatar: Avatar) -> AvatarMesh:
         """GPU buffers of ``avatar`` (created once per avatar object and reused by every slot)."""
         key = id(avatar)
         mesh = self._meshes.pop(key, None)
         if mesh is None or mesh.avatar is not avatar:
-            mesh = AvatarMesh(self.ctx, avatar, self.prog)
+            mesh = AvatarMesh(self.ctx, avatar, self.program_for(avatar))
         self._meshes[key] = mesh  # most recently used last
         while len(self._meshes) > MAX_CACHED_AVATARS:
             self._meshes.pop(next(iter(self._meshes))).release()
@@ -215,16 +297,39 @@ class Renderer:
             self.ctx.copy_framebuffer(self._resolve, self._msaa)
         return self._resolve.color_attachments[0]
 
-    def _draw_picture(self, scene, t: float, size: tuple[int, int], figures: bool) -> None:
-        """Draw the frame into the renderer's own buffer (``self._msaa``) of ``size``."""
+    @property
+    def draws_canvas(self) -> bool:
+        """Whether :meth:`draw_canvas` is available (not with FXAA, whose pass covers the whole buffer)."""
+        return not self.fxaa
+
+    def draw_canvas(self, scene, t: float, size: tuple[int, int], viewport: tuple[int, int, int, int],
+                    background: tuple[float, float, float], *, figures: bool = True) -> moderngl.Framebuffer:
+        """Draw ``scene`` at ``t`` into ``viewport`` (x, y, w, h) of the renderer's own buffer of ``size``,
+        the rest of it ``background`` (rgb), and return that framebuffer: ``ctx.copy_framebuffer`` puts
+        it into a target of the same size in one copy, with no clear and no textured quad -- on llvmpipe
+        a quad over the picture is a full shading pass, several times the cost of the copy. The picture
+        is :meth:`render_texture`'s, pixel for pixel, moved to ``viewport``. Valid until the renderer
+        draws again (:attr:`frames_drawn`). Not with FXAA (:attr:`draws_canvas`)."""
+        if not self.draws_canvas:
+            raise RuntimeError("draw_canvas is not available with FXAA")
+        w, h = (int(v) for v in size)
+        self._draw_picture(scene, t, (w, h), figures, tuple(int(v) for v in viewport), tuple(background))
+        return self._msaa
+
+    def _draw_picture(self, scene, t: float, size: tuple[int, int], figures: bool,
+                      viewport: tuple[int, int, int, int] | None = None,
+                      background: tuple[float, float, float] | None = None) -> None:
+        """Draw the frame into ``viewport`` (default: all) of the renderer's own buffer (``self._msaa``) of
+        ``size``; ``background`` fills the rest."""
         w, h = size
+        viewport = viewport or (0, 0, w, h)
         self.frames_drawn += 1
         self._ensure_buffers((w, h))
         fbo = self._msaa
         fbo.use()
-        backdrop = self._backdrop(scene.n_slots)
+        backdrop = self._backdrop(scene.n_slots, viewport, background)
         if backdrop is None:
-            fbo.clear(*BACKGROUND_BOTTOM, 1.0, depth=1.0)
+            fbo.clear(*(background or BACKGROUND_BOTTOM), 1.0, depth=1.0)
         else:
             # the backdrop never changes: copy the cached one and clear only the depth buffer
             self.ctx.copy_framebuffer(fbo, backdrop)
@@ -232,14 +337,16 @@ class Renderer:
             fbo.clear(depth=1.0)
             fbo.color_mask = (True, True, True, True)
             fbo.use()
-        self._draw_slots(scene, t, (0, 0, w, h), figures, backdrop=backdrop is None)
+        self._draw_slots(scene, t, viewport, figures, backdrop=backdrop is None)
 
-    def _backdrop(self, n_slots: int) -> moderngl.Framebuffer | None:
-        """The backdrop of every slot, drawn once per size and slot count into a texture (single-sampled
-        drawing only: a blit cannot fill a multisample buffer). None when it must be drawn per frame."""
+    def _backdrop(self, n_slots: int, viewport: tuple[int, int, int, int],
+                  background: tuple[float, float, float] | None) -> moderngl.Framebuffer | None:
+        """The backdrop of every slot in ``viewport`` (``background`` around it), drawn once per size,
+        viewport, background and slot count into a texture (single-sampled drawing only: a blit cannot
+        fill a multisample buffer). None when it must be drawn per frame."""
         if self.samples:
             return None
-        key = (self._size, n_slots)
+        key = (self._size, n_slots, viewport, background)
         if self._backdrop_key != key:
             if self._backdrop_fbo is None or self._backdrop_fbo.size != self._size:
                 if self._backdrop_fbo is not None:
@@ -248,9 +355,9 @@ class Renderer:
                 self._backdrop_fbo = self.ctx.framebuffer([self.ctx.texture(self._size, 4)])
             fbo = self._backdrop_fbo
             fbo.use()
-            fbo.clear(*BACKGROUND_BOTTOM, 1.0)
+            fbo.clear(*(background or BACKGROUND_BOTTOM), 1.0)
             self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
-            for vp in slot_viewports((0, 0, *self._size), n_slots):
+            for vp in slot_viewports(viewport, n_slots):
                 fbo.viewport = vp
                 self._empty_vao.render(moderngl.TRIANGLES, vertices=3)
             fbo.viewport = (0, 0, *self._size)
@@ -343,9 +450,11 @@ class Renderer:
             pals.append(pal)
         for mesh in {id(m): m for m in meshes}.values():
             mesh.palette.upload()
-        self.prog["u_view_proj"].write(vp_bytes)
         # the eye of the camera as refitted to this viewport, the one the picture is taken from
-        self.prog["u_camera_pos"].value = tuple(float(v) for v in scene.camera.for_aspect(aspect).eye)
+        eye = tuple(float(v) for v in scene.camera.for_aspect(aspect).eye)
+        for prog in {id(p): p for p in map(self.program_for, scene.avatars)}.values():
+            prog["u_view_proj"].write(vp_bytes)
+            prog["u_camera_pos"].value = eye
         self.floor_prog["u_view_proj"].write(vp_bytes)
         self._aa_rects = []
         for i, vp in enumerate(vps):
@@ -368,15 +477,18 @@ class Renderer:
             self.floor_prog["u_shadow_centre"].value = (float(hips[0]), float(hips[2]))
             feet = [joints[sk.index(n)] if n in sk.names else hips for n in ("LeftFoot", "RightFoot")]
             self.floor_prog["u_feet"].write(np.array([[f[0], f[2]] for f in feet], np.float32).tobytes())
+            self.floor_prog["u_bounds"].value = floor_bounds(hips, feet)
             self._floor_vao.render(moderngl.TRIANGLE_STRIP)
             ctx.disable(moderngl.BLEND)
             # avatar
             ctx.enable(moderngl.DEPTH_TEST)
             mesh = meshes[i]
-            self._set_morphs(frames[i])
-            self.prog["u_morph_rows"].value = mesh.morph_rows
-            self.prog["u_has_texture"].value = mesh.has_texture
-            self.prog["u_base_factor"].value = tuple(float(v) for v in scene.avatars[i].base_color_factor)
+            prog = self.program_for(scene.avatars[i])
+            self._set_morphs(prog, frames[i])
+            prog["u_morph_rows"].value = mesh.morph_rows
+            if "u_has_texture" in prog:
+                prog["u_has_texture"].value = mesh.has_texture
+            prog["u_base_factor"].value = tuple(float(v) for v in scene.avatars[i].base_color_factor)
             mesh.palette.bind(i, 0)
             mesh.morph_pos.use(1)
             mesh.morph_nrm.use(2)
@@ -496,16 +608,16 @@ class Renderer:
                 rects.append((x0, int(b0), x1 - x0, int(b1 - b0)))
         return rects
 
-    def _set_morphs(self, weights: np.ndarray) -> None:
+    def _set_morphs(self, prog: moderngl.Program, weights: np.ndarray) -> None:
         active = np.flatnonzero(np.abs(weights) > MORPH_EPS)[:MAX_ACTIVE_MORPHS]
         n = len(active)
         self._ids[:] = 0
         self._w[:] = 0
         self._ids[:n] = active
         self._w[:n] = weights[active]
-        self.prog["u_morph_count"].value = n
-        self.prog["u_morph_ids"].write(self._ids.tobytes())
-        self.prog["u_morph_w"].write(self._w.tobytes())
+        prog["u_morph_count"].value = n
+        prog["u_morph_ids"].write(self._ids.tobytes())
+        prog["u_morph_w"].write(self._w.tobytes())
 
     def _draw_label(self, text: str, vp: tuple[int, int, int, int]) -> None:
         _, _, w, h = vp

@@ -266,17 +266,18 @@ class StudyApp:
             self._draw_error()
         fbo.use()
         self.ctx.viewport = (0, 0, *self.fb_size)
-        fbo.clear(*BACKGROUND, 1.0, depth=1.0)
-        if self._scene_req is not None:
-            scene, t, (x, y, w, h) = self._scene_req
-            if w >= 1 and h >= 1:
-                viewport = (int(x), int(self.fb_size[1] - y - h), int(w), int(h))  # GL: origin bottom-left
-                if self._scene_cache is None:
-                    from studyapp.ui.scene_cache import SceneCache
+        req = self._scene_req
+        if req is None or req[2][2] < 1 or req[2][3] < 1:
+            fbo.clear(*BACKGROUND, 1.0, depth=1.0)
+        else:  # the scene cache fills the whole frame: the scene, BACKGROUND around it (one copy, no clear)
+            scene, t, (x, y, w, h) = req
+            viewport = (int(x), int(self.fb_size[1] - y - h), int(w), int(h))  # GL: origin bottom-left
+            if self._scene_cache is None:
+                from studyapp.ui.scene_cache import SceneCache
 
-                    self._scene_cache = SceneCache(self.ctx)
-                self._scene_cache.draw(self.renderer, scene, t, fbo, viewport, self.fb_size)
-                fbo.use()
+                self._scene_cache = SceneCache(self.ctx)
+            self._scene_cache.draw(self.renderer, scene, t, fbo, viewport, self.fb_size, BACKGROUND)
+            fbo.use()
         self.ctx.viewport = (0, 0, *self.fb_size)
         self.layer.render(self.fb_size)
         self.frame_index += 1

@@ -7,6 +7,11 @@ GPU busy for nothing (and slow the offscreen bot tenfold on a software renderer)
 The texture is the renderer's own finished picture (:meth:`~studyapp.render.renderer.Renderer.render_texture`),
 not a copy of it: a new picture costs the renderer's drawing and one quad. It is redrawn when (scene,
 time, size) change or the renderer drew something else since.
+
+Given the colour around the scene (``background``), the whole frame comes from the renderer instead
+(:meth:`~studyapp.render.renderer.Renderer.draw_canvas`: the scene in its viewport of a buffer the size of
+the target, the background around it) and reaches the target in one framebuffer copy: no clear and no
+quad, which on a software rasteriser (llvmpipe) is a full shading pass costing several copies.
 """
 from __future__ import annotations
 
@@ -48,17 +53,27 @@ class SceneCache:
         self.vbo = ctx.buffer(quad.tobytes())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f", "in_pos")])
         self.tex: moderngl.Texture | None = None
+        self.canvas: moderngl.Framebuffer | None = None  # the renderer's, with the background drawn around
         self.key: tuple | None = None
         self._drawn = -1  # renderer.frames_drawn when self.tex was drawn
         self.renders = 0
 
     def draw(self, renderer: Renderer, scene: TrialScene, t: float, target: moderngl.Framebuffer,
-             viewport: tuple[int, int, int, int], target_size: tuple[int, int]) -> None:
-        """Draw the scene at ``t`` into ``viewport`` (GL pixels, origin bottom-left) of ``target``."""
+             viewport: tuple[int, int, int, int], target_size: tuple[int, int],
+             background: tuple[float, float, float] | None = None) -> None:
+        """Draw the scene at ``t`` into ``viewport`` (GL pixels, origin bottom-left) of ``target``; with
+        ``background`` (rgb), fill the rest of the target with it (the caller need not clear)."""
         x, y, w, h = (int(v) for v in viewport)
+        if background is not None:
+            if renderer.draws_canvas:
+                self._draw_canvas(renderer, scene, t, target, (x, y, w, h), target_size, tuple(background))
+                return
+            target.use()
+            target.clear(*background, 1.0)
         key = (id(scene), round(float(t), 6), w, h, id(renderer))
         if key != self.key or self.tex is None or self._drawn != renderer.frames_drawn:
             self.tex = renderer.render_texture(scene, t, (w, h))
+            self.canvas = None
             self._drawn = renderer.frames_drawn
             self.key = key
             self.renders += 1
@@ -75,7 +90,20 @@ class SceneCache:
         self.vao.render(moderngl.TRIANGLE_STRIP)
         self.tex.filter = filt
 
+    def _draw_canvas(self, renderer: Renderer, scene: TrialScene, t: float, target: moderngl.Framebuffer,
+                     viewport: tuple[int, int, int, int], target_size: tuple[int, int],
+                     background: tuple[float, float, float]) -> None:
+        tw, th = (int(v) for v in target_size)
+        key = ("canvas", id(scene), round(float(t), 6), viewport, (tw, th), background, id(renderer))
+        if key != self.key or self.canvas is None or self._drawn != renderer.frames_drawn:
+            self.canvas = renderer.draw_canvas(scene, t, (tw, th), viewport, background)
+            self.tex = None
+            self._drawn = renderer.frames_drawn
+            self.key = key
+            self.renders += 1
+        self.ctx.copy_framebuffer(target, self.canvas)
+
     def release(self) -> None:
-        self.tex = None  # the renderer's: it releases it
+        self.tex = self.canvas = None  # the renderer's: it releases them
         for obj in (self.vao, self.vbo, self.prog):
             obj.release()

@@ -199,3 +199,47 @@ def test_open_clock_without_device_is_silent_and_says_so(monkeypatch):
     assert "no audio output device" in message and "--audio-device" in message
     with pytest.raises(AudioDeviceError):
         open_clock("USB headset")  # a device asked for by name must exist
+
+
+def _hold_gil(seconds: float) -> float:
+    """Keep this interpreter's lock for about ``seconds`` in one C call (as moderngl does in a long GL
+    call): ``list.sort`` of plain ints never releases it. Returns how long it really held it."""
+    import random
+
+    n = 200_000
+    while True:
+        data = [random.random() for _ in range(n)]
+        t0 = time.monotonic()
+        data.sort()
+        took = time.monotonic() - t0
+        if took >= seconds / 4 or n > 50_000_000:
+            break
+        n *= 4
+    data = [random.random() for _ in range(int(n * seconds / max(took, 1e-3)))]
+    t0 = time.monotonic()
+    data.sort()
+    return time.monotonic() - t0
+
+
+@pytest.mark.audio
+def test_player_clock_keeps_time_while_this_process_holds_the_gil(null_sink):
+    """The stream's callback runs in the output process: a render thread holding the interpreter lock
+    through a long GL call neither starves the device (no underflow) nor stalls the clock."""
+    from studyapp.audio.playback import AudioPlayer
+
+    clip = Pcm(np.zeros((16000 * 12, 1), np.float32), 16000)
+    with AudioPlayer() as player:
+        assert player.wait_until_flowing(5.0)
+        player.play(clip)
+        assert _wait_for(lambda: player.position_s() > 0.0, 5.0), "the audio clock never started"
+        tries = []
+        for _ in range(3):  # a window in which the machine itself stalled the sink does not count
+            u0, p0, t0 = player.underflows, player.position_s(), time.monotonic()
+            held = _hold_gil(0.6)
+            p1, t1 = player.position_s(), time.monotonic()
+            tries.append((round(held, 3), round(p1 - p0, 3), round(t1 - t0, 3), player.underflows - u0))
+            if player.underflows == u0 and abs((p1 - p0) - (t1 - t0)) <= 0.08:
+                break
+        held, dp, dt, under = tries[-1]
+        assert held >= 0.3, tries  # the lock really was held for a long stretch
+        assert under == 0 and dp == pytest.approx(dt, abs=0.08), tries

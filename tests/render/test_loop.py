@@ -230,3 +230,45 @@ def test_static_frames_are_never_dropped():
     loop = FrameLoop(target, _FakeWallTimer(time_), draw, pacer=predictor)
     loop.run(5)
     assert loop.dropped_late == 0 and target.presented == 5
+
+
+def test_audio_is_taken_at_the_flip_when_the_thread_reads_it_late():
+    """With ``flip_clock`` the offset of a frame is against the audio at its flip: a thread that gets
+    back 30 ms after the flip (a loaded machine) reads the clock 30 ms on, and that is taken off."""
+    time_ = _FakeTime()
+    clock = _SoundClock(time_)
+    late = 0.030
+    player = ScenePlayer(_Recorder(), _LongScene(), clock, flip_clock=lambda: time_.t)
+    plain = ScenePlayer(_Recorder(), _LongScene(), clock)
+    player.start(0.0)
+    time_.t = 1.0
+    for p in (player, plain):
+        p.draw(None, (4, 4), time_.t)  # drawn for the clock's 1.0 s, shown at the flip at 1.0 s
+    time_.t = 1.0 + late  # the thread runs again only now
+    player.after_flip(1.0)
+    plain.after_flip(1.0)
+    assert player.recorder.offsets_s == [pytest.approx(0.0)]
+    assert plain.recorder.offsets_s == [pytest.approx(-late)]
+
+
+def test_a_hold_that_overshoots_the_flip_drops_the_frame():
+    """A quick frame is held until shortly before its flip; when that sleep overshoots the flip (a loaded
+    machine), the frame would appear a period late: it is dropped and counted, never shown."""
+    from studyapp.render.frames import FlipPredictor
+
+    time_ = _FakeTime()
+
+    class Oversleeping(_FakeWallTimer):
+        def wait_until(self, t):
+            self.time.t = t + 0.9 / 60  # wakes up most of a period late
+
+    predictor = FlipPredictor(60.0)
+    predictor.flipped(0.0)
+    player = ScenePlayer(_SlowRenderer(time_, [0.1 / 60]), _LongScene(), _SoundClock(time_), predictor=predictor)
+    target = _VsyncTarget(time_, 1 / 60)
+    loop = FrameLoop(target, Oversleeping(time_), player.draw, player.after_flip, pacer=predictor)
+    player.start(0.0)
+    loop.run(20)
+    assert loop.dropped_late >= 5
+    assert target.presented + loop.dropped_late == 20
+    assert np.all(np.abs(player.recorder.offsets_s) <= 1 / 60 + 1e-9)  # what was shown was on time

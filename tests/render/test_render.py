@@ -10,7 +10,7 @@ from studyapp.face.animation import FaceAnimation
 from studyapp.face.arkit import ARKIT_NAMES
 from studyapp.render.context import OffscreenTarget
 from studyapp.render.pose import prepare_slot
-from studyapp.render.renderer import slot_viewports
+from studyapp.render.renderer import Renderer, slot_viewports
 from studyapp.render.scene import make_scene
 
 pytestmark = pytest.mark.gl
@@ -188,6 +188,7 @@ def test_back_face_culling_hides_nothing_of_the_builtin_avatar(renderer, avatar,
     from studyapp.render.camera import Camera
 
     two_sided = dataclasses.replace(avatar, double_sided=True)
+    renderer = Renderer(renderer.ctx, lighting="pixel")  # as a double-sided avatar is always lit
     for camera in (Camera(eye=np.array([0.0, 1.2, 3.2]), target=np.array([0.0, 1.2, 0.0]), fov_y=35),  # body
                    Camera(eye=np.array([0.25, 1.7, 0.7]), target=np.array([0.0, 1.64, 0.0]), fov_y=22)):  # face
         closed = make_scene([relaxed_slot], avatar)

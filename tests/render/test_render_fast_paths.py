@@ -133,3 +133,56 @@ def test_software_renderers_draw_without_an_extra_pass_by_default(gl_ctx):
         assert r.antialiasing == "msaa" and r.samples > 0
     with pytest.raises(ValueError):
         Renderer(gl_ctx, software_aa="smaa")
+
+
+@pytest.mark.parametrize("kind", ["default", "msaa", "fxaa"])
+def test_scene_cache_with_a_background_fills_the_frame_like_clear_and_quad(gl_ctx, avatar, kind):
+    """Given the colour around the scene, the cache fills the whole target in one copy of the renderer's
+    canvas (no clear, no quad): pixel for pixel the cleared frame with the scene's picture in its
+    viewport, at an offset as in the participant window (panel below, margins)."""
+    from studyapp.ui.scene_cache import SceneCache
+
+    make = {"default": lambda: Renderer(gl_ctx), "fxaa": lambda: Renderer(gl_ctx, software_aa="fxaa"),
+            "msaa": lambda: Renderer(gl_ctx, software_aa="msaa")}
+    renderer = make[kind]()
+    scene = _scene(avatar)
+    size, viewport, bg = (520, 330), (23, 51, 480, 270), (0.11, 0.12, 0.14)
+    want = np.empty((size[1], size[0], 3), np.uint8)
+    want[:] = np.round(np.array(bg) * 255).astype(np.uint8)
+    x, y, w, h = viewport
+    rows = slice(size[1] - y - h, size[1] - y)  # read_rgb is top row first, GL's y from the bottom
+    want[rows, x:x + w] = _frame(renderer, scene, (w, h))
+    cache = SceneCache(gl_ctx)
+    target = OffscreenTarget(gl_ctx, size)
+    try:
+        target.fbo.use()
+        target.fbo.clear(1.0, 0.0, 1.0, 1.0)  # whatever was there before: all of it is replaced
+        cache.draw(renderer, scene, 0.0, target.fbo, viewport, size, bg)
+        got = target.read_rgb()
+        assert np.abs(got.astype(int) - want).max() <= 1, np.abs(got.astype(int) - want).max()
+        cache.draw(renderer, scene, 0.0, target.fbo, viewport, size, bg)
+        assert cache.renders == 1 and (target.read_rgb() == got).all()  # unchanged: copied, not drawn again
+    finally:
+        target.release()
+        cache.release()
+
+
+def test_floor_quad_covers_only_what_the_floor_changes(gl_ctx, avatar, monkeypatch):
+    """The floor is drawn over the fading ellipse and the contact shadows only (``floor_bounds``, whose
+    doctest covers a shadow reaching out of the ellipse): the same picture as the whole floor square, at
+    most a level apart on single pixels where a shadow's tail rounds differently."""
+    import studyapp.render.renderer as rr
+
+    scene = _scene(avatar)
+    size = (640, 360)
+    got = _frame(Renderer(gl_ctx), scene, size).astype(int)
+    bounds = []
+    real = rr.floor_bounds
+    monkeypatch.setattr(rr, "floor_bounds", lambda h, f: bounds.append(real(h, f)) or (-2.5, -2.5, 2.5, 2.5))
+    want = _frame(Renderer(gl_ctx), scene, size).astype(int)
+    d = np.abs(got - want).max(axis=2)
+    assert d.max() <= 1 and (d > 0).sum() <= 50, (d.max(), (d > 0).sum())
+    assert all(b[2] - b[0] < 4.0 for b in bounds)  # really less than the square
+    # the square's floor is visible: drawing none at all would differ a lot
+    monkeypatch.setattr(rr, "floor_bounds", lambda h, f: (0.0, 0.0, 0.0, 0.0))
+    assert np.abs(_frame(Renderer(gl_ctx), scene, size).astype(int) - want).max() > 20
