@@ -36,7 +36,10 @@ def gl_ctx(_session_ctx):
 def _session_renderer(_session_ctx):
     from studyapp.render.renderer import Renderer
 
-    return Renderer(_session_ctx)
+    # Made current here too: a session fixture is set up before the test's gl_ctx enters, while whatever
+    # context an earlier test left current (another test file's own context) still is.
+    with _session_ctx:
+        return Renderer(_session_ctx)
 
 
 @pytest.fixture()
