@@ -38,7 +38,6 @@ class TrialView:
         self.paradigm = self.block.paradigm
         #: The questions of this trial (its block's criteria), in order.
         self.criteria = self.block.criteria
-        self.n_slots = len(plan.slots)
         #: What the figures are called on screen ("A", "B" / "Left", "Right").
         self.names = slot_names(figure_labels(app.design, self.n_slots), self.n_slots)
         ids = [c.id for c in self.criteria]
@@ -63,6 +62,11 @@ class TrialView:
         self.media = load_trial_media(self.app.design, self.plan)
         self.scene = build_trial_scene(self.app.renderer, self.media,
                                        labels=scene_labels(figure_labels(self.app.design, self.n_slots), self.n_slots))
+
+    @property
+    def n_slots(self) -> int:
+        """Figures side by side in this trial (2, 3 or 4, by its paradigm)."""
+        return len(self.plan.slots)
 
     @property
     def loaded(self) -> bool:
