@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from studyapp.audio.clock import MediaClock
+    from studyapp.audio.playback import PendingClock
     from studyapp.render.loop import FrameTimer
     from studyapp.render.renderer import Renderer
     from studyapp.render.scene import TrialScene
@@ -402,7 +403,7 @@ class WindowRunner:
 def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: bool = False,
                audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720),
                plans: Sequence[Any] | None = None, n_rows: int | None = None,
-               upload_status: Callable[[], str] | None = None) -> int:
+               upload_status: Callable[[], str] | None = None, audio: PendingClock | None = None) -> int:
     """Run the participant's session in a window. Returns 0 when the study was completed (or ended
     early by the attention rule), 1 when the window was closed before the end (run again to resume).
 
@@ -410,15 +411,23 @@ def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: b
     default); without any output the study runs silently and says so (console and environment check).
     ``plans`` and ``n_rows``: a schedule given instead of the design's (a bundle's participant).
     ``upload_status``: the final screen's line about the answers' uploads (:mod:`studyapp.study.upload`).
+    ``audio``: the output, opening since the caller started it (``studyapp run`` does, before it loads the
+    design), used instead of opening one here (``audio_device`` is then ignored); the caller closes it too.
     """
-    from studyapp.audio.playback import open_clock
+    from studyapp.audio.playback import PendingClock
     from studyapp.study.session import Session
 
-    if audio_device is None:  # lets the experimenter pick the output for any front end that calls us
-        audio_device = os.environ.get("STUDYAPP_AUDIO_DEVICE") or None
-    clock, message = open_clock(audio_device)
+    if audio is None:
+        if audio_device is None:  # lets the experimenter pick the output for any front end that calls us
+            audio_device = os.environ.get("STUDYAPP_AUDIO_DEVICE") or None
+        audio = PendingClock(audio_device)  # opens while the session is prepared
+    try:
+        session = Session(design, db, participant_id, plans=plans, n_rows=n_rows)
+        clock, message = audio.result()
+    except BaseException:
+        audio.close()
+        raise
     print(message, flush=True)
-    session = Session(design, db, participant_id, plans=plans, n_rows=n_rows)
     runner = None
     try:
         # maximized: the figures get the whole screen; F11 switches to full screen and back
