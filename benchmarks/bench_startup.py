@@ -21,9 +21,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import signal
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -31,36 +34,77 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 FIRST_FRAME = r"""
-import json, sys, time
-phases = {}
-t = time.perf_counter()
-from studyapp.render.context import create_offscreen_context
-from studyapp.render.renderer import Renderer
-from studyapp.render.scene import build_trial_scene
-from studyapp.render.video import render_frames
-from studyapp.resources import demo_design
-from studyapp.study.design import load_design
-from studyapp.study.schedule import participant_schedule
-from studyapp.study.stimuli import load_trial_media
-phases["imports"] = time.perf_counter() - t
-t = time.perf_counter()
-design = load_design(demo_design(), reuse_check=True)  # as `studyapp demo` and `run` start a session
-plan = [p for p in participant_schedule(design, "P01", row=0) if not p.is_practice][0]
-phases["design + schedule"] = time.perf_counter() - t
-t = time.perf_counter()
-media = load_trial_media(design, plan)
-phases["trial media (motion, audio, avatars)"] = time.perf_counter() - t
-t = time.perf_counter()
-ctx = create_offscreen_context()
-phases["GL context"] = time.perf_counter() - t
-t = time.perf_counter()
-renderer = Renderer(ctx)
-scene = build_trial_scene(renderer, media)
-phases["renderer + scene (shaders, uploads)"] = time.perf_counter() - t
-t = time.perf_counter()
-img = next(render_frames(scene, [0.0], (1280, 720)))
-phases["first frame (draw + read-back)"] = time.perf_counter() - t
-print(json.dumps({"done": time.time(), "phases": phases, "shape": list(img.shape), "lit": float(img.std())}))
+# Run as a file, as the `studyapp` console script is: a spawned child (the audio output) imports this file
+# as the parent's main module, as it imports the console script, and so pays for `studyapp.cli` too.
+import json, time
+T0 = time.perf_counter()
+import studyapp.cli  # the console script's import
+
+
+def _main():
+    t = T0
+    phases = {}
+    from studyapp.audio.playback import PendingClock
+    from studyapp.render.context import create_offscreen_context
+    from studyapp.render.renderer import Renderer
+    from studyapp.render.scene import build_trial_scene
+    from studyapp.resources import demo_design
+    from studyapp.study.design import load_design
+    from studyapp.study.schedule import participant_schedule
+    from studyapp.study.stimuli import load_trial_media
+    from studyapp.ui.layer import ImGuiLayer
+    from studyapp.ui.scene_cache import SceneCache
+    phases["imports"] = time.perf_counter() - t
+    t = time.perf_counter()
+    audio = PendingClock(None)  # as `studyapp run` starts it, before the design: it opens while the rest loads
+    phases["audio output started"] = time.perf_counter() - t
+    t = time.perf_counter()
+    design = load_design(demo_design(), reuse_check=True)  # as `studyapp demo` and `run` start a session
+    plan = [p for p in participant_schedule(design, "P01", row=0) if not p.is_practice][0]
+    phases["design + schedule"] = time.perf_counter() - t
+    t = time.perf_counter()
+    media = load_trial_media(design, plan)
+    phases["trial media (motion, audio, avatars)"] = time.perf_counter() - t
+    t = time.perf_counter()
+    ctx = create_offscreen_context()
+    phases["GL context"] = time.perf_counter() - t
+    t = time.perf_counter()
+    renderer = Renderer(ctx)
+    scene = build_trial_scene(renderer, media)
+    phases["renderer + scene (shaders, uploads)"] = time.perf_counter() - t
+    t = time.perf_counter()
+    layer = ImGuiLayer(ctx)  # the participant UI (StudyApp makes it with the window)
+    phases["UI layer"] = time.perf_counter() - t
+    t = time.perf_counter()
+    clock, message = audio.result()  # run_window waits for the output before the window's first frame
+    phases["audio output (waiting for it)"] = time.perf_counter() - t
+    t = time.perf_counter()
+    # the participant's trial frame (StudyApp.frame): the 3D view above the answer footer, the UI drawn on top
+    W, H, FOOT = 1280, 720, 84
+    fbo = ctx.framebuffer([ctx.renderbuffer((W, H), 4)], ctx.depth_renderbuffer((W, H)))
+    SceneCache(ctx).draw(renderer, scene, 0.0, fbo, (0, FOOT, W, H - FOOT), (W, H), (0.11, 0.12, 0.14))
+    fbo.use()
+    ctx.viewport = (0, 0, W, H)
+    layer.new_frame((W, H), 1 / 60)
+    imgui = layer.imgui
+    imgui.set_next_window_pos((0, H - FOOT))
+    imgui.set_next_window_size((W, FOOT))
+    imgui.begin("footer")
+    imgui.text("Play the clip, then rank the three figures.")
+    imgui.button("Play")
+    imgui.end()
+    layer.render((W, H))
+    import numpy as np
+    img = np.frombuffer(fbo.read(components=3), np.uint8).reshape(H, W, 3)
+    phases["first frame (draw + UI + read-back)"] = time.perf_counter() - t
+    print(json.dumps({"done": time.time(), "phases": phases, "shape": list(img.shape), "lit": float(img.std()),
+                      "audio": getattr(clock, "device_name", "none")}))
+    clock.close()
+    audio.close()
+
+
+if __name__ == "__main__":
+    _main()
 """
 
 
@@ -76,10 +120,10 @@ def _children_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _first_frame() -> dict:
+def _first_frame(script: Path) -> dict:
     cpu0 = _children_cpu()
     start = time.time()
-    out = subprocess.run([sys.executable, "-c", FIRST_FRAME], check=True, capture_output=True, text=True).stdout
+    out = subprocess.run([sys.executable, str(script)], check=True, capture_output=True, text=True).stdout
     res = json.loads(out.strip().splitlines()[-1])
     res["total"] = res["done"] - start
     # CPU seconds of the whole process (all its threads, llvmpipe's included): on a shared machine whose load
@@ -109,14 +153,29 @@ def main(argv: list[str]) -> int:
     cmds = {"python -c 'import numpy'": [py, "-c", "import numpy"],
             "studyapp --help": [py, "-m", "studyapp.cli", "--help"],
             "studyapp validate demo.toml": [py, "-m", "studyapp.cli", "validate", str(demo_design())]}
+    audio_env, audio_pid = _null_audio()
     load_before = os.getloadavg()
     times: dict[str, list[float]] = {k: [] for k in cmds}
     frames = []
-    for r in range(runs):
-        order = list(cmds) if r % 2 == 0 else list(reversed(cmds))
-        for k in order:
-            times[k].append(_cold(cmds[k]))
-        frames.append(_first_frame())
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / "first_frame.py"
+        script.write_text(FIRST_FRAME)
+        saved = {k: os.environ.get(k) for k in audio_env}
+        os.environ.update(audio_env)
+        try:
+            for r in range(runs):
+                order = list(cmds) if r % 2 == 0 else list(reversed(cmds))
+                for k in order:
+                    times[k].append(_cold(cmds[k]))
+                frames.append(_first_frame(script))
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+            if audio_pid is not None:
+                os.kill(audio_pid, signal.SIGTERM)
     load_after = os.getloadavg()
     print(f"{runs} cold runs each, interleaved; load average {load_before[0]:.2f} before, {load_after[0]:.2f} "
           f"after ({os.cpu_count()} cores)")
@@ -124,7 +183,9 @@ def main(argv: list[str]) -> int:
         print(f"  {k:40s} {_fmt(xs)}")
     bare, help_ = statistics.median(times[cmds_key(cmds, 0)]), statistics.median(times[cmds_key(cmds, 1)])
     print(f"  --help / import numpy: {help_ / bare:.2f}x (target <= 2x)")
-    print("  first trial frame of the demo, offscreen 1280x720, from process start:")
+    audio = frames[0]["audio"]
+    print(f"  first trial frame of the demo, offscreen 1280x720, UI included, from process start (audio output: "
+          f"{audio}{'' if audio != 'none' else ': NOT MEASURED, no output device and no pulseaudio for a null sink'}):")
     for phase in frames[0]["phases"]:
         print(f"    {phase:38s} {_fmt([f['phases'][phase] for f in frames])}")
     totals = [f["total"] for f in frames]
@@ -138,9 +199,23 @@ def main(argv: list[str]) -> int:
     record("first_trial_frame_s", value=statistics.median(totals), baseline=1.5, unit="s",
            spread=[min(totals), max(totals)], cpu_s=statistics.median(cpus), cpu_spread=[min(cpus), max(cpus)],
            phases={p: statistics.median(f["phases"][p] for f in frames) for p in frames[0]["phases"]},
-           note="process start to the demo's first trial frame rendered offscreen and read back; baseline = "
-                "the 1.5 s target", **common)
+           audio_output=audio, note="process start to the demo's first trial frame (the 3D view and the UI over it) "
+           "rendered offscreen and read back, with the audio output opened as `studyapp run` opens it; baseline = "
+           "the 1.5 s target", **common)
     return 0
+
+
+def _null_audio() -> tuple[dict[str, str], int | None]:
+    """A null PulseAudio sink when there is no sound server (CI, this headless machine), so the first frame's
+    figure includes opening the audio output as a participant's machine, which has a sound card, does.
+    Returns the environment to set and the pid to end (None: one was running already)."""
+    if os.environ.get("PULSE_SERVER") or not shutil.which("pulseaudio"):
+        return {}, None
+    script = HERE.parent / ".ci" / "start-null-audio.sh"
+    out = subprocess.run(["bash", str(script)], capture_output=True, text=True, timeout=30).stdout
+    env = {k: v.strip("'\"") for k, v in (tok.split("=", 1) for tok in out.replace("export ", "").split() if "=" in tok)}
+    pid = env.pop("AUDIO_NULL_PID", None)
+    return (env, int(pid)) if pid else ({}, None)
 
 
 def cmds_key(cmds: dict, i: int) -> str:
