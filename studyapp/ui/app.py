@@ -341,14 +341,17 @@ class WindowRunner:
     :meth:`step` runs one frame (tests interleave it with xdotool events); :meth:`run` loops until the
     participant finishes or closes the window. ``timer``: the loop's frame timer, real time by default
     (a :class:`~studyapp.render.loop.VirtualTimer` makes the window play frame for frame what the
-    offscreen path plays, for comparing the two).
+    offscreen path plays, for comparing the two). ``clock``: the master clock, or a
+    :class:`~studyapp.audio.playback.PendingClock` still opening, waited for once the window and its GL
+    context are made (its message is printed for the experimenter).
     """
 
-    def __init__(self, design: Design, session: ParticipantSession, clock: MediaClock, *, fullscreen: bool = False,
-                 size: tuple[int, int] = (1280, 720), vsync: bool = True, timer: FrameTimer | None = None,
-                 maximized: bool = False) -> None:
+    def __init__(self, design: Design, session: ParticipantSession, clock: MediaClock | PendingClock, *,
+                 fullscreen: bool = False, size: tuple[int, int] = (1280, 720), vsync: bool = True,
+                 timer: FrameTimer | None = None, maximized: bool = False) -> None:
         import glfw
 
+        from studyapp.audio.playback import PendingClock
         from studyapp.render.context import Window
         from studyapp.render.loop import FrameLoop, WallTimer, WindowTarget
 
@@ -360,6 +363,15 @@ class WindowRunner:
         refresh = float(mode.refresh_rate) if mode and mode.refresh_rate else None
         display = ("window", (mode.size.width, mode.size.height) if mode else None, refresh,
                    self.window.content_scale[0])
+        if isinstance(clock, PendingClock):  # an output still opening: waited for once the window is made
+            try:
+                from imgui_bundle import imgui  # noqa: F401  (the UI's library, 0.2-0.4 s, loads meanwhile)
+
+                clock, message = clock.result()
+            except BaseException:
+                self.window.close()
+                raise
+            print(message, flush=True)
         self.app = StudyApp(design, session, self.window.ctx, clock, queue=self.queue, refresh_hz=refresh,
                             display=display)
         self.loop = FrameLoop(WindowTarget(self.window), timer if timer is not None else WallTimer(),
@@ -423,21 +435,20 @@ def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: b
         audio = PendingClock(audio_device)  # opens while the session is prepared
     try:
         session = Session(design, db, participant_id, plans=plans, n_rows=n_rows)
-        clock, message = audio.result()
     except BaseException:
         audio.close()
         raise
-    print(message, flush=True)
     runner = None
     try:
-        # maximized: the figures get the whole screen; F11 switches to full screen and back
-        runner = WindowRunner(design, session, clock, fullscreen=fullscreen, size=size, maximized=True)
+        # maximized: the figures get the whole screen; F11 switches to full screen and back. The window, its
+        # GL context and the UI open while the audio output still opens; the runner waits for it after them.
+        runner = WindowRunner(design, session, audio, fullscreen=fullscreen, size=size, maximized=True)
         runner.app.upload_status = upload_status
         runner.run()
     finally:
         if runner is not None:
             runner.close()
-        clock.close()
+        audio.close()  # the output, opened or not (the runner's clock when it is an AudioPlayer)
         session.close()
     if session.finished:
         return 0
