@@ -5,8 +5,9 @@
 * the first trial frame of the demo, offscreen: from just before the process starts to the first frame of
   the first trial -- the three figures and the participant UI over them, as :class:`~studyapp.ui.app.StudyApp`
   draws a trial frame -- rendered at 1280x720 and read back, with the time of each step inside the process
-  (imports, design, trial media, GL context, renderer and scene, UI layer, the wait for the audio output,
-  the frame itself; target: 1.5 s). The script runs as a file, as the ``studyapp`` console script does, and
+  (target: 1.5 s), in the order of the participant window: imports, design, GL context, the UI library,
+  the wait for the audio output, the UI layer and a "Loading..." frame, trial media, renderer and scene,
+  the frame itself (the results database and session rows, a few milliseconds, are left out). The script runs as a file, as the ``studyapp`` console script does, and
   starts the audio output as ``studyapp run`` does (:class:`~studyapp.audio.playback.PendingClock`, before
   the design loads), so the output process and its cost are in the figure; with no sound server, a null
   PulseAudio sink is started for the benchmark (a participant's machine has a sound card). The design is
@@ -71,31 +72,45 @@ def _main():
     design = load_design(demo_design(), reuse_check=True)  # as `studyapp demo` and `run` start a session
     plan = [p for p in participant_schedule(design, "P01", row=0) if not p.is_practice][0]
     phases["design + schedule"] = time.perf_counter() - t
-    t = time.perf_counter()
-    media = load_trial_media(design, plan)
-    phases["trial media (motion, audio, avatars)"] = time.perf_counter() - t
+    # in the order of the participant window (studyapp.ui.app.run_window, WindowRunner, StudyApp): the window
+    # and its GL context, the UI library, the wait for the audio output, the UI, a "Loading..." frame, then
+    # the trial (TrialView.load after that frame's flip) and its first frame
     t = time.perf_counter()
     ctx = create_offscreen_context()
     phases["GL context"] = time.perf_counter() - t
+    t = time.perf_counter()
+    from imgui_bundle import imgui
+    phases["UI library import"] = time.perf_counter() - t
+    t = time.perf_counter()
+    clock, message = audio.result()
+    phases["audio output (waiting for it)"] = time.perf_counter() - t
+    t = time.perf_counter()
+    layer = ImGuiLayer(ctx)
+    W, H, FOOT = 1280, 720, 84
+    fbo = ctx.framebuffer([ctx.renderbuffer((W, H), 4)], ctx.depth_renderbuffer((W, H)))
+    fbo.use()
+    fbo.clear(0.11, 0.12, 0.14, 1.0, depth=1.0)
+    ctx.viewport = (0, 0, W, H)
+    layer.new_frame((W, H), 1 / 60)
+    imgui.begin("loading")
+    imgui.text("Loading...")
+    imgui.end()
+    layer.render((W, H))
+    fbo.read(components=3)  # the flip: the frame is on screen before the trial loads
+    phases["UI layer + loading frame"] = time.perf_counter() - t
+    t = time.perf_counter()
+    media = load_trial_media(design, plan)
+    phases["trial media (motion, audio, avatars)"] = time.perf_counter() - t
     t = time.perf_counter()
     renderer = Renderer(ctx)
     scene = build_trial_scene(renderer, media)
     phases["renderer + scene (shaders, uploads)"] = time.perf_counter() - t
     t = time.perf_counter()
-    layer = ImGuiLayer(ctx)  # the participant UI (StudyApp makes it with the window)
-    phases["UI layer"] = time.perf_counter() - t
-    t = time.perf_counter()
-    clock, message = audio.result()  # run_window waits for the output before the window's first frame
-    phases["audio output (waiting for it)"] = time.perf_counter() - t
-    t = time.perf_counter()
     # the participant's trial frame (StudyApp.frame): the 3D view above the answer footer, the UI drawn on top
-    W, H, FOOT = 1280, 720, 84
-    fbo = ctx.framebuffer([ctx.renderbuffer((W, H), 4)], ctx.depth_renderbuffer((W, H)))
     SceneCache(ctx).draw(renderer, scene, 0.0, fbo, (0, FOOT, W, H - FOOT), (W, H), (0.11, 0.12, 0.14))
     fbo.use()
     ctx.viewport = (0, 0, W, H)
     layer.new_frame((W, H), 1 / 60)
-    imgui = layer.imgui
     imgui.set_next_window_pos((0, H - FOOT))
     imgui.set_next_window_size((W, FOOT))
     imgui.begin("footer")
