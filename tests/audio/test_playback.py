@@ -327,3 +327,31 @@ def test_run_that_ends_before_its_window_leaves_no_audio_process(null_sink, tmp_
     player = made[0]
     assert player._proc is None                            # ... and was closed on the way out
     assert multiprocessing.active_children() == []
+
+
+@pytest.mark.audio
+def test_window_demo_opens_the_audio_while_the_design_loads(null_sink, tmp_path, monkeypatch):
+    import multiprocessing
+
+    import studyapp.study.design as design_mod
+    import studyapp.ui.app as ui_app
+    from studyapp.cli.demo import run_window_demo
+    from studyapp.resources import demo_design
+
+    made = _watch_players(monkeypatch)
+    seen: dict = {}
+    real_load = design_mod.load_design
+
+    def load(*args, **kwargs):
+        seen["players_when_the_design_loads"] = len(made)
+        return real_load(*args, **kwargs)
+
+    def window(design, db, pid, **kwargs):
+        seen["clock"] = kwargs["audio"].result()[0]
+        return 1  # closed before the end: no analysis to run
+
+    monkeypatch.setattr(design_mod, "load_design", load)
+    monkeypatch.setattr(ui_app, "run_window", window)
+    assert run_window_demo(demo_design(), tmp_path / "out") == 1
+    assert seen["players_when_the_design_loads"] == 1 and seen["clock"] is made[0]
+    assert made[0]._proc is None and multiprocessing.active_children() == []
