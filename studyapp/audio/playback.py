@@ -459,14 +459,24 @@ class PendingClock:
         self.required = required
         self.player = AudioPlayer(device, wait=False)
         self._result: tuple[Any, str] | None = None
+        self._error: AudioDeviceError | None = None
+
+    def done(self) -> bool:
+        """The output process has answered (or ended): :meth:`result` returns at once."""
+        p = self.player
+        return self._result is not None or self._error is not None or p._opened or p._proc is None or p._conn.poll(0)
 
     def result(self) -> tuple[Any, str]:
-        """``(clock, message)``: the opened :class:`AudioPlayer`, or a :class:`SilentClock` (see :func:`open_clock`)."""
+        """``(clock, message)``: the opened :class:`AudioPlayer`, or a :class:`SilentClock` (see :func:`open_clock`).
+        Raises :class:`AudioDeviceError` for a device asked for that cannot be opened (the same error each call)."""
+        if self._error is not None:
+            raise self._error
         if self._result is None:
             try:
                 self.player.ready()
             except AudioDeviceError as exc:
                 if self.required or self.device is not None:
+                    self._error = exc
                     raise
                 self._result = (SilentClock(reason="no audio output device"),
                                 f"WARNING: {exc} Choose an output with --audio-device (see `studyapp doctor`).")

@@ -58,7 +58,12 @@ class StudyApp:
         The moderngl context (window or offscreen).
     clock:
         The master clock: an :class:`~studyapp.audio.playback.AudioPlayer` or a
-        :class:`~studyapp.audio.clock.SilentClock`.
+        :class:`~studyapp.audio.clock.SilentClock`; or a :class:`~studyapp.audio.playback.PendingClock`,
+        an output still opening in its own process: the app takes its clock after the first frame that
+        finds it open (and prints its message for the experimenter), or waits for it when something needs
+        the clock before (a clip played, the environment check). The screens up to the first trial frame
+        need no sound, so they do not wait for it; a device asked for that cannot be opened ends the
+        session from :meth:`after_flip` with its error.
     refresh_hz:
         Display refresh rate when known (frame drop detection, flip prediction).
     display:
@@ -67,14 +72,18 @@ class StudyApp:
         Frames of the render benchmark in the environment check.
     """
 
-    def __init__(self, design: Design, session: ParticipantSession, ctx: moderngl.Context, clock: MediaClock, *,
+    def __init__(self, design: Design, session: ParticipantSession, ctx: moderngl.Context,
+                 clock: MediaClock | PendingClock, *,
                  queue: InputQueue | None = None,
                  refresh_hz: float | None = None, display: tuple | None = None, bench_frames: int = 20,
                  db_path: Path | str | None = None) -> None:
+        from studyapp.audio.playback import PendingClock
+
         self.design = design
         self.session = session
         self.ctx = ctx
-        self.clock = clock
+        self._pending_audio = clock if isinstance(clock, PendingClock) else None
+        self._clock = None if self._pending_audio is not None else clock
         self.refresh_hz = refresh_hz
         self.display = display
         self.bench_frames = bench_frames
@@ -121,6 +130,22 @@ class StudyApp:
         return self.session.results_file
 
     # -- resources ---------------------------------------------------------------------------------
+    @property
+    def clock(self) -> MediaClock:
+        """The master clock (waits for an output still opening: see the class text)."""
+        if self._clock is None:
+            self._take_audio()
+        return self._clock
+
+    @clock.setter
+    def clock(self, clock: MediaClock) -> None:
+        self._clock, self._pending_audio = clock, None
+
+    def _take_audio(self) -> None:
+        clock, message = self._pending_audio.result()
+        self._clock, self._pending_audio = clock, None
+        print(message, flush=True)
+
     @property
     def renderer(self) -> Renderer:
         if self._renderer is None:
@@ -297,6 +322,8 @@ class StudyApp:
     def after_flip(self, flip_time: float) -> None:
         """Call right after the frame was presented (swap) with the time it happened."""
         self.predictor.flipped(flip_time)
+        if self._pending_audio is not None and self._pending_audio.done():
+            self._take_audio()
         if self._view is not None:
             self._view.after_flip(flip_time)
         while self._pending:
@@ -342,8 +369,7 @@ class WindowRunner:
     participant finishes or closes the window. ``timer``: the loop's frame timer, real time by default
     (a :class:`~studyapp.render.loop.VirtualTimer` makes the window play frame for frame what the
     offscreen path plays, for comparing the two). ``clock``: the master clock, or a
-    :class:`~studyapp.audio.playback.PendingClock` still opening, waited for once the window and its GL
-    context are made (its message is printed for the experimenter).
+    :class:`~studyapp.audio.playback.PendingClock` still opening (see :class:`StudyApp`).
     """
 
     def __init__(self, design: Design, session: ParticipantSession, clock: MediaClock | PendingClock, *,
@@ -351,7 +377,6 @@ class WindowRunner:
                  timer: FrameTimer | None = None, maximized: bool = False) -> None:
         import glfw
 
-        from studyapp.audio.playback import PendingClock
         from studyapp.render.context import Window
         from studyapp.render.loop import FrameLoop, WallTimer, WindowTarget
 
@@ -363,15 +388,6 @@ class WindowRunner:
         refresh = float(mode.refresh_rate) if mode and mode.refresh_rate else None
         display = ("window", (mode.size.width, mode.size.height) if mode else None, refresh,
                    self.window.content_scale[0])
-        if isinstance(clock, PendingClock):  # an output still opening: waited for once the window is made
-            try:
-                from imgui_bundle import imgui  # noqa: F401  (the UI's library, 0.2-0.4 s, loads meanwhile)
-
-                clock, message = clock.result()
-            except BaseException:
-                self.window.close()
-                raise
-            print(message, flush=True)
         self.app = StudyApp(design, session, self.window.ctx, clock, queue=self.queue, refresh_hz=refresh,
                             display=display)
         self.loop = FrameLoop(WindowTarget(self.window), timer if timer is not None else WallTimer(),
@@ -441,7 +457,7 @@ def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: b
     runner = None
     try:
         # maximized: the figures get the whole screen; F11 switches to full screen and back. The window, its
-        # GL context and the UI open while the audio output still opens; the runner waits for it after them.
+        # GL context, the UI and the first frames come while the audio output still opens (see StudyApp).
         runner = WindowRunner(design, session, audio, fullscreen=fullscreen, size=size, maximized=True)
         runner.app.upload_status = upload_status
         runner.run()

@@ -321,8 +321,9 @@ def test_participant_window_asks_to_open_maximized(xvfb_display, tiny_study, mon
 
 
 @pytest.mark.audio
-def test_window_waits_for_the_audio_output_started_before_it_and_plays_on_it(xvfb_display, tiny_study, capsys):
-    """`studyapp run` starts the output before the design loads; the window, made meanwhile, uses that one."""
+def test_window_takes_the_audio_output_started_before_it_without_waiting_for_it(xvfb_display, tiny_study, capsys):
+    """`studyapp run` starts the output before the design loads; the window opens and draws meanwhile, then
+    plays on that very output (its process), and the process ends with the session."""
     import multiprocessing
 
     from studyapp.audio.playback import AudioPlayer, PendingClock
@@ -342,11 +343,13 @@ def test_window_waits_for_the_audio_output_started_before_it_and_plays_on_it(xvf
         except Exception as exc:
             pytest.skip(f"no GLX window under Xvfb: {exc}")
         try:
+            deadline = time.monotonic() + 20
+            while runner.app._pending_audio is not None and time.monotonic() < deadline:
+                runner.step()                  # taken after the first flip that finds it open
             clock = runner.app.clock
             assert isinstance(clock, AudioPlayer) and clock is pending.player and clock._proc is child
             assert child.is_alive() and clock.wait_until_flowing(6.0)  # open, the device takes its samples
             assert f"audio output: {clock.device_name} " in capsys.readouterr().out
-            runner.step()
         finally:
             runner.close()
     finally:
