@@ -12,8 +12,14 @@ Protocol: the parent (:class:`~studyapp.audio.playback.AudioPlayer`) sends comma
 ``("close",)`` -- and reads the clock from :class:`SharedClock`, which the callback writes: the run
 (``gen``) and first clip sample of the last buffer that carried clip samples, its length, and the
 ``time.monotonic()`` at which it reaches the DAC (the callback's ``outputBufferDacTime`` moved onto the
-monotonic clock both processes share), plus counters. After opening the stream the child answers
-``("ok", reported_latency_s)`` or ``("error", message)``.
+monotonic clock both processes share), plus counters. The child resolves the device itself
+(:func:`~studyapp.audio.playback.resolve_device`: the parent never loads PortAudio, 0.3 s of a participant's
+start) and, after opening the stream, answers ``("ok", reported_latency_s, device, rate, channels)`` (``device``
+an :class:`~studyapp.audio.playback.OutputDevice`) or ``("error", message)``, a message for the participant.
+
+The child imports only this module, :mod:`studyapp.audio.playback` (numpy, no scipy until a clip needs
+resampling, which only the parent does) and ``sounddevice``: it starts while the parent loads the study
+(``studyapp run``), so anything else it imported would slow the participant's start on a 2-core machine.
 """
 from __future__ import annotations
 
@@ -73,9 +79,20 @@ _SLOT = {"gen": GEN, "first": FIRST, "dac": DAC, "frames": FRAMES, "read": READ,
          "frames_total": FRAMES_TOTAL, "underflows": UNDERFLOWS, "latency": LATENCY, "alive": ALIVE}
 
 
-def run_output(conn: Any, shm_name: str, device: int, rate: int, channels: int, latency: Any) -> None:
-    """Child process body: open the stream, answer, then serve commands until ``close`` or EOF."""
+def run_output(conn: Any, shm_name: str, device: int | str | None, samplerate: float | None, channels: int,
+               latency: Any) -> None:
+    """Child process body: find the device, open the stream, answer, then serve commands until ``close`` or EOF."""
+    from studyapp.audio.playback import AudioDeviceError, resolve_device  # playback imports this module
+
     clock = SharedClock(shm_name)
+    try:
+        info = resolve_device(device)
+    except AudioDeviceError as exc:
+        _answer(conn, ("error", str(exc)))
+        clock.close()
+        return
+    rate = int(samplerate or info.default_samplerate or 48000)
+    channels = max(1, min(int(channels), info.max_output_channels))
     lock = threading.Lock()
     state: dict[str, Any] = {"buf": np.zeros((0, channels), np.float32), "read": 0, "running": False, "gen": -1,
                              "callbacks": 0, "frames_total": 0, "underflows": 0}
@@ -114,15 +131,16 @@ def run_output(conn: Any, shm_name: str, device: int, rate: int, channels: int, 
     try:
         import sounddevice as sd
 
-        stream = sd.OutputStream(samplerate=rate, channels=channels, dtype="float32", device=device,
+        stream = sd.OutputStream(samplerate=rate, channels=channels, dtype="float32", device=info.index,
                                  latency=latency, callback=callback)
         stream.start()
     except Exception as exc:  # reported to the parent, which raises AudioDeviceError
-        conn.send(("error", str(exc)))
+        _answer(conn, ("error", f"could not open audio output {info.name!r}: {exc}"))
         clock.close()
         return
-    conn.send(("ok", float(stream.latency)))
     try:
+        if not _answer(conn, ("ok", float(stream.latency), info, rate, channels)):
+            return  # the parent is gone already (it ended before the stream was open)
         while True:
             try:
                 msg = conn.recv()
@@ -145,3 +163,12 @@ def run_output(conn: Any, shm_name: str, device: int, rate: int, channels: int, 
         stream.close()
         clock.write(alive=0.0)
         clock.close()
+
+
+def _answer(conn: Any, msg: tuple) -> bool:
+    """Send ``msg`` to the parent; False when the parent is gone (a start that ended early)."""
+    try:
+        conn.send(msg)
+        return True
+    except (OSError, ValueError):
+        return False

@@ -193,20 +193,27 @@ class AudioPlayer:
         PortAudio latency hint (``"low"``, ``"high"`` or seconds). Low latency keeps the sound-to-picture
         delay short; the measured latency is compensated either way.
 
+    wait:
+        True: return once the stream is open (or raise :class:`AudioDeviceError`). False: return as soon as
+        the output process is started, so the caller loads its study meanwhile; :meth:`ready` then waits
+        for it (and raises). ``device``, ``device_name``, ``rate`` and ``channels`` are known from then.
+
     The stream lives in a child process started with ``multiprocessing``'s ``spawn`` (opening takes
-    about half a second more); as with any spawned process, a script that makes a player must keep its
-    top-level code under ``if __name__ == "__main__":`` (the ``studyapp`` command does).
+    about half a second more, which ``wait=False`` overlaps with the caller's work); as with any spawned
+    process, a script that makes a player must keep its top-level code under ``if __name__ == "__main__":``
+    (the ``studyapp`` command does).
     """
 
     def __init__(self, device: int | str | None = None, *, samplerate: float | None = None,
-                 channels: int = 2, latency: str | float = 0.1) -> None:
+                 channels: int = 2, latency: str | float = 0.1, wait: bool = True) -> None:
         import multiprocessing as mp
 
-        info = resolve_device(device)
-        self.device = info
-        self.device_name = info.name
-        self.rate = int(samplerate or info.default_samplerate or 48000)
-        self.channels = max(1, min(int(channels), info.max_output_channels))
+        self._proc = None
+        self._opened = False
+        self.device: OutputDevice | None = None
+        self.device_name = "default output" if device is None else str(device)  # until the child says
+        self.rate = int(samplerate or 48000)
+        self.channels = max(1, int(channels))
         self._lock = threading.Lock()  # commands to the output process go out in the order they were made
         self._buf = np.zeros((0, self.channels), np.float32)
         self._read = 0            # first clip sample of the current run
@@ -221,18 +228,36 @@ class AudioPlayer:
         self._clock = SharedClock()
         spawn = mp.get_context("spawn")
         self._conn, child = spawn.Pipe()
-        self._proc = spawn.Process(target=run_output, name="studyapp-audio", daemon=True,
-                                   args=(child, self._clock.name, info.index, self.rate, self.channels, latency))
-        self._proc.start()
+        # the child finds the device itself (studyapp.audio.output_process): no PortAudio in this process
+        proc = spawn.Process(target=run_output, name="studyapp-audio", daemon=True,
+                             args=(child, self._clock.name, device, samplerate, int(channels), latency))
+        proc.start()
+        self._proc = proc
         child.close()
+        self._reported_latency = 0.0
+        if wait:
+            self.ready()
+
+    def ready(self) -> "AudioPlayer":
+        """Wait until the output process has opened the stream; raises :class:`AudioDeviceError` (and ends
+        that process) when it could not."""
+        if self._opened:
+            return self
+        if self._proc is None:
+            raise AudioDeviceError("the audio output was closed before it was opened")
         try:
-            ready = self._conn.recv() if self._conn.poll(30.0) else ("error", "no answer within 30 s")
+            ready = self._conn.recv() if self._conn.poll(30.0) else ("error", "the audio output did not open within 30 s")
         except EOFError:
             ready = ("error", f"the audio process ended (exit code {self._proc.exitcode})")
         if ready[0] != "ok":
             self._shutdown()
-            raise AudioDeviceError(f"could not open audio output {info.name!r}: {ready[1]}")
-        self._reported_latency = float(ready[1])
+            raise AudioDeviceError(ready[1])
+        _, latency, self.device, self.rate, self.channels = ready
+        self.device_name = self.device.name
+        self._buf = np.zeros((0, self.channels), np.float32)
+        self._reported_latency = float(latency)
+        self._opened = True
+        return self
 
     def _send(self, *msg: Any) -> None:
         self._conn.send(msg)
@@ -395,6 +420,7 @@ class AudioPlayer:
         return False
 
     def close(self) -> None:
+        """End the output process (also one still opening: a start that ended early leaves no process)."""
         if getattr(self, "_proc", None) is None:
             return
         try:
@@ -419,6 +445,50 @@ class AudioPlayer:
         self.close()
 
 
+class PendingClock:
+    """A session's master clock whose audio output opens in its own process while the caller loads the study.
+
+    ``studyapp run`` starts one before it reads the design, so the ~0.7 s the output process takes to start
+    and open its stream overlaps with loading the design, the trial media and the scene. :meth:`result`
+    waits for it and gives what :func:`open_clock` gives; :meth:`close` ends the output process whether or
+    not it was opened or used (call it on every way out: an early exit leaves no process behind).
+    """
+
+    def __init__(self, device: int | str | None = None, *, required: bool = False) -> None:
+        self.device = device
+        self.required = required
+        self.player = AudioPlayer(device, wait=False)
+        self._result: tuple[Any, str] | None = None
+        self._error: AudioDeviceError | None = None
+
+    def done(self) -> bool:
+        """The output process has answered (or ended): :meth:`result` returns at once."""
+        p = self.player
+        return self._result is not None or self._error is not None or p._opened or p._proc is None or p._conn.poll(0)
+
+    def result(self) -> tuple[Any, str]:
+        """``(clock, message)``: the opened :class:`AudioPlayer`, or a :class:`SilentClock` (see :func:`open_clock`).
+        Raises :class:`AudioDeviceError` for a device asked for that cannot be opened (the same error each call)."""
+        if self._error is not None:
+            raise self._error
+        if self._result is None:
+            try:
+                self.player.ready()
+            except AudioDeviceError as exc:
+                if self.required or self.device is not None:
+                    self._error = exc
+                    raise
+                self._result = (SilentClock(reason="no audio output device"),
+                                f"WARNING: {exc} Choose an output with --audio-device (see `studyapp doctor`).")
+            else:
+                self._result = (self.player, f"audio output: {self.player.device_name} "
+                                             "(its latency is measured and compensated)")
+        return self._result
+
+    def close(self) -> None:
+        self.player.close()
+
+
 def open_clock(device: int | str | None = None, *, required: bool = False) -> tuple[Any, str]:
     """The master clock for a session and a one-line description for the experimenter.
 
@@ -426,12 +496,4 @@ def open_clock(device: int | str | None = None, *, required: bool = False) -> tu
     :class:`SilentClock` and a message that says the study will be silent and how to pick a device.
     A device that was asked for by name/index but does not exist is always an error.
     """
-    try:
-        player = AudioPlayer(device)
-    except AudioDeviceError as exc:
-        if required or device is not None:
-            raise
-        return SilentClock(reason="no audio output device"), (
-            f"WARNING: {exc} Choose an output with --audio-device (see `studyapp doctor`)."
-        )
-    return player, f"audio output: {player.device_name} (its latency is measured and compensated)"
+    return PendingClock(device, required=required).result()

@@ -56,15 +56,21 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def run_window_demo(design_path: Path, out: Path) -> int:
+    from studyapp.audio.playback import PendingClock
     from studyapp.study.design import load_design
     from studyapp.study.storage import ResultsDB
     from studyapp.ui.app import run_window
 
-    design = load_design(design_path, reuse_check=True)  # a session start: see study.design.validated
-    tmp = Path(tempfile.mkdtemp(prefix="studyapp-demo-"))
-    db = ResultsDB(tmp / "demo.results.sqlite", design)
-    code = run_window(design, db, "demo")
-    db.close()
+    # the audio output opens in its own process while the design loads (as for `studyapp run`)
+    audio = PendingClock(os.environ.get("STUDYAPP_AUDIO_DEVICE") or None)
+    try:
+        design = load_design(design_path, reuse_check=True)  # a session start: see study.design.validated
+        tmp = Path(tempfile.mkdtemp(prefix="studyapp-demo-"))
+        db = ResultsDB(tmp / "demo.results.sqlite", design)
+        code = run_window(design, db, "demo", audio=audio)
+        db.close()
+    finally:
+        audio.close()
     print(f"Demo results database: {tmp / 'demo.results.sqlite'}")
     report = _analyse(tmp / "demo.results.sqlite", out / "analysis", design)
     if report is not None:

@@ -160,6 +160,35 @@ def _print_saved(plan: Any) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    audio = _start_audio(args)
+    try:
+        return _run_session(args, audio)
+    finally:
+        if audio is not None:  # closed on every way out (also before the window opened): no process left
+            audio.close()
+
+
+def _start_audio(args: argparse.Namespace) -> Any:
+    """For a window session: the audio output, opening in its own process while the design, the database and
+    the first trial load (:class:`~studyapp.audio.playback.PendingClock`; it takes ~0.7 s, all of it on the way
+    to the participant's first frame otherwise). None for the scripted and offscreen modes, which play no sound."""
+    import os
+
+    if args.no_render or args.offscreen or args.bot:
+        return None
+    from studyapp.cli.demo import display_available
+
+    if not display_available():
+        return None  # _run_mode says so
+    from studyapp.audio.playback import PendingClock
+
+    device = args.audio_device or os.environ.get("STUDYAPP_AUDIO_DEVICE") or None
+    if device is not None and device.isdigit():
+        device = int(device)
+    return PendingClock(device)
+
+
+def _run_session(args: argparse.Namespace, audio: Any = None) -> int:
     from studyapp.study.session import ParticipantFinishedError, prepare_participant
     from studyapp.study.storage import ResultsDB
 
@@ -235,7 +264,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if rec.id != args.participant:
             print(f"Participant {args.participant} already finished; this run is recorded as {rec.id}.", flush=True)
         try:
-            code = _run_mode(args, design, db, rec.id, schedule, uploader)
+            code = _run_mode(args, design, db, rec.id, schedule, uploader, audio)
         except BaseException:
             if uploader is not None:
                 uploader.finish(0)
@@ -280,9 +309,10 @@ def _forget_unstarted(db: Any, results: Path, pid: str, known: set[str], new_db:
 
 
 def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule: dict[str, Any],
-              uploader: Any = None) -> int:
+              uploader: Any = None, audio: Any = None) -> int:
     """Run the session; ``schedule``: ``plans`` and ``n_rows`` a bundle carries for its participant (or empty);
-    ``uploader``: the bundle run's :class:`~studyapp.study.upload.Uploader` (its state on the window's final screen)."""
+    ``uploader``: the bundle run's :class:`~studyapp.study.upload.Uploader` (its state on the window's final screen);
+    ``audio``: the window's audio output, already opening (:func:`_start_audio`)."""
     if args.no_render or args.offscreen:
         # the offscreen participant shows its progress on screen (its PNGs), not as "saved trial" lines
         return run_bot(design, db, pid, args.bot, args.seed, render=args.offscreen,
@@ -299,7 +329,7 @@ def _run_mode(args: argparse.Namespace, design: Any, db: Any, pid: str, schedule
         device = int(device)
     status = None if uploader is None else _upload_line(uploader)
     return int(run_window(design, db, pid, fullscreen=args.fullscreen, audio_device=device, upload_status=status,
-                          **schedule) or 0)
+                          audio=audio, **schedule) or 0)
 
 
 def _upload_line(uploader: Any) -> Callable[[], str]:

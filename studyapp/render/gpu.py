@@ -26,7 +26,9 @@ def morph_texture_data(deltas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ([-1, -1, 0], [1.0, 2.0, 3.0, 0.0])
     """
     m, v, _ = deltas.shape
-    moved = np.abs(deltas).max(axis=(0, 2)) > 0 if m else np.zeros(v, bool)
+    # a contiguous pass over (M, V*3) then a (V, 3) fold: reducing over axes (0, 2) of the (M, V, 3) array
+    # (strided) took 70 ms for the built-in avatar, all of it before a participant's first frame
+    moved = np.any(deltas.reshape(m, v * 3) != 0, axis=0).reshape(v, 3).any(axis=1) if m else np.zeros(v, bool)
     rows = np.full(v, -1, np.int32)
     idx = np.flatnonzero(moved)
     rows[idx] = np.arange(len(idx), dtype=np.int32)

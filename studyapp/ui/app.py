@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from studyapp.audio.clock import MediaClock
+    from studyapp.audio.playback import PendingClock
     from studyapp.render.loop import FrameTimer
     from studyapp.render.renderer import Renderer
     from studyapp.render.scene import TrialScene
@@ -57,7 +58,12 @@ class StudyApp:
         The moderngl context (window or offscreen).
     clock:
         The master clock: an :class:`~studyapp.audio.playback.AudioPlayer` or a
-        :class:`~studyapp.audio.clock.SilentClock`.
+        :class:`~studyapp.audio.clock.SilentClock`; or a :class:`~studyapp.audio.playback.PendingClock`,
+        an output still opening in its own process: the app takes its clock after the first frame that
+        finds it open (and prints its message for the experimenter), or waits for it when something needs
+        the clock before (a clip played, the environment check). The screens up to the first trial frame
+        need no sound, so they do not wait for it; a device asked for that cannot be opened ends the
+        session from :meth:`after_flip` with its error.
     refresh_hz:
         Display refresh rate when known (frame drop detection, flip prediction).
     display:
@@ -66,14 +72,18 @@ class StudyApp:
         Frames of the render benchmark in the environment check.
     """
 
-    def __init__(self, design: Design, session: ParticipantSession, ctx: moderngl.Context, clock: MediaClock, *,
+    def __init__(self, design: Design, session: ParticipantSession, ctx: moderngl.Context,
+                 clock: MediaClock | PendingClock, *,
                  queue: InputQueue | None = None,
                  refresh_hz: float | None = None, display: tuple | None = None, bench_frames: int = 20,
                  db_path: Path | str | None = None) -> None:
+        from studyapp.audio.playback import PendingClock
+
         self.design = design
         self.session = session
         self.ctx = ctx
-        self.clock = clock
+        self._pending_audio = clock if isinstance(clock, PendingClock) else None
+        self._clock = None if self._pending_audio is not None else clock
         self.refresh_hz = refresh_hz
         self.display = display
         self.bench_frames = bench_frames
@@ -120,6 +130,22 @@ class StudyApp:
         return self.session.results_file
 
     # -- resources ---------------------------------------------------------------------------------
+    @property
+    def clock(self) -> MediaClock:
+        """The master clock (waits for an output still opening: see the class text)."""
+        if self._clock is None:
+            self._take_audio()
+        return self._clock
+
+    @clock.setter
+    def clock(self, clock: MediaClock) -> None:
+        self._clock, self._pending_audio = clock, None
+
+    def _take_audio(self) -> None:
+        clock, message = self._pending_audio.result()
+        self._clock, self._pending_audio = clock, None
+        print(message, flush=True)
+
     @property
     def renderer(self) -> Renderer:
         if self._renderer is None:
@@ -296,6 +322,8 @@ class StudyApp:
     def after_flip(self, flip_time: float) -> None:
         """Call right after the frame was presented (swap) with the time it happened."""
         self.predictor.flipped(flip_time)
+        if self._pending_audio is not None and self._pending_audio.done():
+            self._take_audio()
         if self._view is not None:
             self._view.after_flip(flip_time)
         while self._pending:
@@ -340,12 +368,13 @@ class WindowRunner:
     :meth:`step` runs one frame (tests interleave it with xdotool events); :meth:`run` loops until the
     participant finishes or closes the window. ``timer``: the loop's frame timer, real time by default
     (a :class:`~studyapp.render.loop.VirtualTimer` makes the window play frame for frame what the
-    offscreen path plays, for comparing the two).
+    offscreen path plays, for comparing the two). ``clock``: the master clock, or a
+    :class:`~studyapp.audio.playback.PendingClock` still opening (see :class:`StudyApp`).
     """
 
-    def __init__(self, design: Design, session: ParticipantSession, clock: MediaClock, *, fullscreen: bool = False,
-                 size: tuple[int, int] = (1280, 720), vsync: bool = True, timer: FrameTimer | None = None,
-                 maximized: bool = False) -> None:
+    def __init__(self, design: Design, session: ParticipantSession, clock: MediaClock | PendingClock, *,
+                 fullscreen: bool = False, size: tuple[int, int] = (1280, 720), vsync: bool = True,
+                 timer: FrameTimer | None = None, maximized: bool = False) -> None:
         import glfw
 
         from studyapp.render.context import Window
@@ -402,7 +431,7 @@ class WindowRunner:
 def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: bool = False,
                audio_device: int | str | None = None, *, size: tuple[int, int] = (1280, 720),
                plans: Sequence[Any] | None = None, n_rows: int | None = None,
-               upload_status: Callable[[], str] | None = None) -> int:
+               upload_status: Callable[[], str] | None = None, audio: PendingClock | None = None) -> int:
     """Run the participant's session in a window. Returns 0 when the study was completed (or ended
     early by the attention rule), 1 when the window was closed before the end (run again to resume).
 
@@ -410,25 +439,32 @@ def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: b
     default); without any output the study runs silently and says so (console and environment check).
     ``plans`` and ``n_rows``: a schedule given instead of the design's (a bundle's participant).
     ``upload_status``: the final screen's line about the answers' uploads (:mod:`studyapp.study.upload`).
+    ``audio``: the output, opening since the caller started it (``studyapp run`` does, before it loads the
+    design), used instead of opening one here (``audio_device`` is then ignored); the caller closes it too.
     """
-    from studyapp.audio.playback import open_clock
+    from studyapp.audio.playback import PendingClock
     from studyapp.study.session import Session
 
-    if audio_device is None:  # lets the experimenter pick the output for any front end that calls us
-        audio_device = os.environ.get("STUDYAPP_AUDIO_DEVICE") or None
-    clock, message = open_clock(audio_device)
-    print(message, flush=True)
-    session = Session(design, db, participant_id, plans=plans, n_rows=n_rows)
+    if audio is None:
+        if audio_device is None:  # lets the experimenter pick the output for any front end that calls us
+            audio_device = os.environ.get("STUDYAPP_AUDIO_DEVICE") or None
+        audio = PendingClock(audio_device)  # opens while the session is prepared
+    try:
+        session = Session(design, db, participant_id, plans=plans, n_rows=n_rows)
+    except BaseException:
+        audio.close()
+        raise
     runner = None
     try:
-        # maximized: the figures get the whole screen; F11 switches to full screen and back
-        runner = WindowRunner(design, session, clock, fullscreen=fullscreen, size=size, maximized=True)
+        # maximized: the figures get the whole screen; F11 switches to full screen and back. The window, its
+        # GL context, the UI and the first frames come while the audio output still opens (see StudyApp).
+        runner = WindowRunner(design, session, audio, fullscreen=fullscreen, size=size, maximized=True)
         runner.app.upload_status = upload_status
         runner.run()
     finally:
         if runner is not None:
             runner.close()
-        clock.close()
+        audio.close()  # the output, opened or not (the runner's clock when it is an AudioPlayer)
         session.close()
     if session.finished:
         return 0

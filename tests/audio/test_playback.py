@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -190,13 +191,21 @@ def test_player_reaches_the_end(null_sink):
         assert player.finished and player.position_s() == pytest.approx(player.duration_s)
 
 
-def test_open_clock_without_device_is_silent_and_says_so(monkeypatch):
-    import studyapp.audio.playback as pb
-
-    monkeypatch.setattr(pb, "list_output_devices", lambda: [])
-    clock, message = open_clock(None)
-    assert isinstance(clock, SilentClock)
-    assert "no audio output device" in message and "--audio-device" in message
+def test_open_clock_without_device_is_silent_and_says_so():
+    # the output process looks for the device itself: a fresh interpreter whose sound server does not exist
+    code = ("from studyapp.audio.playback import list_output_devices, open_clock\n"
+            "if __name__ == '__main__':\n"
+            "    if list_output_devices():\n"
+            "        print('HAS-CARDS')\n"
+            "    else:\n"
+            "        clock, message = open_clock(None)\n"
+            "        print(type(clock).__name__, message)\n")
+    env = {**os.environ, "PULSE_SERVER": "unix:/nonexistent/pulse/native"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60).stdout
+    if "HAS-CARDS" in out:
+        pytest.skip("this machine has sound cards: no way to show a machine without any")
+    assert out.startswith("SilentClock ")
+    assert "no audio output device" in out and "--audio-device" in out
     with pytest.raises(AudioDeviceError):
         open_clock("USB headset")  # a device asked for by name must exist
 
@@ -243,3 +252,106 @@ def test_player_clock_keeps_time_while_this_process_holds_the_gil(null_sink):
         held, dp, dt, under = tries[-1]
         assert held >= 0.3, tries  # the lock really was held for a long stretch
         assert under == 0 and dp == pytest.approx(dt, abs=0.08), tries
+
+
+def _watch_players(monkeypatch) -> list:
+    """Every AudioPlayer made from now on, in order."""
+    import studyapp.audio.playback as pb
+
+    made = []
+    real_init = pb.AudioPlayer.__init__
+
+    def init(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(pb.AudioPlayer, "__init__", init)
+    return made
+
+
+def _gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    return False
+
+
+@pytest.mark.audio
+def test_run_opens_the_audio_before_the_design_loads_and_the_window_uses_that_output(null_sink, tmp_path,
+                                                                                      monkeypatch):
+    import multiprocessing
+
+    import studyapp.cli.session as cli_session
+    import studyapp.ui.app as ui_app
+    from studyapp.cli import main
+    from studyapp.resources import demo_design
+
+    made = _watch_players(monkeypatch)
+    seen: dict = {}
+    real_load = cli_session.load_design_for_run
+
+    def load(*args, **kwargs):
+        seen["players_when_the_design_loads"] = len(made)
+        return real_load(*args, **kwargs)
+
+    def window(design, db, pid, **kwargs):  # the window itself is tested under Xvfb; here: what it is handed
+        clock, message = kwargs["audio"].result()
+        seen.update(clock=clock, message=message, pid=clock._proc.pid, alive=clock._proc.is_alive())
+        return 0
+
+    monkeypatch.setattr(cli_session, "load_design_for_run", load)
+    monkeypatch.setattr(ui_app, "run_window", window)
+    monkeypatch.setenv("DISPLAY", ":99")  # only asked whether a window could open
+    code = main(["run", str(demo_design()), "--participant", "P01", "--results", str(tmp_path / "r.sqlite")])
+    assert code == 0
+    assert seen["players_when_the_design_loads"] == 1     # started before the design was read
+    assert len(made) == 1 and seen["clock"] is made[0]    # ... and the very output the window got
+    assert seen["alive"] and seen["message"].startswith(f"audio output: {made[0].device.name} ")
+    assert _gone(seen["pid"]) and multiprocessing.active_children() == []  # closed when the run ended
+
+
+@pytest.mark.audio
+def test_run_that_ends_before_its_window_leaves_no_audio_process(null_sink, tmp_path, monkeypatch, capsys):
+    import multiprocessing
+
+    from studyapp.cli import main
+
+    made = _watch_players(monkeypatch)
+    monkeypatch.setenv("DISPLAY", ":99")
+    bad = tmp_path / "broken.toml"
+    bad.write_text("title = [unclosed\n")
+    code = main(["run", str(bad), "--participant", "P01", "--results", str(tmp_path / "r.sqlite")])
+    assert code == 2 and "broken.toml" in capsys.readouterr().err
+    assert len(made) == 1                                  # the output had been started early...
+    player = made[0]
+    assert player._proc is None                            # ... and was closed on the way out
+    assert multiprocessing.active_children() == []
+
+
+@pytest.mark.audio
+def test_window_demo_opens_the_audio_while_the_design_loads(null_sink, tmp_path, monkeypatch):
+    import multiprocessing
+
+    import studyapp.study.design as design_mod
+    import studyapp.ui.app as ui_app
+    from studyapp.cli.demo import run_window_demo
+    from studyapp.resources import demo_design
+
+    made = _watch_players(monkeypatch)
+    seen: dict = {}
+    real_load = design_mod.load_design
+
+    def load(*args, **kwargs):
+        seen["players_when_the_design_loads"] = len(made)
+        return real_load(*args, **kwargs)
+
+    def window(design, db, pid, **kwargs):
+        seen["clock"] = kwargs["audio"].result()[0]
+        return 1  # closed before the end: no analysis to run
+
+    monkeypatch.setattr(design_mod, "load_design", load)
+    monkeypatch.setattr(ui_app, "run_window", window)
+    assert run_window_demo(demo_design(), tmp_path / "out") == 1
+    assert seen["players_when_the_design_loads"] == 1 and seen["clock"] is made[0]
+    assert made[0]._proc is None and multiprocessing.active_children() == []

@@ -9,7 +9,7 @@ from render_helpers import RELAXED, posed
 from studyapp.face.animation import FaceAnimation
 from studyapp.face.arkit import ARKIT_NAMES
 from studyapp.render.context import OffscreenTarget
-from studyapp.render.gpu import vertex_local_order
+from studyapp.render.gpu import morph_texture_data, vertex_local_order
 from studyapp.render.pose import prepare_slot
 from studyapp.render.renderer import Renderer
 from studyapp.render.scene import make_scene
@@ -186,3 +186,19 @@ def test_floor_quad_covers_only_what_the_floor_changes(gl_ctx, avatar, monkeypat
     # the square's floor is visible: drawing none at all would differ a lot
     monkeypatch.setattr(rr, "floor_bounds", lambda h, f: (0.0, 0.0, 0.0, 0.0))
     assert np.abs(_frame(Renderer(gl_ctx), scene, size).astype(int) - want).max() > 20
+
+
+def test_morph_rows_are_the_vertices_any_morph_moves():
+    """The packing's row selection (computed on a flat view for speed) against a per-vertex loop."""
+    rng = np.random.default_rng(3)
+    d = np.zeros((5, 40, 3), np.float32)
+    for m, v, c in zip(rng.integers(0, 5, 30), rng.integers(0, 40, 30), rng.integers(0, 3, 30)):
+        d[m, v, c] = rng.choice([-1e-7, 0.5, -2.0])
+    rows, tex = morph_texture_data(d)
+    moved = [v for v in range(40) if any(d[m, v, c] != 0 for m in range(5) for c in range(3))]
+    assert rows[moved].tolist() == list(range(len(moved)))
+    assert (rows[[v for v in range(40) if v not in moved]] == -1).all()
+    flat = tex.reshape(-1, 4)
+    for m in range(5):
+        for r, v in enumerate(moved):
+            assert flat[m * len(moved) + r, :3].tolist() == d[m, v].tolist()

@@ -102,3 +102,49 @@ def test_the_app_provides_its_protocol(tiny_study, gl_ctx) -> None:
     finally:
         app.shutdown()
         session.close()
+
+
+@pytest.mark.gl
+def test_the_app_draws_before_the_audio_output_is_open_and_takes_it_once_open(tiny_study, gl_ctx, capsys) -> None:
+    """An output still opening (studyapp run's PendingClock) holds up no frame; the app takes its clock after
+    the first flip that finds it open, or at once when something needs the clock before that."""
+    from studyapp.audio.clock import SilentClock
+    from studyapp.audio.playback import PendingClock
+    from studyapp.ui.app import StudyApp
+
+    class Opening(PendingClock):  # no process: opens when the test says so
+        def __init__(self) -> None:
+            self.opened = False
+            self.waited = 0
+            self.clock = SilentClock(virtual=True)
+
+        def done(self) -> bool:
+            return self.opened
+
+        def result(self):
+            self.waited += 0 if self.opened else 1
+            return self.clock, "audio output: Test (its latency is measured and compensated)"
+
+    design, db = tiny_study
+    fbo = gl_ctx.simple_framebuffer((640, 360))
+    for needs_it_early in (False, True):
+        session = Session(design, db, f"S{3 + needs_it_early}")
+        opening = Opening()
+        app = StudyApp(design, session, gl_ctx, opening)
+        try:
+            for k in range(3):
+                app.frame(fbo, (640, 360), k / 60)
+                app.after_flip(k / 60)
+            assert app._pending_audio is opening and opening.waited == 0   # three frames, no wait
+            if needs_it_early:
+                assert app.clock is opening.clock and opening.waited == 1   # e.g. the sound check's tone
+            else:
+                opening.opened = True
+                app.frame(fbo, (640, 360), 0.1)
+                app.after_flip(0.1)
+                assert app._pending_audio is None and opening.waited == 0
+                assert app.clock is opening.clock
+            assert capsys.readouterr().out.count("audio output: Test") == 1
+        finally:
+            app.shutdown()
+            session.close()

@@ -318,3 +318,42 @@ def test_participant_window_asks_to_open_maximized(xvfb_display, tiny_study, mon
     design, db = tiny_study
     assert app_mod.run_window(design, db, "M1") == 1  # closed before the end
     assert made.get("maximized") is True
+
+
+@pytest.mark.audio
+def test_window_takes_the_audio_output_started_before_it_without_waiting_for_it(xvfb_display, tiny_study, capsys):
+    """`studyapp run` starts the output before the design loads; the window opens and draws meanwhile, then
+    plays on that very output (its process), and the process ends with the session."""
+    import multiprocessing
+
+    from studyapp.audio.playback import AudioPlayer, PendingClock
+    from studyapp.study.session import Session
+    from studyapp.ui.app import WindowRunner
+
+    if not os.environ.get("PULSE_SERVER"):
+        pytest.skip("no sound server (.ci/test starts a null sink): no output to open")
+    design, db = tiny_study
+    pending = PendingClock(None)
+    child = pending.player._proc
+    session = Session(design, db, "A1")
+    restore_egl = release_egl_context()
+    try:
+        try:
+            runner = WindowRunner(design, session, pending, size=(640, 360))
+        except Exception as exc:
+            pytest.skip(f"no GLX window under Xvfb: {exc}")
+        try:
+            deadline = time.monotonic() + 20
+            while runner.app._pending_audio is not None and time.monotonic() < deadline:
+                runner.step()                  # taken after the first flip that finds it open
+            clock = runner.app.clock
+            assert isinstance(clock, AudioPlayer) and clock is pending.player and clock._proc is child
+            assert child.is_alive() and clock.wait_until_flowing(6.0)  # open, the device takes its samples
+            assert f"audio output: {clock.device_name} " in capsys.readouterr().out
+        finally:
+            runner.close()
+    finally:
+        pending.close()
+        session.close()
+        restore_egl()
+    assert not child.is_alive() and multiprocessing.active_children() == []
