@@ -374,7 +374,8 @@ class WindowRunner:
 
     def __init__(self, design: Design, session: ParticipantSession, clock: MediaClock | PendingClock, *,
                  fullscreen: bool = False, size: tuple[int, int] = (1280, 720), vsync: bool = True,
-                 timer: FrameTimer | None = None, maximized: bool = False) -> None:
+                 timer: FrameTimer | None = None, maximized: bool = False,
+                 upload_status: Callable[[], str] | None = None) -> None:
         import glfw
 
         from studyapp.render.context import Window
@@ -390,6 +391,7 @@ class WindowRunner:
                    self.window.content_scale[0])
         self.app = StudyApp(design, session, self.window.ctx, clock, queue=self.queue, refresh_hz=refresh,
                             display=display)
+        self.app.upload_status = upload_status
         self.loop = FrameLoop(WindowTarget(self.window), timer if timer is not None else WallTimer(),
                               self._draw, self._after_flip, running=lambda: not self.app.quit,
                               pacer=self.app.predictor)
@@ -458,8 +460,8 @@ def run_window(design: Design, db: ResultsDB, participant_id: str, fullscreen: b
     try:
         # maximized: the figures get the whole screen; F11 switches to full screen and back. The window, its
         # GL context, the UI and the first frames come while the audio output still opens (see StudyApp).
-        runner = WindowRunner(design, session, audio, fullscreen=fullscreen, size=size, maximized=True)
-        runner.app.upload_status = upload_status
+        runner = WindowRunner(design, session, audio, fullscreen=fullscreen, size=size, maximized=True,
+                              upload_status=upload_status)
         runner.run()
     finally:
         if runner is not None:
