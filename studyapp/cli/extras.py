@@ -1,0 +1,37 @@
+"""Which optional extra brings a package, and the one line a command prints when its extra is not installed.
+
+A participant's install (``pip install studyapp``) has what the desktop session, a study bundle and uploads
+need; the experimenter's commands need extras (pyproject.toml, README "Dependencies"). A command that reaches
+a package of a missing extra ends with one line naming the command, the package and the ``pip install`` that
+brings it, never an ImportError traceback: :func:`missing_extra_line` turns the ``ModuleNotFoundError`` into
+that line, and the shell (:mod:`studyapp.cli`) prints it.
+"""
+from __future__ import annotations
+
+#: Top-level import name -> the extra of pyproject.toml that installs it.
+EXTRA_OF: dict[str, str] = {
+    "pandas": "analysis",
+    "scipy": "analysis",
+    "onnxruntime": "models",
+    "onnx": "models",
+    "av": "video",
+    "starlette": "server",
+    "uvicorn": "server",
+    "psycopg": "postgresql",
+}
+
+
+def missing_extra_line(exc: ModuleNotFoundError, command: str | None) -> str | None:
+    """The user's line for a package of an extra that is not installed; None when ``exc`` is anything else.
+
+    >>> missing_extra_line(ModuleNotFoundError("No module named 'pandas'", name="pandas"), "export")
+    'studyapp export needs pandas, which is not installed: pip install "studyapp[analysis]"'
+    >>> missing_extra_line(ModuleNotFoundError("x", name="numpy"), "run") is None
+    True
+    """
+    top = (exc.name or "").partition(".")[0]
+    extra = EXTRA_OF.get(top)
+    if extra is None:
+        return None
+    what = f"studyapp {command}" if command else "this command"
+    return f'{what} needs {top}, which is not installed: pip install "studyapp[{extra}]"'
