@@ -4,9 +4,14 @@ A participant's install (``pip install studyapp``) has what the desktop session,
 need; the experimenter's commands need extras (pyproject.toml, README "Dependencies"). A command that reaches
 a package of a missing extra ends with one line naming the command, the package and the ``pip install`` that
 brings it, never an ImportError traceback: :func:`missing_extra_line` turns the ``ModuleNotFoundError`` into
-that line, and the shell (:mod:`studyapp.cli`) prints it.
+that line, and the shell (:mod:`studyapp.cli`) prints it. Commands that work for minutes before they reach
+the package (``prerender``, ``demo``, ``render`` of an MP4) call :func:`require` first, so they stop at once.
 """
 from __future__ import annotations
+
+import importlib.util
+
+from studyapp.errors import StudyappError
 
 #: Top-level import name -> the extra of pyproject.toml that installs it.
 EXTRA_OF: dict[str, str] = {
@@ -35,3 +40,19 @@ def missing_extra_line(exc: ModuleNotFoundError, command: str | None) -> str | N
         return None
     what = f"studyapp {command}" if command else "this command"
     return f'{what} needs {top}, which is not installed: pip install "studyapp[{extra}]"'
+
+
+def require(command: str, *modules: str) -> None:
+    """Stop ``studyapp COMMAND`` before any work when one of ``modules`` (top-level names) is not installed.
+
+    Looks the packages up without importing them (importing ``av`` or ``pandas`` costs time the command may
+    not spend until much later).
+    """
+    for module in modules:
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:
+            found = False
+        if not found:
+            line = missing_extra_line(ModuleNotFoundError(f"No module named {module!r}", name=module), command)
+            raise StudyappError(line or f"studyapp {command} needs {module}, which is not installed")
