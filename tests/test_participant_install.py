@@ -109,6 +109,12 @@ def test_results_analysis_names_its_extra(lab: dict, tmp_path: Path) -> None:
     assert not (tmp_path / "a").exists()
 
 
+def test_serve_names_the_server_extra(lab: dict) -> None:
+    done = _run(["serve", lab["design"], "--port", "0"], lab["env"])
+    assert _one_error_line(done) == ('error: studyapp serve needs starlette, uvicorn, av and pandas, which are not '
+                                     'installed: pip install "studyapp[server]"')
+
+
 def test_demo_names_every_missing_package_at_once(lab: dict, tmp_path: Path) -> None:
     done = _run(["demo", "--offscreen", "--out", tmp_path / "demo"], lab["env"])
     assert _one_error_line(done) == ('error: studyapp demo needs pandas, scipy and av, which are not installed: '

@@ -42,16 +42,17 @@ def missing_extra_line(exc: ModuleNotFoundError, command: str | None) -> str | N
     return f'{what} needs {top}, which is not installed: pip install "studyapp[{extra}]"'
 
 
-def require(command: str, *modules: str) -> None:
+def require(command: str, *modules: str, extra: str | None = None) -> None:
     """Stop ``studyapp COMMAND`` before any work when any of ``modules`` (top-level names) is not installed.
 
-    One line names every missing package and one ``pip install`` for all their extras. The packages are looked
+    One line names every missing package and one ``pip install`` for all their extras (or for ``extra``, when
+    the command's packages come with one extra of their own, as ``serve``'s do). The packages are looked
     up without importing them (importing ``av`` or ``pandas`` costs time the command may not spend until later).
     """
     missing = [m for m in modules if not _installed(m)]
     if not missing:
         return
-    extras = ",".join(dict.fromkeys(EXTRA_OF.get(m, m) for m in missing))
+    extras = ",".join(dict.fromkeys(extra or EXTRA_OF.get(m, m) for m in missing))
     names = ", ".join(missing[:-1]) + (" and " if len(missing) > 1 else "") + missing[-1]
     verb = "are" if len(missing) > 1 else "is"
     raise StudyappError(f'studyapp {command} needs {names}, which {verb} not installed: '
