@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 
-from studyapp.errors import StudyappError
+from studyapp.errors import InputError
 
 #: Top-level import name -> the extra of pyproject.toml that installs it.
 EXTRA_OF: dict[str, str] = {
@@ -55,8 +55,9 @@ def require(command: str, *modules: str, extra: str | None = None) -> None:
     extras = ",".join(dict.fromkeys(extra or EXTRA_OF.get(m, m) for m in missing))
     names = ", ".join(missing[:-1]) + (" and " if len(missing) > 1 else "") + missing[-1]
     verb = "are" if len(missing) > 1 else "is"
-    raise StudyappError(f'studyapp {command} needs {names}, which {verb} not installed: '
-                        f'pip install "studyapp[{extras}]"')
+    # an InputError without file or place: the line is the whole message (as `serve` always said it)
+    raise InputError(None, None, f'studyapp {command} needs {names}, which {verb} not installed: '
+                     f'pip install "studyapp[{extras}]"')
 
 
 def _installed(module: str) -> bool:
