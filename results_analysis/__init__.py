@@ -9,30 +9,38 @@ Functions take DataFrames / arrays and return DataFrames, in the manner of pingo
 >>> float(friedman(wide)["chi2"].iloc[0])
 4.5
 """
-from results_analysis.adjust import adjust_pvalues
-from results_analysis.agreement import agreement_summary, stimulus_agreement
-from results_analysis.analysis import Analysis, analyze_criterion, group_breakdown, run_analysis
-from results_analysis.bootstrap import cluster_bootstrap
-from results_analysis.bradley_terry import (ConvergenceWarning, bradley_terry, estimability, fit_bradley_terry,
-                                            pairwise_wins)
-from results_analysis.descriptives import condition_summary
-from results_analysis.effect_sizes import EffectSizes, HodgesLehmann, effect_sizes, hodges_lehmann
-from results_analysis.errors import AnalysisInputError
-from results_analysis.exclusions import apply_exclusions
-from results_analysis.friedman import FriedmanResult, friedman, friedman_ranks, kendall_w
-from results_analysis.loader import load_questionnaire, load_results, load_study_title, normalize_results
-from results_analysis.mismatch import barnard_exact, compare_conditions, matched_preference
-from results_analysis.pairwise import bradley_terry_elo, elo_differences, elo_win_probability, win_matrix
-from results_analysis.paradigm_analysis import analyze_blocks
-from results_analysis.rating import rating_summary, rating_tests, screen_reference
-from results_analysis.posthoc import (conover, critical_difference, holm, nemenyi, nemenyi_q_alpha, posthoc_table,
-                                      wilcoxon_holm)
-from results_analysis.questionnaire import cronbach_alpha, item_summary, scale_reliability
-from results_analysis.reliability import feldt_interval, item_analysis, item_reliability, scale_reliability_ci
-from results_analysis.ranks import RankBlocks, as_blocks, place_shares, rank_blocks, within_block_ranks
-from results_analysis.report import analyze
-from results_analysis.simulate import simulate_paradigm, simulate_results
-from results_analysis.validate import MixedDesignWarning, validate_results
+try:  # the statistics need the "analysis" extra; without it, `results-analysis` says what to install
+    import pandas as _pandas  # noqa: F401
+    import scipy as _scipy  # noqa: F401
+except ModuleNotFoundError as _exc:
+    MISSING: str | None = _exc.name
+else:
+    MISSING = None
+if MISSING is None:
+    from results_analysis.adjust import adjust_pvalues
+    from results_analysis.agreement import agreement_summary, stimulus_agreement
+    from results_analysis.analysis import Analysis, analyze_criterion, group_breakdown, run_analysis
+    from results_analysis.bootstrap import cluster_bootstrap
+    from results_analysis.bradley_terry import (ConvergenceWarning, bradley_terry, estimability, fit_bradley_terry,
+                                                pairwise_wins)
+    from results_analysis.descriptives import condition_summary
+    from results_analysis.effect_sizes import EffectSizes, HodgesLehmann, effect_sizes, hodges_lehmann
+    from results_analysis.errors import AnalysisInputError
+    from results_analysis.exclusions import apply_exclusions
+    from results_analysis.friedman import FriedmanResult, friedman, friedman_ranks, kendall_w
+    from results_analysis.loader import load_questionnaire, load_results, load_study_title, normalize_results
+    from results_analysis.mismatch import barnard_exact, compare_conditions, matched_preference
+    from results_analysis.pairwise import bradley_terry_elo, elo_differences, elo_win_probability, win_matrix
+    from results_analysis.paradigm_analysis import analyze_blocks
+    from results_analysis.rating import rating_summary, rating_tests, screen_reference
+    from results_analysis.posthoc import (conover, critical_difference, holm, nemenyi, nemenyi_q_alpha, posthoc_table,
+                                          wilcoxon_holm)
+    from results_analysis.questionnaire import cronbach_alpha, item_summary, scale_reliability
+    from results_analysis.reliability import feldt_interval, item_analysis, item_reliability, scale_reliability_ci
+    from results_analysis.ranks import RankBlocks, as_blocks, place_shares, rank_blocks, within_block_ranks
+    from results_analysis.report import analyze
+    from results_analysis.simulate import simulate_paradigm, simulate_results
+    from results_analysis.validate import MixedDesignWarning, validate_results
 
 __all__ = [
     "EffectSizes", "HodgesLehmann", "adjust_pvalues", "agreement_summary", "cluster_bootstrap", "effect_sizes",

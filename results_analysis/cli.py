@@ -70,6 +70,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from results_analysis import MISSING
+
+    if MISSING is not None:  # an install without the "analysis" extra (a participant's): one line, no traceback
+        print(f'error: results-analysis needs {MISSING.partition(".")[0]}, which is not installed: '
+              'pip install "studyapp[analysis]"', file=sys.stderr)
+        return 2
     from results_analysis.loader import load_questionnaire, load_results, normalize_questionnaire
     from results_analysis.report import analyze
     from results_analysis.study_meta import questionnaire_from_results, study_title

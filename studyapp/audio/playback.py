@@ -163,7 +163,7 @@ def _to_stream_format(clip: Any, rate: int, channels: int) -> np.ndarray:
         samples = samples[:, None]
     src_rate = int(clip.sample_rate)
     if src_rate != rate:
-        from scipy.signal import resample_poly
+        from studyapp.audio.dsp import resample_poly  # scipy's, in numpy: a participant's install has no scipy
 
         g = math.gcd(src_rate, rate)
         samples = resample_poly(samples, rate // g, src_rate // g, axis=0).astype(np.float32)

@@ -100,13 +100,12 @@ def speech_accents(energy: np.ndarray, fps: float) -> np.ndarray:
     >>> int(np.argmax(a)), bool(a[20] > a[15])
     (10, True)
     """
-    # imported here: scipy.signal and scipy.ndimage are heavy, and only a bot that listens needs them
-    from scipy.ndimage import gaussian_filter1d
-    from scipy.signal import find_peaks
+    # scipy's smoothing and peak picking, in numpy: a participant's install (and its bot) has no scipy
+    from studyapp.audio.dsp import find_peaks, gaussian_filter1d
 
     e = np.asarray(energy, dtype=np.float64)
     smooth = gaussian_filter1d(e, 0.05 * fps) if 0.05 * fps > 0.3 else e
-    peaks, _ = find_peaks(smooth, height=0.2 * max(smooth.max(initial=0.0), 1e-12),
+    peaks = find_peaks(smooth, height=0.2 * max(smooth.max(initial=0.0), 1e-12),
                           distance=max(1, int(round(0.15 * fps))))
     pulses = np.zeros_like(smooth)
     pulses[peaks] = smooth[peaks]

@@ -133,7 +133,7 @@ def choose_ranking(
     if policy == "careful":
         if media is None:
             raise ValueError("the careful bot needs the trial's media (load_trial_media)")
-        from studyapp.bots.careful import careful_scores  # scipy's signal tools, only for this policy
+        from studyapp.bots.careful import careful_scores  # signal processing, only for this policy
 
         scores = careful_scores(media)
         out = {}

@@ -12,6 +12,7 @@ import sys
 
 from studyapp import __version__
 from studyapp.cli import demo, design, doctor, models, motion, planning, prerender, render, serve, session
+from studyapp.cli.extras import missing_extra_line
 from studyapp.errors import StudyappError
 
 _COMMAND_MODULES = (
@@ -55,6 +56,13 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except StudyappError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:
+        # a participant's install reaching an experimenter's command: say which extra to install
+        line = missing_extra_line(exc, args.command)
+        if line is None:
+            raise
+        print(f"error: {line}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # `studyapp inspect --json | head`: the reader left, nothing to report
         sys.stderr.close()

@@ -47,8 +47,13 @@ def display_available() -> bool:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from studyapp.cli.extras import require
+
     design_path = demo_design()
-    if args.offscreen or not display_available():
+    offscreen = args.offscreen or not display_available()
+    # the demo ends with the analysis report (and offscreen, an MP4): an experimenter's extras, checked up front
+    require("demo", "pandas", "scipy", *(("av",) if offscreen and not args.no_video else ()))
+    if offscreen:
         if not args.offscreen:
             print("No display found: running the demo offscreen.")
         return run_offscreen_demo(design_path, args.out, panel=args.panel, seed=args.seed, video=not args.no_video)

@@ -60,6 +60,9 @@ class ProgressBar:
 
 
 def cmd_prerender(args: argparse.Namespace) -> int:
+    from studyapp.cli.extras import require
+
+    require("prerender", "av")  # before minutes of rendering, not after
     from studyapp.study.design import load_design
     from studyapp.study.prerender import RenderSettings, prerender
 

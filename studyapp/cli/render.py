@@ -274,6 +274,9 @@ def cmd_render(args: argparse.Namespace) -> int:
             raise StudyappError(f"--time {args.time:g} is outside the trial, which lasts {scene.duration:.2f} s")
         render_still(scene, args.time, out, size=args.size)
     elif out.suffix.lower() in (".mp4", ".m4v", ".mov"):
+        from studyapp.cli.extras import require
+
+        require("render", "av")
         duration = getattr(media, "duration_s", None)
         render_video(scene, media.audio, out, size=args.size, fps=args.fps, duration=duration)
     else:

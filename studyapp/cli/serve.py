@@ -109,12 +109,11 @@ def make_app(design_path: Path, db_url: str | None, cache_dir: Path | None, secr
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
-    try:
-        import starlette  # noqa: F401
-        import uvicorn
-    except ImportError as exc:   # a participant's install: the server's packages are an extra
-        raise InputError(None, "studyapp serve", f"needs the server's packages ({exc.name} is missing): "
-                         'pip install "studyapp[server]"') from None
+    from studyapp.cli.extras import require
+
+    # the server's extra: the framework and its server, av to pre-render, pandas for the dashboard's export
+    require("serve", "starlette", "uvicorn", "av", "pandas", extra="server")
+    import uvicorn
 
     from studyapp.cli.prerender import ProgressBar
     from studyapp.study.prerender import RenderSettings, prerender

@@ -77,13 +77,6 @@ REPRESENTATIONS: dict[str, int] = {
 }
 
 
-def _rotation_class():
-    # scipy.spatial takes ~0.3 s to import; only the matrix / rotation-vector conversions need it
-    from scipy.spatial.transform import Rotation
-
-    return Rotation
-
-
 def _check_order(order: str) -> str:
     o = str(order).upper()
     if len(o) != 3 or any(c not in "XYZ" for c in o) or o[0] == o[1] or o[1] == o[2]:
@@ -232,12 +225,24 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     flat, lead = _flat(m, (3, 3))
     if flat.shape[0] == 0:
         return np.zeros(lead + (4,))
-    # Proper rotations (all retargeting and reader output) in numpy: scipy.spatial costs ~0.8 s to import
-    # before a participant's first frame (issue 20). Anything else goes through scipy's projection.
+    # scipy's Rotation.from_matrix, in numpy (scipy.spatial costs ~0.8 s to import before a participant's first
+    # frame, issue 20, and a participant's install has no scipy): proper rotations (all retargeting and reader
+    # output) directly; others are projected to the nearest rotation (polar decomposition) first
     gram = np.einsum("nji,njk->nik", flat, flat) - np.eye(3)
     if np.all(np.isfinite(flat)) and np.abs(gram).max() < 1e-9 and np.linalg.det(flat).min() > 0:
         return _markley_quat(flat).reshape(lead + (4,))
-    return _rotation_class().from_matrix(flat).as_quat(canonical=True).reshape(lead + (4,))
+    det = np.linalg.det(flat)
+    if np.any(det <= 0):
+        i = int(np.nonzero(det <= 0)[0][0])
+        raise ValueError(f"Non-positive determinant (left-handed or null coordinate frame) in rotation matrix {i}: "
+                         f"{flat[i]}.")
+    gram = flat @ np.swapaxes(flat, 1, 2)
+    skew = ~np.all(np.isclose(gram, np.eye(3), atol=1e-12), axis=(1, 2))
+    flat = flat.copy()
+    if skew.any():
+        u, _, vt = np.linalg.svd(flat[skew], full_matrices=False)
+        flat[skew] = u @ vt
+    return _markley_quat(flat).reshape(lead + (4,))
 
 
 def _markley_quat(m: np.ndarray) -> np.ndarray:
@@ -271,7 +276,15 @@ def axis_angle_to_quat(v: np.ndarray) -> np.ndarray:
     flat, lead = _flat(v, (3,))
     if flat.shape[0] == 0:
         return np.zeros(lead + (4,))
-    return _rotation_class().from_rotvec(flat).as_quat().reshape(lead + (4,))
+    # scipy's Rotation.from_rotvec, in numpy (a participant's install has no scipy): sin(a/2)/a by its Taylor
+    # series near zero, where the division would lose digits
+    angle = np.linalg.norm(flat, axis=1)
+    small = angle <= 1e-3
+    a2 = angle * angle
+    safe = np.where(small, 1.0, angle)
+    scale = np.where(small, 0.5 - a2 / 48.0 + a2 * a2 / 3840.0, np.sin(0.5 * safe) / safe)
+    q = np.concatenate([scale[:, None] * flat, np.cos(0.5 * angle)[:, None]], axis=1)
+    return q.reshape(lead + (4,))
 
 
 def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
@@ -279,7 +292,15 @@ def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
     flat, lead = _flat(q, (4,))
     if flat.shape[0] == 0:
         return np.zeros(lead + (3,))
-    return _rotation_class().from_quat(flat).as_rotvec().reshape(lead + (3,))
+    # scipy's Rotation.as_rotvec, in numpy: the angle from atan2 (accurate at every angle), w >= 0 first
+    q = flat / np.linalg.norm(flat, axis=1, keepdims=True)
+    q = np.where(q[:, 3:] < 0, -q, q)
+    angle = 2.0 * np.arctan2(np.linalg.norm(q[:, :3], axis=1), q[:, 3])
+    small = angle <= 1e-3
+    a2 = angle * angle
+    scale = np.where(small, 2.0 + a2 / 12.0 + 7.0 * a2 * a2 / 2880.0,
+                     angle / np.sin(0.5 * np.where(small, 1.0, angle)))
+    return (scale[:, None] * q[:, :3]).reshape(lead + (3,))
 
 
 def _gram_schmidt(d6: np.ndarray, vectors: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

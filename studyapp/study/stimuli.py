@@ -760,6 +760,8 @@ def _check_model(design: Design, ci: int, cond: Condition) -> list[tuple[str, st
 
         session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
         read_spec(session, path)
+    except ModuleNotFoundError:  # no "models" extra: the command says what to install, not "cannot load"
+        raise
     except InputError as exc:
         return [(f"conditions[{ci}].model", f"the model does not follow the studyapp model contract: "
                  f"{_problem_text(exc)}", "see studyapp/models/CONTRACT.md")]

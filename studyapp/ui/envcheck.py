@@ -218,8 +218,7 @@ def gl_facts(report: EnvReport, ctx: moderngl.Context) -> None:
 
 def benchmark_scene(n_frames: int = 60, fps: float = 30.0) -> TrialScene:
     """Three built-in avatars waving their arms (different phases), independent of any design."""
-    from scipy.spatial.transform import Rotation
-
+    from studyapp.motion.rotations import axis_angle_to_quat, quat_multiply
     from studyapp.motion.skeleton import Motion
     from studyapp.render.avatar import build_default_avatar
     from studyapp.render.pose import prepare_slot
@@ -236,8 +235,8 @@ def benchmark_scene(n_frames: int = 60, fps: float = 30.0) -> TrialScene:
             if name in sk.names:
                 j = sk.index(name)
                 angle = sign * (0.5 + 0.4 * np.sin(2 * np.pi * (0.8 + 0.3 * k) * t + k))
-                swing = Rotation.from_rotvec(np.outer(angle, [0.0, 0.0, 1.0]))
-                motion.rotations[:, j] = (swing * Rotation.from_quat(sk.rest_rotations[j])).as_quat()
+                swing = axis_angle_to_quat(np.outer(angle, [0.0, 0.0, 1.0]))
+                motion.rotations[:, j] = quat_multiply(swing, sk.rest_rotations[j])
         slots.append(prepare_slot(avatar, motion, None))
     return make_scene(slots, avatar, labels=("A", "B", "C"))
 

@@ -200,3 +200,24 @@ def test_matrix_to_quat_matches_scipy_without_importing_it() -> None:
     code = ("import sys, numpy as np; from studyapp.motion.rotations import matrix_to_quat; "
             "matrix_to_quat(np.eye(3)[None].repeat(4, 0)); print('scipy.spatial' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "False"
+
+
+def test_rotvec_and_matrix_conversions_are_scipys() -> None:
+    """axis-angle and matrix conversions are numpy ports of scipy's (a participant's install has no scipy)."""
+    from scipy.spatial.transform import Rotation
+
+    from studyapp.motion.rotations import axis_angle_to_quat, matrix_to_quat, quat_to_axis_angle
+
+    rng = np.random.default_rng(11)
+    v = np.concatenate([rng.standard_normal((300, 3)) * s for s in (1e-7, 1e-4, 1e-3, 0.02, 1.0, 3.0, 10.0)]
+                       + [np.zeros((1, 3)), [[np.pi, 0.0, 0.0]]])
+    np.testing.assert_allclose(axis_angle_to_quat(v), Rotation.from_rotvec(v).as_quat(), rtol=0, atol=1e-15)
+    q = rng.standard_normal((2000, 4)) * rng.uniform(0.1, 3.0, (2000, 1))
+    q[:5, :3] *= 1e-6
+    np.testing.assert_allclose(quat_to_axis_angle(q), Rotation.from_quat(q).as_rotvec(), rtol=0, atol=1e-14)
+    # matrices off a rotation by up to 0.1 are projected to the nearest one, as scipy does
+    m = Rotation.random(1000, random_state=3).as_matrix()
+    m = m + rng.standard_normal(m.shape) * np.repeat([1e-13, 1e-10, 1e-6, 1e-3, 0.1], 200)[:, None, None]
+    np.testing.assert_allclose(matrix_to_quat(m), Rotation.from_matrix(m).as_quat(canonical=True), rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="Non-positive determinant"):
+        matrix_to_quat(np.diag([1.0, 1.0, -1.0]))
