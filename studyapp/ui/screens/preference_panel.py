@@ -36,6 +36,8 @@ from studyapp.ui.screens.ranking_panel import (
     _lift,
     _text_height,
     next_row,
+    question_text,
+    row_keys,
 )
 
 if TYPE_CHECKING:
@@ -159,7 +161,6 @@ def _row_begin(app: ScreenApp, name: str, row_h: float, active: bool) -> None:
 
 
 def draw(app: ScreenApp, view: TrialView) -> None:
-    ui = app.ui
     s = app.scale
     p = view.answer
     assert isinstance(p, PreferenceState)
@@ -177,11 +178,7 @@ def draw(app: ScreenApp, view: TrialView) -> None:
         x0 = imgui.get_cursor_pos_x()
         top = imgui.get_cursor_pos_y()
         wrap = x0 + text_w
-        ui.heading(crit.label, 1.05, key=("crit", crit.id), wrap_x=wrap)
-        imgui.same_line(0, 10 * s)
-        ui.wrapped(crit.question, wrap_x=wrap)
-        if crit.explanation:
-            ui.muted(crit.explanation, wrap_x=wrap, size=0.9)
+        question_text(app, crit, wrap)
         mid = row_h / 2 - ROW_PAD_PX[1] * s
         imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 24 * s, round(top + mid - box_h / 2)))
         for k, value in enumerate(p.options):
@@ -231,14 +228,7 @@ def _keys(app: ScreenApp, view: TrialView, p: PreferenceState) -> None:
         p.key_step(-1)
     if app.key_pressed(imgui.Key.right_arrow):
         p.key_step(1)
-    if app.key_pressed("down"):
-        p.move_active(1)
-    if app.key_pressed("up"):
-        p.move_active(-1)
-    if app.key_pressed("backspace") or app.key_pressed("delete"):
-        p.key_clear()
-    if app.key_pressed("enter") and view.can_submit():
-        view.submit()
+    row_keys(app, view, p.move_active, p.key_clear)
 
 
 def next_button(app: ScreenApp, view: TrialView) -> None:

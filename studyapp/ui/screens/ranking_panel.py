@@ -20,7 +20,7 @@ the next figure placed with the one above it (``1 = 2 3``). Without ties the pan
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from imgui_bundle import imgui
 
@@ -165,6 +165,30 @@ def _tie_link(app: ScreenApp, r: RankingState, ci: int, crit_id: str, link: int,
     ui.tooltip(app.design.text("rank.tie_on" if tied else "rank.tie_off"))
 
 
+def row_keys(app: ScreenApp, view: TrialView, move: Callable[[int], None], clear: Callable[[], None]) -> None:
+    """The keys every answer panel shares: Up/Down move between the questions, Backspace/Delete clear the
+    highlighted one, Enter goes on once the answer is complete."""
+    if app.key_pressed("down"):
+        move(1)
+    if app.key_pressed("up"):
+        move(-1)
+    if app.key_pressed("backspace") or app.key_pressed("delete"):
+        clear()
+    if app.key_pressed("enter") and view.can_submit():
+        view.submit()
+
+
+def question_text(app: ScreenApp, crit: Criterion, wrap_x: float) -> None:
+    """A question's label, its question and its explanation, wrapped inside the text column."""
+    s = app.scale
+    ui = app.ui
+    ui.heading(crit.label, 1.05, key=("crit", crit.id), wrap_x=wrap_x)
+    imgui.same_line(0, 10 * s)
+    ui.wrapped(crit.question, wrap_x=wrap_x)
+    if crit.explanation:
+        ui.muted(crit.explanation, wrap_x=wrap_x, size=0.9)
+
+
 def _keys(app: ScreenApp, view: TrialView) -> None:
     r = view.ranking
     typed = app.typed_text()
@@ -183,14 +207,7 @@ def _keys(app: ScreenApp, view: TrialView) -> None:
                 r.key_slot(i)
         if r.allow_ties and "=" in typed:
             r.key_tie()
-    if app.key_pressed("down"):
-        r.move_active(1)
-    if app.key_pressed("up"):
-        r.move_active(-1)
-    if app.key_pressed("backspace") or app.key_pressed("delete"):
-        r.clear(r.criteria[r.active])
-    if app.key_pressed("enter") and view.can_submit():
-        view.submit()
+    row_keys(app, view, r.move_active, lambda: r.clear(r.criteria[r.active]))
 
 
 def draw(app: ScreenApp, view: TrialView) -> None:
@@ -224,11 +241,7 @@ def draw(app: ScreenApp, view: TrialView) -> None:
         x0 = imgui.get_cursor_pos_x()
         top = imgui.get_cursor_pos_y()
         wrap = x0 + text_w
-        ui.heading(crit.label, 1.05, key=("crit", crit.id), wrap_x=wrap)
-        imgui.same_line(0, 10 * s)
-        ui.wrapped(crit.question, wrap_x=wrap)
-        if crit.explanation:
-            ui.muted(crit.explanation, wrap_x=wrap, size=0.9)
+        question_text(app, crit, wrap)
         # the three places, best to worst
         mid = row_h / 2 - ROW_PAD_PX[1] * s  # the row's middle, in the child's content coordinates
         imgui.set_cursor_pos(imgui.ImVec2(x0 + text_w + 20 * s, round(top + mid - box_h / 2)))

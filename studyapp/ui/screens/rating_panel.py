@@ -25,7 +25,7 @@ from imgui_bundle import imgui
 from studyapp.render.renderer import slot_viewports
 from studyapp.ui.input import digit_key
 from studyapp.ui.rating import RatingState, anchor_centres, digit_points
-from studyapp.ui.screens.ranking_panel import GAP_PX, ROW_PAD_PX, next_row
+from studyapp.ui.screens.ranking_panel import GAP_PX, ROW_PAD_PX, next_row, row_keys
 
 if TYPE_CHECKING:
     from studyapp.ui.seams import ScreenApp
@@ -204,14 +204,7 @@ def _keys(app: ScreenApp, view: TrialView, r: RatingState) -> None:
         r.key_step(10)
     if app.key_pressed(imgui.Key.page_down):
         r.key_step(-10)
-    if app.key_pressed("down"):
-        r.move_active(1)
-    if app.key_pressed("up"):
-        r.move_active(-1)
-    if app.key_pressed("backspace") or app.key_pressed("delete"):
-        r.key_clear()
-    if app.key_pressed("enter") and view.can_submit():
-        view.submit()
+    row_keys(app, view, r.move_active, r.key_clear)
 
 
 def next_button(app: ScreenApp, view: TrialView) -> None:
