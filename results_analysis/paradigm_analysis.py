@@ -107,7 +107,10 @@ def analyze_block(df: pd.DataFrame, block: str, paradigm: str, *, n_boot: int = 
         rows = rows[~rows["participant"].astype(str).isin(set(out["participant"]))]
         if rows.empty:
             raise AnalysisInputError(df.attrs.get("source"), f"block {block}",
-                                     "every participant was screened out (hidden reference rated low)")
+                                     f"every participant was screened out: each rated the hidden reference "
+                                     f"{reference!r} below {threshold:g} in more than {max_share:.0%} of the items "
+                                     "-- fix: check that --reference names the condition the block showed as its "
+                                     "reference, or leave out --screen-reference")
     conditions = condition_order(rows)
     if paradigm == "rating" and reference in conditions:  # the reference last: it is not one of the systems
         conditions = [c for c in conditions if c != reference] + [reference]

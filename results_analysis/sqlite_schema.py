@@ -12,7 +12,7 @@ has no labels) and ``condition_position`` (its place in the design, the order of
 figures; empty for a pseudo-condition such as an attention check's frozen slot), the ``study_title`` (the
 report's title) and each participant's questionnaire answers, one column per rated (Likert) item named
 ``questionnaire:<scale>:<item>`` (see :data:`QUESTIONNAIRE_PREFIX`; the scale part is empty where none was
-stored). Free-text answers stay out of the table (``studyapp export --questionnaire-csv`` has them).
+stored). Free-text, choice and number answers stay out of the table (``studyapp export --questionnaire-csv`` has them).
 It reads what it is given: the loader proves the file intact first
 (:mod:`results_analysis.integrity`), as ``studyapp`` does when it opens a database.
 
@@ -232,7 +232,9 @@ def _questionnaire_columns(con: sqlite3.Connection, tables: set[str]) -> dict[st
     out: dict[str, dict[str, str | None]] = {}
     for participant, item, sc, kd, value in con.execute(
             f"SELECT participant, item, {scale}, {kind}, value FROM questionnaire ORDER BY rowid"):
-        if str(kd or "likert").lower() == "text":
+        # only Likert answers are numbers on a scale: a number item (age) or a choice would otherwise be
+        # summarised and put into a scale's Cronbach alpha with the Likert items
+        if str(kd or "likert").lower() != "likert":
             continue
         name = f"{QUESTIONNAIRE_PREFIX}{sc if isinstance(sc, str) and sc.strip() else ''}:{item}"
         out.setdefault(name, {})[str(participant)] = None if value is None else str(value)

@@ -301,10 +301,11 @@ class UIBot:
             self._planned_for = view.plan.trial_index
             plan = view.plan
             rng = policies.trial_rng(self.seed, self.session.participant_id, plan.trial_index)
-            ranks = policies.choose_ranking(self.policy, plan, view.media, self.design.criteria, rng,
+            # the block's criteria, as on screen: a rank block of a multi-block design may ask only some
+            ranks = policies.choose_ranking(self.policy, plan, view.media, view.criteria, rng,
                                    condition_order=[c.id for c in self.design.conditions],
                                    allow_ties=view.ranking.allow_ties)
-            for ci, crit in enumerate(self.design.criteria):
+            for ci, crit in enumerate(view.criteria):
                 order, ties = order_and_ties(ranks[crit.id])  # best first
                 if ci == 0:      # drag and drop
                     for place, slot in enumerate(order):

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import warnings
+from pathlib import Path
 
 from studyapp import __version__
 from studyapp.cli import demo, design, doctor, models, motion, planning, prerender, render, serve, session
@@ -29,6 +31,19 @@ _COMMAND_MODULES = (
 )
 
 
+_PACKAGE = str(Path(__file__).resolve().parents[1])
+_python_format = warnings.formatwarning
+
+
+def _format_warning(message, category, filename, lineno, line=None) -> str:
+    """studyapp's own warnings (a design's notes, a reader's workaround) as one line, as ``validate`` prints
+    them: the experimenter reads them, so Python's ``file:line: Category`` and the source line under it would
+    only hide the message. Warnings of other packages keep Python's format."""
+    if str(filename).startswith(_PACKAGE):
+        return f"note: {message}\n"
+    return _python_format(message, category, filename, lineno, line)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="studyapp",
@@ -45,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    warnings.formatwarning = _format_warning
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(levelname)s: %(message)s",

@@ -12,6 +12,8 @@ import re
 from collections.abc import Iterable
 from typing import Any
 
+from studyapp.ui.line_break import break_lines
+
 Rect = tuple[float, float, float, float]  # x0, y0, x1, y1 in framebuffer pixels
 
 #: A line that starts a list item keeps its own line inside a paragraph.
@@ -69,6 +71,7 @@ class Painter:
         self.cut_off: list[tuple[str, str]] = []
         self._frame = 0
         self._windows: dict[int, tuple[int, int]] = {}  # window id -> (first, last) frame drawn in a row
+        self._breaks: dict[tuple[str, int, float], str] = {}  # (text, width, font size) -> with CJK breaks
 
     def begin_frame(self) -> None:
         self._frame += 1
@@ -85,6 +88,22 @@ class Painter:
             imgui = self.imgui
             a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
             self.rects[key] = (a.x, a.y, b.x, b.y)
+
+    def _broken(self, s: str, wrap_x: float) -> str:
+        """``s`` with the line breaks ImGui's wrapping cannot find in Chinese or Japanese text (between any two
+        characters, :mod:`studyapp.ui.line_break`), for the wrap position ``wrap_x`` at the cursor; other text
+        is unchanged. Cached: a page draws the same texts every frame."""
+        if not _NO_SPACE.search(s):
+            return s
+        imgui = self.imgui
+        avail = imgui.get_content_region_avail().x if wrap_x <= 0 else wrap_x - imgui.get_cursor_pos_x()
+        key = (s, int(avail), imgui.get_font_size())
+        if key not in self._breaks:
+            if len(self._breaks) > 512:
+                self._breaks.clear()
+            # 1 px short of the edge: ImGui must not wrap a line that our measure says fits
+            self._breaks[key] = break_lines(s, avail - 1.0, lambda t: imgui.calc_text_size(t).x)
+        return self._breaks[key]
 
     def _check_fits(self, s: str, rect: Rect | None = None) -> None:
         """Note ``s`` (the last item, or text drawn at ``rect``) as cut off when it reaches past the left or
@@ -147,7 +166,7 @@ class Painter:
         """Text wrapped at ``wrap_x`` (window-local x; 0: the window's right edge)."""
         self.record(s)
         self.imgui.push_text_wrap_pos(wrap_x)
-        self.imgui.text_unformatted(s)
+        self.imgui.text_unformatted(self._broken(s, wrap_x))
         self.imgui.pop_text_wrap_pos()
         self._check_fits(s)
         self._item_rect(key)
@@ -160,7 +179,7 @@ class Painter:
         if size != 1.0:
             imgui.push_font(None, imgui.get_style().font_size_base * size)
         imgui.push_text_wrap_pos(wrap_x)
-        imgui.text_unformatted(s)
+        imgui.text_unformatted(self._broken(s, wrap_x))
         imgui.pop_text_wrap_pos()
         self._check_fits(s)
         if size != 1.0:
@@ -174,7 +193,7 @@ class Painter:
         font = self.layer.font_bold if self.layer else None
         imgui.push_font(font, imgui.get_style().font_size_base * size)
         imgui.push_text_wrap_pos(wrap_x)
-        imgui.text_unformatted(s)
+        imgui.text_unformatted(self._broken(s, wrap_x))
         imgui.pop_text_wrap_pos()
         self._check_fits(s)
         imgui.pop_font()

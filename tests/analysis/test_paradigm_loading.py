@@ -195,3 +195,15 @@ def test_cli_analyses_a_study_of_other_paradigms_only_with_chinese_labels(tmp_pa
     assert [str(w.message) for w in caught if "missing from font" in str(w.message)] == []
     svg = (tmp_path / "o" / "figures" / "block_pairwise_elo.svg").read_text()
     assert "模型甲" in svg and "真人动作" in svg
+
+
+def test_screening_out_everyone_says_which_reference_and_rule_and_what_to_do(study) -> None:
+    """A wrong --reference (a system every participant rates below 90) screens out everyone: the one line names
+    the condition, the rule and the way out, rather than only that nobody is left."""
+    from results_analysis.paradigm_analysis import analyze_block
+
+    rating = study[study["paradigm"] == "rating"].copy()
+    rating.attrs["source"] = "s.csv"
+    with pytest.raises(AnalysisInputError, match=r"hidden reference 'A' below 90 in more than 15% of the items "
+                                                 r"-- fix: .*leave out --screen-reference"):
+        analyze_block(rating, "rating", "rating", n_boot=0, reference="A", screen=True)

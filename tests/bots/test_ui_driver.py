@@ -377,3 +377,35 @@ def test_fast_typing_with_key_rollover_ties_the_right_figures(tied_study):
     finally:
         bot.close()
     assert seen == {"order": [0, 1, None], "ties": [True, False]}
+
+
+def test_bot_ranks_only_the_questions_of_its_rank_block(tmp_path):
+    """A rank block that asks one criterion (realism, then a mismatch block for speech: Nagy et al.'s separate
+    blocks): the offscreen bot answers the questions on screen, the block's, and finishes the study."""
+    from fixtures.paradigm_studies import write_paradigm_study
+    from studyapp.study.design import load_design
+    from studyapp.study.storage import ResultsDB
+
+    blocks = '''
+[[blocks]]
+id = "real"
+paradigm = "rank"
+criteria = ["realism"]
+stimuli = ["s1"]
+
+[[blocks]]
+id = "fit"
+paradigm = "mismatch"
+criteria = ["synchronization"]
+conditions = ["FaceCapGes"]
+stimuli = ["s2", "s4"]
+'''
+    design = load_design(write_paradigm_study(tmp_path, blocks, seconds=1.0))
+    db = ResultsDB(tmp_path / "r.sqlite", design)
+    bot = UIBot(design, db, "P1", "careful", 3)
+    try:
+        assert bot.run() == 0
+    finally:
+        bot.close()
+    assert db.participant("P1").status == "done"
+    assert {(r["trial_index"], r["criterion"]) for r in db.responses("P1")} == {(0, "realism")}

@@ -143,3 +143,34 @@ def test_labels_order_title_and_questionnaire_travel_with_the_long_table(tmp_pat
     back = pd.read_csv(tmp_path / "r.csv")
     assert back["condition_label"].tolist() == df["condition_label"].tolist()
     assert list(back.columns[-3:]) == ["study_title", "design_hash", "app_version"]
+
+
+def test_only_likert_answers_become_questionnaire_columns(tmp_path: Path) -> None:
+    """A number item (age) and a choice item are not on a rating scale: they stay out of the tidy table (and so
+    out of the report's scale statistics), while the questionnaire export keeps them."""
+    path = write_synthetic_study(tmp_path / "s", n_stimuli=2, questionnaire=True, seconds=0.5)
+    path.write_text(path.read_text() + '''
+[[questionnaire]]
+id = "age"
+kind = "number"
+text = "Your age?"
+min = 18
+max = 99
+integer = true
+
+[[questionnaire]]
+id = "hand"
+kind = "choice"
+text = "Which hand do you write with?"
+options = ["left", "right"]
+''')
+    design = load_design(path, check_files=False)
+    db_path = tmp_path / "r.sqlite"
+    with ResultsDB(db_path, design) as db:
+        run_bot_session(design, db, "P1", "random", 1)
+    with sqlite3.connect(db_path) as con:
+        kinds = {i: k for i, k in con.execute("SELECT item, kind FROM questionnaire")}
+    assert kinds["age"] == "number" and kinds["hand"] == "choice" and "likert" in kinds.values()
+    columns = {c.rsplit(":", 1)[1] for c in export_dataframe(db_path).columns if c.startswith("questionnaire:")}
+    assert columns == {i for i, k in kinds.items() if k == "likert"}
+    assert {"age", "hand"} <= set(questionnaire_dataframe(db_path)["item"])

@@ -79,3 +79,12 @@ def test_the_characters_taken_on_trust_are_in_the_ui_font():
 
     have = charmap(str(ui_font_path()))
     assert have and sorted(c for c in SURELY_IN_UI_FONT if ord(c) not in have) == []
+
+
+def test_the_built_in_consent_fits_every_paradigm():
+    """The default consent page is the first page of every study, whatever its blocks ask: it may not promise
+    three figures to rank (a pairwise or mismatch study shows two, a rating study asks for sliders)."""
+    from studyapp.study.design.texts import LANGUAGES
+
+    assert "three" not in LANGUAGES["en"]["welcome.consent"] and "rank" not in LANGUAGES["en"]["welcome.consent"]
+    assert "三个" not in LANGUAGES["zh"]["welcome.consent"] and "排序" not in LANGUAGES["zh"]["welcome.consent"]

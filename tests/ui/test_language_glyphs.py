@@ -113,3 +113,44 @@ def test_without_the_system_font_the_same_check_finds_the_missing_glyphs(tmp_pat
     db.close()
     missing = [c for c, cell in zip(chars, cells) if cell.max() < 100 or np.abs(cell - none).mean() < 2.0]
     assert missing == list("请观看片段")
+
+
+def _text_lines(rgb: np.ndarray, x0: int = 200, x1: int = 1120, bottom: int = 630) -> list[tuple[int, int, int]]:
+    """The page's rows of light text: (top, bottom, right end) of each band of rows with text pixels."""
+    bright = rgb[:bottom, x0:x1].astype(int).sum(axis=2) > 450
+    rows, out, y = bright.any(axis=1), [], 0
+    while y < len(rows):
+        if not rows[y]:
+            y += 1
+            continue
+        top = y
+        while y < len(rows) and rows[y]:
+            y += 1
+        out.append((top, y, x0 + int(np.nonzero(bright[top:y].any(axis=0))[0].max())))
+    return out
+
+
+def test_chinese_paragraphs_wrap_at_the_edge_not_at_their_spaces(tmp_path):
+    """ImGui wraps only at spaces: the Chinese "how to rank" text (a few spaces, around numbers) broke far
+    before the edge. Every line of a paragraph but its last now reaches to within two characters of the
+    page's widest line, in the pixels of the instructions page."""
+    design, db = _zh_study(tmp_path)
+    bot = UIBot(design, db, "P1", "ordered", 1, size=(1280, 720))
+    try:
+        for _ in range(400):
+            bot.step()
+            if bot.app.screen_key() == "instructions" and bot._prev_key == "instructions":
+                break
+        assert bot.app.screen_key() == "instructions"
+        for _ in range(2):
+            bot.frame()
+        rgb = bot.target.read_rgb()
+    finally:
+        bot.close()
+        db.close()
+    lines = _text_lines(rgb)
+    widest = max(right for _, _, right in lines)
+    # lines of one paragraph are 4 px apart here; paragraphs and items 14 px or more
+    inner = [(top, right) for (top, bottom, right), nxt in zip(lines, lines[1:]) if nxt[0] - bottom <= 6]
+    assert len(inner) >= 2, lines
+    assert [(top, right) for top, right in inner if right < widest - 40] == [], (widest, lines)

@@ -27,8 +27,8 @@ EN: dict[str, str] = {
     "page.more_below": "More text below: scroll down (mouse wheel or Page Down).",
     # welcome and consent
     "welcome.title": "Welcome",
-    "welcome.consent": ("In this study you will watch short clips of three animated figures talking and rank them on "
-                        "a few questions. It takes about {minutes} minutes. Your answers are saved as you go, under "
+    "welcome.consent": ("In this study you will watch short clips of animated figures talking and answer a few "
+                        "questions about them. It takes about {minutes} minutes. Your answers are saved as you go, under "
                         "a participant code, without your name. You can stop at any time by closing the window; "
                         "nothing else is recorded."),
     "welcome.agree_note": ("By pressing \"I agree, start\" you agree to take part and to your anonymous answers being "
@@ -219,7 +219,7 @@ ZH: dict[str, str] = {
     "page.press_enter": "或按回车键",
     "page.more_below": "下面还有内容：请向下滚动（鼠标滚轮或 Page Down 键）。",
     "welcome.title": "欢迎",
-    "welcome.consent": ("在本研究中，您将观看三个会说话的动画人物的短片，并就几个问题对它们进行排序。整个过程大约需要 "
+    "welcome.consent": ("在本研究中，您将观看一些会说话的动画人物的短片，并回答关于它们的几个问题。整个过程大约需要 "
                         "{minutes} 分钟。您的回答会随时保存，只记录参与者编号，不记录您的姓名。您可以随时关闭窗口退出；"
                         "除此之外不会记录任何信息。"),
     "welcome.agree_note": "点击“我同意，开始”即表示您同意参与，并同意您的匿名回答用于研究。如果您不想参与，请点击“我不同意”。",
