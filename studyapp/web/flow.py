@@ -332,7 +332,9 @@ class Flow:
             if block.paradigm == "rank":
                 text = self.t("instructions.how", keys="1, 2, 3")
             elif block.paradigm in ("pairwise", "mismatch"):
-                text = self.t("instructions.how_pref", n=block.levels)
+                names = self.design.slot_labels_for(2) or ("1", "2")  # what the answers call the figures
+                first, last = names[0], names[-1]
+                text = self.t("instructions.how_pref", n=block.levels, first=first, last=last)
                 if block.reasons:
                     text += "\n\n" + self.t("instructions.how_reasons")
             else:

@@ -88,3 +88,12 @@ def test_the_built_in_consent_fits_every_paradigm():
 
     assert "three" not in LANGUAGES["en"]["welcome.consent"] and "rank" not in LANGUAGES["en"]["welcome.consent"]
     assert "三个" not in LANGUAGES["zh"]["welcome.consent"] and "排序" not in LANGUAGES["zh"]["welcome.consent"]
+
+
+def test_preference_instructions_name_the_figures_as_the_answers_do():
+    """The answers read "Clearly A" .. "Clearly B"; the instructions must use the same names, not only
+    left/right (a participant met "1 = clearly the left figure" above boxes saying A and B)."""
+    for lang, table in T.LANGUAGES.items():
+        how = T.fill(table["instructions.how_pref"], n=5, first="Ⓐ", last="Ⓑ")
+        assert "Ⓐ" in how and "Ⓑ" in how, lang
+        assert T.fill(table["pref.clearly"], figure="Ⓐ") .replace("Ⓐ", "") != table["pref.clearly"], lang

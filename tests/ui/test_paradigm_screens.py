@@ -186,7 +186,7 @@ def test_chinese_paradigm_screens_have_every_glyph_and_nothing_cut_off(tmp_path,
     finally:
         bot.close()
     for key in ("pref.equal", "rating.unset", "block.title", "instructions.how_pref", "instructions.how_rating"):
-        assert any(design.text(key, n=5) in s for s in drawn), key
+        assert any(design.text(key, n=5, first="A", last="B") in s for s in drawn), key
     assert "这一部分每次比较两个人物。" in drawn and "很好" in drawn
     chars = sorted({c for s in drawn for c in s if c.isprintable() and not c.isspace()})
     cells, none = _glyph_cells(design, db, chars, monkeypatch)

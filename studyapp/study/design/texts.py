@@ -146,7 +146,8 @@ EN: dict[str, str] = {
     "instructions.how_pref": (
         "After a clip has played to the end, a panel opens below the two figures. For each question, say which "
         "figure you prefer, and how clearly: click one of the answers, or press its number key, shown above it "
-        "(1 = clearly the left figure ... {n} = clearly the right one; the middle one means no preference). "
+        "(1 = clearly {first}, the figure on the left ... {n} = clearly {last}, the one on the right; the middle "
+        "one means no preference). "
         "Left/Right move the answer one step, Up/Down change question, Backspace clears it, Enter goes to the "
         "next clip. Space pauses and resumes the clip."),
     "instructions.how_reasons": (
@@ -325,7 +326,7 @@ ZH: dict[str, str] = {
     "instructions.how_answer_title": "如何作答",
     "instructions.how_pref": (
         "片段播放完毕后，两个人物下方会出现一个面板。请针对每个问题，说明您更喜欢哪个人物以及程度：点击其中一个答案，"
-        "或按答案上方显示的数字键（1 = 明显左边的人物更好 …… {n} = 明显右边的人物更好；中间的表示没有偏好）。"
+        "或按答案上方显示的数字键（1 = 明显{first}（左边的人物）更好 …… {n} = 明显{last}（右边的人物）更好；中间的表示没有偏好）。"
         "左/右方向键把答案移动一格，上/下方向键切换问题，退格键清除答案，回车键进入下一个片段。空格键暂停和继续播放。"),
     "instructions.how_reasons": "当您更喜欢其中一个人物时，还可以勾选造成差别的原因（可选）：点击方框，或按下方向键移到原因处再按数字键。",
     "instructions.how_rating": (

@@ -32,7 +32,8 @@ def how_to_answer(app: ScreenApp, block: BlockView) -> list[str]:
     """Paragraphs saying how a trial of ``block``'s paradigm is answered, mouse and keyboard."""
     t = app.design.text
     if block.paradigm in PREFERENCE:
-        out = [t("instructions.how_pref", n=block.levels)]
+        first, *_, last = slot_names(figure_labels(app.design, 2), 2)  # as the answer boxes call them
+        out = [t("instructions.how_pref", n=block.levels, first=first, last=last)]
         if block.reasons:
             out.append(t("instructions.how_reasons"))
         return out
