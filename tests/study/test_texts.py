@@ -32,6 +32,12 @@ def test_language_picks_the_table_and_texts_override_it(tmp_path):
     assert [c.label for c in d.criteria] == ["真实感", "同步性", "多样性"]
 
 
+@pytest.mark.parametrize("code", ["zh-Hans", "zh_CN", "ZH-cn"])
+def test_common_tags_of_a_shipped_language_pick_its_table(tmp_path, code):
+    d = load_design(_study(tmp_path, f'language = "{code}"\n'))
+    assert d.language == "zh" and d.text("progress.clip", k=2, n=5) == "第 2 / 5 个片段"
+
+
 @pytest.mark.parametrize("top,key,words", [
     ('[texts]\n"page.contineu" = "Go"', "texts.page.contineu", "unknown text key"),
     ('[texts]\n"progress.clip" = "Clip {k}"', "texts.progress.clip", "same fields"),

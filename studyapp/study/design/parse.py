@@ -26,7 +26,7 @@ from studyapp.study.design.schema import (ASPECTS, ATTENTION_KINDS, AVATAR_SUFFI
                                               SLOT_LABELS, AttentionCheckTable, AvatarTable, BlockTable,
                                               DesignFile, OnlineTable, OrderingTable, ParticipantsTable, SlotsTable,
                                               key_default)
-from studyapp.study.design.texts import LANGUAGES
+from studyapp.study.design.texts import LANGUAGES, language_code
 from studyapp.study.design.texts import fields as text_fields
 from studyapp.study.design.texts import table as texts_table
 from studyapp.study.timeline import MOTION_END_CHOICES
@@ -668,6 +668,7 @@ def parse_design(path: Path, check_files: bool) -> tuple[Design | None, list[Pro
     # reference to it from `practice` or an attention check is not a second problem.
     stim_ids = [e["id"] for _, e in stims if e.get("id")]
     language = top.get("language", key_default(DesignFile, "language"))
+    language = language_code(language) if isinstance(language, str) else language
     texts = _texts(col, language, top.get("texts", {}))
     criteria = _criteria(col, top, crits, texts)
     # As for stimuli: a criterion with a problem of its own is still known by its id to attention checks.

@@ -381,6 +381,19 @@ ZH: dict[str, str] = {
 #: Shipped tables by language code (see the module docstring to add one).
 LANGUAGES: dict[str, dict[str, str]] = {"en": EN, "zh": ZH}
 
+#: Other codes people write for a shipped table (BCP 47 tags, compared case-insensitively, ``_`` read as ``-``).
+ALIASES = {"zh-hans": "zh", "zh-cn": "zh", "zh-sg": "zh", "zh-hans-cn": "zh", "en-us": "en", "en-gb": "en"}
+
+
+def language_code(code: str) -> str:
+    """The shipped table's code for ``code``: ``"zh-Hans"`` -> ``"zh"``; an unknown code is returned as given.
+
+    >>> language_code("zh-Hans"), language_code("zh_CN"), language_code("en"), language_code("fr")
+    ('zh', 'zh', 'en', 'fr')
+    """
+    key = str(code).strip().lower().replace("_", "-")
+    return key if key in LANGUAGES else ALIASES.get(key, code)
+
 _FIELD = re.compile(r"\{(\w+)\}")
 
 
