@@ -223,7 +223,8 @@ class Flow:
             raise Refused("online.bad_link")
         existed = self.db.participant(pid) is not None
         session = Session(self.design, self.db, pid, machine={
-            "frontend": "browser", **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
+            "frontend": "browser", SEEN_AT: self._now_iso(),
+            **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
         if existed and not session.resumed:
             session.accept_consent()   # consented when the record was made; nothing answered yet
         return session
@@ -244,8 +245,10 @@ class Flow:
         row = next((s for s in self.db.sessions(session.participant_id) if s["id"] == session.session_id), None)
         seen = _seconds(row["machine"].get(SEEN_AT)) if row is not None else None
         if seen is None or now - seen >= SEEN_EVERY_S:
-            self.db.update_session_machine(session.session_id, {
-                SEEN_AT: datetime.fromtimestamp(now, timezone.utc).isoformat(timespec="milliseconds")})
+            self.db.update_session_machine(session.session_id, {SEEN_AT: self._now_iso()})
+
+    def _now_iso(self) -> str:
+        return datetime.fromtimestamp(self.clock(), timezone.utc).isoformat(timespec="milliseconds")
 
     def _abandoned(self, pid: str) -> bool:
         return any(ABANDONED in s["machine"] for s in self.db.sessions(pid))
