@@ -2,7 +2,8 @@
 database, one secret) and a participant whose consecutive requests alternate between them. Every rule holds
 (watch once before answering, a too-short play does not count, no going back, a reload and a SIGKILLed and
 restarted server resume where the participant was) and every answer is stored exactly once; ``--workers``
-runs on PostgreSQL and is refused, in one line, on SQLite."""
+runs on PostgreSQL and is refused, in one line, on SQLite. A participant begun at a lab station, whose latest
+session is not a browser one, still gets the browser's own session with "welcome back" first."""
 from __future__ import annotations
 
 import json
@@ -242,3 +243,45 @@ def test_workers_need_postgresql_and_serve_a_participant_on_it(multi_study, post
         assert [s["machine"]["frontend"] for s in db.sessions("w01")] == ["browser"]
     finally:
         db.close()
+
+
+def test_a_participant_begun_at_a_lab_station_gets_welcome_back_in_the_browser(study, browser_for) -> None:
+    """The latest session is not an open browser one: the browser starts its own, "welcome back" first, and a
+    clip played but left unanswered at the station must be watched again."""
+    import warnings
+
+    from studyapp.study.session import Session
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        from starlette.testclient import TestClient
+
+    db = study.db()
+    lab = Session(study.design, db, "LAB7")
+    lab.accept_consent()
+    lab.finish_instructions()
+    lab.record_env_check({"gl_renderer": "station"})
+    lab.record_play_started()
+    lab.record_play_finished(True)
+    lab.submit_ranking({c.id: {0: 1, 1: 2, 2: 3} for c in study.design.criteria})   # the practice clip
+    lab.record_play_started()
+    lab.record_play_finished(True)                                                    # clip 1 watched, not answered
+    lab.close()
+    db.close()
+    with TestClient(study.app()) as client:
+        b = browser_for(client, study)
+        r = b.get("/?PROLIFIC_PID=LAB7")
+        assert r.status_code == 200 and "/s/" in str(r.url)
+        b.base = str(r.url)[len(str(client.base_url)):]
+        page = b.reload()
+        assert page["screen"] == "back" and "clip 1 of 3" in page["lines"][0] and "not saved" in page["lines"][1]
+        b.act("continue")
+        assert b.state["screen"] == "trial" and b.state["progress"] == "Clip 1 of 3" and not b.state["can_rank"]
+        b.watch()
+        b.answer_well()
+        assert b.reload()["progress"] == "Clip 2 of 3"
+    db = study.db()
+    sessions = db.sessions("LAB7")
+    assert len(sessions) == 2 and sessions[1]["machine"]["frontend"] == "browser" and sessions[1]["machine"]["resumed_at"]
+    assert sorted(db.answered_trials("LAB7")) == [0, 1]
+    db.close()
