@@ -47,6 +47,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from figures import load_average, record  # noqa: E402
 
 CLIP_S = 1.0
+#: A kept-alive connection is dropped by the client after 3 s idle, before uvicorn's 5 s: otherwise a request
+#: sent as the server closes the idle connection fails (a browser would send it again; httpx does not).
+KEEPALIVE = __import__("httpx").Limits(keepalive_expiry=3.0)
 COMPLETION = "BENCH123"
 
 
@@ -164,7 +167,7 @@ async def participant(bases: list[str], k: int, latencies: list[float], acked: d
         async def post(self, path: str, **kw: Any) -> Any:
             return await self.c.post(at(path), **kw)
 
-    async with httpx.AsyncClient(headers=headers, timeout=120) as raw:
+    async with httpx.AsyncClient(headers=headers, timeout=120, limits=KEEPALIVE) as raw:
         c = Client(raw)
         r = await c.get(f"/?PROLIFIC_PID={pid}&STUDY_ID=load&SESSION_ID=s{k}")
         r.raise_for_status()
