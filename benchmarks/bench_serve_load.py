@@ -17,7 +17,12 @@ p50/p99 answer-commit latency, answers per second, lost and duplicated answers, 
 The trial videos are stand-ins (one small H.264 clip per trial, tests/fixtures/web_study.py): this measures the
 server and its database, not video encoding (``studyapp prerender`` has its own benchmark).
 
-Usage: ``python benchmarks/bench_serve_load.py [--participants N] [--stimuli K] [--backends sqlite,postgresql]``
+``--workers N`` (PostgreSQL only) runs N server processes on N ports and sends each participant's consecutive
+requests to them in turn, as a reverse proxy spreading requests over several ``studyapp serve`` processes would:
+any process serves any request, since none keeps a participant's session in memory.
+
+Usage: ``python benchmarks/bench_serve_load.py [--participants N] [--stimuli K] [--backends sqlite,postgresql]
+[--workers N]``
 """
 from __future__ import annotations
 
@@ -42,6 +47,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from figures import load_average, record  # noqa: E402
 
 CLIP_S = 1.0
+#: A kept-alive connection is dropped by the client after 3 s idle, before uvicorn's 5 s: otherwise a request
+#: sent as the server closes the idle connection fails (a browser would send it again; httpx does not).
+KEEPALIVE = __import__("httpx").Limits(keepalive_expiry=3.0)
 COMPLETION = "BENCH123"
 
 
@@ -131,12 +139,36 @@ def _state(html: str) -> dict[str, Any]:
     return json.loads(m.group(1))
 
 
-async def participant(base: str, k: int, latencies: list[float], acked: dict[str, int]) -> None:
+class _Turns:
+    """URLs on the server processes in turn, starting at participant ``k``'s own (one server: always it)."""
+
+    def __init__(self, bases: list[str], k: int) -> None:
+        self.bases, self.k = bases, k
+
+    def __call__(self, path: str) -> str:
+        self.k += 1
+        return self.bases[self.k % len(self.bases)] + path
+
+
+async def participant(bases: list[str], k: int, latencies: list[float], acked: dict[str, int]) -> None:
     import httpx
 
     pid = f"bench{k:04d}"
     headers = {"X-Forwarded-For": f"10.{k // 65536 % 256}.{k // 256 % 256}.{k % 256}"}
-    async with httpx.AsyncClient(base_url=base, headers=headers, timeout=120) as c:
+    at = _Turns(bases, k)
+
+    class Client:   # every request to the next server process
+        def __init__(self, c: httpx.AsyncClient) -> None:
+            self.c = c
+
+        async def get(self, path: str, **kw: Any) -> Any:
+            return await self.c.get(at(path), **kw)
+
+        async def post(self, path: str, **kw: Any) -> Any:
+            return await self.c.post(at(path), **kw)
+
+    async with httpx.AsyncClient(headers=headers, timeout=120, limits=KEEPALIVE) as raw:
+        c = Client(raw)
         r = await c.get(f"/?PROLIFIC_PID={pid}&STUDY_ID=load&SESSION_ID=s{k}")
         r.raise_for_status()
         s = _state(r.text)
@@ -161,7 +193,7 @@ async def participant(base: str, k: int, latencies: list[float], acked: dict[str
             (await c.get(state["video"])).raise_for_status()
             await act("play")
             await asyncio.sleep(CLIP_S)  # the clip plays: the server checks it was watched to its end
-            await act("ended")
+            await act("ended", {"play": state.get("play")})   # the ticket the play's reply carried
             ranks = {crit["id"]: {"0": 1, "1": 2, "2": 3} for crit in state["criteria"]}
             t0 = time.perf_counter()
             resp = await c.post(go + "answer", json={"ranks": ranks}, headers={"X-CSRF-Token": state["csrf"]})
@@ -175,11 +207,11 @@ async def participant(base: str, k: int, latencies: list[float], acked: dict[str
             raise RuntimeError(f"{pid} ended on {state['screen']!r}, not the completion page")
 
 
-async def crowd(base: str, n: int) -> tuple[list[float], dict[str, int], float, list[str]]:
+async def crowd(bases: list[str], n: int) -> tuple[list[float], dict[str, int], float, list[str]]:
     latencies: list[float] = []
     acked: dict[str, int] = {}
     t0 = time.perf_counter()
-    results = await asyncio.gather(*(participant(base, k, latencies, acked) for k in range(n)),
+    results = await asyncio.gather(*(participant(bases, k, latencies, acked) for k in range(n)),
                                    return_exceptions=True)
     failures = [f"{type(r).__name__}: {r}" for r in results if isinstance(r, BaseException)]
     return latencies, acked, time.perf_counter() - t0, failures
@@ -220,27 +252,29 @@ def _pct(sorted_ms: list[float], q: float) -> float:
 
 
 def run_backend(name: str, target: Path | str, server_url: str, design_path: Path, videos: Path,
-                n: int) -> dict[str, Any]:
+                n: int, workers: int = 1) -> dict[str, Any]:
     from studyapp.study.design import load_design
 
     design = load_design(design_path, check_files=False)
-    commits_out = design_path.with_name(f"commits-{name}.json")
-    proc, base = start_server(design_path, server_url, videos, commits_out)
+    outs = [design_path.with_name(f"commits-{name}-{workers}-{j}.json") for j in range(workers)]
+    servers = [start_server(design_path, server_url, videos, out) for out in outs]
     load_before = load_average()
     try:
-        latencies, acked, wall, failures = asyncio.run(crowd(base, n))
+        latencies, acked, wall, failures = asyncio.run(crowd([base for _, base in servers], n))
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        for proc, _ in servers:
+            proc.send_signal(signal.SIGINT)
+        for proc, _ in servers:
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
     load_after = load_average()
     lost, dup, done = check_database(target, design, acked)
     ms = sorted(x * 1e3 for x in latencies)
     p50, p99 = _pct(ms, 0.5), _pct(ms, 0.99)
-    commits = sorted(x * 1e3 for x in json.loads(commits_out.read_text())) if commits_out.exists() else []
-    return {"backend": name, "participants": n, "done": done, "answers": len(ms), "p50_ms": p50, "p99_ms": p99,
+    commits = sorted(x * 1e3 for out in outs if out.exists() for x in json.loads(out.read_text()))
+    return {"backend": name if workers == 1 else f"{name}x{workers}", "participants": n, "done": done, "answers": len(ms), "p50_ms": p50, "p99_ms": p99,
             "commit_p50_ms": _pct(commits, 0.5), "commit_p99_ms": _pct(commits, 0.99), "commits": len(commits),
             "max_ms": ms[-1] if ms else float("nan"), "answers_per_s": len(ms) / wall, "wall_s": wall,
             "lost": lost, "duplicated": dup, "failures": failures, "load_before": load_before,
@@ -255,6 +289,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--participants", type=int, default=200)
     ap.add_argument("--stimuli", type=int, default=3, help="rotation clips per participant (plus one practice)")
     ap.add_argument("--backends", default="sqlite,postgresql")
+    ap.add_argument("--workers", type=int, default=1, help="server processes on PostgreSQL (default 1)")
     args = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-serve-") as tmp:
@@ -264,6 +299,8 @@ def main(argv: list[str]) -> int:
         for name in args.backends.split(","):
             if name == "sqlite":
                 target = folder / "load.results.sqlite"
+                if args.workers > 1:
+                    raise SystemExit("--workers needs PostgreSQL: an SQLite file is served by one process")
                 rows.append(run_backend(name, target, str(target), design_path, videos, args.participants))
             elif name == "postgresql":
                 from fixtures.postgres import TempPostgres
@@ -272,14 +309,14 @@ def main(argv: list[str]) -> int:
                 try:
                     pg.new_database("load")
                     tcp = pg.url("load", tcp=True)
-                    rows.append(run_backend(name, tcp, tcp, design_path, videos, args.participants))
+                    rows.append(run_backend(name, tcp, tcp, design_path, videos, args.participants, args.workers))
                 finally:
                     pg.stop()
             else:
                 raise SystemExit(f"unknown backend {name!r}: sqlite or postgresql")
     trials = args.stimuli + 1
     print(f"{args.participants} participants at once on loopback, {trials} trials each (clip {CLIP_S:.0f} s watched "
-          f"in real time), one server process; {os.cpu_count()} cores")
+          f"in real time), {args.workers} server process(es); {os.cpu_count()} cores")
     print("answer round trip: the participant's POST until the reply, which the server sends once the answer is "
           "committed; commit: the commit itself inside the server (ResultsDB.save_trial)")
     print(f"{'backend':<11} {'done':>5} {'answers':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'commit p50':>10} "

@@ -1,7 +1,15 @@
-"""``studyapp serve``: the browser study server (:mod:`studyapp.web`) for online participants."""
+"""``studyapp serve``: the browser study server (:mod:`studyapp.web`) for online participants.
+
+``--workers N`` runs N server processes on one port (uvicorn's workers): the parent checks the design, renders
+the missing videos and makes the secret, then each worker builds the same app (:func:`worker_app`, from the
+settings the parent leaves in :data:`WORKER_ENV`) on its own database connection. The participant flow keeps
+nothing in a process's memory (:mod:`studyapp.web.flow`), so any worker serves any request; several workers
+need PostgreSQL, since an SQLite file is written by one server process.
+"""
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -11,6 +19,8 @@ from studyapp.cli.render import _size
 from studyapp.errors import InputError
 
 PASSWORD_ENV = "STUDYAPP_SERVE_PASSWORD"
+#: Where ``--workers`` leaves the server's settings for its worker processes (JSON; no password, only its file).
+WORKER_ENV = "STUDYAPP_SERVE_WORKER"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,6 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=int, default=1, help="processes rendering missing videos (default 1)")
     p.add_argument("--secret-file", type=Path, help="the server's secret, which signs participant links (made on "
                    "first start; default: <design>.serve-secret next to the design)")
+    p.add_argument("--workers", type=int, default=1, help="server processes sharing the port (default 1); more "
+                   "than one needs a PostgreSQL --db (README, 'Several server processes')")
     p.add_argument("--password-file", type=Path, help="file whose first line is the experimenter dashboard's "
                    f"password (or set {PASSWORD_ENV}); without either, /dashboard is off")
     p.set_defaults(func=_cmd_serve)
@@ -84,6 +96,33 @@ def default_cache(design_path: Path) -> Path:
     return design_path.resolve().parent / "prerendered"
 
 
+def secret_path(design_path: Path, secret_file: Path | None) -> Path:
+    """``--secret-file``, else ``<design>.serve-secret`` next to the design."""
+    return secret_file or design_path.with_name(f"{design_path.stem}.serve-secret")
+
+
+def check_workers(workers: int, url: str) -> None:
+    """``--workers``: at least 1, and more than 1 only on PostgreSQL (one line otherwise)."""
+    if workers < 1:
+        raise InputError(None, "--workers", "must be at least 1")
+    if workers > 1 and not url.startswith(("postgresql://", "postgres://")):
+        raise InputError(None, "--workers", f"{workers} server processes need a PostgreSQL database (--db "
+                         "postgresql://USER@HOST/DB); an SQLite file is served by one process: drop --workers")
+
+
+def worker_app() -> Any:
+    """The app of one ``--workers`` process, from the settings in :data:`WORKER_ENV` (uvicorn's app factory)."""
+    from studyapp.study.prerender import RenderSettings
+
+    cfg = json.loads(os.environ[WORKER_ENV])
+    design_path = Path(cfg["design"])
+    design, url = load_for_serve(design_path, cfg["db"])
+    password = dashboard_password(Path(cfg["password_file"]) if cfg["password_file"] else None)
+    settings = RenderSettings(size=tuple(cfg["size"]), fps=int(cfg["fps"]))
+    return make_app(design_path, url, Path(cfg["cache"]), Path(cfg["secret_file"]), password, design=design,
+                    settings=settings)
+
+
 def make_app(design_path: Path, db_url: str | None, cache_dir: Path | None, secret_file: Path | None,
              password: str | None, videos: Any = None, *, design: Any = None, settings: Any = None) -> Any:
     """The server's ASGI app for a design. ``videos``: a :class:`~studyapp.web.media.TrialVideos` to use
@@ -99,7 +138,7 @@ def make_app(design_path: Path, db_url: str | None, cache_dir: Path | None, secr
         loaded, url = load_for_serve(design_path, db_url)
     else:
         loaded, url = design, results_url(design_path, db_url)
-    tokens = Tokens(load_or_create_secret(secret_file or design_path.with_name(f"{design_path.stem}.serve-secret")))
+    tokens = Tokens(load_or_create_secret(secret_path(design_path, secret_file)))
     source = videos or PrerenderedVideos(loaded, cache_dir or default_cache(design_path), settings)
 
     def open_flow() -> Flow:
@@ -120,19 +159,33 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
     if args.fps < 1 or args.jobs < 1:
         raise InputError(None, "--fps/--jobs", "must be at least 1")
+    check_workers(args.workers, results_url(args.design, args.db))
     password = dashboard_password(args.password_file)
     design, url = load_for_serve(args.design, args.db)
     settings = RenderSettings(size=args.size, fps=args.fps)
     cache = args.cache or default_cache(args.design)
     report = prerender(design, cache, progress=ProgressBar(), jobs=args.jobs, settings=settings)
     print(f"{report.total} trial videos in {cache} ({report.rendered} rendered now)", flush=True)
-    app = make_app(args.design, url, cache, args.secret_file, password, design=design, settings=settings)
+    if args.workers > 1:
+        from studyapp.web.tokens import load_or_create_secret
+
+        secret = secret_path(args.design, args.secret_file)
+        load_or_create_secret(secret)   # made here once: the workers only read it
+        os.environ[WORKER_ENV] = json.dumps({
+            "design": str(args.design.resolve()), "db": url, "cache": str(Path(cache).resolve()),
+            "secret_file": str(secret.resolve()), "size": list(args.size), "fps": args.fps,
+            "password_file": str(args.password_file.resolve()) if args.password_file else None})
+        app: Any = "studyapp.cli.serve:worker_app"
+    else:
+        app = make_app(args.design, url, cache, args.secret_file, password, design=design, settings=settings)
     if password is None:
         print(f"note: the experimenter dashboard is off (give --password-file or set {PASSWORD_ENV})", file=sys.stderr)
-    print(f"Serving {args.design} at http://{args.host}:{args.port}/ (participants: /?PROLIFIC_PID=...; "
+    workers = f" with {args.workers} server processes" if args.workers > 1 else ""
+    print(f"Serving {args.design} at http://{args.host}:{args.port}/{workers} (participants: /?PROLIFIC_PID=...; "
           f"dashboard: /dashboard). Stop with Ctrl+C.", flush=True)
     # proxy_headers: behind a reverse proxy on this machine the client's address (rate limits) and the scheme
     # (secure cookies) come from its X-Forwarded-* headers; from anyone else they are ignored.
     uvicorn.run(app, host=args.host, port=args.port, proxy_headers=True, forwarded_allow_ips="127.0.0.1",
-                server_header=False, log_level="info")
+                server_header=False, log_level="info", factory=args.workers > 1,
+                workers=args.workers if args.workers > 1 else None)
     return 0

@@ -44,6 +44,16 @@ Every trial also stores its slots (``trial_slots``: condition, whose motion, sam
 they are due, and playing or answering waits for :meth:`Session.finish_block_instructions`; a participant
 resumed inside a block does not see them again (one who resumes at the block's first trial does).
 
+Restoring a session: everything the rules above need is in the database, so ``Session(design, db, id,
+session_id=N)`` continues stored session ``N`` where it stands, with no object kept in memory between two
+calls (the browser server restores the session for every request, in whichever of its processes gets it).
+The phase comes from the session's ``machine`` record (``consent_at``/``resumed_at``, :data:`INSTRUCTIONS_AT`,
+:data:`ENV_CHECK_AT`, written as the participant passes each screen, then the first unanswered trial as
+always); the current clip's plays from the ``plays`` rows of this session (the open one, the completed ones,
+those a front end lost: :data:`LOST_PLAYS`); dismissed block instructions from :data:`BLOCK_INTROS`; the time
+the clip was shown from this session's latest answer (else its environment check). A desktop session writes
+the same records, so one it left can be continued the same way.
+
 Attention checks (``design.attention_checks``): a trial whose plan has ``is_attention_check`` is scored by
 :func:`attention_passed`; when more checks fail than ``design.max_attention_failures`` allows, the session
 ends early with a polite message.
@@ -60,6 +70,7 @@ from __future__ import annotations
 
 import enum
 import time
+from datetime import datetime
 from dataclasses import asdict, dataclass, is_dataclass
 from typing import Any, Callable, Mapping, Sequence
 
@@ -88,6 +99,15 @@ class State(str, enum.Enum):
     DONE = "done"
     ENDED_EARLY = "ended_early"
     DECLINED = "declined"
+
+
+#: Keys of a session's ``machine`` record that say how far it got, so it can be restored from the database
+#: (``Session(..., session_id=...)``): the instructions read, the environment check done, the blocks whose
+#: instructions were dismissed, and the plays a front end lost (not counted against ``allow_replay = false``).
+INSTRUCTIONS_AT = "instructions_at"
+ENV_CHECK_AT = "env_check_at"
+BLOCK_INTROS = "block_intros_seen"
+LOST_PLAYS = "lost_plays"
 
 
 class SessionError(StudyappError):
@@ -394,6 +414,15 @@ class Session:
         A schedule to use instead of :func:`studyapp.study.schedule.participant_schedule` (tests, bundles).
     on_saved:
         Called with the :class:`TrialPlan` after its answer is committed (bots print "saved trial K").
+    machine:
+        More keys for the new session's ``machine`` record (the front end: ``{"frontend": "browser"}``).
+    session_id:
+        Continue this stored session of the participant instead of starting one: its state is restored from
+        the database alone (see "Restoring a session" in the module notes), so a front end that keeps no
+        session in memory (the browser server, any of its processes) drives the same state machine.
+    play_duration_s:
+        With ``session_id``: ``f(plan)``, the scene length the front end gave :meth:`record_play_started`
+        (stored with the answer as ``trial_duration_s`` when the current clip was played in this session).
     """
 
     def __init__(
@@ -408,6 +437,9 @@ class Session:
         plans: Sequence[Any] | None = None,
         n_rows: int | None = None,
         on_saved: Callable[[Any], None] | None = None,
+        machine: Mapping[str, Any] | None = None,
+        session_id: int | None = None,
+        play_duration_s: Callable[[Any], float | None] | None = None,
     ) -> None:
         self.design = design
         self.db = db
@@ -427,16 +459,21 @@ class Session:
         self.n_practice: int = sum(1 for p in self.plans if p.is_practice)
         self.n_trials: int = len(self.plans) - self.n_practice
         answered = db.answered_trials(self.participant_id)
-        self.resumed: bool = bool(answered)
-        if answered:
-            self._check_same_schedule()
         self._pos = next((i for i, p in enumerate(self.plans) if p.trial_index not in answered), len(self.plans))
-        self.session_id: int = db.start_session(self.participant_id, {**machine_basics(), "app_version": __version__})
         self.state: State = State.WELCOME
         self._intro_seen: set[str] = set()  # blocks whose instructions were dismissed in this session
         #: The results file to send back (remote bundle runs), set when the session ends; the final screen shows it.
         self.results_file: Any = None
         self._reset_trial()
+        if session_id is not None:
+            self.session_id: int = int(session_id)
+            self._restore(answered, play_duration_s)
+            return
+        self.resumed: bool = bool(answered)
+        if answered:
+            self._check_same_schedule()
+        self.session_id = db.start_session(self.participant_id, {**machine_basics(), "app_version": __version__,
+                                                                 **dict(machine or {})})
 
     # ------------------------------------------------------------------ setup helpers
     def _check_same_schedule(self) -> None:
@@ -461,6 +498,50 @@ class Session:
                                  "the stored answer does not match this participant's schedule (was the design's "
                                  "order or the studyapp version changed?); continue with the original version, "
                                  "or use a new participant id")
+
+    def _restore(self, answered: set[int], play_duration_s: Callable[[Any], float | None] | None) -> None:
+        """The state of stored session :attr:`session_id`, from the database alone (see the module notes)."""
+        row = next((s for s in self.db.sessions(self.participant_id) if s["id"] == self.session_id), None)
+        if row is None:
+            raise SessionError(f"participant {self.participant_id!r} has no session {self.session_id}")
+        m = row["machine"]
+        self._intro_seen = set(m.get(BLOCK_INTROS, []))
+        if m.get("consent") == "declined":
+            self.resumed = False
+            self.state = State.DECLINED
+            return
+        consented = "consent_at" in m or "resumed_at" in m
+        # before consent nothing of this session is answered: earlier answers make it a resumed one
+        self.resumed = "resumed_at" in m if consented else bool(answered)
+        if not consented:
+            return                                    # WELCOME
+        if INSTRUCTIONS_AT not in m:
+            self.state = State.INSTRUCTIONS
+            return
+        if ENV_CHECK_AT not in m:
+            self.state = State.ENV_CHECK
+            return
+        self._advance()                               # the one rule for what comes next (it may finish)
+        plan = self.current_trial()
+        if plan is None:
+            return
+        # shown when this session last moved on: its latest answer, else its environment check
+        mine = [t["answered_at"] for t in self.db.trials(self.participant_id) if t["session"] == self.session_id]
+        self._shown_wall = max(mine) if mine else m[ENV_CHECK_AT]
+        try:
+            ago = time.time() - datetime.fromisoformat(self._shown_wall).timestamp()
+            self._shown_mono = time.monotonic() - max(0.0, ago)
+        except (TypeError, ValueError):
+            self._shown_mono = None
+        lost = set(m.get(LOST_PLAYS, []))
+        plays = [p for p in self.db.plays(self.participant_id)
+                 if p["session"] == self.session_id and p["trial_index"] == plan.trial_index]
+        open_ = [p["id"] for p in plays if p["ended"] is None]
+        self._play_id = open_[-1] if open_ else None
+        self._plays = sum(1 for p in plays if p["id"] not in lost)
+        self._completed_plays = sum(1 for p in plays if p["completed"])
+        if plays and play_duration_s is not None:
+            self._played_s = play_duration_s(plan)
 
     def _reset_trial(self) -> None:
         self._shown_wall: str | None = None
@@ -509,6 +590,7 @@ class Session:
 
     def finish_instructions(self) -> State:
         self._expect(State.INSTRUCTIONS)
+        self.db.update_session_machine(self.session_id, {INSTRUCTIONS_AT: now_iso()})
         self.state = State.ENV_CHECK
         return self.state
 
@@ -516,8 +598,7 @@ class Session:
         """Store what the environment check found (GL renderer, refresh rate, audio device and latency, ...)
         with this session, then go to the first unanswered trial (or further)."""
         self._expect(State.ENV_CHECK)
-        if info:
-            self.db.update_session_machine(self.session_id, dict(info))
+        self.db.update_session_machine(self.session_id, {**dict(info or {}), ENV_CHECK_AT: now_iso()})
         self._advance()
         return self.state
 
@@ -589,6 +670,11 @@ class Session:
         return self._plays
 
     @property
+    def play_id(self) -> int | None:
+        """The id (``plays`` table) of the play started and not yet reported finished, or None."""
+        return self._play_id
+
+    @property
     def playing(self) -> bool:
         """A play of the current clip started and has not been reported finished (a browser page reloaded
         mid-clip leaves one open: the server closes it as not completed before the next play)."""
@@ -647,7 +733,11 @@ class Session:
         self._expect(State.PRACTICE, State.TRIALS)
         if self._play_id is None:
             raise SessionError("no clip is playing")
+        lost = self._play_id
         self.record_play_finished(False)
+        row = next((s for s in self.db.sessions(self.participant_id) if s["id"] == self.session_id), None)
+        known = list(row["machine"].get(LOST_PLAYS, [])) if row is not None else []
+        self.db.update_session_machine(self.session_id, {LOST_PLAYS: [*known, lost]})
         self._plays -= 1
 
     def can_rank(self) -> bool:
@@ -692,6 +782,7 @@ class Session:
         if self.block_instructions() is None:
             raise SessionError("no block instructions are due")
         self._intro_seen.add(getattr(plan, "block", "main"))
+        self.db.update_session_machine(self.session_id, {BLOCK_INTROS: sorted(self._intro_seen)})
 
     # ------------------------------------------------------------------ answers
     def _ready_to_answer(self, paradigms: tuple[str, ...]) -> Any:

@@ -55,6 +55,8 @@ _SQLITE_MAGIC = b"SQLite format 3\x00"
 _NEARLY_FULL_BYTES = 1 << 20
 #: The advisory lock every PostgreSQL write transaction takes (per database; any fixed 64-bit number).
 WRITE_LOCK_KEY = 0x5374756479617070  # "Studyapp"
+#: The first key of the advisory locks that run one participant's requests one at a time (:meth:`hold`).
+PARTICIPANT_LOCK_SPACE = 0x53747564  # "Stud"
 #: Where PostgreSQL records the rows a transaction changed (see :mod:`studyapp.study.row_checksums`).
 PG_DIRTY_TABLE = "_studyapp_dirty_rows"
 _PG_DIRTY_FUNC = "_studyapp_mark_dirty"
@@ -102,6 +104,9 @@ class Backend(Protocol):
         """The engine's own structural check: ``["ok"]`` or one entry per problem."""
     def begin_write(self, con: Connection) -> None:
         """Start a write transaction that runs alone among this database's writers."""
+    def hold(self, con: Connection, key: int, held: bool) -> None:
+        """Take (``held``) or give back lock ``key`` (a signed 32-bit number) across transactions, for one
+        participant's requests in several server processes; SQLite serves one process and needs none."""
     def kind(self, exc: BaseException) -> str:
         """full, readonly, busy, io, unreachable, damaged or other."""
     def problem(self, exc: BaseException, what: str) -> InputError:
@@ -253,6 +258,9 @@ class SQLiteBackend:
         # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
         con.execute("BEGIN IMMEDIATE")
 
+    def hold(self, con: Connection, key: int, held: bool) -> None:
+        pass   # one server process: its event loop already runs a participant's requests one at a time
+
     def kind(self, exc: BaseException) -> str:
         return _kind(exc)
 
@@ -318,6 +326,11 @@ class PostgresBackend:
         # READ COMMITTED: each statement after the lock sees every commit made before it was granted (a
         # REPEATABLE READ snapshot would be taken by the lock's own statement, before the wait)
         con.execute("BEGIN ISOLATION LEVEL READ COMMITTED; SELECT pg_advisory_xact_lock(%d)" % WRITE_LOCK_KEY)
+
+    def hold(self, con: Connection, key: int, held: bool) -> None:
+        # a session-level advisory lock in its own key space (two keys), apart from WRITE_LOCK_KEY's
+        con.execute(f"SELECT {'pg_advisory_lock' if held else 'pg_advisory_unlock'}(%d, %d)"
+                    % (PARTICIPANT_LOCK_SPACE, int(key)))
 
     def kind(self, exc: BaseException) -> str:
         import psycopg

@@ -33,16 +33,18 @@ Example
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import platform
 import random
 import sqlite3
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 from studyapp import __version__
 from studyapp.errors import InputError, StudyappError
@@ -627,6 +629,24 @@ class ResultsDB:
             except self.backend.errors:
                 pass
 
+    @contextmanager
+    def exclusive(self, name: str) -> Iterator[None]:
+        """``with db.exclusive(participant_id):`` — run this block alone among every connection to the database
+        that asks for the same name (PostgreSQL: an advisory lock, so several server processes never interleave
+        two requests of one participant; SQLite: nothing, one server process already does)."""
+        key = int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:4], "big", signed=True)
+        try:
+            self._backend.hold(self._con, key, True)
+        except self._backend.errors as exc:
+            raise self._backend.problem(exc, "the request waited too long for the participant's previous one") from None
+        try:
+            yield
+        finally:
+            try:
+                self._backend.hold(self._con, key, False)
+            except self._backend.errors:
+                pass   # the connection is gone, and its session-level lock with it
+
     def transaction(self, what: str = _NOT_SAVED) -> "ResultsDB._Tx":
         """``with db.transaction() as con:`` — all statements inside commit together or not at all, with the
         checksums of every row they wrote; a full disk, a read-only file or a lock held too long raise
@@ -746,9 +766,9 @@ class ResultsDB:
             return int(cur.lastrowid)
 
     def update_session_machine(self, session_id: int, machine: dict[str, Any]) -> None:
-        row = self._con.execute("SELECT machine FROM sessions WHERE id = ?", (session_id,)).fetchone()
-        merged = {**(json.loads(row[0]) if row else {}), **machine}
-        with self.transaction() as con:
+        with self.transaction() as con:   # read inside: another server process may write the same record
+            row = con.execute("SELECT machine FROM sessions WHERE id = ?", (session_id,)).fetchone()
+            merged = {**(json.loads(row[0]) if row else {}), **machine}
             con.execute("UPDATE sessions SET machine = ? WHERE id = ?", (json.dumps(merged, sort_keys=True, default=str), session_id))
 
     def end_session(self, session_id: int) -> None:

@@ -15,7 +15,9 @@ Routes (nothing else is served: no directory listing, no file by path)::
 Every participant page is one HTML shell with the page's state as JSON (``<script type="application/json">``,
 not executed) and ``/a/app.js``, which draws it and posts actions; each action's reply is the next state.
 All database work runs on the event loop's thread, one request at a time (SQLite's connection belongs to
-one thread; an answer's commit takes milliseconds), so two requests of one participant cannot interleave.
+one thread; an answer's commit takes milliseconds), so two requests of one participant cannot interleave; with
+several server processes on PostgreSQL the flow takes a per-participant lock for the same guarantee
+(:mod:`studyapp.web.flow`, "One session, any process").
 """
 from __future__ import annotations
 

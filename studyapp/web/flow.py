@@ -14,12 +14,23 @@ Participants and their rows
     used one, chosen in the database's write transaction (:meth:`~studyapp.study.storage.ResultsDB.add_participant`),
     so lab stations and browser participants share one balance.
 
+One session, any process
+    No participant state is kept in a server's memory: every request restores the participant's session from
+    the results database (``Session(..., session_id=...)``: the phase, the current trial, its plays, see
+    :mod:`studyapp.study.session`), does its one step through the session's methods and forgets it. So any
+    server process on the same PostgreSQL database (``studyapp serve --workers N``, or several servers behind
+    one reverse proxy sharing the secret file) can serve any request of any participant, and a server restart
+    changes nothing a participant sees. The session continued is the participant's latest one when it is an
+    open browser session, else a new one starts. One participant's requests run one at a time across processes
+    (:meth:`~studyapp.study.storage.ResultsDB.exclusive`, a PostgreSQL advisory lock per participant), as they
+    do on one process's event loop.
+
 Coming back
-    Reloading a page shows the same state. After a server restart the participant's session is opened again
-    from the database and continues at the first unanswered trial (a "welcome back" page first, as on the
-    desktop; a clip played but not answered is shown again and must be watched again). The study link
-    opened again with the same ``PROLIFIC_PID`` continues an unfinished participant; a participant who finished
-    (or ended) is refused.
+    Reloading a page shows the same state, and so does a server restart. The study link opened again with the
+    same ``PROLIFIC_PID`` continues an unfinished participant; a participant who finished (or ended) is refused.
+    A participant whose latest session was not an open browser one (one begun at a lab station) starts a new
+    session at the first unanswered trial, with a "welcome back" page first, as on the desktop (a clip played
+    but not answered is shown again and must be watched again).
 
 Abandonment
     A browser participant with no activity for the design's ``[online] abandon_after_min`` is abandoned when the
@@ -27,8 +38,9 @@ Abandonment
     (:meth:`Flow.sweep`): status ``ended_early``, and the
     last session's machine record gets :data:`~studyapp.study.storage.ABANDONED` (the time) and
     ``abandon_after_min``. Their answers are kept; their row is given out again. Coming back later, they read
-    that the session was closed. Activity is the latest session start or end, play start or end, and answer, or
-    any request this server process saw.
+    that the session was closed. Activity is the latest session start or end, play start or end, and answer, and
+    the latest request of any server process (the session's :data:`SEEN_AT`, written at most once per
+    :data:`SEEN_EVERY_S`).
 
 Paradigms
     A trial's page carries its paradigm (``rank``, ``pairwise``, ``mismatch``, ``rating``) and the answer goes to
@@ -40,15 +52,17 @@ Paradigms
 Must watch once
     The page reports when the video starts (``play``) and when it fires ``ended``; the server counts the play
     as complete only when at least the video's length (less :data:`WATCH_SLACK_S`) passed between the two,
-    so a page that skips ahead or speeds up has not watched.
+    so a page that skips ahead or speeds up has not watched. The reply to ``play`` carries a signed ticket with
+    the play's id and start time (:meth:`~studyapp.web.tokens.Tokens.play`); the page sends it with ``ended``,
+    so the process that gets ``ended`` knows the start without any memory of the one that got ``play``.
+    Several machines behind one proxy must keep their clocks in step (NTP).
 """
 from __future__ import annotations
 
 import re
 import secrets
 import time
-from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -68,6 +82,10 @@ WATCH_SLACK_S = 0.5
 #: Abandonment is looked for at most this often (it reads every unfinished participant's record); the
 #: timeout itself is minutes to hours.
 SWEEP_EVERY_S = 60.0
+#: A participant's presence (any request) is written to their session at most this often.
+SEEN_EVERY_S = 60.0
+#: The key of a session's ``machine`` record holding the latest request's time (ISO 8601, UTC).
+SEEN_AT = "seen_at"
 #: The longest text answer kept (a questionnaire comment).
 MAX_TEXT_CHARS = 5000
 
@@ -110,12 +128,6 @@ def _seconds(iso: str | None) -> float | None:
         return None
 
 
-@dataclass
-class _Play:
-    started: float
-    length_s: float
-
-
 class Flow:
     """Every browser participant of one study (see the module docstring)."""
 
@@ -126,9 +138,6 @@ class Flow:
         self.tokens = tokens
         self.videos = videos
         self.clock = clock
-        self._sessions: dict[str, Session] = {}
-        self._plays: dict[str, _Play] = {}
-        self._seen: dict[str, float] = {}
         self._lengths: dict[Path, float] = {}
         self._minutes: int | None = None
         self._swept: float | None = None
@@ -189,30 +198,35 @@ class Flow:
         params = prolific_params(raw)
         pid = params.get("PROLIFIC_PID") or f"web-{secrets.token_hex(6)}"
         self.sweep()
-        try:
-            session = self._open(pid, params)
-        except ParticipantFinishedError:
-            raise Refused("online.expired" if self._abandoned(pid) else "online.already_done") from None
-        if session.state is State.WELCOME and not session.resumed:
-            if consent:
-                session.accept_consent()
-            else:
-                session.decline_consent()
-        self._touch(pid)
+        with self.db.exclusive(pid):
+            try:
+                session = self._open(pid, params)
+            except ParticipantFinishedError:
+                raise Refused("online.expired" if self._abandoned(pid) else "online.already_done") from None
+            if session.state is State.WELCOME and not session.resumed:
+                if consent:
+                    session.accept_consent()
+                else:
+                    session.decline_consent()
+            self._touch(session)
         return self.tokens.session(pid)
 
-    def _open(self, pid: str, params: Mapping[str, str] | None = None) -> Session:
-        """The participant's live session: in memory, else opened from the database (a new participant is
-        registered on the least used row)."""
-        session = self._sessions.get(pid)
-        if session is None:
-            existed = self.db.participant(pid) is not None
-            session = Session(self.design, self.db, pid)
-            self.db.update_session_machine(session.session_id, {
-                "frontend": "browser", **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
-            if existed and not session.resumed:
-                session.accept_consent()   # consented when the record was made; nothing answered yet
-            self._sessions[pid] = session
+    def _open(self, pid: str, params: Mapping[str, str] | None = None, create: bool = True) -> Session:
+        """The participant's session, restored from the database: their open browser session (see "One
+        session, any process"), else (``create``) a new one (a new participant is registered on the least used
+        row); without ``create`` and with no open session, :class:`Refused`."""
+        sessions = self.db.sessions(pid)
+        last = sessions[-1] if sessions else None
+        if last is not None and last["ended"] is None and last["machine"].get("frontend") == "browser":
+            return Session(self.design, self.db, pid, session_id=last["id"], play_duration_s=self._length)
+        if not create:
+            raise Refused("online.bad_link")
+        existed = self.db.participant(pid) is not None
+        session = Session(self.design, self.db, pid, machine={
+            "frontend": "browser", SEEN_AT: self._now_iso(),
+            **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
+        if existed and not session.resumed:
+            session.accept_consent()   # consented when the record was made; nothing answered yet
         return session
 
     def participant_for(self, token: str) -> str:
@@ -222,17 +236,28 @@ class Flow:
         return pid
 
     # ------------------------------------------------------------------ abandonment
-    def _touch(self, pid: str) -> None:
-        self._seen[pid] = self.clock()
+    def _touch(self, session: Session) -> None:
+        """Record that the participant is here (their session's :data:`SEEN_AT`, at most once per
+        :data:`SEEN_EVERY_S`): a page read for a long time is activity too, whichever process served it."""
+        if session.finished:
+            return
+        now = self.clock()
+        row = next((s for s in self.db.sessions(session.participant_id) if s["id"] == session.session_id), None)
+        seen = _seconds(row["machine"].get(SEEN_AT)) if row is not None else None
+        if seen is None or now - seen >= SEEN_EVERY_S:
+            self.db.update_session_machine(session.session_id, {SEEN_AT: self._now_iso()})
+
+    def _now_iso(self) -> str:
+        return datetime.fromtimestamp(self.clock(), timezone.utc).isoformat(timespec="milliseconds")
 
     def _abandoned(self, pid: str) -> bool:
         return any(ABANDONED in s["machine"] for s in self.db.sessions(pid))
 
     def last_activity(self, pid: str) -> float:
         """The time (seconds since the epoch) of the participant's latest recorded or seen activity."""
-        times = [self._seen.get(pid)]
+        times: list[float | None] = []
         for s in self.db.sessions(pid):
-            times += [_seconds(s["started"]), _seconds(s["ended"])]
+            times += [_seconds(s["started"]), _seconds(s["ended"]), _seconds(s["machine"].get(SEEN_AT))]
         for p in self.db.plays(pid):
             times += [_seconds(p["started"]), _seconds(p["ended"])]
         times += [_seconds(t["answered_at"]) for t in self.db.trials(pid)]
@@ -256,27 +281,34 @@ class Flow:
                 continue   # a lab participant: the experimenter decides when they stop
             if now - self.last_activity(rec.id) <= limit_s:
                 continue
-            self.db.update_session_machine(sessions[-1]["id"], {ABANDONED: now_iso(),
-                                                                "abandon_after_min": self.design.online.abandon_after_min})
-            self.db.set_status(rec.id, "ended_early")
-            live = self._sessions.pop(rec.id, None)
-            if live is not None:
-                self.db.end_session(live.session_id)
-            self._plays.pop(rec.id, None)
+            with self.db.exclusive(rec.id):   # not while another process serves them; looked at again inside
+                current = self.db.participant(rec.id)
+                if current is None or current.status != "active" or now - self.last_activity(rec.id) <= limit_s:
+                    continue
+                sessions = self.db.sessions(rec.id)
+                self.db.update_session_machine(sessions[-1]["id"], {
+                    ABANDONED: now_iso(), "abandon_after_min": self.design.online.abandon_after_min})
+                self.db.set_status(rec.id, "ended_early")
+                for s in sessions:
+                    if s["ended"] is None and s["machine"].get("frontend") == "browser":
+                        self.db.end_session(s["id"])
             out.append(rec.id)
         return out
 
     # ------------------------------------------------------------------ what a page shows
     def state(self, pid: str) -> dict[str, Any]:
         """The page the participant sees now, as JSON."""
-        rec = self.db.participant(pid)
-        if rec is None:
-            raise Refused("online.bad_link")
-        self._touch(pid)
-        if rec.status != "active":
-            self._sessions.pop(pid, None)
-            return self._final(pid, rec.status)
-        session = self._open(pid)
+        with self.db.exclusive(pid):
+            rec = self.db.participant(pid)
+            if rec is None:
+                raise Refused("online.bad_link")
+            if rec.status != "active":
+                return self._final(pid, rec.status)
+            session = self._open(pid)
+            self._touch(session)
+            return self._show(session, pid)
+
+    def _show(self, session: Session, pid: str) -> dict[str, Any]:
         tok = self.tokens.session(pid)
         common = {"csrf": self.tokens.csrf(pid), "base": f"/s/{tok}/"}
         st = session.state
@@ -423,8 +455,10 @@ class Flow:
     # ------------------------------------------------------------------ media
     def media(self, pid: str, name: str) -> Path:
         """The current trial's video file, when ``name`` is its opaque name for this participant."""
-        session = self._open(pid)
-        plan = session.current_trial()
+        rec = self.db.participant(pid)
+        if rec is None or rec.status != "active":
+            raise Refused("online.bad_link")
+        plan = self._open(pid, create=False).current_trial()
         if plan is None or name != self.tokens.media(pid, plan.trial_index):
             raise Refused("online.bad_link")
         return self.videos.video(plan)
@@ -439,13 +473,21 @@ class Flow:
     def act(self, pid: str, action: str, body: Mapping[str, Any]) -> dict[str, Any]:
         """Do one participant action and return the page to show next (raises :class:`NotSaved` with the
         participant's message when the session refuses an answer, :class:`BadRequest` for a malformed one)."""
-        rec = self.db.participant(pid)
-        if rec is None:
-            raise Refused("online.bad_link")
-        if rec.status != "active":
-            return self.state(pid)
-        session = self._open(pid)
-        self._touch(pid)
+        with self.db.exclusive(pid):
+            rec = self.db.participant(pid)
+            if rec is None:
+                raise Refused("online.bad_link")
+            if rec.status != "active":
+                return self._final(pid, rec.status)
+            session = self._open(pid)
+            self._touch(session)
+            extra = self._act(session, pid, action, body)
+            if session.finished:
+                return self._final(pid, "done" if session.state is State.DONE else "ended_early")
+            return {**self._show(session, pid), **extra}
+
+    def _act(self, session: Session, pid: str, action: str, body: Mapping[str, Any]) -> dict[str, Any]:
+        """Do ``action`` on the session; what the reply carries besides the page (the ticket of a play)."""
         try:
             if action == "continue":
                 if session.state is State.WELCOME:
@@ -459,14 +501,13 @@ class Flow:
             elif action == "sound":
                 session.record_env_check(self._env(body))
             elif action == "play":
-                self._play(session, pid)
+                return {"play": self._play(session, pid)}
             elif action == "ended":
-                self._ended(session, pid)
+                self._ended(session, pid, body)
             elif action == "block":
                 session.finish_block_instructions()
             elif action == "answer":
                 self._answer(session, body)
-                self._plays.pop(pid, None)
             elif action == "questionnaire":
                 session.submit_questionnaire(self._answers(body))
             else:
@@ -475,9 +516,7 @@ class Flow:
             raise NotSaved(str(exc)) from None
         except SessionError as exc:          # not possible in this state: a stale or forged page
             raise BadRequest(str(exc)) from None
-        if session.finished:
-            self._sessions.pop(pid, None)
-        return self.state(pid)
+        return {}
 
     @staticmethod
     def _answer(session: Session, body: Mapping[str, Any]) -> None:
@@ -519,22 +558,22 @@ class Flow:
             info["screen"] = f"{int(w)}x{int(h)}"
         return info
 
-    def _play(self, session: Session, pid: str) -> None:
+    def _play(self, session: Session, pid: str) -> str:
         if session.playing:
             # the page was reloaded (or lost) while a play was open: that play did not finish
             session.abandon_play()
         plan = session.current_trial()
         if plan is None:
             raise BadRequest("no clip to play now")
-        length = self._length(plan)
-        session.record_play_started(duration_s=length)
-        self._plays[pid] = _Play(self.clock(), length)
+        play_id = session.record_play_started(duration_s=self._length(plan))
+        return self.tokens.play(pid, play_id, self.clock())
 
-    def _ended(self, session: Session, pid: str) -> None:
-        play = self._plays.pop(pid, None)
-        if play is None or not session.playing:
-            raise BadRequest("no clip is playing")
-        watched = self.clock() - play.started >= play.length_s - WATCH_SLACK_S
+    def _ended(self, session: Session, pid: str, body: Mapping[str, Any]) -> None:
+        play_id, plan = session.play_id, session.current_trial()
+        started = None if play_id is None else self.tokens.play_started(pid, play_id, body.get("play"))
+        if started is None or plan is None:
+            raise BadRequest("no clip is playing (or not the play this page started)")
+        watched = self.clock() - started >= self._length(plan) - WATCH_SLACK_S
         session.record_play_finished(watched)
 
     def _answers(self, body: Mapping[str, Any]) -> dict[str, Any]:

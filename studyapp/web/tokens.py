@@ -1,4 +1,4 @@
-"""The server's secret and the opaque tokens derived from it: session, media and CSRF tokens.
+"""The server's secret and the opaque tokens derived from it: session, media, play and CSRF tokens.
 
 Every token is an HMAC-SHA256 of a purpose and the participant id (and a trial index for media) under the
 server's secret, cut to 128 bits and written URL-safe. So tokens are unguessable without the secret, differ
@@ -16,6 +16,9 @@ True
 (22, True)
 >>> t.participant_for(t.session("P02"), ["P01", "P02"])
 'P02'
+>>> ticket = t.play("P01", 7, 1700000000.25)
+>>> t.play_started("P01", 7, ticket), t.play_started("P01", 8, ticket), t.play_started("P02", 7, ticket)
+(1700000000.25, None, None)
 """
 from __future__ import annotations
 
@@ -76,6 +79,25 @@ class Tokens:
     def csrf(self, participant: str) -> str:
         """The token every state-changing request of this participant must carry."""
         return self._mac("csrf", participant)
+
+    def play(self, participant: str, play_id: int, started: float) -> str:
+        """The ticket of one play, ``<play id>.<start time in ms>.<mac>``: the page sends it back when the clip
+        ends, so whichever server process gets that request knows when the play started (by the server's clock)
+        without keeping anything in memory."""
+        ms = int(round(float(started) * 1000))
+        return f"{int(play_id)}.{ms}.{self._mac('play', participant, int(play_id), ms)}"
+
+    def play_started(self, participant: str, play_id: int, ticket: object) -> float | None:
+        """The start time (seconds) in a ticket of this participant's play ``play_id``; None when the ticket is
+        not one (malformed, forged, another play's or another participant's)."""
+        if not isinstance(ticket, str) or len(ticket) > 80 or ticket.count(".") != 2:
+            return None
+        pid_text, ms_text, mac = ticket.split(".")
+        if not (pid_text.isdigit() and ms_text.isdigit()) or int(pid_text) != int(play_id):
+            return None
+        if not hmac.compare_digest(mac, self._mac("play", participant, int(play_id), int(ms_text))):
+            return None
+        return int(ms_text) / 1000.0
 
     def entry_csrf(self, nonce: str) -> str:
         """The CSRF token of the consent page, bound to a random ``nonce`` the page carries too."""

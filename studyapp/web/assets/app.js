@@ -196,7 +196,7 @@
     }
     video.addEventListener("ended", function () {
       if (!playing) return;
-      post("ended", {}, function (next) { S = next; return true; }).then(function () { playing = false; refresh(); });
+      post("ended", {play: S.play}, function (next) { S = next; return true; }).then(function () { playing = false; refresh(); });
     });
     function submit() {
       if (next.disabled) return;
