@@ -334,6 +334,9 @@ def test_the_demo_is_served(tmp_path, browser_for) -> None:
         assert b.state["screen"] == "questionnaire"
         b.act("questionnaire", {"answers": {q["id"]: 5 for q in b.state["items"]}})
         assert b.state["screen"] == "done"
+        # the demo's [online] table: Prolific's completion code and redirect, as a real study has them
+        assert "DEMO1234" in b.state["code"]
+        assert b.state["redirect"] == "https://app.prolific.com/submissions/complete?cc=DEMO1234"
         for url, headers, body in b.seen:
             assert conditions_named_in(design, " ".join([url, json.dumps(headers), body.decode("latin-1")])) == []
     db = study.db()
