@@ -330,7 +330,7 @@ class Flow:
         out: list[str] = []
         for block in self.design.trial_blocks:
             if block.paradigm == "rank":
-                text = self.t("instructions.how", keys="1, 2, 3")
+                text = self.t("instructions.how", keys=self._rank_keys(self._labels(3)))
             elif block.paradigm in ("pairwise", "mismatch"):
                 text = self.t("instructions.how_pref", n=block.levels)
                 if block.reasons:
@@ -340,6 +340,19 @@ class Flow:
             if text not in out:
                 out.append(text)
         return out
+
+    def _labels(self, n: int) -> list[str]:
+        """The figures' labels on a trial of ``n`` figures, left to right."""
+        return list(self.design.slot_labels_for(n) or [str(k + 1) for k in range(n)])
+
+    @staticmethod
+    def _rank_keys(labels: list[str]) -> str:
+        """Which number key picks which figure, as the desktop says it: the digits name figures, not ranks.
+
+        >>> Flow._rank_keys(["A", "B", "C"])
+        '1 = A, 2 = B, 3 = C'
+        """
+        return ", ".join(f"{i + 1} = {label}" for i, label in enumerate(labels))
 
     def _items(self) -> list[dict[str, Any]]:
         out = []
@@ -373,8 +386,7 @@ class Flow:
             next_key = "rank.start_study"
         else:
             next_key = "rank.next_practice" if plan.is_practice else "rank.next"
-        n = len(plan.slots)
-        labels = list(self.design.slot_labels_for(n) or [str(k + 1) for k in range(n)])
+        labels = self._labels(len(plan.slots))
         paradigm = getattr(plan, "paradigm", "rank")
         block = self.design.block(getattr(plan, "block", "main"))
         pb = self.design.playback
@@ -383,7 +395,8 @@ class Flow:
         if paradigm == "rank":
             texts |= {k: self.t(k) for k in ("trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
                                              "rank.third", "rank.drop_here", "rank.tie_on", "rank.tie_off")}
-            texts |= {"start_hint": self.t("rank.start_hint", keys="1, 2, 3"), "still": self.t("rank.still", criteria="{criteria}")}
+            texts |= {"start_hint": self.t("rank.start_hint", keys=self._rank_keys(labels)),
+                      "still": self.t("rank.still", criteria="{criteria}")}
             answer: dict[str, Any] = {}
         elif paradigm in ("pairwise", "mismatch"):
             texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),

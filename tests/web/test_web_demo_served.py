@@ -162,6 +162,7 @@ def test_the_demo_served_with_its_prerendered_videos_to_a_prolific_participant_i
         wait.until(lambda d: heading() == "Practice clip 1 of 1")
         assert answer_before_watching() == 422
         watch()
+        assert chrome.find_element(By.ID, "hint").text.endswith("or press 1 = A, 2 = B, 3 = C.")
         rank_by_drag(best_first())
         next_clip()
         wait.until(lambda d: heading() == "Clip 1 of 5")

@@ -179,8 +179,10 @@
       panel.draw();
       var missing = panel.missing();
       next.disabled = !watched || missing.length > 0 || playing;
+      // nothing answered yet: how to answer (mouse and keys), as the desktop says it; then what is still open
       hint.textContent = !watched ? S.texts["rank.wait"] :
-        (missing.length ? S.texts.still.replace("{criteria}", missing.join(", ")) : S.texts["rank.next_ok"]);
+        (missing.length === panel.size ? S.texts.start_hint :
+          (missing.length ? S.texts.still.replace("{criteria}", missing.join(", ")) : S.texts["rank.next_ok"]));
     }
     function startPlay() {
       if (playing || !S.can_play) return;
@@ -266,6 +268,7 @@
       });
     }
     return {
+      size: S.criteria.length,
       draw: function () {
         panel.textContent = "";
         S.criteria.forEach(function (c, ci) {
@@ -332,6 +335,7 @@
       return chosen.some(function (k) { return k !== null && S.options[k].value !== 0; });
     }
     return {
+      size: S.criteria.length,
       draw: function () {
         panel.textContent = "";
         S.criteria.forEach(function (c, ci) {
@@ -416,6 +420,7 @@
       });
     }
     return {
+      size: -1,   // no start hint: the sliders' keys are the browser's own (see instructions.how_rating)
       draw: draw,
       missing: function () {
         var out = [];
