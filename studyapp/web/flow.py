@@ -292,7 +292,7 @@ class Flow:
         if st is State.INSTRUCTIONS:
             return self._page("instructions", heading=self.t("instructions.title"),
                               text=self.design.instructions, questions_title=self.t("instructions.questions"),
-                              criteria=self._criteria(), how_title=self.t("instructions.how_title"),
+                              criteria=self._criteria(), how_title=self._how_title(),
                               how="\n\n".join(self._how()),
                               ties=self.t("instructions.ties") if self.design.playback.allow_ties else "",
                               button=self.t("page.continue"), **common)
@@ -324,6 +324,11 @@ class Flow:
     def _criteria(self, ids: list[str] | None = None) -> list[dict[str, str]]:
         return [{"id": c.id, "label": c.label, "question": c.question, "explanation": c.explanation}
                 for c in self.design.criteria if ids is None or c.id in ids]
+
+    def _how_title(self) -> str:
+        """"How to rank" for a ranking-only design, else "How to answer" (as the desktop's instructions)."""
+        only_rank = [b.paradigm for b in self.design.trial_blocks] == ["rank"]
+        return self.t("instructions.how_title" if only_rank else "instructions.how_answer_title")
 
     def _how(self) -> list[str]:
         """How to answer, for each paradigm the design's blocks use (in their order)."""

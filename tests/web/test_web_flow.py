@@ -331,6 +331,7 @@ def test_the_demo_is_served(tmp_path, browser_for) -> None:
         # the number keys name figures, not ranks: the page says which key is which figure, as the desktop does
         assert b.state["texts"]["start_hint"].endswith("or press 1 = A, 2 = B, 3 = C.")
         assert any(b"1 = A, 2 = B, 3 = C puts that figure in the next free box" in body for _, _, body in b.seen)
+        assert any(b'"how_title": "How to rank"' in body for _, _, body in b.seen)
         while b.state["screen"] == "trial":
             b.watch()
             b.answer_well()

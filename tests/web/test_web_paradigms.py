@@ -61,6 +61,7 @@ def test_a_participant_answers_every_paradigm_block_in_the_browser(example, brow
         for blk in study.design.trial_blocks:   # the instructions say how to answer each paradigm
             key = {"rank": "instructions.how", "rating": "instructions.how_rating"}.get(blk.paradigm, "instructions.how_pref")
             assert study.design.texts[key].split("{")[0][:40] in how
+        assert b.state["how_title"] == "How to answer"     # not "How to rank": these designs do not rank
         b.act("continue")
         b.act("sound", {})
         blocks_seen, paradigms, tried_bad = 0, set(), False
