@@ -72,6 +72,18 @@ SWEEP_EVERY_S = 60.0
 MAX_TEXT_CHARS = 5000
 
 
+def digit_points(n_anchors: int) -> list[float]:
+    """Where the number keys 1, 2, .. put a rating slider, as on the desktop (``studyapp.ui.rating``, a module
+    of the same layer): the centres of the anchors' equal intervals on 0..100, or 10, 20, .. 90 without anchors.
+
+    >>> digit_points(3), digit_points(0)[:3]
+    ([16.67, 50.0, 83.33], [10.0, 20.0, 30.0])
+    """
+    if not n_anchors:
+        return [10.0 * k for k in range(1, 10)]
+    return [round(100.0 * (k + 0.5) / n_anchors, 2) for k in range(min(n_anchors, 9))]
+
+
 class Refused(Exception):
     """The participant cannot (or can no longer) take part; ``key`` names the participant text."""
 
@@ -341,7 +353,7 @@ class Flow:
                 if block.reasons:
                     text += "\n\n" + self.t("instructions.how_reasons")
             else:
-                text = self.t("instructions.how_rating", n=max(2, len(block.anchors) or 5))
+                text = self.t("instructions.how_rating", n=len(digit_points(len(block.anchors))))
             if text not in out:
                 out.append(text)
         return out
@@ -411,8 +423,8 @@ class Flow:
         else:
             texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),
                       "unset": self.t("rating.unset"), "still": self.t("rating.still", sliders="{criteria}"),
-                      "start_hint": self.t("rating.start_hint", n=max(2, len(block.anchors) or 5))}
-            answer = {"anchors": list(block.anchors)}
+                      "start_hint": self.t("rating.start_hint", n=len(digit_points(len(block.anchors))))}
+            answer = {"anchors": list(block.anchors), "points": digit_points(len(block.anchors))}
         texts["next"] = self.t(next_key)
         return self._page(
             "trial", paradigm=paradigm, progress=session.progress_label(),

@@ -72,6 +72,11 @@ def test_a_participant_answers_every_paradigm_block_in_the_browser(example, brow
                 b.act("block")
                 continue
             paradigms.add(b.state["paradigm"])
+            if b.state["paradigm"] == "rating":    # the number keys jump where the desktop's do
+                from studyapp.ui.rating import digit_points
+                points = digit_points(len(b.state["anchors"]))
+                assert b.state["points"] == pytest.approx(points, abs=0.01)
+                assert f"number keys 1-{len(points)} jump" in how
             b.watch()
             if not tried_bad:
                 for bad, code in _bad_answers(b.state):
