@@ -49,6 +49,9 @@ _FALSE = {"0", "false", "f", "no", "n", ""}
 def _is_sqlite(path: Path) -> bool:
     """True for a SQLite database (by its header, whatever the file is called); the file must exist."""
     if not path.exists():
+        if str(path).startswith(("postgresql:", "postgres:")):    # a `studyapp serve --db` URL (Path ate its //)
+            raise AnalysisInputError(path, None, "a PostgreSQL database is not read here: write it out with "
+                                     "`studyapp export URL --csv results.csv` and analyse the CSV")
         raise AnalysisInputError(path, None, "file not found")
     with open(path, "rb") as fh:
         return fh.read(16).startswith(b"SQLite format 3")

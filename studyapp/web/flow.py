@@ -90,6 +90,18 @@ SEEN_AT = "seen_at"
 MAX_TEXT_CHARS = 5000
 
 
+def digit_points(n_anchors: int) -> list[float]:
+    """Where the number keys 1, 2, .. put a rating slider, as on the desktop (``studyapp.ui.rating``, a module
+    of the same layer): the centres of the anchors' equal intervals on 0..100, or 10, 20, .. 90 without anchors.
+
+    >>> digit_points(3), digit_points(0)[:3]
+    ([16.67, 50.0, 83.33], [10.0, 20.0, 30.0])
+    """
+    if not n_anchors:
+        return [10.0 * k for k in range(1, 10)]
+    return [round(100.0 * (k + 0.5) / n_anchors, 2) for k in range(min(n_anchors, 9))]
+
+
 class Refused(Exception):
     """The participant cannot (or can no longer) take part; ``key`` names the participant text."""
 
@@ -324,7 +336,7 @@ class Flow:
         if st is State.INSTRUCTIONS:
             return self._page("instructions", heading=self.t("instructions.title"),
                               text=self.design.instructions, questions_title=self.t("instructions.questions"),
-                              criteria=self._criteria(), how_title=self.t("instructions.how_title"),
+                              criteria=self._criteria(), how_title=self._how_title(),
                               how="\n\n".join(self._how()),
                               ties=self.t("instructions.ties") if self.design.playback.allow_ties else "",
                               button=self.t("page.continue"), **common)
@@ -357,12 +369,17 @@ class Flow:
         return [{"id": c.id, "label": c.label, "question": c.question, "explanation": c.explanation}
                 for c in self.design.criteria if ids is None or c.id in ids]
 
+    def _how_title(self) -> str:
+        """"How to rank" for a ranking-only design, else "How to answer" (as the desktop's instructions)."""
+        only_rank = [b.paradigm for b in self.design.trial_blocks] == ["rank"]
+        return self.t("instructions.how_title" if only_rank else "instructions.how_answer_title")
+
     def _how(self) -> list[str]:
         """How to answer, for each paradigm the design's blocks use (in their order)."""
         out: list[str] = []
         for block in self.design.trial_blocks:
             if block.paradigm == "rank":
-                text = self.t("instructions.how", keys="1, 2, 3")
+                text = self.t("instructions.how", keys=self._rank_keys(self._labels(3)))
             elif block.paradigm in ("pairwise", "mismatch"):
                 names = self.design.slot_labels_for(2) or ("1", "2")  # what the answers call the figures
                 first, last = names[0], names[-1]
@@ -370,10 +387,23 @@ class Flow:
                 if block.reasons:
                     text += "\n\n" + self.t("instructions.how_reasons")
             else:
-                text = self.t("instructions.how_rating", n=max(2, len(block.anchors) or 5))
+                text = self.t("instructions.how_rating", n=len(digit_points(len(block.anchors))))
             if text not in out:
                 out.append(text)
         return out
+
+    def _labels(self, n: int) -> list[str]:
+        """The figures' labels on a trial of ``n`` figures, left to right."""
+        return list(self.design.slot_labels_for(n) or [str(k + 1) for k in range(n)])
+
+    @staticmethod
+    def _rank_keys(labels: list[str]) -> str:
+        """Which number key picks which figure, as the desktop says it: the digits name figures, not ranks.
+
+        >>> Flow._rank_keys(["A", "B", "C"])
+        '1 = A, 2 = B, 3 = C'
+        """
+        return ", ".join(f"{i + 1} = {label}" for i, label in enumerate(labels))
 
     def _items(self) -> list[dict[str, Any]]:
         out = []
@@ -407,8 +437,7 @@ class Flow:
             next_key = "rank.start_study"
         else:
             next_key = "rank.next_practice" if plan.is_practice else "rank.next"
-        n = len(plan.slots)
-        labels = list(self.design.slot_labels_for(n) or [str(k + 1) for k in range(n)])
+        labels = self._labels(len(plan.slots))
         paradigm = getattr(plan, "paradigm", "rank")
         block = self.design.block(getattr(plan, "block", "main"))
         pb = self.design.playback
@@ -417,7 +446,8 @@ class Flow:
         if paradigm == "rank":
             texts |= {k: self.t(k) for k in ("trial.rank_now", "trial.rank_replay", "rank.first", "rank.second",
                                              "rank.third", "rank.drop_here", "rank.tie_on", "rank.tie_off")}
-            texts |= {"start_hint": self.t("rank.start_hint", keys="1, 2, 3"), "still": self.t("rank.still", criteria="{criteria}")}
+            texts |= {"start_hint": self.t("rank.start_hint", keys=self._rank_keys(labels)),
+                      "still": self.t("rank.still", criteria="{criteria}")}
             answer: dict[str, Any] = {}
         elif paradigm in ("pairwise", "mismatch"):
             texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),
@@ -427,8 +457,8 @@ class Flow:
         else:
             texts |= {"trial.rank_now": self.t("trial.answer_now"), "trial.rank_replay": self.t("trial.answer_replay"),
                       "unset": self.t("rating.unset"), "still": self.t("rating.still", sliders="{criteria}"),
-                      "start_hint": self.t("rating.start_hint", n=max(2, len(block.anchors) or 5))}
-            answer = {"anchors": list(block.anchors)}
+                      "start_hint": self.t("rating.start_hint", n=len(digit_points(len(block.anchors))))}
+            answer = {"anchors": list(block.anchors), "points": digit_points(len(block.anchors))}
         texts["next"] = self.t(next_key)
         return self._page(
             "trial", paradigm=paradigm, progress=session.progress_label(),

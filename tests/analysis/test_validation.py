@@ -234,3 +234,10 @@ def test_skillings_mack_permutation_p_reaches_stats_and_report(clean: pd.DataFra
     assert main([str(src), "--out", str(tmp_path / "b"), "--incomplete", "skillings-mack", "--permutations", "0",
                  "--bootstrap", "50"]) == 0
     assert "permutation" not in (tmp_path / "b" / "report.md").read_text()
+
+
+def test_a_postgresql_url_is_told_to_export_first() -> None:
+    """``studyapp serve --db postgresql://...`` keeps results in PostgreSQL; the analysis reads files, so the
+    message says how to get one (not "file not found" for a mangled path)."""
+    with pytest.raises(AnalysisInputError, match=r"studyapp export URL --csv"):
+        load_results("postgresql://postgres@/study?host=/tmp/pg&port=5432")

@@ -91,8 +91,14 @@ def test_pairwise_and_rating_pages_in_chromium(tmp_path, chrome) -> None:
         for k in range(2):                             # the pair block's two stimuli
             wait.until(lambda d: d.find_elements(By.ID, "opt-realism-2"))
             watch()
-            click("#opt-realism-2")                    # "Clearly B": the right figure
-            click("#reason-1")                         # "Timing"
+            if k == 0:                                 # by clicks
+                click("#opt-realism-2")                # "Clearly B": the right figure
+                click("#reason-1")                     # "Timing"
+            else:                                      # by keys: 5 = clearly B; Down to the reasons, 2 = Timing
+                body = chrome.find_element(By.TAG_NAME, "body")
+                for key in ("5", Keys.ARROW_DOWN, "2"):
+                    body.send_keys(key)
+                assert chrome.find_element(By.ID, "reason-1").is_selected()
             click("#next")
             wait.until(lambda d: answered() == k + 1)
         wait.until(lambda d: heading() == "The next part")
@@ -105,9 +111,14 @@ def test_pairwise_and_rating_pages_in_chromium(tmp_path, chrome) -> None:
             watch()
             assert not chrome.find_element(By.ID, "next").is_enabled()
             sliders = chrome.find_elements(By.CSS_SELECTOR, "input[type=range]")
-            for i, s in enumerate(sliders):           # every slider moved: 50 + 10 (i + 1) with the keyboard
-                for _ in range(10 * (i + 1)):
-                    s.send_keys(Keys.ARROW_RIGHT)
+            if done == 2:                             # every slider moved: 50 + 10 (i + 1) with its arrow keys
+                for i, s in enumerate(sliders):
+                    for _ in range(10 * (i + 1)):
+                        s.send_keys(Keys.ARROW_RIGHT)
+            else:                                     # the number keys jump to the anchors: 2 = "Good" (75),
+                body = chrome.find_element(By.TAG_NAME, "body")  # Down = the next slider, 1 = "Bad" (25)
+                for key in ("2", Keys.ARROW_DOWN, "1"):
+                    body.send_keys(key)
             click("#next")
             wait.until(lambda d: answered() == done + 1)
             done += 1
@@ -132,5 +143,7 @@ def test_pairwise_and_rating_pages_in_chromium(tmp_path, chrome) -> None:
     assert all(json.loads(r[2]) == ["Timing"] for r in pair)
     rating = read_db(db, "SELECT trial_index, slot, value FROM judgements j JOIN trials t USING (participant, "
                          "trial_index) WHERE t.paradigm = 'rating' ORDER BY trial_index, slot")
-    assert rating and all(v == 50 + 10 * (slot + 1) for _, slot, v in rating)
+    first = min(t for t, _, _ in rating)
+    assert [v for t, _, v in rating if t == first] == [60, 70]
+    assert [v for t, _, v in rating if t != first] == [75, 25]
     assert read_db(db, "SELECT status FROM participants") == [("done",)]

@@ -326,12 +326,19 @@ def test_the_demo_is_served(tmp_path, browser_for) -> None:
         b = browser_for(client, study)
         _to_first_trial(b, "PROLIFIC_PID=demo1")
         assert "Practice clip 1 of 1" == b.state["progress"] and b.state["labels"] == ["A", "B", "C"]
+        # the number keys name figures, not ranks: the page says which key is which figure, as the desktop does
+        assert b.state["texts"]["start_hint"].endswith("or press 1 = A, 2 = B, 3 = C.")
+        assert any(b"1 = A, 2 = B, 3 = C puts that figure in the next free box" in body for _, _, body in b.seen)
+        assert any(b'"how_title": "How to rank"' in body for _, _, body in b.seen)
         while b.state["screen"] == "trial":
             b.watch()
             b.answer_well()
         assert b.state["screen"] == "questionnaire"
         b.act("questionnaire", {"answers": {q["id"]: 5 for q in b.state["items"]}})
         assert b.state["screen"] == "done"
+        # the demo's [online] table: Prolific's completion code and redirect, as a real study has them
+        assert "DEMO1234" in b.state["code"]
+        assert b.state["redirect"] == "https://app.prolific.com/submissions/complete?cc=DEMO1234"
         for url, headers, body in b.seen:
             assert conditions_named_in(design, " ".join([url, json.dumps(headers), body.decode("latin-1")])) == []
     db = study.db()

@@ -61,6 +61,7 @@ def test_a_participant_answers_every_paradigm_block_in_the_browser(example, brow
         for blk in study.design.trial_blocks:   # the instructions say how to answer each paradigm
             key = {"rank": "instructions.how", "rating": "instructions.how_rating"}.get(blk.paradigm, "instructions.how_pref")
             assert study.design.texts[key].split("{")[0][:40] in how
+        assert b.state["how_title"] == "How to answer"     # not "How to rank": these designs do not rank
         b.act("continue")
         b.act("sound", {})
         blocks_seen, paradigms, tried_bad = 0, set(), False
@@ -71,6 +72,11 @@ def test_a_participant_answers_every_paradigm_block_in_the_browser(example, brow
                 b.act("block")
                 continue
             paradigms.add(b.state["paradigm"])
+            if b.state["paradigm"] == "rating":    # the number keys jump where the desktop's do
+                from studyapp.ui.rating import digit_points
+                points = digit_points(len(b.state["anchors"]))
+                assert b.state["points"] == pytest.approx(points, abs=0.01)
+                assert f"number keys 1-{len(points)} jump" in how
             b.watch()
             if not tried_bad:
                 for bad, code in _bad_answers(b.state):

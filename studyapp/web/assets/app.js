@@ -3,7 +3,8 @@
 // this script only shows it. Ranking: drag a figure's label into a box, click labels in order, or press the
 // figure's number key (it goes into the next free box); Up/Down change question, Backspace clears one,
 // Enter goes on. Preference (pairwise, mismatch): click an answer or press its number, Left/Right move it.
-// Rating: one slider per figure and question, each must be moved.
+// Preference reasons: Down past the last question reaches them, their number keys tick them.
+// Rating: one slider per figure and question, each must be moved; Up/Down choose a slider, number keys jump.
 "use strict";
 (function () {
   var root = document.getElementById("app");
@@ -179,8 +180,10 @@
       panel.draw();
       var missing = panel.missing();
       next.disabled = !watched || missing.length > 0 || playing;
+      // nothing answered yet: how to answer (mouse and keys), as the desktop says it; then what is still open
       hint.textContent = !watched ? S.texts["rank.wait"] :
-        (missing.length ? S.texts.still.replace("{criteria}", missing.join(", ")) : S.texts["rank.next_ok"]);
+        (missing.length === panel.size ? S.texts.start_hint :
+          (missing.length ? S.texts.still.replace("{criteria}", missing.join(", ")) : S.texts["rank.next_ok"]));
     }
     function startPlay() {
       if (playing || !S.can_play) return;
@@ -266,6 +269,7 @@
       });
     }
     return {
+      size: S.criteria.length,
       draw: function () {
         panel.textContent = "";
         S.criteria.forEach(function (c, ci) {
@@ -332,6 +336,7 @@
       return chosen.some(function (k) { return k !== null && S.options[k].value !== 0; });
     }
     return {
+      size: S.criteria.length,
       draw: function () {
         panel.textContent = "";
         S.criteria.forEach(function (c, ci) {
@@ -347,12 +352,13 @@
           panel.appendChild(row);
         });
         if (S.reasons.length && preferring()) {
-          var box = el("fieldset", {"class": "reasons"}, el("legend", {text: S.texts.reasons}));
+          var box = el("fieldset", {"class": "reasons" + (active === S.criteria.length ? " active" : "")},
+            el("legend", {text: S.texts.reasons}));
           S.reasons.forEach(function (r, i) {
             var input = el("input", {type: "checkbox", id: "reason-" + i});
             input.checked = !!reasons[r];
             input.addEventListener("change", function () { reasons[r] = input.checked; });
-            box.appendChild(el("label", {"class": "option"}, input, el("span", {text: r})));
+            box.appendChild(el("label", {"class": "option"}, input, el("span", {text: (i + 1) + ". " + r})));
           });
           panel.appendChild(box);
         }
@@ -368,13 +374,21 @@
       },
       key: function (ev) {
         var k = Number(ev.key);
+        var last = S.criteria.length - 1 + (S.reasons.length && preferring() ? 1 : 0);   // the reasons: one row more
+        if (active > last) active = last;
+        if (active === S.criteria.length) {     // on the reasons: their number keys tick them
+          if (k >= 1 && k <= S.reasons.length) { reasons[S.reasons[k - 1]] = !reasons[S.reasons[k - 1]]; refresh(); return true; }
+          if (ev.key === "ArrowUp") { active -= 1; refresh(); return true; }
+          if (ev.key === "Backspace") { reasons = {}; refresh(); return true; }
+          return ev.key === "ArrowDown";
+        }
         if (k >= 1 && k <= S.options.length) { choose(active, k - 1); return true; }
         if (ev.key === "ArrowLeft" || ev.key === "ArrowRight") {
           var at = chosen[active] === null ? (S.options.length - 1) / 2 : chosen[active];
           chosen[active] = Math.max(0, Math.min(S.options.length - 1, at + (ev.key === "ArrowLeft" ? -1 : 1)));
           refresh(); return true;
         }
-        if (ev.key === "ArrowDown") { active = Math.min(active + 1, S.criteria.length - 1); refresh(); return true; }
+        if (ev.key === "ArrowDown") { active = Math.min(active + 1, last); refresh(); return true; }
         if (ev.key === "ArrowUp") { active = Math.max(active - 1, 0); refresh(); return true; }
         if (ev.key === "Backspace") { chosen[active] = null; refresh(); return true; }
         return false;
@@ -386,7 +400,15 @@
     var n = S.labels.length;
     var values = S.criteria.map(function () { return S.labels.map(function () { return null; }); });  // null: not moved
     var drawn = false;
-    var shown = [];
+    var shown = [];     // every slider, top to bottom: {ci, slot, out, input}
+    var active = 0;     // the slider the keys move (as the desktop's highlighted one)
+    function setValue(i, v) {
+      var s = shown[i];
+      s.input.value = String(Math.max(0, Math.min(100, v)));
+      values[s.ci][s.slot] = Number(s.input.value);
+      s.input.focus();
+      refresh();
+    }
     function draw() {
       // drawn once: sliders keep focus and position while the participant moves them
       if (drawn) {
@@ -401,10 +423,11 @@
           var input = el("input", {type: "range", min: "0", max: "100", step: "1", value: "50",
             id: "rate-" + c.id + "-" + slot, "aria-label": S.labels[slot]});
           var out = el("output", {id: "value-" + c.id + "-" + slot, text: S.texts.unset});
-          (function (input, ci, slot) {
+          (function (input, ci, slot, at) {
             input.addEventListener("input", function () { values[ci][slot] = Number(input.value); refresh(); });
-          })(input, ci, slot);
-          shown.push({ci: ci, slot: slot, out: out});
+            input.addEventListener("focus", function () { active = at; });
+          })(input, ci, slot, shown.length);
+          shown.push({ci: ci, slot: slot, out: out, input: input});
           row.appendChild(el("div", {"class": "slider"}, el("strong", {text: S.labels[slot]}), input, out));
         }
         if (S.anchors.length) {
@@ -416,6 +439,7 @@
       });
     }
     return {
+      size: -1,   // no start hint: the sliders' keys are the browser's own (see instructions.how_rating)
       draw: draw,
       missing: function () {
         var out = [];
@@ -432,7 +456,26 @@
         });
         return {ratings: ratings};
       },
-      key: function () { return false; }   // the sliders take the arrow keys themselves
+      // the desktop's keys (instructions.how_rating): Up/Down choose a slider, the number keys jump to
+      // S.points; Left/Right and Page Up/Down are the focused slider's own, else they move the chosen one
+      key: function (ev) {
+        if (ev.target && ev.target.type === "range") {
+          for (var i = 0; i < shown.length; i++) if (shown[i].input === ev.target) active = i;
+        }
+        if (ev.key === "ArrowUp" || ev.key === "ArrowDown") {
+          active = Math.max(0, Math.min(shown.length - 1, active + (ev.key === "ArrowDown" ? 1 : -1)));
+          shown[active].input.focus();
+          return true;
+        }
+        var k = Number(ev.key);
+        if (k >= 1 && k <= S.points.length) { setValue(active, S.points[k - 1]); return true; }
+        if (ev.target && ev.target.type === "range") return false;
+        var step = {ArrowLeft: -1, ArrowRight: 1, PageDown: -10, PageUp: 10}[ev.key];
+        if (!step) return false;
+        var cur = values[shown[active].ci][shown[active].slot];
+        setValue(active, cur === null ? 50 : cur + step);
+        return true;
+      }
     };
   }
 
