@@ -33,6 +33,7 @@ Example
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -251,6 +252,21 @@ _EXPECTED_TABLES = {
 }
 #: Tables a database of the current version has besides those (an older one gains them when upgraded).
 _NEW_TABLES = ("trial_slots", "judgements")
+
+
+
+
+@functools.lru_cache(maxsize=1)
+def _expected_columns() -> dict[str, tuple[str, ...]]:
+    """Each table of the current schema and its columns, read from :data:`_SCHEMA` made in memory."""
+    con = sqlite3.connect(":memory:")
+    try:
+        con.executescript(_SCHEMA)
+        names = [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
+                 if not r[0].startswith("sqlite_")]
+        return {t: tuple(r[1] for r in con.execute(f"PRAGMA table_info({t})")) for t in names}
+    finally:
+        con.close()
 
 
 _log = logging.getLogger(__name__)
@@ -501,6 +517,15 @@ class ResultsDB:
             if not self._has_table(table):
                 raise InputError(self.path, "schema", f"table {table} is missing: the file is damaged or not a "
                                  "complete studyapp results database. Keep a copy of it for recovery")
+        # A damaged table definition (a flipped bit in a column's name) passes the integrity check and would
+        # surface later as an SQL error in a query: every column the tables must have is looked for now.
+        for table, columns in _expected_columns().items():
+            have = {r[1] for r in self._con.execute(f"PRAGMA table_info({table})")}
+            lost = [c for c in columns if c not in have]
+            if lost:
+                raise InputError(self.path, "schema", f"table {table} has no column {', '.join(lost)}: the file is "
+                                 "damaged or not a complete studyapp results database. Keep a copy of it for "
+                                 "recovery")
 
     def _has_table(self, name: str) -> bool:
         return self._con.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",

@@ -190,6 +190,25 @@ def test_every_single_bit_flip_is_harmless_or_reported(bot_db: Path, tmp_path) -
     assert outcome["reported"] > N_FLIPS // 4  # the flips really hit data
 
 
+@pytest.mark.parametrize("table,column", [("judgements", "reasons"), ("trials", "slot_middle"),
+                                          ("responses", "rank")])
+def test_a_damaged_column_name_is_reported_when_opened(bot_db: Path, tmp_path, table, column) -> None:
+    """One flipped bit in a table's definition renames a column: SQLite's integrity check passes, and the
+    first query naming the column failed with an SQL error (fresh-clone CI, byte 79810: 'no such column:
+    j.reasons'). Opening the file now says which column is gone."""
+    path = tmp_path / "r.sqlite"
+    shutil.copy(bot_db, path)
+    flipped = column[:-1] + chr(ord(column[-1]) ^ 1)  # one bit of the name's last letter: still a name
+    with sqlite3.connect(path) as con:
+        sql = con.execute("SELECT sql FROM sqlite_master WHERE name = ?", (table,)).fetchone()[0]
+        damaged = sql.replace(f"{column} ", f"{flipped} ", 1)
+        assert damaged != sql
+        con.execute("PRAGMA writable_schema = ON")
+        con.execute("UPDATE sqlite_master SET sql = ? WHERE name = ?", (damaged, table))
+    with pytest.raises(InputError, match=f"table {table} has no column {column}: the file is damaged"):
+        ResultsDB(path, create=False)
+
+
 def test_a_schema_3_database_is_upgraded_in_place_with_checksums(bot_db: Path, tmp_path, caplog) -> None:
     path = tmp_path / "r.sqlite"
     shutil.copy(bot_db, path)
