@@ -162,7 +162,7 @@ def load_questionnaire(path: str | Path) -> pd.DataFrame:
                 if "questionnaire" not in _tables(con):
                     raise AnalysisInputError(path, "table questionnaire", "missing")
                 q = questionnaire_from_connection(con, path)
-        except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
+        except (sqlite3.DatabaseError, pd.errors.DatabaseError, UnicodeDecodeError) as exc:
             raise AnalysisInputError(path, "table questionnaire", f"not readable ({exc})") from exc
     else:
         q = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
@@ -226,7 +226,7 @@ def load_study_title(path: str | Path) -> str | None:
     try:
         with _open_verified(path) as con:
             return study_title_from_connection(con)
-    except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
+    except (sqlite3.DatabaseError, pd.errors.DatabaseError, UnicodeDecodeError) as exc:
         raise AnalysisInputError(path, "table study", f"not readable ({exc})") from exc
 
 
@@ -258,7 +258,7 @@ def _read_sqlite(path: Path) -> pd.DataFrame:
     try:
         with _open_verified(path) as con:
             return tidy_from_connection(con, path)
-    except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
+    except (sqlite3.DatabaseError, pd.errors.DatabaseError, UnicodeDecodeError) as exc:
         raise AnalysisInputError(path, None, f"not a readable SQLite results database ({exc})") from exc
 
 
