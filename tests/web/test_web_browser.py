@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 
-from fixtures.web_serve import CHROME_MISSING, Server, free_port, read_db as _read
+from fixtures.web_serve import CHROME_MISSING, Page, Server, free_port, read_db as _read
 from fixtures.web_study import COMPLETION_CODE, write_web_study
 from studyapp.study.design import load_design
 from studyapp.study.schedule import participant_schedule
@@ -39,27 +39,13 @@ def test_a_participant_completes_the_study_in_chromium_through_a_reload_and_a_se
     server = Server(design_path, db, port, tmp_path / "videos")
     server.start()
     wait = WebDriverWait(chrome, 20)
+    page = Page(chrome, 20)
+    heading, click = page.heading, page.click
 
     def find(css: str):
         return wait.until(lambda d: d.find_element(By.CSS_SELECTOR, css))
 
-    def click(css: str) -> None:
-        def clicked(d) -> bool:   # the page redraws itself: an element found may be replaced before the click
-            try:
-                e = d.find_element(By.CSS_SELECTOR, css)
-                if not e.is_enabled():
-                    return False
-                e.click()
-                return True
-            except WebDriverException:
-                return False
-        wait.until(clicked)
 
-    def heading() -> str:
-        try:
-            return find("h1").text
-        except WebDriverException:   # redrawn meanwhile
-            return ""
 
     def answered() -> list[int]:
         return [r[0] for r in _read(db, "SELECT trial_index FROM trials WHERE participant = ? ORDER BY trial_index", PID)]

@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from fixtures.synthetic import write_synthetic_study
-from fixtures.web_serve import CHROME_MISSING, Server, free_port, read_db
+from fixtures.web_serve import CHROME_MISSING, Page, Server, free_port, read_db
 
 pytestmark = CHROME_MISSING
 PID = "paradigmsInChromium01"
@@ -54,24 +54,10 @@ def test_pairwise_and_rating_pages_in_chromium(tmp_path, chrome) -> None:
     server = Server(design_path, db, port, tmp_path / "videos", password="dashboard password 1")
     server.start()
     wait = WebDriverWait(chrome, 20)
+    page = Page(chrome, 20)
+    heading, click = page.heading, page.click
 
-    def heading() -> str:
-        try:
-            return chrome.find_element(By.TAG_NAME, "h1").text
-        except WebDriverException:
-            return ""
 
-    def click(css: str) -> None:
-        def clicked(d) -> bool:
-            try:
-                e = d.find_element(By.CSS_SELECTOR, css)
-                if not e.is_enabled():
-                    return False
-                e.click()
-                return True
-            except WebDriverException:
-                return False
-        wait.until(clicked)
 
     def answered() -> int:
         return read_db(db, "SELECT COUNT(*) FROM trials")[0][0]

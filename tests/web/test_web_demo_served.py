@@ -20,7 +20,7 @@ import time
 import urllib.request
 from pathlib import Path
 
-from fixtures.web_serve import CHROME_MISSING, ROOT, free_port, read_db
+from fixtures.web_serve import CHROME_MISSING, Page, ROOT, free_port, read_db
 
 pytestmark = CHROME_MISSING
 PID = "5f1c0ffee0d3m0000000c0de"
@@ -85,24 +85,10 @@ def test_the_demo_served_with_its_prerendered_videos_to_a_prolific_participant_i
         assert abs(mp4.duration / 1e6 - CLIP_S) < 0.2
 
     wait = WebDriverWait(chrome, 30)
+    page = Page(chrome, 30)
+    heading, click = page.heading, page.click
 
-    def heading() -> str:
-        try:
-            return chrome.find_element(By.TAG_NAME, "h1").text
-        except WebDriverException:
-            return ""
 
-    def click(css: str) -> None:
-        def clicked(d) -> bool:
-            try:
-                e = d.find_element(By.CSS_SELECTOR, css)
-                if not e.is_enabled():
-                    return False
-                e.click()
-                return True
-            except WebDriverException:
-                return False
-        wait.until(clicked)
 
     def answered() -> list[int]:
         return [r[0] for r in read_db(db, "SELECT trial_index FROM trials WHERE participant = ? ORDER BY trial_index", PID)]
