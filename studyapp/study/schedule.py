@@ -74,6 +74,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from studyapp.study.design import FROZEN_PREFIX, Block, Design
+# one rule for which clips a mismatch trial may play, shared with the played pairs (design/played.py)
+from studyapp.study.design.played import mismatch_sources
 from studyapp.study.ordering import latin_row, n_latin_rows, participant_seed, slot_permutations
 
 if TYPE_CHECKING:  # pandas is imported where a table is built: loading a design must not pay ~0.3-1 s for it
@@ -165,15 +167,6 @@ def n_rows(design: Design) -> int:
 def block_latin_rows(design: Design, block: Block) -> int:
     """Clip orders a block cycles through (Williams rows over its stimuli, 1 for random or fixed order)."""
     return n_latin_rows(len(block.stimuli)) if design.ordering == "balanced-latin-square" else 1
-
-
-def mismatch_sources(design: Design, block: Block, stimulus_id: str) -> list[str]:
-    """The block's other stimuli sharing the stimulus's ``match_tag`` value, in block order (the clips whose
-    motion a mismatch trial of ``stimulus_id`` may play)."""
-    tags = {s.id: s.tags for s in design.stimuli}
-    value = tags[stimulus_id].get(block.match_tag)
-    return [o for o in block.stimuli if o != stimulus_id and value is not None
-            and tags[o].get(block.match_tag) == value]
 
 
 def block_period(design: Design, block: Block) -> int:

@@ -37,7 +37,7 @@ from studyapp.audio.wav import AudioClip
 from studyapp.errors import InputError
 from studyapp.face.animation import FaceAnimation
 from studyapp.motion.skeleton import Motion
-from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
+from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path, played_pairs,
                                    motion_path, resolve)
 from studyapp.study.design.parse import is_smpl_file, missing_array_settings
 from studyapp.study.schedule import TrialPlan
@@ -335,7 +335,8 @@ def _problem_text(exc: Exception, *, with_path: bool = True) -> str:
 def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     """Problems ``(key, message, fix)`` found by reading every file a design references.
 
-    Reads each audio, face, head and motion file, checks each stimulus's media against its trial's
+    Reads each audio, face, head and motion file (motion: of each (condition, stimulus) pair some trial plays,
+    :func:`~studyapp.study.design.played_pairs`), checks each stimulus's media against its trial's
     timeline (:mod:`studyapp.study.timeline`) and that each condition's skeleton has the humanoid bones,
     then does a dry run: per stimulus it assembles the media and builds the scene a participant gets
     (every condition's motion retargeted with its own ``name_map`` onto the stimulus's avatar, the face
@@ -366,13 +367,15 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     model_ok = {ci for ci, cond in enumerate(design.conditions)
                 if cond.model is not None and model_path(design, cond).is_file()
                 and not any(p[0].startswith(f"conditions[{ci}]") for p in problems)}
+    played = played_pairs(design)  # a (condition, stimulus) no trial plays needs no file and is not checked
     retarget_bad: set[int] = set()
     built: set[tuple] = set()  # scenes the dry run built (see _scene_identity)
     dry_failures: dict[tuple[str, str], list[tuple[int, str, str]]] = {}  # (avatar, problem) -> (ci, stim, file)
     for si, stim in enumerate(design.stimuli):
         items: dict[str, tuple[float, str]] = {}
         n_before = len(problems)
-        ready: list[int] = sorted(model_ok)  # conditions whose media for this stimulus were read without a problem
+        # conditions whose media for this stimulus were read without a problem
+        ready: list[int] = [ci for ci in sorted(model_ok) if stim.id in played[design.conditions[ci].id]]
         if stim.audio.is_file():
             try:
                 items["audio"] = (load_audio(stim.audio).duration, str(stim.audio))
@@ -399,7 +402,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
         audio_s = items.get("audio", (None, ""))[0]
         for cond in design.conditions:
             ci = cond_index[cond.id]
-            if cond.motion is None:
+            if cond.motion is None or stim.id not in played[cond.id]:
                 continue  # live conditions are generated to the audio's length
             good_samples = 0
             for k in range(1, cond.samples + 1):  # every sample is a file a participant may be shown
@@ -442,7 +445,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
         present = all(f is None or Path(f).is_file() for f in (stim.face, stim.head)) and (
             avatar in ("builtin", "") or Path(avatar).is_file()) and avatar not in bad_avatars
         # (missing files are the loader's to report, bad avatars _check_avatars's)
-        if "audio" in items and present and len(problems) == n_before:
+        if "audio" in items and present and len(problems) == n_before and any(stim.id in v for v in played.values()):
             # Only a stimulus whose files passed the checks above: a scene from bad files fails for reasons
             # already reported, with a less helpful message.
             good = [ci for ci in sorted(ready) if ci not in retarget_bad]

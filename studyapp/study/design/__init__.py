@@ -12,7 +12,8 @@ files per stimulus, told apart by ``{sample}`` (1..N); the schedule picks one pe
 
 The package, one job a module: :mod:`.schema` declares every key once (a dataclass field with the types it
 accepts and its default), :mod:`.model` holds the validated classes, :mod:`.parse` reads a file into them,
-:mod:`.files` knows the files a design names and its hash, :mod:`.blinding` keeps condition names out of
+:mod:`.files` knows the files a design names and its hash, :mod:`.played` which (condition, stimulus) motion
+some trial plays (only those need files), :mod:`.blinding` keeps condition names out of
 participants' sight.
 
 Example
@@ -36,6 +37,7 @@ from studyapp.study.design.files import (SAMPLE_FIELD, design_hash, fill_sample,
 from studyapp.study.design.model import (DEFAULT_CRITERIA, AttentionCheck, Block, Condition, Criterion, Design,
                                          DesignError, DesignWarning, Display, Playback, Problem, QuestionItem,
                                          Stimulus, criterion_aspect)
+from studyapp.study.design.played import mismatch_sources, played_pairs
 from studyapp.study.design.parse import REPRESENTATIONS, TABLES, condition_from_settings, parse_design
 from studyapp.study.design.schema import (ATTENTION_KINDS, AVATAR_SUFFIXES, BUILTIN_REFERENCE, FROZEN_PREFIX,
                                           MOTION_SUFFIXES, ORDERINGS, PARADIGMS, PREFERENCE_LEVELS, QUESTION_KINDS,
@@ -47,7 +49,7 @@ __all__ = [
     "PARADIGMS", "PREFERENCE_LEVELS", "Block", "DesignWarning", "criterion_aspect",
     "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Display", "Playback", "Problem", "QuestionItem",
     "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",
-    "pattern_fields", "problems_to_json", "referenced_files", "resolve", "validate_design", "visible_text_leaks",
+    "mismatch_sources", "played_pairs", "pattern_fields", "problems_to_json", "referenced_files", "resolve", "validate_design", "visible_text_leaks",
 ]
 
 

@@ -177,10 +177,17 @@ def design_hash(design_bytes: bytes, files: dict[str, Path]) -> str:
 def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str, Path]:
     """Every file a design refers to, keyed by the design key it comes from (``stimuli[0].audio``, ...).
 
-    Motion files are keyed by :func:`motion_key` (every sample of a condition with ``samples > 1``). With
-    ``col`` given, missing files are reported there, one problem per file.
+    Motion files are keyed by :func:`motion_key` (every sample of a condition with ``samples > 1``), for the
+    (condition, stimulus) pairs some trial plays (:func:`~studyapp.study.design.played.played_pairs`) in a
+    design with ``[[blocks]]``; a design without blocks names every condition's motion for every stimulus,
+    as it always did, so its hash never changes. With ``col`` given, missing files are reported there, one
+    problem per file, played pairs' motion only (a file no trial plays is not needed).
     """
+    from studyapp.study.design.played import played_pairs
+
     files: dict[str, Path] = {}
+    played = played_pairs(design)
+    unplayed: set[str] = set()  # keys hashed for a design without blocks that no trial plays
     for i, s in enumerate(design.stimuli):
         files[f"stimuli[{i}].audio"] = s.audio
         if s.face is not None:
@@ -197,11 +204,16 @@ def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str
         # a pattern with a problem (parse.py reports it) is never filled in: its files are unknown
         if c.motion is not None and pattern_problem(c.motion) is None and pattern_fields(c.motion):
             for s in design.stimuli:
+                plays = s.id in played[c.id]
+                if not plays and design.blocks:
+                    continue
                 try:
                     for k in range(1, max(1, c.samples) + 1):
                         files[motion_key(i, s.id, k, c.samples)] = motion_path(design, c, s, k)
+                        if not plays:
+                            unplayed.add(motion_key(i, s.id, k, c.samples))
                 except (KeyError, IndexError, ValueError) as exc:
-                    if col is not None:
+                    if col is not None and plays:
                         col.add(f"conditions[{i}].motion", f"pattern {c.motion!r} uses {exc} but stimulus "
                                 f"{s.id!r} has no such tag", "add the tag to that stimulus or use only {stimulus}")
     if design.avatar != "builtin":
@@ -211,7 +223,7 @@ def referenced_files(design: Design, col: ProblemSink | None = None) -> dict[str
             files[f"avatar.by_speaker.{k}"] = resolve(design, v)
     if col is not None:
         for key, p in files.items():
-            if not p.is_file():
+            if key not in unplayed and not p.is_file():
                 what = key.split(".")[-1].split("[")[0]
                 if ".motion[" in key:
                     ckey, stim = key[:-1].split(".motion[")
