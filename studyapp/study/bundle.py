@@ -556,7 +556,11 @@ def _confine(path: Path, design_name: str, design_bytes: bytes, files: dict[str,
 def bundle_design_paths(raw: dict[str, Any], max_samples: int) -> list[tuple[str, str]]:
     """``(key, path as written)`` for every file a (raw, parsed TOML) design names, keyed as
     :func:`~studyapp.study.design.referenced_files` keys them; motion patterns filled in for every stimulus and
-    sample. Raises :class:`InputError` for a pattern that cannot be filled safely."""
+    sample that sets the pattern's tags. A shipped trial tags only the tokens it plays (see
+    :mod:`studyapp.study.shipped`), so a stimulus without a tag names no file of that condition; should the
+    design still need one, it has no path to follow (the design check reports the missing tag). This is a
+    superset of what the design package resolves, which is what confinement needs. Raises
+    :class:`InputError` for a pattern that cannot be filled safely."""
     from studyapp.study.design.files import fill_sample, motion_key
 
     def strs(table: Any) -> dict[str, Any]:
@@ -590,8 +594,9 @@ def bundle_design_paths(raw: dict[str, Any], max_samples: int) -> list[tuple[str
             fields = {k: v for k, v in strs(s.get("tags")).items() if isinstance(v, str)}
             fields["stimulus"] = sid if isinstance(sid, str) else ""
             for k in range(1, samples + 1):
-                out.append((motion_key(i, fields["stimulus"], k, samples),
-                            _fill_pattern(fill_sample(pattern, k), fields, f"conditions[{i}].motion")))
+                filled = _fill_pattern(fill_sample(pattern, k), fields, f"conditions[{i}].motion")
+                if filled is not None:
+                    out.append((motion_key(i, fields["stimulus"], k, samples), filled))
     avatar = strs(raw.get("avatar"))
     if isinstance(avatar.get("model"), str) and avatar["model"] != "builtin":
         out.append(("avatar.model", avatar["model"]))
@@ -601,11 +606,14 @@ def bundle_design_paths(raw: dict[str, Any], max_samples: int) -> list[tuple[str
     return out
 
 
-def _fill_pattern(pattern: str, fields: dict[str, str], key: str) -> str:
+def _fill_pattern(pattern: str, fields: dict[str, str], key: str) -> str | None:
     """``pattern`` with each ``{name}`` replaced by ``fields[name]``; nothing else of ``str.format`` is run.
+    None when a bare ``{name}`` is not one of ``fields`` (the stimulus names no such file).
 
     >>> _fill_pattern("media/m_{c_ab}.bvh", {"c_ab": "12", "stimulus": "s"}, "k")
     'media/m_12.bvh'
+    >>> _fill_pattern("media/m_{x3}.bvh", {"stimulus": "s"}, "k") is None
+    True
     >>> _fill_pattern("{stimulus:>99999999}", {"stimulus": "s"}, "k")
     Traceback (most recent call last):
     ...
@@ -624,6 +632,8 @@ def _fill_pattern(pattern: str, fields: dict[str, str], key: str) -> str:
             shown = "{" + name + (f"!{conv}" if conv else "") + (f":{spec}" if spec else "") + "}"
             raise InputError(None, key, f"the pattern's placeholder {shown[:80]} is not a plain {{name}}: refused")
         if name not in fields:
+            if name.isidentifier():
+                return None
             raise InputError(None, key, f"the pattern uses {{{name[:80]}}}, which a stimulus does not set: refused")
         out.append(fields[name])
     return "".join(out)

@@ -10,10 +10,14 @@ maps it back (kept by the experimenter):
   stimulus with an opaque id (a salted hash of participant and trial index). ``schedule.json`` lists each
   participant's trials in order -- shipped stimulus, slots, practice and attention-check flags -- and the
   participant's session plays exactly that list, so the slots shown are the real schedule.
-* **Neutral condition tokens.** The shipped design has ``k`` conditions ``x1 .. xk`` (``k`` real ones);
-  which real condition each token stands for is shuffled independently for every shipped stimulus (a salted
-  permutation), so a token means nothing across trials and the conditions carry no design order. The key
-  maps (shipped stimulus, token) back to (real stimulus, real condition, sample).
+* **Neutral condition tokens.** The shipped design has ``k`` conditions ``x1 .. xk``, ``k`` the most
+  figures one trial shows (3 for a design without blocks; a rating block's figures; 2 for pairwise and
+  mismatch). A shipped trial carries one token per figure it shows, ``x1 .. xn``, and which of its figures
+  each token stands for is shuffled independently for every shipped stimulus (a salted permutation), so a
+  token means nothing across trials and the conditions carry no design order. The key maps (shipped
+  stimulus, token) back to (real stimulus, real condition, sample). Only the motion a trial plays is
+  shipped (:func:`~studyapp.study.design.played_pairs`): a condition needs no file for a clip of a block it
+  is not in.
 * **The same keys for every condition.** Each token condition is ``{id, motion = "media/m_{xi}.bvh"}`` and
   only keys whose value is the same for every real condition (an ``fps`` or ``motion_end`` all of them set
   alike, the union of the conditions' ``name_map`` when it changes no condition's own mapping). Motion that
@@ -27,7 +31,9 @@ maps it back (kept by the experimenter):
   who sees that condition on that clip: a name never links two clips of one model, and the zip holds each
   file once. Audio, face and head files are named by a salted hash of their bytes (shared by the trials of
   one clip; they are the same for every condition). A shipped stimulus's tags are the tokens' file hashes
-  (``{x1 = "<hash>", ...}``, every token on every stimulus) plus ``speaker`` where the avatar depends on it.
+  (``{x1 = "<hash>", ...}``, every token of its trial) plus ``speaker`` where the avatar depends on it. The
+  shipped ``[[blocks]]`` name the tokens their trials carry (``x1 .. xn``), so the shipped design's played
+  pairs are exactly its files.
 * **Response paradigms.** ``schedule.json`` gives each trial its ``block`` and ``paradigm``; the shipped
   ``[[blocks]]`` keep what the participant's screens need (paradigm, criteria, instructions, levels, reasons,
   anchors) and name tokens and shipped stimuli instead of conditions and clips (no ``reference``: the hidden
@@ -36,7 +42,7 @@ maps it back (kept by the experimenter):
   for its one condition, one playing the clip's own motion and one the other clip's. The mismatched motion
   is written as the lab session plays it under this trial (cut, held or looped to the trial's length) and
   named by a salted hash of (condition, source clip, trial clip, sample), so its name links it to no other
-  file; a design whose only blocks are mismatch blocks with one condition ships two tokens.
+  file.
 * **No schedule inputs.** The shipped design has no ``seed``, ``ordering``, ``slot_assignment``,
   ``practice`` or stimulus order (stimuli are listed by opaque id); attention checks name their shipped
   trial and, for a ``known-worst`` check, that trial's token of the known-worst condition.
@@ -116,9 +122,9 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
         return hashlib.sha256(f"{salt}\0{kind}\0{text}".encode()).hexdigest()[:n]
 
     conds = list(design.conditions)
-    # a mismatch trial shows its one condition twice: with a single condition it needs a second token
+    # one token per figure of the fullest trial (a mismatch trial shows its one condition twice: two)
     any_mismatch = any(b.paradigm == "mismatch" for b in design.trial_blocks)
-    toks = tokens(max(len(conds), 2 if any_mismatch else 1))
+    toks = tokens(max(_block_tokens(b) for b in design.trial_blocks))
     common, converted = _condition_settings(design, raw)
     if any_mismatch:
         # every motion shipped for a mismatch study is already as long as the trials it plays in (the
@@ -182,7 +188,7 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
             stim = design.stimulus(plan.stimulus_id)
             sample_of = {cid.removeprefix(FROZEN_PREFIX): k for cid, k in zip(plan.slots, plan.samples)}
             # what each token stands for in this trial: (condition, whose motion, sample)
-            figures = _trial_figures(plan, [c.id for c in conds], len(toks), sample_of)
+            figures = _trial_figures(plan, [c.id for c in conds], sample_of)
             random.Random(opaque("tokens", f"{pid}\0{plan.trial_index}", 32)).shuffle(figures)
             real_of = {tok: f[0] for tok, f in zip(toks, figures)}
             motion_of = {tok: f[1] for tok, f in zip(toks, figures)}
@@ -244,19 +250,23 @@ def ship_design(design: Design, raw: Mapping[str, Any], roster: Mapping[str, int
 _MATCH_TAG = "match"
 
 
-def _trial_figures(plan: Any, conditions: list[str], n_tokens: int,
-                   sample_of: Mapping[str, int]) -> list[tuple[str, str, int]]:
+def _block_tokens(block: Any) -> int:
+    """Figures one trial of the block shows, so tokens its shipped trials carry: 3 rank, 2 pairwise, 2
+    mismatch (its condition on the clip's own motion and on the other clip's), every figure for rating."""
+    return {"rank": 3, "pairwise": 2, "mismatch": 2}.get(block.paradigm, len(block.figures))
+
+
+def _trial_figures(plan: Any, conditions: list[str], sample_of: Mapping[str, int]) -> list[tuple[str, str, int]]:
     """``(condition, stimulus whose motion, sample)`` for each token of a trial, in design order before the
-    shuffle: every condition on the trial's clip; a mismatch trial's condition also on its other clip (in
-    place of the last other condition, so the token count stays the design's)."""
-    own = [(c, plan.stimulus_id, sample_of.get(c, 1)) for c in conditions]
-    if plan.paradigm != "mismatch":
-        return own
-    cond = plan.slots[0]
-    other = next(i for i in range(len(plan.slots)) if plan.motion_stimulus(i) != plan.stimulus_id)
-    mismatched = (cond, plan.motion_stimulus(other), plan.samples[other])
-    kept = [f for f in own if f[0] == cond] + [f for f in own if f[0] != cond]
-    return kept[:n_tokens - 1] + [mismatched]
+    shuffle: the trial's conditions on its clip (a design without blocks: all three, every trial); a mismatch
+    trial's one condition on its own clip and on the other clip. Only what the trial plays is shipped, so a
+    condition's motion for a clip no trial plays it on is never needed (see
+    :func:`~studyapp.study.design.played_pairs`)."""
+    if plan.paradigm == "mismatch":
+        own = next(i for i in range(len(plan.slots)) if plan.motion_stimulus(i) == plan.stimulus_id)
+        return [(plan.slots[i], plan.motion_stimulus(i), plan.samples[i]) for i in (own, 1 - own)]
+    shown = {c.removeprefix(FROZEN_PREFIX) for c in plan.slots}
+    return [(c, plan.stimulus_id, sample_of.get(c, 1)) for c in conditions if c in shown]
 
 
 def _slot_tokens(plan: Any, figure_of: Mapping[str, tuple[str, str, int]]) -> list[str]:
@@ -272,10 +282,10 @@ def _slot_tokens(plan: Any, figure_of: Mapping[str, tuple[str, str, int]]) -> li
 
 def _shipped_block(block: Any, toks: list[str], sids: list[str]) -> dict[str, Any]:
     """A block of the shipped design: what the screens need, tokens and shipped clips for ids (module notes)."""
-    n = {"rank": 3, "pairwise": 2, "mismatch": 1}.get(block.paradigm, len(block.figures))
+    # the tokens its trials carry (each shipped trial names tokens x1 .. xn, shuffled over its figures), so
+    # the shipped design's played pairs are exactly the shipped motion files
     out: dict[str, Any] = {"id": block.id, "paradigm": block.paradigm, "criteria": list(block.criteria),
-                           "conditions": toks[:max(n, 2) if block.paradigm == "pairwise" else n],
-                           "stimuli": sids}
+                           "conditions": toks[:_block_tokens(block)], "stimuli": sids}
     if block.instructions:
         out["instructions"] = block.instructions
     if block.paradigm in ("pairwise", "mismatch"):
@@ -338,9 +348,15 @@ def _condition_settings(design: Design, raw: Mapping[str, Any]) -> tuple[dict[st
 
 
 def _joint_names(design: Design, cond: Condition) -> set[str]:
+    """The joints of the condition's skeleton, read from its first clip some trial plays (a condition of a
+    block has files only for that block's clips); none for a condition no trial shows."""
+    from studyapp.study.design import played_pairs
     from studyapp.study.stimuli import load_condition_motion
 
-    motion = load_condition_motion(design, cond, design.stimuli[0])
+    clips = played_pairs(design)[cond.id]
+    if not clips:
+        return set()
+    motion = load_condition_motion(design, cond, design.stimulus(clips[0]))
     return set(motion.skeleton.names)
 
 
