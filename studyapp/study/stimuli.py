@@ -37,8 +37,8 @@ from studyapp.audio.wav import AudioClip
 from studyapp.errors import InputError
 from studyapp.face.animation import FaceAnimation
 from studyapp.motion.skeleton import Motion
-from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path, played_pairs,
-                                   motion_path, resolve)
+from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
+                                   motion_path, played_pairs, resolve)
 from studyapp.study.design.parse import is_smpl_file, missing_array_settings
 from studyapp.study.schedule import TrialPlan
 from studyapp.study.timeline import (DURATION_TOLERANCE_S, MOTION_END_CHOICES, cut_audio, fit_face, fit_motion,
@@ -371,6 +371,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
     retarget_bad: set[int] = set()
     built: set[tuple] = set()  # scenes the dry run built (see _scene_identity)
     dry_failures: dict[tuple[str, str], list[tuple[int, str, str]]] = {}  # (avatar, problem) -> (ci, stim, file)
+    on_screen = {sid for clips in played.values() for sid in clips}  # a clip no trial shows builds no scene
     for si, stim in enumerate(design.stimuli):
         items: dict[str, tuple[float, str]] = {}
         n_before = len(problems)
@@ -445,7 +446,7 @@ def check_stimulus_files(design: Design) -> list[tuple[str, str, str]]:
         present = all(f is None or Path(f).is_file() for f in (stim.face, stim.head)) and (
             avatar in ("builtin", "") or Path(avatar).is_file()) and avatar not in bad_avatars
         # (missing files are the loader's to report, bad avatars _check_avatars's)
-        if "audio" in items and present and len(problems) == n_before and any(stim.id in v for v in played.values()):
+        if "audio" in items and present and len(problems) == n_before and stim.id in on_screen:
             # Only a stimulus whose files passed the checks above: a scene from bad files fails for reasons
             # already reported, with a less helpful message.
             good = [ci for ci in sorted(ready) if ci not in retarget_bad]
