@@ -243,3 +243,26 @@ def test_a_block_design_with_only_its_played_files_validates_runs_bundles_and_pr
         for i, slot in enumerate(plan.slots):
             rendered.setdefault(slot.removeprefix(FROZEN_PREFIX), set()).add(plan.motion_stimulus(i))
     assert rendered == {c: set(s) for c, s in TWO_BLOCKS_PLAYS.items()}
+
+
+def test_a_mismatch_rating_rank_design_with_only_its_played_files_validates_and_bundles(tmp_path: Path) -> None:
+    """The mismatch block's sources, the rating block's reference, the practice clip opening the mismatch
+    block and the check joining the last block: all played, nothing else on disk; the shipped design's own
+    played pairs are exactly the files it ships."""
+    from studyapp import tomlfile
+    from studyapp.study.bundle import bundle_design_paths, make_bundle, open_bundle
+
+    path = blocked_study(tmp_path / "s", MISMATCH_RATING_RANK, only_played=True)
+    assert not (tmp_path / "s" / "motion" / "synced" / "s1.bvh").exists()  # synced is in no block with s1
+    assert validate_design(path) == []
+    info = make_bundle(path, tmp_path / "study.zip", participants=3, results=tmp_path / "s" / "tiny.results.sqlite",
+                       salt="mm")
+    plays = played_pairs(load_design(path))
+    for entry in info.key["trials"].values():
+        for tok, real in entry["conditions"].items():
+            assert entry["motions"][tok] in plays[real], (real, entry)
+    opened = open_bundle(info.path, cache=tmp_path / "cache")
+    shipped, problems = parse_design(opened.design_path, True)
+    assert shipped is not None and problems == []
+    walked = dict(bundle_design_paths(tomlfile.loads(opened.design_path.read_text(encoding="utf-8")), 100))
+    assert set(walked) == set(referenced_files(shipped))
