@@ -320,8 +320,8 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
 
 
 def _paradigms_only(df: pd.DataFrame, names: dict[str, str], *, block: str, exclude_failed_attention: bool,
-                    exclude: Iterable[str], alpha: float, n_boot: int, ci: float, seed: int, incomplete: str, adjust: str, interval: str,
-                    block_options: dict) -> Analysis:
+                    exclude: Iterable[str], alpha: float, n_boot: int, ci: float, seed: int, incomplete: str,
+                    adjust: str, interval: str, block_options: dict) -> Analysis:
     """The analysis of a study without a rank block: exclusions, then every block of another paradigm."""
     kept, excluded = apply_exclusions(df, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
     if kept.empty:

@@ -44,9 +44,9 @@ _NEEDED = {"responses": {"participant", "trial_index", "criterion", "condition",
 #: The tidy table's first columns, in order; one column per stimulus tag and per participant group follows
 #: (sorted, a name never shadowing an earlier column), then :data:`TAIL_COLUMNS`.
 CORE_COLUMNS = (
-    "participant", "session", "trial_index", "stimulus", "criterion", "criterion_label", "condition", "condition_label",
-    "condition_position", "slot", "rank", "plays", "response_time_s", "is_practice", "is_attention_check",
-    "attention_passed", "trial_duration_s", "sample",
+    "participant", "session", "trial_index", "stimulus", "criterion", "criterion_label", "condition",
+    "condition_label", "condition_position", "slot", "rank", "plays", "response_time_s", "is_practice",
+    "is_attention_check", "attention_passed", "trial_duration_s", "sample",
 )
 #: The response-paradigm columns (schema 6), right after :data:`CORE_COLUMNS` (see the module notes).
 PARADIGM_COLUMNS = ("block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
