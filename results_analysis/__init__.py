@@ -12,6 +12,10 @@ Functions take DataFrames / arrays and return DataFrames, in the manner of pingo
 try:  # the statistics need the "analysis" extra; without it, `results-analysis` says what to install
     import pandas as _pandas  # noqa: F401
     import scipy as _scipy  # noqa: F401
+    import importlib.util as _util
+
+    if _util.find_spec("matplotlib") is None:  # the figures' (imported when drawn, not here: it is slow)
+        raise ModuleNotFoundError("No module named 'matplotlib'", name="matplotlib")
 except ModuleNotFoundError as _exc:
     MISSING: str | None = _exc.name
 else:

@@ -16,7 +16,8 @@ blocks (``block='trial'``, the analysis many published studies report) overstate
 were written (1,1,3 or 1.5,1.5,3) cannot change a result.
 
 Conditions are analysed in the design's order, and ``Analysis.labels`` holds the name each is shown by
-(:mod:`results_analysis.study_meta`); the numbers are computed, and stored, under the condition ids.
+(:mod:`results_analysis.study_meta`); the numbers are computed, and stored, under the condition ids. Criteria
+likewise: computed under their ids, shown by ``Analysis.criterion_name`` (the design's label, else the id).
 """
 from __future__ import annotations
 
@@ -47,7 +48,7 @@ from results_analysis.ranks import (RankBlocks, participant_index, place_shares,
                                     rank_blocks_with_trials, shared_trial_tables)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
-from results_analysis.study_meta import condition_labels, condition_order
+from results_analysis.study_meta import condition_labels, condition_order, criterion_labels
 from results_analysis.validate import check_complete, validate_structure
 
 
@@ -108,6 +109,12 @@ class Analysis:
     #: (:mod:`results_analysis.paradigm_analysis`); ``criteria`` holds the rank blocks' analysis (empty when
     #: the study has none)
     paradigm_blocks: dict[str, BlockAnalysis] = field(default_factory=dict)
+    #: criterion id -> the name text, tables and figures show: its design label (``criterion_label``), else the id
+    criterion_labels: dict[str, str] = field(default_factory=dict)
+
+    def criterion_name(self, criterion: str) -> str:
+        """What the report calls ``criterion``: its label, else its id."""
+        return self.criterion_labels.get(criterion, criterion)
 
 
 def group_columns(df: pd.DataFrame) -> list[str]:
@@ -226,11 +233,12 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         raise AnalysisInputError(df.attrs.get("source"), "--interval",
                                  f"{interval!r} is not one of {', '.join(INTERVALS)}")
     df = normalize_results(df)  # frames from studyapp's export_dataframe come with their own dtypes
+    names = criterion_labels(df)
     others, df = other_rows(df), rank_rows(df)
     block_options = dict(n_boot=paradigm_n_boot, ci=ci, seed=seed, adjust=adjust, reference=reference,
                          screen=screen_reference)
     if df.empty and len(others):
-        return _paradigms_only(others, block=block, exclude_failed_attention=exclude_failed_attention,
+        return _paradigms_only(others, names, block=block, exclude_failed_attention=exclude_failed_attention,
                                exclude=exclude, alpha=alpha, n_boot=n_boot, ci=ci, seed=seed, incomplete=incomplete,
                                adjust=adjust, interval=interval, block_options=block_options)
     with warnings.catch_warnings(record=True) as caught:
@@ -308,12 +316,12 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                     sm_permutations=sm_permutations if incomplete == "skillings-mack" else 0,
                     adjust=adjust, control=control, interval=interval, agreement=agreement,
                     agreement_summary=agreement_summary(agreement, alpha=alpha),
-                    questionnaire_item_reliability=item_rel, labels=labels)
+                    questionnaire_item_reliability=item_rel, labels=labels, criterion_labels=names)
 
 
-def _paradigms_only(df: pd.DataFrame, *, block: str, exclude_failed_attention: bool, exclude: Iterable[str],
-                    alpha: float, n_boot: int, ci: float, seed: int, incomplete: str, adjust: str, interval: str,
-                    block_options: dict) -> Analysis:
+def _paradigms_only(df: pd.DataFrame, names: dict[str, str], *, block: str, exclude_failed_attention: bool,
+                    exclude: Iterable[str], alpha: float, n_boot: int, ci: float, seed: int, incomplete: str,
+                    adjust: str, interval: str, block_options: dict) -> Analysis:
     """The analysis of a study without a rank block: exclusions, then every block of another paradigm."""
     kept, excluded = apply_exclusions(df, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
     if kept.empty:
@@ -332,4 +340,4 @@ def _paradigms_only(df: pd.DataFrame, *, block: str, exclude_failed_attention: b
                     incomplete=incomplete, warnings=notes, source=df.attrs.get("source"),
                     design_hashes=[str(h) for h in hashes], n_boot=n_boot, seed=seed, ci=ci, adjust=adjust,
                     interval=interval, labels=condition_labels(kept, conditions),
-                    paradigm_blocks=analyze_blocks(kept, **block_options))
+                    paradigm_blocks=analyze_blocks(kept, **block_options), criterion_labels=names)

@@ -106,7 +106,8 @@ def posthoc_table(a: Analysis) -> pd.DataFrame:
         eff = c.effect_sizes.pairs.set_index(["a", "b"]) if c.effect_sizes is not None else None
         for w in c.posthoc["wilcoxon_holm"].itertuples():
             n = nem[frozenset((w.a, w.b))]
-            row = {"criterion": crit, "pair": f"{w.a} – {w.b}", "Δ mean rank": _num(n.difference),
+            row = {"criterion": a.criterion_name(crit), "pair": f"{w.a} – {w.b}",
+                   "Δ mean rank": _num(n.difference),
                    "Nemenyi p_adj": _p_cell(n.p_adjusted), "Wilcoxon V": fmt_v(w.statistic),
                    "r_rb": _num(w.rank_biserial)}
             if eff is not None:
@@ -189,11 +190,12 @@ def agreement_section(a: Analysis, doc: Document) -> None:
     s = a.agreement_summary
     doc.p("Per stimulus, Kendall's W measures how similarly the participants who ranked it ordered the "
           "conditions (0: no agreement, 1: identical rankings). " + "; ".join(
-              f"{r.criterion}: median W = {_num(r.median_w)} over {r.n_stimuli} stimuli (range "
+              f"{a.criterion_name(r.criterion)}: median W = {_num(r.median_w)} over {r.n_stimuli} stimuli (range "
               f"{_num(r.min_w)}–{_num(r.max_w)}, {_num(r.mean_raters, 1)} participants per stimulus on average), "
               f"significant concordance for {r.n_significant} of {r.n_stimuli}" for r in s.itertuples()) + ".")
     t = a.agreement.copy()
-    show = pd.DataFrame({"criterion": t["criterion"], "stimulus": t["stimulus"], "participants": t["n_raters"],
+    show = pd.DataFrame({"criterion": t["criterion"].map(a.criterion_name), "stimulus": t["stimulus"],
+                         "participants": t["n_raters"],
                          "W": [_num(v) for v in t["kendall_w"]], "χ²": [_num(v) for v in t["chi2"]], "df": t["df"],
                          "p": [_p_cell(v) for v in t["p"]],
                          f"p_adj ({adjustment_name(a)})": [_p_cell(v) for v in t["p_adjusted"]]})

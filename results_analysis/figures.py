@@ -125,7 +125,7 @@ def rank_share_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] 
             ax.set_xlim(0, 100)
             ax.set_xticks([0, 25, 50, 75, 100])
             ax.set_xticklabels(["0", "25", "50", "75", "100"])
-            ax.set_title(crit.capitalize())
+            ax.set_title(str(crit))
             ax.tick_params(axis="y", length=0)
             ax.spines["left"].set_visible(False)
             ax.set_yticks(y)
@@ -206,7 +206,7 @@ def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: flo
             for x in (lo, lo + cd):
                 ax.plot([x, x], [0.97, 1.13], color="#b2182b", lw=1.2)
             ax.text(lo + cd / 2, 1.2, f"CD = {cd:.2f}", ha="center", va="bottom", fontsize=8, color="#b2182b")
-            ax.text(hi + 0.85, 1.2, crit.capitalize(), ha="right", va="bottom", fontsize=10, fontweight="bold")
+            ax.text(hi + 0.85, 1.2, str(crit), ha="right", va="bottom", fontsize=10, fontweight="bold")
             # Labels: best half to the left, worst half to the right, each on its own line.
             for pos, idx in enumerate(by_rank):
                 v = vals[idx]
@@ -257,7 +257,7 @@ def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] |
             ax.set_yticklabels(conds)
             ax.tick_params(axis="y", length=0)
             ax.spines["left"].set_visible(False)
-            ax.set_title(crit.capitalize())
+            ax.set_title(str(crit))
             ax.set_xlabel("mean rank (1 = best)")
             ax.grid(axis="x", color="#e5e5e5", lw=0.6)
             ax.set_axisbelow(True)
@@ -301,7 +301,7 @@ def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = No
             ax.set_yticklabels(conds)
             ax.tick_params(axis="y", length=0)
             ax.spines["left"].set_visible(False)
-            ax.set_title(crit.capitalize())
+            ax.set_title(str(crit))
             ax.set_xlabel("Bradley-Terry strength")
         fig.text(0.5, _caption_y(fig), f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap interval over participants. "
                  "Dotted line: equal strengths." + (" Red: no finite strength (the condition never won or never "

@@ -25,7 +25,7 @@ FLAG_COLUMNS = ("is_practice", "is_attention_check", "attention_passed")
 #: Columns that are bookkeeping, never a stimulus tag or participant group.
 CORE_COLUMNS = REQUIRED_COLUMNS + FLAG_COLUMNS + (
     "session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "design_hash", "app_version", "_where",
-    "condition_label", "condition_position", "study_title",
+    "condition_label", "condition_position", "study_title", "criterion_label",
     "block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
 #: The response-paradigm columns and their value in a table without them (an export before schema 6 is one
 #: rank block "main"); see :mod:`results_analysis.sqlite_schema`.
@@ -38,7 +38,7 @@ INTERNAL_COLUMNS = ("_where",)
 
 #: Columns :func:`normalize_results` makes text (object: str or None) and numbers (float).
 _TEXT_COLUMNS = ("participant", "stimulus", "criterion", "condition", "session", "design_hash", "app_version",
-                 "condition_label", "study_title", "block", "paradigm", "motion_stimulus", "reasons")
+                 "condition_label", "criterion_label", "study_title", "block", "paradigm", "motion_stimulus", "reasons")
 _NUMBER_COLUMNS = ("rank", "trial_index", "slot", "plays", "response_time_s", "trial_duration_s", "sample",
                    "condition_position", "rating", "preference", "matched")
 

@@ -66,7 +66,7 @@ def interval_figure(tables: dict[str, pd.DataFrame], conditions: Sequence[str], 
             ax.set_yticklabels(conds)
             ax.tick_params(axis="y", length=0)
             ax.spines["left"].set_visible(False)
-            ax.set_title(str(crit).capitalize())
+            ax.set_title(str(crit))
             ax.set_xlabel(xlabel)
             ax.grid(axis="x", color="#e5e5e5", lw=0.6)
             ax.set_axisbelow(True)
@@ -110,7 +110,7 @@ def win_matrix_figure(wins: dict[str, pd.DataFrame], conditions: Sequence[str]):
             ax.set_xticklabels(conds, rotation=30, ha="right")
             ax.set_yticks(np.arange(k))
             ax.set_yticklabels(conds)
-            ax.set_title(str(crit).capitalize())
+            ax.set_title(str(crit))
             ax.set_xlabel("against")
             for s in ax.spines.values():
                 s.set_visible(False)

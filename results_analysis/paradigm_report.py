@@ -7,6 +7,7 @@ stats.json gets the numbers under condition ids from :func:`results_analysis.par
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -81,8 +82,10 @@ def write_block_tables(blocks: dict[str, BlockAnalysis], out: Path) -> None:
 # --- figures ------------------------------------------------------------------------------------------
 
 
-def write_block_figures(blocks: dict[str, BlockAnalysis], out: Path) -> None:
-    """Every block's figures, each drawn once and saved as ``out/block_<id>_<kind>.png|svg``."""
+def write_block_figures(blocks: dict[str, BlockAnalysis], out: Path, names: Mapping[str, str] | None = None) -> None:
+    """Every block's figures, each drawn once and saved as ``out/block_<id>_<kind>.png|svg``; a panel per
+    criterion, titled by its name in ``names`` (criterion id -> label; default: the id)."""
+    names = names or {}
     if not blocks:
         return
     # matplotlib is imported when figures are drawn, not with the statistics (a cold start pays for it once)
@@ -94,20 +97,24 @@ def write_block_figures(blocks: dict[str, BlockAnalysis], out: Path) -> None:
         boot = "participant bootstrap" if b.n_boot > 0 else "no interval"
         if b.paradigm == "pairwise":
             res = _of(b, PairwiseResult)
-            figures.save(interval_figure({c: r.elo for c, r in res.items()}, b.conditions, value="elo",
+            elo = {names.get(c, c): r.elo for c, r in res.items()}
+            figures.save(interval_figure(elo, b.conditions, value="elo",
                                          xlabel="Elo (mean 0)", chance=0.0, fmt="{:+.0f}",
                                          caption=f"Dots: Bradley-Terry strength as Elo (+200 = preferred 76 % of the "
                                          f"time); lines: {ci} {boot} interval."), out, f"{s}_elo")
-            figures.save(win_matrix_figure({c: r.wins for c, r in res.items()}, b.conditions), out, f"{s}_wins")
+            wins = {names.get(c, c): r.wins for c, r in res.items()}
+            figures.save(win_matrix_figure(wins, b.conditions), out, f"{s}_wins")
         elif b.paradigm == "mismatch":
             res = _of(b, MismatchResult)
-            figures.save(interval_figure({c: r.rates for c, r in res.items()}, b.conditions, value="rate",
+            rates = {names.get(c, c): r.rates for c, r in res.items()}
+            figures.save(interval_figure(rates, b.conditions, value="rate",
                                          xlabel="matched motion preferred (ties = ½)", chance=0.5, xlim=(0.0, 1.0),
                                          caption=f"Dots: matched-preference rate; lines: {ci} {boot} interval. "
                                          "Dotted line: chance."), out, f"{s}_mismatch")
         else:
             res = _of(b, RatingResult)
-            figures.save(interval_figure({c: r.summary for c, r in res.items()}, b.conditions, value="mean",
+            means = {names.get(c, c): r.summary for c, r in res.items()}
+            figures.save(interval_figure(means, b.conditions, value="mean",
                                          xlabel="mean rating (0-100)", xlim=(0.0, 100.0), fmt="{:.1f}",
                                          caption=f"Dots: mean rating; lines: {ci} {boot} interval."),
                          out, f"{s}_ratings")
@@ -134,7 +141,7 @@ def _ci(lo: float, hi: float, digits: int = 2) -> str:
     return f"{_n(lo, digits)} to {_n(hi, digits)}"
 
 
-def _pairwise(b: BlockAnalysis, doc: Document, ci: str) -> None:
+def _pairwise(b: BlockAnalysis, doc: Document, ci: str, names: Mapping[str, str]) -> None:
     doc.p(f"Participants saw two conditions side by side and said which they preferred (clearly, slightly, or no "
           f"preference). Each preference counts as a win whatever its strength; \"no preference\" counts as half a "
           f"win for each condition, as GENEA does. Bradley–Terry strengths were fitted by maximum likelihood "
@@ -146,13 +153,14 @@ def _pairwise(b: BlockAnalysis, doc: Document, ci: str) -> None:
           f"the same resamples and a two-sided bootstrap p-value (twice the smaller share of resampled differences "
           f"on either side of 0, counted as (1 + count)/(1 + B)), adjusted over the pairs.")
     for crit, r in _of(b, PairwiseResult).items():
+        crit = names.get(crit, crit)  # shown by its label from here on
         e = r.elo.sort_values("elo", ascending=False, na_position="last")
         parts = [f"{row.condition} {row.elo:+.0f} ({ci} CI {row.ci_low:+.0f} to {row.ci_high:+.0f})"
                  if np.isfinite(row.elo) and np.isfinite(row.ci_low) else
                  (f"{row.condition} {row.elo:+.0f}" if np.isfinite(row.elo) else
                   f"{row.condition} not estimable ({row.note})") for row in e.itertuples()]
         n = int(r.wins["n"].sum() // 2)
-        doc.p(f"**{crit.capitalize()}.** Elo from {n} comparisons: " + ", ".join(parts) + ".")
+        doc.p(f"**{crit}.** Elo from {n} comparisons: " + ", ".join(parts) + ".")
         show = pd.DataFrame({"condition": r.elo["condition"],
                              "Elo": [f"{v:+.0f}" if np.isfinite(v) else "not estimable" for v in r.elo["elo"]],
                              f"{ci} CI": [_ci(lo, hi, 0) for lo, hi in zip(r.elo["ci_low"], r.elo["ci_high"])],
@@ -189,7 +197,7 @@ def _pairwise(b: BlockAnalysis, doc: Document, ci: str) -> None:
     doc.figure(f"{s}_wins", f"{b.block}: share of points of the row condition against the column condition.")
 
 
-def _mismatch(b: BlockAnalysis, doc: Document, ci: str) -> None:
+def _mismatch(b: BlockAnalysis, doc: Document, ci: str, names: Mapping[str, str]) -> None:
     adj = next(iter(_of(b, MismatchResult).values())).comparisons["adjustment"].iloc[0] \
         if any(len(r.comparisons) for r in _of(b, MismatchResult).values()) else "Holm"
     doc.p("Each trial showed one condition twice with the trial's speech: once the motion made for that speech "
@@ -202,11 +210,12 @@ def _mismatch(b: BlockAnalysis, doc: Document, ci: str) -> None:
           f"counted as not preferred), and with a participant bootstrap of the difference of rates; both families "
           f"of p-values were {adj}-adjusted over the pairs.")
     for crit, r in _of(b, MismatchResult).items():
+        crit = names.get(crit, crit)  # shown by its label from here on
         t = r.rates
         parts = [f"{row.condition} {row.rate:.0%} ({ci} CI {_ci(100 * row.ci_low, 100 * row.ci_high, 0)} %; "
                  f"{row.matched} matched, {row.equal} equal, {row.mismatched} mismatched preferred; {_p(row.p)})"
                  for row in t.itertuples()]
-        text = f"**{crit.capitalize()}.** Matched-preference rates: " + "; ".join(parts) + "."
+        text = f"**{crit}.** Matched-preference rates: " + "; ".join(parts) + "."
         comp = r.comparisons
         if len(comp):
             text += " Between conditions: " + "; ".join(
@@ -237,7 +246,7 @@ def _mismatch(b: BlockAnalysis, doc: Document, ci: str) -> None:
                "interval; dotted line: chance.")
 
 
-def _rating(b: BlockAnalysis, doc: Document, ci: str) -> None:
+def _rating(b: BlockAnalysis, doc: Document, ci: str, names: Mapping[str, str]) -> None:
     ref = (f" The hidden reference ({b.reference}) is shown with the others but left out of the tests."
            if b.reference is not None else "")
     screen = ""
@@ -256,6 +265,7 @@ def _rating(b: BlockAnalysis, doc: Document, ci: str) -> None:
           f"adjusted (exact below {WILCOXON_EXACT_BELOW_N} non-zero differences without ties, else the normal "
           f"approximation with continuity correction).{ref}{screen}")
     for crit, r in _of(b, RatingResult).items():
+        crit = names.get(crit, crit)  # shown by its label from here on
         fr = r.friedman.iloc[0]
         s = r.summary
         means = ", ".join(f"{row.condition} {row.mean:.1f} ({ci} CI {_ci(row.ci_low, row.ci_high, 1)})"
@@ -263,7 +273,7 @@ def _rating(b: BlockAnalysis, doc: Document, ci: str) -> None:
         post = "; ".join(f"{p.a} vs {p.b}: V = {p.statistic:g}, r_rb = {_n(p.rank_biserial)}, "
                          f"{_p(p.p_adjusted, True)}" for p in r.posthoc.itertuples())
         n_inc = r.friedman.attrs.get("n_incomplete", 0)
-        doc.p(f"**{crit.capitalize()}.** Mean ratings: {means}. Friedman test over {int(fr['n_blocks'])} participants"
+        doc.p(f"**{crit}.** Mean ratings: {means}. Friedman test over {int(fr['n_blocks'])} participants"
               + (f" ({n_inc} who did not rate every condition left out)" if n_inc else "")
               + f": χ²({int(fr['df'])}) = {_n(fr['chi2'])}, {_p(fr['p'])}, Kendall's W = {_n(fr['kendall_w'])}. "
               f"Wilcoxon: {post}.")
@@ -277,8 +287,9 @@ def _rating(b: BlockAnalysis, doc: Document, ci: str) -> None:
     doc.figure(f"{_stem(b)}_ratings", f"{b.block}: mean rating with {ci} participant-bootstrap interval.")
 
 
-def add_sections(blocks: dict[str, BlockAnalysis], doc: Document) -> None:
-    """One section per block: its method, results text, tables and figures.
+def add_sections(blocks: dict[str, BlockAnalysis], doc: Document, names: Mapping[str, str] | None = None) -> None:
+    """One section per block: its method, results text, tables and figures; criteria shown by their name in
+    ``names`` (criterion id -> label; default: the id).
 
     >>> from results_analysis.paradigm_analysis import analyze_blocks
     >>> from results_analysis.simulate import simulate_paradigm
@@ -291,4 +302,4 @@ def add_sections(blocks: dict[str, BlockAnalysis], doc: Document) -> None:
         ci = f"{b.ci:.0%}"
         doc.h(1, f"Block {b.block} ({b.paradigm})")
         doc.p(f"{b.n_participants} participants, {b.n_trials} trials, conditions: {', '.join(b.conditions)}.")
-        {"pairwise": _pairwise, "mismatch": _mismatch, "rating": _rating}[b.paradigm](b, doc, ci)
+        {"pairwise": _pairwise, "mismatch": _mismatch, "rating": _rating}[b.paradigm](b, doc, ci, names or {})

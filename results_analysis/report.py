@@ -64,7 +64,7 @@ def write_outputs(a: Analysis, out: Path, *, title: str, metrics: pd.DataFrame |
     write_tables(a, out / "tables")
     if a.criteria:  # the rank blocks' figures (a study of other paradigms only has none)
         write_figures(a, out / "figures")
-    write_block_figures(a.paradigm_blocks, out / "figures")
+    write_block_figures(a.paradigm_blocks, out / "figures", a.criterion_labels)
     doc = build_document(a, title)
     if objective is not None:
         objective.write_tables(out / "tables")
@@ -109,6 +109,7 @@ def stats_dict(a: Analysis) -> dict:
         "source": a.source, "block": a.block, "primary": f"Friedman test over {a.block}s",
         "ties": "answers turned into within-trial average ranks before every test; place shares split ties",
         "conditions": a.conditions, "labels": a.labels, "criteria": list(a.criteria),
+        "criterion_labels": a.criterion_labels,
         "n_participants": a.n_participants, "n_trials": a.n_trials, "alpha": a.alpha,
         "excluded": a.exclusions.to_dict("records"), "incomplete_blocks": a.incomplete,
         "dropped_incomplete": a.dropped_incomplete, "incomplete_kept_for_skillings_mack": a.incomplete_blocks,
@@ -209,14 +210,15 @@ def write_figures(a: Analysis, out: Path) -> None:
     from results_analysis import figures
 
     order = display_order(a)
-    summaries = {k: c.summary for k, c in a.criteria.items()}
+    # panels are titled by the dicts' keys: the criteria's labels
+    summaries = {a.criterion_name(k): c.summary for k, c in a.criteria.items()}
     figures.save(figures.rank_share_figure(summaries, order), out, "rank_shares")
-    cd_input = {k: (dict(zip(a.conditions, c.friedman.mean_rank)), c.critical_difference)
+    cd_input = {a.criterion_name(k): (dict(zip(a.conditions, c.friedman.mean_rank)), c.critical_difference)
                 for k, c in a.criteria.items()}
     figures.save(figures.cd_diagram(cd_input, alpha=a.alpha, order=order), out, "critical_difference")
     figures.save(figures.mean_rank_figure(summaries, order, ci=a.ci), out, "mean_ranks")
-    figures.save(figures.bt_figure({k: c.bradley_terry for k, c in a.criteria.items()}, order, ci=a.ci), out,
-                 "bradley_terry")
+    figures.save(figures.bt_figure({a.criterion_name(k): c.bradley_terry for k, c in a.criteria.items()}, order,
+                                   ci=a.ci), out, "bradley_terry")
 
 
 # --- the report text -------------------------------------------------------------------------------
@@ -289,7 +291,7 @@ def criterion_paragraphs(a: Analysis, c: CriterionAnalysis) -> list[str]:
                 f"block, as published analyses count them)")
     sig = fr.p < a.alpha
     verdict = "showed a significant difference between" if sig else "did not show a significant difference between"
-    text = [f"**{c.criterion.capitalize()}.** Mean ranks (1 = best) were {ranks}. {headline} "
+    text = [f"**{a.criterion_name(c.criterion)}.** Mean ranks (1 = best) were {ranks}. {headline} "
             f"{verdict} the {k} conditions, χ²({fr.df}) = {_num(fr.chi2)}, {fmt_p(fr.p)}, Kendall's W = "
             f"{effects_report.kendall_w_text(a, c)} (Iman–Davenport F({fr.iman_davenport_df1}, {fr.iman_davenport_df2}) = "
             f"{_num(fr.iman_davenport_f)}, {fmt_p(fr.iman_davenport_p)})."]
@@ -453,6 +455,7 @@ def build_document(a: Analysis, title: str) -> Document:
                    "critical_difference"]].rename(columns={"n_blocks": "n", "chi2": "χ²", "kendall_w": "W",
                                                            "iman_davenport_f": "F_ID", "iman_davenport_p": "p (F_ID)",
                                                            "critical_difference": "CD"})
+        show["criterion"] = show["criterion"].map(a.criterion_name)
         show["p"] = [_p_cell(p) for p in show["p"]]
         show["p (F_ID)"] = [_p_cell(p) for p in show["p (F_ID)"]]
         for col in ("χ²", "W", "F_ID", "CD"):
@@ -462,7 +465,8 @@ def build_document(a: Analysis, title: str) -> Document:
         rows = []
         for crit, c in a.criteria.items():
             for r in c.summary.itertuples():
-                rows.append({"criterion": crit, "condition": r.condition, "n": r.n, "mean rank": _num(r.mean_rank),
+                rows.append({"criterion": a.criterion_name(crit), "condition": r.condition, "n": r.n,
+                             "mean rank": _num(r.mean_rank),
                              f"{a.ci:.0%} CI": f"{_num(r.ci_low)}–{_num(r.ci_high)}", "median": f"{r.median_rank:g}",
                              **dict(zip((f"rank {i}" for i in range(1, len(a.conditions) + 1)), _percentages(
                                  [getattr(r, f"share_rank_{i}") for i in range(1, len(a.conditions) + 1)])))})
@@ -470,7 +474,7 @@ def build_document(a: Analysis, title: str) -> Document:
                   "interval, median, and share of answers at each rank (a tied answer shared between the places it "
                   "spans, so each row sums to 100 %).")
         doc.table(effects_report.posthoc_table(a), effects_report.posthoc_caption(a))
-        btrows = [{"criterion": crit, "condition": r["condition"], "strength": _bt_cell(r),
+        btrows = [{"criterion": a.criterion_name(crit), "condition": r["condition"], "strength": _bt_cell(r),
                    "win rate": f"{r['win_rate']:.0%}"} for crit, c in a.criteria.items()
                   for _, r in c.bradley_terry.iterrows()]
         doc.table(pd.DataFrame(btrows), f"Table 4. Bradley–Terry strengths (sum to 1) with {a.ci:.0%} participant-"
@@ -482,7 +486,7 @@ def build_document(a: Analysis, title: str) -> Document:
         doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")
         doc.figure("bradley_terry", f"Figure 4. Bradley–Terry strengths with {a.ci:.0%} participant-bootstrap interval.")
         effects_report.agreement_section(a, doc)
-    add_sections(a.paradigm_blocks, doc)
+    add_sections(a.paradigm_blocks, doc, a.criterion_labels)
     if a.groups:
         doc.h(1, "Breakdowns")
         for g, t in a.groups.items():
@@ -490,6 +494,7 @@ def build_document(a: Analysis, title: str) -> Document:
                    [f"mean_rank_{x}" for x in a.conditions]
             show = t[cols].rename(columns={"n_blocks": "n", "n_participants": "participants", "chi2": "χ²",
                                            "kendall_w": "W", **{f"mean_rank_{x}": f"mean rank {x}" for x in a.conditions}})
+            show["criterion"] = show["criterion"].map(a.criterion_name)
             show["p"] = [_p_cell(p) for p in show["p"]]
             # Same precision as Tables 1 and 2, so a level's numbers compare directly with the overall ones.
             for col in ["χ²", "W"] + [f"mean rank {x}" for x in a.conditions]:

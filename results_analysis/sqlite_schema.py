@@ -1,4 +1,4 @@
-"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 6).
+"""Build the tidy results frame straight from a studyapp results database (schema versions 1 to 7).
 
 Reads with pandas and any DB-API connection that speaks SQLite's SQL (no studyapp import): an
 :class:`sqlite3.Connection`, or studyapp's PostgreSQL connection, which answers the same statements (``studyapp
@@ -9,7 +9,9 @@ exactly the columns of ``studyapp export``.
 The table carries what the report needs besides the ranks, so a CSV export and its database give the same
 report: each condition's ``condition_label`` (the design's label, else the id: a database before version 4
 has no labels) and ``condition_position`` (its place in the design, the order of the report's tables and
-figures; empty for a pseudo-condition such as an attention check's frozen slot), the ``study_title`` (the
+figures; empty for a pseudo-condition such as an attention check's frozen slot), each criterion's
+``criterion_label`` (the design's label, e.g. "Synchronization with speech", in the design's language; the id
+in a database before version 7, or one upgraded and not yet opened with its design), the ``study_title`` (the
 report's title) and each participant's questionnaire answers, one column per rated (Likert) item named
 ``questionnaire:<scale>:<item>`` (see :data:`QUESTIONNAIRE_PREFIX`; the scale part is empty where none was
 stored). Free-text, choice and number answers stay out of the table (``studyapp export --questionnaire-csv`` has them).
@@ -42,9 +44,9 @@ _NEEDED = {"responses": {"participant", "trial_index", "criterion", "condition",
 #: The tidy table's first columns, in order; one column per stimulus tag and per participant group follows
 #: (sorted, a name never shadowing an earlier column), then :data:`TAIL_COLUMNS`.
 CORE_COLUMNS = (
-    "participant", "session", "trial_index", "stimulus", "criterion", "condition", "condition_label",
-    "condition_position", "slot", "rank", "plays", "response_time_s", "is_practice", "is_attention_check",
-    "attention_passed", "trial_duration_s", "sample",
+    "participant", "session", "trial_index", "stimulus", "criterion", "criterion_label", "condition",
+    "condition_label", "condition_position", "slot", "rank", "plays", "response_time_s", "is_practice",
+    "is_attention_check", "attention_passed", "trial_duration_s", "sample",
 )
 #: The response-paradigm columns (schema 6), right after :data:`CORE_COLUMNS` (see the module notes).
 PARADIGM_COLUMNS = ("block", "paradigm", "rating", "preference", "matched", "motion_stimulus", "reasons")
@@ -150,6 +152,8 @@ def tidy_table(con: sqlite3.Connection, path: str | Path, *, include_practice: b
     labels, positions = _conditions(con, tables)
     df["condition_label"] = [labels.get(c) or c for c in df["condition"]]
     df["condition_position"] = pd.array([positions.get(c) for c in df["condition"]], dtype="Int64")
+    criterion_names = _criterion_labels(con, tables)
+    df["criterion_label"] = [criterion_names.get(c) or c for c in df["criterion"]]
     df["study_title"] = study_title_from_connection(con)
     answers = _questionnaire_columns(con, tables)
     for name, values in answers.items():
@@ -220,6 +224,14 @@ def _conditions(con: sqlite3.Connection, tables: set[str]) -> tuple[dict[str, st
     rows = con.execute(f"SELECT id, {label}, {position} FROM conditions").fetchall()
     return ({str(i): (str(lb) if lb is not None and str(lb).strip() else None) for i, lb, _ in rows},
             {str(i): int(p) for i, _, p in rows if p is not None})
+
+
+def _criterion_labels(con: sqlite3.Connection, tables: set[str]) -> dict[str, str]:
+    """Each criterion's stored label (none before schema version 7, or before the design was recorded)."""
+    if "criteria" not in tables or "label" not in {r[1] for r in con.execute("PRAGMA table_info(criteria)")}:
+        return {}
+    return {str(i): " ".join(str(lb).split()) for i, lb in con.execute("SELECT id, label FROM criteria")
+            if lb is not None and str(lb).strip()}
 
 
 def _questionnaire_columns(con: sqlite3.Connection, tables: set[str]) -> dict[str, dict[str, str | None]]:

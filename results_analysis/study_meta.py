@@ -1,11 +1,12 @@
 """What a results table says about its study besides the ranks: each condition's label and place in the
-design, the study's title and the participants' questionnaire answers.
+design, each criterion's label, the study's title and the participants' questionnaire answers.
 
 ``studyapp export`` writes them into every row (columns ``condition_label``, ``condition_position``,
-``study_title`` and ``questionnaire:<scale>:<item>``, see :mod:`results_analysis.sqlite_schema`), and a
-database gives the same columns, so a CSV export and its database give the same report. A table without
-them (an older export, a hand-made CSV) still works: its conditions are named by their ids, in the order
-of the ids, and the report's title comes from elsewhere.
+``criterion_label``, ``study_title`` and ``questionnaire:<scale>:<item>``, see
+:mod:`results_analysis.sqlite_schema`), and a database gives the same columns, so a CSV export and its
+database give the same report. A table without them (an older export, a hand-made CSV) still works: its
+conditions and criteria are named by their ids, the conditions in the order of the ids, and the report's
+title comes from elsewhere.
 
 The analysis keeps computing on condition ids (``stats.json`` is keyed by them); :func:`relabel` turns an
 analysis into the one the tables, figures and text show, with each id replaced by its label.
@@ -81,6 +82,30 @@ def condition_labels(df: pd.DataFrame, conditions: list[str] | None = None) -> d
                                      f"conditions {other!r} and {cid!r} would both be shown as {label!r}; "
                                      "give them different labels")
     return labels
+
+
+def criterion_labels(df: pd.DataFrame) -> dict[str, str]:
+    """``{criterion id: label}`` for every criterion of ``df``, in the order first seen: the
+    ``criterion_label`` of its rows (the design's label, e.g. ``"Synchronization with speech"``), else the id (a
+    table before schema 7, a hand-made CSV). Raises :class:`AnalysisInputError` when one criterion has two labels.
+
+    >>> criterion_labels(pd.DataFrame({"criterion": ["sync", "real"], "criterion_label": ["In time", None]}))
+    {'sync': 'In time', 'real': 'real'}
+    """
+    found: dict[str, str] = {}
+    ids = list(dict.fromkeys(df["criterion"].astype(str)))
+    if "criterion_label" in df.columns:
+        where = df["_where"] if "_where" in df.columns else pd.Series([f"row {i + 1}" for i in range(len(df))],
+                                                                       index=df.index)
+        first = ~df[["criterion", "criterion_label"]].astype(str).duplicated()  # one look per distinct pair
+        for cid, label, w in zip(df["criterion"][first].astype(str), df["criterion_label"][first], where[first]):
+            if label is None or (isinstance(label, float) and np.isnan(label)) or not str(label).strip():
+                continue
+            label = " ".join(str(label).split())  # one line: it heads paragraphs, tables and figure panels
+            if found.setdefault(cid, label) != label:
+                raise AnalysisInputError(df.attrs.get("source"), f"{w}, column 'criterion_label'",
+                                         f"criterion {cid!r} is labelled both {found[cid]!r} and {label!r}")
+    return {c: found.get(c, c) for c in ids}
 
 
 def study_title(df: pd.DataFrame) -> str | None:

@@ -1,6 +1,7 @@
 """Every shipped design that validates also runs: a scripted participant goes through the real app offscreen
 to the end (a real ``studyapp run`` process), and every trial records the duration its timeline gives. A design
-without a live model runs on a participant's install (no extras: pandas, scipy, onnxruntime, av refused)."""
+without a live model runs on a participant's install (no extras: pandas, scipy, matplotlib, onnxruntime, av
+refused)."""
 from __future__ import annotations
 
 import os

@@ -45,6 +45,8 @@ def test_wheel_contains_shaders_designs_and_demo_data(wheel: Path) -> None:
     assert any(n.startswith("results_analysis/") for n in names)
     for src in (ROOT / "shaders").iterdir():
         assert f"studyapp/_data/shaders/{src.name}" in names, f"{src.name} missing from the wheel"
+    # the slot labels' font and its license (matplotlib, which ships it too, is not a participant dependency)
+    assert {"studyapp/render/fonts/DejaVuSans-Bold.ttf", "studyapp/render/fonts/LICENSE_DEJAVU"} <= names
     for src in (ROOT / "studyapp" / "web" / "assets").iterdir():   # the browser pages' script and style
         assert f"studyapp/web/assets/{src.name}" in names, f"{src.name} missing from the wheel"
 

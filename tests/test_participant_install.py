@@ -1,9 +1,9 @@
 """A participant's install (``pip install studyapp``, no extras) runs a study; experimenters' commands on it
 say in one line what to install.
 
-The child processes run with pandas, scipy, onnxruntime, onnx, av, starlette, uvicorn and psycopg refused by
-an import hook (``tests/fixtures/participant_install.py``), as on a computer that installed only the base
-dependencies. The demo design's offscreen run on that install is in ``tests/test_designs_run_offscreen.py``.
+The child processes run with pandas, scipy, matplotlib, onnxruntime, onnx, av, starlette, uvicorn and psycopg
+refused by an import hook (``tests/fixtures/participant_install.py``), as on a computer that installed only the
+base dependencies. The demo design's offscreen run on that install is in ``tests/test_designs_run_offscreen.py``.
 """
 from __future__ import annotations
 
@@ -117,6 +117,6 @@ def test_serve_names_the_server_extra(lab: dict) -> None:
 
 def test_demo_names_every_missing_package_at_once(lab: dict, tmp_path: Path) -> None:
     done = _run(["demo", "--offscreen", "--out", tmp_path / "demo"], lab["env"])
-    assert _one_error_line(done) == ('error: studyapp demo needs pandas, scipy and av, which are not installed: '
-                                     'pip install "studyapp[analysis,video]"')
+    assert _one_error_line(done) == ('error: studyapp demo needs pandas, scipy, matplotlib and av, which are not '
+                                     'installed: pip install "studyapp[analysis,video]"')
     assert not (tmp_path / "demo").exists()

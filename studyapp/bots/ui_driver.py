@@ -62,13 +62,10 @@ def slider_point(rect: tuple[float, float, float, float], value: int) -> tuple[f
 
 
 def save_png(rgb: np.ndarray, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.image as mimage
+    from PIL import Image
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    mimage.imsave(str(path), rgb)
+    Image.fromarray(np.ascontiguousarray(rgb, np.uint8)).save(path, format="png")
 
 
 class UIBot:

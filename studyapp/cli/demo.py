@@ -52,7 +52,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     design_path = demo_design()
     offscreen = args.offscreen or not display_available()
     # the demo ends with the analysis report (and offscreen, an MP4): an experimenter's extras, checked up front
-    require("demo", "pandas", "scipy", *(("av",) if offscreen and not args.no_video else ()))
+    require("demo", "pandas", "scipy", "matplotlib", *(("av",) if offscreen and not args.no_video else ()))
     if offscreen:
         if not args.offscreen:
             print("No display found: running the demo offscreen.")

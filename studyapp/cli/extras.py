@@ -17,6 +17,7 @@ from studyapp.errors import InputError
 EXTRA_OF: dict[str, str] = {
     "pandas": "analysis",
     "scipy": "analysis",
+    "matplotlib": "analysis",
     "onnxruntime": "models",
     "onnx": "models",
     "av": "video",

@@ -42,9 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "export",
         help="export a results database as a tidy CSV (one row per rank)",
         description="Export a results database (.sqlite) as CSV for analysis: --csv writes one row per "
-        "participant x trial x criterion x condition with its rank (and the condition's label and design "
-        "order, the study title and the participant's rated questionnaire answers, so results-analysis gives the "
-        "same report from the CSV as from the database), --questionnaire-csv one row per participant "
+        "participant x trial x criterion x condition with its rank (and the criterion's and condition's labels, "
+        "the design order, the study title and the participant's rated questionnaire answers, so "
+        "results-analysis gives the same report from the CSV as from the database), --questionnaire-csv one row per participant "
         "x questionnaire item; with neither, the long table is printed to stdout. Practice trials are kept and flagged "
         "unless --exclude-practice.",
     )

@@ -20,7 +20,7 @@ What is read
   with :func:`studyapp.face.arkit.match_arkit_name`; VRM 1.0 expressions and VRM 0.x blend shape groups
   named as ARKit shapes ("perfect sync") supply the shapes no target is named after, as the weighted sum of
   their bound targets; other targets are ignored with a note.
-* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via matplotlib/Pillow, with
+* ``baseColorFactor``, ``COLOR_0`` and one ``baseColorTexture`` (PNG/JPEG, via Pillow, with
   ``KHR_texture_transform``); ``doubleSided`` on any material turns back-face culling off for the avatar.
   Several different textures are baked into vertex colours (noted).
 * Sparse accessors. VRM 0.x (``extensions.VRM``) and 1.0 (``extensions.VRMC_vrm``) humanoid bones are
@@ -356,7 +356,8 @@ def _data_uri(uri: str, path: Path, where: str) -> bytes:
 
 
 def decode_image(data: bytes, path: Path | None = None, where: str | None = None) -> np.ndarray:
-    """PNG or JPEG bytes -> ``(H, W, 4) uint8``: PNG via matplotlib, JPEG via Pillow (matplotlib's dependency)."""
+    """PNG or JPEG bytes -> ``(H, W, 4) uint8`` via Pillow (any PNG: 8 or 16 bits, grey, palette, RGB(A),
+    interlaced; 16-bit channels keep their high byte)."""
     try:
         from PIL import Image
 
@@ -368,18 +369,13 @@ def decode_image(data: bytes, path: Path | None = None, where: str | None = None
         raise InputError(path, where, f"texture of {w} x {h} pixels; at most {MAX_TEXTURE_PIXELS} pixels "
                          "(e.g. 8192 x 4096) are read: scale it down")
     try:
-        if data[:8] == b"\x89PNG\r\n\x1a\n":
-            import matplotlib.image as mpimg
-
-            arr = mpimg.imread(io.BytesIO(data), format="png")
-        else:
-            from PIL import Image
-
-            arr = np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
+        with Image.open(io.BytesIO(data)) as im:
+            if im.mode.startswith("I"):  # 16-bit grey ("I;16", "I;16B", "I"): Pillow's RGBA would clip it
+                arr = (np.asarray(im).astype(np.uint32) >> 8).clip(0, 255).astype(np.uint8)
+            else:
+                arr = np.asarray(im.convert("RGBA"))
     except Exception as exc:
         raise InputError(path, where, f"cannot decode texture image: {exc}") from None
-    if arr.dtype != np.uint8:
-        arr = np.clip(np.asarray(arr) * 255.0 + 0.5, 0, 255).astype(np.uint8)
     if arr.ndim == 2:
         arr = np.stack([arr] * 3, -1)
     if arr.shape[2] == 3:
@@ -985,10 +981,10 @@ def export_glb(avatar: Avatar, path: str | Path) -> Path:
         "materials": [material],
     }
     if avatar.texture is not None:
-        import matplotlib.image as mpimg
+        from PIL import Image
 
         png = io.BytesIO()
-        mpimg.imsave(png, avatar.texture, format="png")
+        Image.fromarray(np.ascontiguousarray(avatar.texture, np.uint8)).save(png, format="png")
         iv = w.view(png.getvalue())
         gltf["images"] = [{"bufferView": iv, "mimeType": "image/png"}]
         gltf["samplers"] = [{"magFilter": 9729, "minFilter": 9987}]

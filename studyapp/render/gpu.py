@@ -178,9 +178,9 @@ class PaletteBuffers:
 def rasterize_label(text: str, height_px: int) -> np.ndarray:
     """White-on-black coverage image ``(H, W) uint8`` of ``text`` in DejaVu Sans Bold, its ink centred.
 
-    FreeType through Pillow (which matplotlib brings) with the font file matplotlib ships, found without
-    importing matplotlib: its import alone cost 0.3-1 s of a participant's first frame on a loaded 2-core
-    machine (issue 20).
+    FreeType through Pillow with the font file studyapp ships (``studyapp/render/fonts``, the one matplotlib
+    ships too: the labels look as they did when matplotlib drew them, and the participant's install needs no
+    matplotlib).
 
     >>> img = rasterize_label("A", 32); img.shape[0] == 32 and bool(img.max() > 200)
     True
@@ -204,14 +204,5 @@ def rasterize_label(text: str, height_px: int) -> np.ndarray:
 
 
 def _label_font() -> Path:
-    """matplotlib's bundled DejaVu Sans Bold, located without importing matplotlib."""
-    import importlib.util
-
-    spec = importlib.util.find_spec("matplotlib")
-    if spec is not None and spec.origin:
-        path = Path(spec.origin).parent / "mpl-data" / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"
-        if path.is_file():
-            return path
-    import matplotlib  # an unusual layout: ask matplotlib itself
-
-    return Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans-Bold.ttf"
+    """DejaVu Sans Bold, shipped in studyapp's package data (``studyapp/render/fonts``, with its license)."""
+    return Path(__file__).resolve().parent / "fonts" / "DejaVuSans-Bold.ttf"

@@ -94,12 +94,12 @@ def _play_loop(renderer: Renderer, scene, target, fps: float, duration: float | 
 def render_still(scene, t: float, out_png: str | Path, size: tuple[int, int] = (1280, 720),
                  renderer: Renderer | None = None) -> np.ndarray:
     """Render one frame at ``t`` seconds to a PNG; returns the image ``(H, W, 3) uint8``."""
-    import matplotlib.image as mpimg
+    from PIL import Image
 
     img = next(render_frames(scene, [t], size, renderer))
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    mpimg.imsave(out_png, img)
+    Image.fromarray(np.ascontiguousarray(img)).save(out_png, format="png")
     return img
 
 

@@ -736,6 +736,12 @@ def _answer_key(trial: dict[str, Any]) -> tuple[Any, ...]:
     return trial.get("trial_index"), trial.get("stimulus"), trial.get("answered_at")
 
 
+def _has_criteria(db: Any) -> bool:
+    """Whether the database records its criteria (schema 7; a file read as it is may be older)."""
+    return db.connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'criteria'"
+                                 ).fetchone() is not None
+
+
 def results_payload(db: Any, participant_id: str, study: str) -> dict[str, Any]:
     """What ``results.json`` holds for one participant (also what an upload carries, :mod:`studyapp.study.upload`);
     ``db``: anything with the results ``connection`` and its ``design_hash``."""
@@ -743,6 +749,10 @@ def results_payload(db: Any, participant_id: str, study: str) -> dict[str, Any]:
         "format": RESULTS_FORMAT, "version": FORMAT_VERSION, "study": study, "design_hash": db.design_hash,
         "app_version": __version__, "participant": participant_id,
         "stimuli": [dict(r) for r in db.connection.execute("SELECT * FROM stimuli")],
+        # the criteria's labels (schema 7), checked against the design when merged (studyapp.study.returned)
+        **({"criteria": [{k: r[k] for k in ("id", "position", "label", "question")}
+                         for r in db.connection.execute("SELECT * FROM criteria ORDER BY position")]}
+           if _has_criteria(db) else {}),
         **_participant_rows(db, participant_id),
     }
 
@@ -913,6 +923,7 @@ def merge_results(db_path: str | Path, files: Iterable[str | Path], *, key_file:
     reports = []
     try:
         lab = _merge_design(db, db.path, design)
+        db.store_design_metadata(lab)  # an upgraded database gains the design's labels (e.g. of its criteria)
         read: list[tuple[Path, _Returned | MergeReport]] = []
         for f in map(Path, files):
             read.append((f, _guarded(f, lambda: _prepare(db, f, extra_keys))))

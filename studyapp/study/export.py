@@ -88,8 +88,8 @@ def export_json(db: str | Path | ResultsDB) -> dict:
     try:
         con = rdb.connection
         out = {"schema": "studyapp-results", "design_hash": rdb.design_hash, "title": rdb.title}
-        for table in ("study", "stimuli", "conditions", "participants", "sessions", "trials", "trial_slots",
-                      "responses", "judgements", "plays", "questionnaire"):
+        for table in ("study", "stimuli", "conditions", "criteria", "participants", "sessions", "trials",
+                      "trial_slots", "responses", "judgements", "plays", "questionnaire"):
             out[table] = [dict(r) for r in con.execute(f"SELECT * FROM {table}")]
     finally:
         if owned:

@@ -15,6 +15,8 @@ opaque ids back to the real condition and stimulus ids):
   :func:`studyapp.study.schedule.participant_schedule` from the design's seed, the id and the row -- the
   same function the session runs, never a second implementation; answered trials are ``0 .. k-1`` (the
   session answers in order), all of them for a participant who finished;
+* **criteria** (results of schema 7): the file's criteria are the design's, with the design's labels and
+  questions (the merge stores the lab design's own, never the file's);
 * **slots** (results of schema 6): every trial's ``trial_slots`` rows are the scheduled slots: condition,
   the stimulus whose motion each played (a mismatch trial's other clip) and sample, and its ``block`` and
   ``paradigm`` are the scheduled ones (a file without them is one rank block "main");
@@ -656,6 +658,36 @@ def check_copies(pid: str, trials: Sequence[Row], others: Mapping[str, Iterable[
     return out
 
 
+# ------------------------------------------------------------------------------------------ criteria
+def check_criteria(rows: Any, design: Design) -> list[Finding]:
+    """The file's ``criteria`` rows (schema 7) are the design's criteria, each with its label and question.
+
+    >>> from studyapp.study.design.model import Criterion
+    >>> from types import SimpleNamespace as NS
+    >>> d = NS(criteria=[Criterion("sync", "Synchronization with speech", "Which is in time?")])
+    >>> check_criteria([{"id": "sync", "label": "Synchronization with speech", "question": "Which is in time?"}], d)
+    []
+    >>> [f.problem[:40] for f in check_criteria([{"id": "sync", "label": "Sync", "question": "Which is in time?"}], d)]
+    ["criterion 'sync' is labelled 'Sync' in t"]
+    """
+    if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+        return [Finding("criteria", "not a list of criteria rows")]
+    want = {c.id: c for c in design.criteria}
+    out = []
+    for r in rows:
+        c = want.get(r.get("id"))  # type: ignore[arg-type]
+        if c is None:
+            out.append(Finding("criteria", f"criterion {r.get('id')!r} is not one of the design's "
+                                           f"({', '.join(want)})"))
+            continue
+        for name in ("label", "question"):
+            if r.get(name) != getattr(c, name):
+                out.append(Finding("criteria", f"criterion {c.id!r} is {'labelled' if name == 'label' else 'asked'} "
+                                               f"{r.get(name)!r} in the file, {getattr(c, name)!r} in the design: the "
+                                               "file was not made from this study's design"))
+    return out
+
+
 # ------------------------------------------------------------------------------------------ all of it
 def check_returned(payload: Mapping[str, Any], design: Design, *, roster: Mapping[str, int] | None,
                    allow_unlisted: bool, others: Mapping[str, Iterable[Row]],
@@ -677,6 +709,8 @@ def check_returned(payload: Mapping[str, Any], design: Design, *, roster: Mappin
     if not isinstance(pid, str):
         return out
     out += check_rows_belong(pid, payload)
+    if "criteria" in payload:  # a file of schema 7 or later
+        out += check_criteria(payload["criteria"], design)
     row = p.get("latin_row")
     if not _is_int(row) or not 0 <= row < rows:
         return out

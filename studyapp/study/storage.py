@@ -53,7 +53,7 @@ from studyapp.study import row_checksums, sql_backend
 from studyapp.study.sql_backend import sqlite_problem  # noqa: F401  (its home was here; callers import it from here)
 
 #: Bumped whenever the tables change; a database with another version is refused, never guessed at.
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 #: Older schema versions this version upgrades in place when it opens them (see ``_MIGRATIONS``).
 #: Version 2 added ``trials.trial_duration_s``; a version 1 trial keeps it NULL (not recorded).
 #: Version 3 added ``trials.sample_left/middle/right`` (the sample each slot showed, see ``samples`` in
@@ -70,6 +70,9 @@ SCHEMA_VERSION = 6
 #: ``judgements`` (pairwise/mismatch preferences and ratings, one row per slot). New parts use portable SQL
 #: only (INTEGER/REAL/TEXT, no AUTOINCREMENT, no SQLite-only functions), so the same statements run on
 #: PostgreSQL.
+#: Version 7 added table ``criteria`` (each criterion's place in the design, its ``label`` and ``question`` in
+#: the design's language), filled whenever the database is opened with its design; an upgraded database has
+#: none until then, and the analysis names such a criterion by its id.
 _MIGRATIONS = {1: ("ALTER TABLE trials ADD COLUMN trial_duration_s REAL",),
                2: ("ALTER TABLE trials ADD COLUMN sample_left INTEGER",
                    "ALTER TABLE trials ADD COLUMN sample_middle INTEGER",
@@ -223,6 +226,14 @@ CREATE TABLE judgements (
     PRIMARY KEY (participant, trial_index, criterion, slot),
     FOREIGN KEY (participant, trial_index) REFERENCES trials(participant, trial_index)
 );
+-- The design's criteria (schema 7): position is its place in the design, label and question the text the
+-- participants read (in the design's language): the analysis shows the label (the id when none is stored)
+CREATE TABLE criteria (
+    id TEXT PRIMARY KEY,
+    position INTEGER NOT NULL,
+    label TEXT NOT NULL,
+    question TEXT NOT NULL
+);
 -- Keys of remote bundles made from this study: opaque condition ids -> real ids (see bundle.py).
 CREATE TABLE bundles (
     design_hash TEXT PRIMARY KEY,
@@ -241,6 +252,7 @@ def _create_statement(table: str) -> str:
 
 _MIGRATIONS[5] = ("ALTER TABLE trials ADD COLUMN block TEXT", "ALTER TABLE trials ADD COLUMN paradigm TEXT",
                   _create_statement("trial_slots"), _create_statement("judgements"))
+_MIGRATIONS[6] = (_create_statement("criteria"),)
 
 assert not any(";" in ln for ln in _SCHEMA.splitlines() if ln.strip().startswith("--")), \
     "a ';' in a comment of _SCHEMA would split its statement"
@@ -251,7 +263,7 @@ _EXPECTED_TABLES = {
     "responses", "plays", "questionnaire", "bundles",
 }
 #: Tables a database of the current version has besides those (an older one gains them when upgraded).
-_NEW_TABLES = ("trial_slots", "judgements")
+_NEW_TABLES = ("trial_slots", "judgements", "criteria")
 
 
 
@@ -460,7 +472,7 @@ class ResultsDB:
             )
         if design is not None:
             try:
-                self._store_design_metadata(design)
+                self.store_design_metadata(design)
             except BaseException:
                 self._con.close()
                 raise
@@ -591,9 +603,13 @@ class ResultsDB:
             row_checksums.seal_all(con)
         return True
 
-    def _store_design_metadata(self, design: Any) -> None:
+    def store_design_metadata(self, design: Any) -> None:
+        """Record what an export needs of ``design`` (its stimuli's tags, its conditions' and criteria's places
+        and labels), keeping what is stored already: called when the database is opened with its design, and
+        by merge, which opens it without and then loads the design (an upgraded database gains its labels)."""
         stimuli = getattr(design, "stimuli", None) or []
         conditions = getattr(design, "conditions", None) or []
+        criteria = getattr(design, "criteria", None) or []
         with self.transaction() as con:
             for s in stimuli:
                 con.execute("INSERT OR IGNORE INTO stimuli (id, tags) VALUES (?, ?)",
@@ -601,6 +617,9 @@ class ResultsDB:
             for i, c in enumerate(conditions):
                 con.execute("INSERT OR IGNORE INTO conditions (id, position, label) VALUES (?, ?, ?)",
                             (c.id, i, getattr(c, "label", None)))
+            for i, c in enumerate(criteria):
+                con.execute("INSERT OR IGNORE INTO criteria (id, position, label, question) VALUES (?, ?, ?, ?)",
+                            (c.id, i, getattr(c, "label", None) or c.id, getattr(c, "question", None) or ""))
 
     # ------------------------------------------------------------------ plumbing
     @property
@@ -696,6 +715,10 @@ class ResultsDB:
 
     def condition_ids(self) -> list[str]:
         return [r[0] for r in self._con.execute("SELECT id FROM conditions ORDER BY position")]
+
+    def criteria(self) -> list[dict[str, Any]]:
+        """The stored criteria (id, position, label, question) in the design's order."""
+        return [dict(r) for r in self._con.execute("SELECT * FROM criteria ORDER BY position")]
 
     # ------------------------------------------------------------------ participants
     @staticmethod

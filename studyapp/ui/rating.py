@@ -10,6 +10,8 @@ Anchors (the block's ``anchors``, e.g. Bad / Poor / Fair / Good / Excellent) div
 intervals, MUSHRA's convention: with n anchors, anchor k labels ``[100 k / n, 100 (k + 1) / n]`` and sits at
 that interval's centre (:func:`anchor_centres`).
 
+The value is written beside the slider's handle, never under it (:func:`value_text_x`).
+
 Rows and the keyboard: sliders are rows in reading order (criterion by criterion, each figure left to
 right). The highlighted slider takes the keys: Left / Right move it by 1, Page Up / Page Down by 10 (a first
 press on an unset slider sets it to 50), the digits jump to :func:`digit_points` (anchor k's centre, or
@@ -50,6 +52,32 @@ def anchor_centres(n: int) -> list[float]:
     [10.0, 30.0, 50.0, 70.0, 90.0]
     """
     return [HIGH * (k + 0.5) / n for k in range(n)]
+
+
+def grab_span(x0: float, x1: float, value: int, grab_min: float, pad: float = 2.0) -> tuple[float, float]:
+    """Screen x range of the handle of an integer 0..100 slider spanning ``x0..x1``, as ImGui places it
+    (``SliderBehaviorT``: ``pad`` px in from each end, the handle ``max(track / 101, grab_min)`` wide, its
+    centre moving over the rest).
+
+    >>> grab_span(0, 206, 0, 10), grab_span(0, 206, 100, 10), grab_span(0, 206, 50, 10)
+    ((2.0, 12.0), (194.0, 204.0), (98.0, 108.0))
+    """
+    track = (x1 - x0) - 2 * pad
+    size = min(max(track / (HIGH - LOW + 1), grab_min), track)
+    centre = x0 + pad + size / 2 + (track - size) * (value - LOW) / (HIGH - LOW)
+    return centre - size / 2, centre + size / 2
+
+
+def value_text_x(x0: float, x1: float, value: int, text_w: float, grab_min: float, gap: float) -> float:
+    """Where the value's text starts on a slider spanning ``x0..x1``: ``gap`` px beside the handle, on the side
+    with more room (right of it in the lower half, left of it from 50 on), so the handle never covers it (ImGui
+    centres it in the track, under the handle at 50).
+
+    >>> value_text_x(0, 206, 0, 20, 10, 6), value_text_x(0, 206, 50, 20, 10, 6), value_text_x(0, 206, 100, 20, 10, 6)
+    (18.0, 72.0, 168.0)
+    """
+    a, b = grab_span(x0, x1, value, grab_min)
+    return b + gap if value < (LOW + HIGH) / 2 else a - gap - text_w
 
 
 @dataclass

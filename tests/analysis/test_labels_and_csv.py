@@ -82,7 +82,7 @@ def test_report_shows_labels_in_the_design_order_and_the_study_title(demo_report
     assert all(label in svg for label in labels)
     assert not any(re.search(rf">\s*{cid}\s*<", svg) for cid in design.condition_ids)
     # rows of Table 2 in the design's order (the demo's ids are not in alphabetical order)
-    rows = [ln for ln in md.splitlines() if ln.startswith("| realism |") and "%" in ln][:3]  # Table 2 comes first
+    rows = [ln for ln in md.splitlines() if ln.startswith("| Realism |") and "%" in ln][:3]  # Table 2 first
     assert [next(lb for lb in labels if f"| {lb} |" in r) for r in rows] == labels
     assert sorted(design.condition_ids) != design.condition_ids
 

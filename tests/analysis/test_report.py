@@ -195,7 +195,7 @@ def test_report_names_the_pairs_where_post_hoc_tests_disagree(written) -> None:
     s = json.loads((out / "stats.json").read_text())
     for crit in a.criteria:
         # the post-hoc paragraph follows the criterion's opening paragraph
-        post = paras[next(i for i, p in enumerate(paras) if p.startswith(f"**{crit.capitalize()}.**")) + 1]
+        post = paras[next(i for i, p in enumerate(paras) if p.startswith(f"**{crit}.**")) + 1]
         nem = {(r["a"], r["b"]): r["significant"] for r in s[crit]["posthoc"]["nemenyi"]}
         wil = {(r["a"], r["b"]): r["p_adjusted"] < 0.05 for r in s[crit]["posthoc"]["wilcoxon_holm"]}
         differ = [f"{x} vs {y} (significant only with {'Wilcoxon' if wil[(x, y)] else 'Nemenyi'})"
@@ -252,7 +252,7 @@ def test_prose_and_tables_print_the_same_numbers(tmp_path: Path) -> None:
         assert f"(difference {r['Δ mean rank']}, " in prose, (x, y)
         cell = r["Nemenyi p_adj"]
         assert (f"p_adj {cell})" if cell.startswith("<") else f"p_adj = {cell})") in prose, (x, y)
-    opening = next(p for p in md.split("\n\n") if p.startswith("**Realism.**"))
+    opening = next(p for p in md.split("\n\n") if p.startswith("**realism.**"))  # no label: the id
     (t1,) = _md_table(md, "| criterion | n | χ² |")
     assert f"χ²({t1['df']}) = {t1['χ²']}, " in opening and f"Kendall's W = {t1['W']} " in opening
     assert f") = {t1['F_ID']}, " in opening and f"CD = {t1['CD']} at α = .05" in prose

@@ -240,7 +240,7 @@ def test_default_headline_is_participant_level_and_says_so(tmp_path: Path) -> No
     ref = stats.friedmanchisquare(*means.to_numpy().T)
     assert c.friedman.chi2 == pytest.approx(ref.statistic) and c.friedman.p == pytest.approx(ref.pvalue)
     md = (tmp_path / "report.md").read_text()
-    opening = next(p for p in md.split("\n\n") if p.startswith("**Realism.**"))
+    opening = next(p for p in md.split("\n\n") if p.startswith("**realism.**"))  # no label: the id
     assert "The primary, participant-level Friedman test (each of the 6 participants a block" in opening
     assert "The secondary, trial-level test (every trial a block)" in opening and "pseudo-replication" in opening
     assert "Table 1. Friedman tests per criterion (primary analysis, blocks: participants)." in md

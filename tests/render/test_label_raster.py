@@ -1,4 +1,4 @@
-"""Slot labels are drawn with Pillow's FreeType and matplotlib's DejaVu Sans Bold without importing matplotlib
+"""Slot labels are drawn with Pillow's FreeType and the DejaVu Sans Bold studyapp ships, without matplotlib
 (0.3-1 s of a participant's first frame); the glyphs are those matplotlib's Agg draws, centred."""
 from __future__ import annotations
 

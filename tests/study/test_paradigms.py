@@ -452,7 +452,7 @@ def test_a_schema_5_database_made_by_the_old_code_is_upgraded_in_place(tmp_path:
     con.close()
     with ResultsDB(path, create=False) as db:
         con = db.connection
-        assert con.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 6
+        assert con.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 7
         assert row_checksums.verify(con) == []
         after = _table(con, "trials")
         assert [r[:-2] for r in after] == before["trials"] and {r[-2:] for r in after} == {(None, None)}

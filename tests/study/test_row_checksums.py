@@ -220,6 +220,7 @@ def test_a_schema_3_database_is_upgraded_in_place_with_checksums(bot_db: Path, t
     with sqlite3.connect(path) as con:  # what studyapp wrote before labels (4) and checksums (5)
         con.execute(f"DROP TABLE {row_checksums.TABLE}")
         con.execute("ALTER TABLE conditions DROP COLUMN label")
+        con.execute("DROP TABLE criteria")  # added by 7
         for table in ("trial_slots", "judgements"):  # added by 6
             con.execute(f"DROP TABLE {table}")
         for column in ("block", "paradigm"):  # added by 6

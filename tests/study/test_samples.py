@@ -215,13 +215,14 @@ def test_a_schema_2_database_is_upgraded_and_its_trials_keep_no_sample(tmp_path:
         for column in ("sample_left", "sample_middle", "sample_right"):
             con.execute(f"ALTER TABLE trials DROP COLUMN {column}")
         con.execute("DROP TABLE row_checksums")  # added by 5
+        con.execute("DROP TABLE criteria")  # added by 7
         for table in ("trial_slots", "judgements"):  # added by 6
             con.execute(f"DROP TABLE {table}")
         for column in ("block", "paradigm"):  # added by 6
             con.execute(f"ALTER TABLE trials DROP COLUMN {column}")
         con.execute("UPDATE schema_version SET version = 2")
     with ResultsDB(db_path, d) as db:
-        assert db.connection.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 6
+        assert db.connection.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 7
         run_bot_session(d, db, "P2", "random", 1)
     df = export_dataframe(db_path)
     assert df[df.participant == "P1"]["sample"].isna().all()  # not recorded then: empty, not made up

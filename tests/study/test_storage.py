@@ -194,6 +194,7 @@ def test_conditions_keep_their_label_and_a_schema_3_database_is_upgraded_with_no
     with sqlite3.connect(path) as con:  # what studyapp wrote before labels (4) and row checksums (5): schema 3
         con.execute("DROP TABLE row_checksums")
         con.execute("ALTER TABLE conditions DROP COLUMN label")
+        con.execute("DROP TABLE criteria")  # added by 7
         for table in ("trial_slots", "judgements"):  # added by 6
             con.execute(f"DROP TABLE {table}")
         for column in ("block", "paradigm"):  # added by 6
@@ -201,7 +202,7 @@ def test_conditions_keep_their_label_and_a_schema_3_database_is_upgraded_with_no
         con.execute("UPDATE schema_version SET version = 3")
     df = export_dataframe(path)  # opening upgrades it in place
     with sqlite3.connect(path) as con:
-        assert con.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 6
+        assert con.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 7
         assert con.execute("SELECT id, label FROM conditions ORDER BY position").fetchall() == [
             ("b", None), ("a", None), ("c", None)]
     # no label recorded: the analysis's name is the id; the design order stays

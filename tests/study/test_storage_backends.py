@@ -381,3 +381,34 @@ def test_paradigm_answers_export_the_same_from_postgresql(paradigm: str, tmp_pat
     sqlite_table, pg_table = _export_without_timing(tmp_path / "r.sqlite"), _export_without_timing(url)
     assert len(pg_table) > 0 and set(pg_table["paradigm"]) == {paradigm} | ({"rank"} & set(sqlite_table["paradigm"]))
     pd.testing.assert_frame_equal(pg_table, sqlite_table, check_exact=True)
+
+
+def test_criterion_labels_and_the_upgrade_from_schema_6_on_both_backends(results_target: Path | str) -> None:
+    """Schema 7 on either engine: a version 6 database (no table criteria) is upgraded in place; opened with its
+    design it records each criterion's label and question, and the export carries the labels."""
+    from types import SimpleNamespace as NS
+
+    from studyapp.study.export import export_dataframe
+
+    db = open_results(results_target, design_hash="ef56", title="T")
+    db.add_participant("P1", n_rows=2)
+    db.save_trial(*_trial("P1", 0, db.start_session("P1")))
+    db.close()
+    _raw(results_target, "DROP TABLE criteria")  # what studyapp wrote before schema 7, its rows sealed as then
+    _raw(results_target, "UPDATE schema_version SET version = 6")
+    backend = sql_backend.backend_for(results_target)
+    con = backend.connect(30.0)
+    backend.begin_write(con)
+    row_checksums.seal_all(con)
+    con.execute("COMMIT")
+    con.close()
+    assert export_dataframe(results_target)["criterion_label"].tolist() == ["realism"] * 3  # the id: no label
+    design = NS(design_hash="ef56", title="T", criteria=[
+        NS(id="realism", label="Looks like a real person", question="Which looks real?")])
+    with open_results(results_target, design) as db:
+        assert db.connection.execute("SELECT version FROM schema_version").fetchone()[0] == 7
+        assert db.criteria() == [{"id": "realism", "position": 0, "label": "Looks like a real person",
+                                  "question": "Which looks real?"}]
+    assert _raw(results_target, "SELECT label FROM criteria") == [("Looks like a real person",)]
+    assert export_dataframe(results_target)["criterion_label"].tolist() == ["Looks like a real person"] * 3
+    open_results(results_target, create=False).close()  # every row, the new ones too, matches its checksum

@@ -229,6 +229,7 @@ def test_two_processes_upgrading_an_old_database_at_once(tmp_path: Path) -> None
     with sqlite3.connect(base) as con:  # what studyapp wrote before labels (4) and row checksums (5)
         con.execute("DROP TABLE row_checksums")
         con.execute("ALTER TABLE conditions DROP COLUMN label")
+        con.execute("DROP TABLE criteria")  # added by 7
         for table in ("trial_slots", "judgements"):  # added by 6
             con.execute(f"DROP TABLE {table}")
         for column in ("block", "paradigm"):  # added by 6

@@ -100,6 +100,7 @@ def _downgrade_to_v1(path: Path) -> None:
         for column in ("sample_left", "sample_middle", "sample_right", "trial_duration_s"):  # added by 3, 2
             con.execute(f"ALTER TABLE trials DROP COLUMN {column}")
         con.execute("DROP TABLE row_checksums")  # added by 5
+        con.execute("DROP TABLE criteria")  # added by 7
         for table in ("trial_slots", "judgements"):  # added by 6
             con.execute(f"DROP TABLE {table}")
         for column in ("block", "paradigm"):  # added by 6
@@ -130,7 +131,7 @@ def test_every_trial_stores_its_duration_and_old_databases_stay_readable(tmp_pat
         old = tidy_from_connection(con, db_path)
     assert "trial_duration_s" in old.columns and old["trial_duration_s"].isna().all() and len(old) == len(df)
     with ResultsDB(db_path, design) as db:  # studyapp upgrades it in place and goes on
-        assert db.connection.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 6
+        assert db.connection.execute("SELECT version FROM schema_version").fetchone()[0] == SCHEMA_VERSION == 7
         run_bot_session(design, db, "P2", "random", 1)
     df = export_dataframe(db_path)
     assert df[df.participant == "P1"]["trial_duration_s"].isna().all()    # not recorded then: empty, not made up

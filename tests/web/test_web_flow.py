@@ -54,6 +54,9 @@ def test_a_prolific_participant_completes_the_study(study, browser_for) -> None:
     assert rec.status == "done"
     assert answered == len(db.trials("5f0c0ffee0ddba11")) == 4   # practice, 2 clips, the attention check
     assert len(db.responses("5f0c0ffee0ddba11")) == 4 * 3 * len(study.design.criteria)
+    # the design's criteria are recorded with the answers: the analysis names them by their labels
+    assert [(c["id"], c["label"], c["question"]) for c in db.criteria()] == [
+        (c.id, c.label, c.question) for c in study.design.criteria]
     machine = db.sessions("5f0c0ffee0ddba11")[0]["machine"]
     assert machine["frontend"] == "browser" and machine["prolific_study_id"] == "study77"
     assert machine["prolific_session_id"] == "sess99" and machine["prolific_prolific_pid"] == "5f0c0ffee0ddba11"

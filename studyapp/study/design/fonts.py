@@ -2,8 +2,8 @@
 
 The UI draws with Roboto, which has Latin, Greek and Cyrillic but no CJK glyphs. :func:`needed_chars`
 collects every character of the texts a design shows participants; :func:`fallback_font` finds an
-installed font (through matplotlib's font manager, already a dependency) whose character map has every
-one Roboto lacks, preferring well-known CJK families. The UI merges that font into its own
+installed font (the files in the system's font folders, read by :mod:`.font_files`) whose character map has
+every one Roboto lacks, preferring well-known CJK families. The UI merges that font into its own
 (:mod:`studyapp.ui.layer`); Dear ImGui 1.92 rasterises glyphs when they are first drawn, so only the
 characters actually used are loaded. When no font covers the texts, ``validate`` says so
 (:func:`font_problem`). On Debian/Ubuntu ``apt install fonts-noto-cjk`` (or ``fonts-wqy-microhei``)
@@ -14,6 +14,8 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from studyapp.study.design.font_files import FontFace, read_face, system_fonts
 
 if TYPE_CHECKING:
     from studyapp.study.design.model import Design
@@ -33,14 +35,14 @@ def ui_font_path(bold: bool = False) -> Path:
 
 
 @lru_cache(maxsize=None)
+def _face(path: str) -> FontFace | None:
+    return read_face(path)
+
+
 def charmap(path: str) -> frozenset[int]:
     """The code points a font file has glyphs for (empty when it cannot be read)."""
-    from matplotlib.ft2font import FT2Font
-
-    try:
-        return frozenset(FT2Font(path).get_charmap())
-    except Exception:  # a broken or unsupported font file is just not a candidate
-        return frozenset()
+    face = _face(path)
+    return face.codes if face is not None else frozenset()
 
 
 def participant_texts(design: Design) -> list[str]:
@@ -62,8 +64,8 @@ def needed_chars(texts: list[str]) -> set[str]:
 
 
 #: Characters Roboto certainly has (ASCII, Latin-1, Latin Extended-A and common punctuation; a test checks
-#: them against the font): texts made only of these need neither imgui-bundle nor matplotlib loaded, which
-#: keeps ``validate`` of an English design free of GUI and plotting imports.
+#: them against the font): texts made only of these need no font file read, which keeps ``validate`` of an
+#: English design from reading fonts.
 SURELY_IN_UI_FONT = frozenset(chr(c) for c in [*range(0x20, 0x7F), *range(0xA0, 0x180), 0x2013, 0x2014, 0x2018,
                                                 0x2019, 0x201C, 0x201D, 0x2026, 0x2022, 0x2212, 0x2264, 0x2265])
 
@@ -86,29 +88,24 @@ def fallback_font(chars: set[str]) -> Path | None:
     if not chars:
         return None
     want = {ord(c) for c in chars}
-    found = _search(want, _font_entries(rescan=False))
-    # matplotlib caches its font list: a font installed since (apt install fonts-noto-cjk) needs a rescan
-    return found if found is not None else _search(want, _font_entries(rescan=True))
+    return _search(want, _font_entries())
 
 
-def _font_entries(rescan: bool) -> list:
-    from matplotlib import font_manager
-
-    if rescan:
-        font_manager.fontManager = font_manager._load_fontmanager(try_read_cache=False)
-    return list(font_manager.fontManager.ttflist)
+def _font_entries() -> list[FontFace]:
+    """The first face of every installed font file that can be read (a file is read once per process)."""
+    return [f for f in map(_face, map(str, system_fonts())) if f is not None]
 
 
-def _search(want: set[int], entries: list) -> Path | None:
+def _search(want: set[int], entries: list[FontFace]) -> Path | None:
     entries = sorted(entries,
-                     key=lambda e: (PREFERRED.index(e.name) if e.name in PREFERRED else len(PREFERRED),
-                                    e.weight not in (400, "normal", "regular"), e.fname))
+                     key=lambda e: (PREFERRED.index(e.family) if e.family in PREFERRED else len(PREFERRED),
+                                    e.weight != 400, str(e.path)))
     for e in entries:
         # "Last Resort" fonts map every code point to a placeholder box: that is what must not be shown
-        if "lastresort" in Path(e.fname).name.lower().replace(" ", ""):
+        if "lastresort" in e.path.name.lower().replace(" ", ""):
             continue
-        if want <= charmap(e.fname):
-            return Path(e.fname)
+        if want <= e.codes:
+            return e.path
     return None
 
 
@@ -122,9 +119,9 @@ def design_fallback_font(design: Design) -> tuple[Path | None, set[str]]:
         return font, set()
     # name what is uncovered: the characters that no single font could add
     covered: set[int] = set()
-    for e in _font_entries(rescan=False):
-        if "lastresort" not in Path(e.fname).name.lower():
-            covered |= charmap(e.fname) & {ord(c) for c in missing}
+    for e in _font_entries():
+        if "lastresort" not in e.path.name.lower():
+            covered |= e.codes & {ord(c) for c in missing}
     return None, {c for c in missing if ord(c) not in covered} or missing
 
 

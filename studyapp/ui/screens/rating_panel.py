@@ -7,7 +7,9 @@ their centres (:func:`studyapp.ui.rating.anchor_centres`), with a tick between n
 the ends read 0 and 100.
 
 A slider starts *unset*: no handle, and "not rated yet" written in it, so an untouched slider cannot be
-mistaken for an answer at its starting point. Every slider must be moved before "Next clip" is enabled; until
+mistaken for an answer at its starting point. A set slider's value is written beside its handle, on the side
+with more room (:func:`studyapp.ui.rating.value_text_x`): ImGui's own text, centred in the track, lay under
+the handle at 50. Every slider must be moved before "Next clip" is enabled; until
 then the hint beside that button names the ones left ("Still to rate: Realism: A, C").
 
 Mouse: click or drag on a slider (a click puts it where clicked). Keyboard, the ranking panel's scheme: the
@@ -24,7 +26,7 @@ from imgui_bundle import imgui
 
 from studyapp.render.renderer import slot_viewports
 from studyapp.ui.input import digit_key
-from studyapp.ui.rating import RatingState, anchor_centres, digit_points
+from studyapp.ui.rating import RatingState, anchor_centres, digit_points, value_text_x
 from studyapp.ui.screens.ranking_panel import GAP_PX, ROW_PAD_PX, next_row, row_keys
 
 if TYPE_CHECKING:
@@ -36,6 +38,8 @@ ANCHOR_PX = 20.0
 #: Margin between a slider and its figure column's edges, and the room for the figure's name before it.
 MARGIN_PX = 18.0
 NAME_PX = 26.0
+#: Room between a set slider's handle and its value's text.
+VALUE_GAP_PX = 6.0
 ROW_BG = (0.16, 0.17, 0.20, 1.0)
 FOCUS_COLOR = (0.55, 0.78, 1.0, 1.0)
 UNSET_GRAB = (0.0, 0.0, 0.0, 0.0)
@@ -147,8 +151,9 @@ def _slider(app: ScreenApp, view: TrialView, r: RatingState, ci: int, slot: int,
                            imgui.ImVec4(*(UNSET_GRAB if value is None else GRAB_COLOR)))
     imgui.set_next_item_width(x1 - x0)
     ui.record(unset_text if value is None else str(value))
+    # a set slider's value is drawn below, beside the handle: ImGui would centre it under the handle at 50
     changed, new = imgui.slider_int(f"##rate_{ci}_{slot}", 50 if value is None else value, 0, 100,
-                                    unset_text if value is None else "%d",
+                                    unset_text if value is None else "",
                                     imgui.SliderFlags_.no_input | imgui.SliderFlags_.always_clamp)
     imgui.pop_style_color(2)
     a, b = imgui.get_item_rect_min(), imgui.get_item_rect_max()
@@ -159,6 +164,13 @@ def _slider(app: ScreenApp, view: TrialView, r: RatingState, ci: int, slot: int,
     if changed or (imgui.is_item_activated() and value is None):
         # a click on an unset slider counts as setting it where clicked, even at its hidden start value
         r.set(crit.id, slot, new)
+    current = r.values[crit.id][slot]  # as this frame's click or drag left it
+    if current is not None and value is not None:  # (a slider set this frame shows its value from the next)
+        shown = str(current)
+        size = imgui.calc_text_size(shown)
+        x = value_text_x(a.x, b.x, current, size.x, imgui.get_style().grab_min_size, VALUE_GAP_PX * s)
+        imgui.get_window_draw_list().add_text(imgui.ImVec2(x, (a.y + b.y - size.y) / 2),
+                                              imgui.get_color_u32(imgui.Col_.text), shown)
     if rows[r.active] == (crit.id, slot):
         imgui.get_window_draw_list().add_rect(imgui.ImVec2(a.x - 3 * s, a.y - 3 * s), imgui.ImVec2(b.x + 3 * s, b.y + 3 * s),
                                               imgui.get_color_u32(imgui.ImVec4(*FOCUS_COLOR)), 6 * s, 2 * s)
