@@ -144,6 +144,42 @@ def _clip_hinges(glob: np.ndarray, bone: dict[str, int], axes) -> dict[str, np.n
     return bone_axes(glob[..., :3, :3], pos, bone, sub, from_motion=True)
 
 
+#: Share of the hand's twist about the forearm that the forearm takes (Mecanim's "lower arm twist" default).
+_FOREARM_TWIST_SHARE = 0.5
+
+
+def _share_wrist_twist(t_glob_q: np.ndarray, target: Skeleton, t_bone: dict[str, int], t_g0: np.ndarray,
+                       t_pos0: np.ndarray, mapped: set[str]) -> None:
+    """Move half of each hand's twist about its forearm into the forearm, in place (``t_glob_q``: world
+    quaternions of the target joints).
+
+    A wrist does not twist: pronation turns the radius, and the hand with it. Many rigs keep pronation in
+    the hand joint instead (ZEGGS' hands turn 69 and 84 degrees about the forearm, median over the sample
+    clip, up to 176), which on an avatar whose forearm skin follows its forearm bone wrings the wrist like
+    a sweet wrapper. Turning the forearm about its own axis moves no joint; split in halves, the skin twists
+    half as much at the elbow as at the wrist, as a single forearm bone can best show it.
+    """
+    for side in ("Left", "Right"):
+        fore, hand = f"{side}LowerArm", f"{side}Hand"
+        if fore not in mapped or hand not in mapped:
+            continue
+        fj, hj = t_bone[fore], t_bone[hand]
+        r0 = t_g0[fj, :3, :3]
+        axis = r0.T @ (t_pos0[hj] - t_pos0[fj])  # the forearm's axis in its own local frame
+        n = np.linalg.norm(axis)
+        if n < 1e-9:
+            continue
+        axis = axis / n
+        rest_rel = matrix_to_quat(r0.T @ t_g0[hj, :3, :3])
+        # the hand's turn against the forearm beyond rest, in the forearm's local axes
+        turn = quat_multiply(quat_multiply(quat_inverse(t_glob_q[:, fj]), t_glob_q[:, hj]), quat_inverse(rest_rel))
+        twist = 2.0 * np.arctan2(turn[:, :3] @ axis, turn[:, 3])
+        twist = (twist + np.pi) % (2 * np.pi) - np.pi
+        half = 0.5 * _FOREARM_TWIST_SHARE * twist
+        spin = np.concatenate([np.sin(half)[:, None] * axis, np.cos(half)[:, None]], axis=1)
+        t_glob_q[:, fj] = quat_multiply(t_glob_q[:, fj], spin)
+
+
 def _same_rig(a: Skeleton, b: Skeleton) -> bool:
     return a is b or (a.names == b.names and a.offsets.shape == b.offsets.shape
                       and np.allclose(a.offsets, b.offsets, atol=1e-9))
@@ -189,10 +225,12 @@ def retarget(
 
     s_glob = global_transforms(source.skeleton, source.rotations, source.translations)
     s_pos0, s_g0 = _rest_points(source.skeleton)
-    standing = is_standing(s_pos0, s_bone)
+    # A rig copied onto itself needs no anatomy: its own rest frames on both sides cancel, whatever its pose.
+    same = _same_rig(source.skeleton, target)
+    standing = same or is_standing(s_pos0, s_bone)
     if standing:
         x_s, s_fwd, _, _ = _rest_frames(source.skeleton, s_bone, axes)
-        if not _same_rig(source.skeleton, target):
+        if not same:
             x_s.update(_clip_hinges(s_glob, s_bone, axes))
     else:  # the zero pose carries no anatomy: read it from the animation
         x_s = bone_axes(s_glob[..., :3, :3], s_glob[..., :3, 3], s_bone, axes, from_motion=True,
@@ -212,6 +250,8 @@ def retarget(
         corr = np.stack([x_s[b] @ x_t[b].T for b in mapped])
         t_glob_q[:, tj] = matrix_to_quat(yaw_m @ s_glob[:, sj, :3, :3] @ corr[None])
         set_global[tj] = True
+        if not same:
+            _share_wrist_twist(t_glob_q, target, t_bone, t_g0, t_pos0, set(mapped))
 
     # local rotations: walk the target in depth-first order
     rot = np.empty((f, target.n_joints, 4))

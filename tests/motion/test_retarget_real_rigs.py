@@ -183,3 +183,46 @@ def test_every_rig_stands_on_the_avatars_floor(name):
     _, rest = fk(type(out).rest(avatar.skeleton, 1, 30.0))
     lowest = pos[:, :, 1].min(axis=1)
     assert abs(np.median(lowest) - rest[0, :, 1].min()) < 0.03, f"{name}: feet at {np.median(lowest):.3f} m"
+
+
+def test_a_zero_pose_whose_spine_stands_while_its_limbs_fold_is_read_from_the_animation():
+    """LAFAN1 with its joints' axes turned at random (seed 0): the spine of that zero pose points up, its elbows
+    fold 107-160 degrees and its thighs point sideways. Read as a standing T-pose, the avatar's forearms were
+    turned 70-145 degrees about themselves; read from the animation, every avatar bone turns as with the file."""
+    src, avatar, out = _retargeted("lafan1_walk1_subject1_excerpt.bvh")
+    garbled = _garbled_zero_pose(src, seed=0)
+    _, rest = fk(type(garbled).rest(garbled.skeleton, 1, 30.0))
+    idx = garbled.skeleton.names.index
+    up = _unit(rest[0, idx("Head")] - rest[0, idx("Hips")])
+    assert up[1] > np.cos(np.radians(45.0))  # the trunk of this zero pose stands ...
+    elbow = _angles(rest[0, idx("LeftForeArm")] - rest[0, idx("LeftArm")], rest[0, idx("LeftHand")] - rest[0, idx("LeftForeArm")])
+    assert elbow > 90.0  # ... its arms do not
+    rot_ref, _ = fk(out)
+    rot, _ = fk(to_avatar_skeleton(avatar, garbled))
+    rel = np.swapaxes(rot_ref, -1, -2) @ rot
+    off = np.degrees(Rotation.from_matrix(rel.reshape(-1, 3, 3)).magnitude()).reshape(rel.shape[:2])
+    worst = avatar.skeleton.names[int(np.argmax(off.max(0)))]
+    assert off.max() < 1.0, f"{worst} turned {off.max():.0f} degrees from the file's own retargeting"
+
+
+def _wrist_twist(motion, fore: str, hand: str) -> np.ndarray:
+    """Degrees the hand turns about the forearm's axis against the forearm, beyond the rest pose (scipy)."""
+    rot, _ = fk(motion)
+    rest_rot, rest_pos = fk(type(motion).rest(motion.skeleton, 1, 30.0))
+    f, h = motion.skeleton.index(fore), motion.skeleton.index(hand)
+    axis = rest_rot[0, f].T @ _unit(rest_pos[0, h] - rest_pos[0, f])
+    turn = Rotation.from_matrix(np.swapaxes(rot[:, f], -1, -2) @ rot[:, h] @ (rest_rot[0, f].T @ rest_rot[0, h]).T)
+    q = turn.as_quat()  # x, y, z, w
+    return (np.degrees(2.0 * np.arctan2(q[:, :3] @ axis, q[:, 3])) + 180.0) % 360.0 - 180.0
+
+
+def test_the_avatars_forearm_takes_half_of_the_hands_twist():
+    """ZEGGS keeps pronation in the hand joint (the hand turned up to 176 degrees against the forearm): the
+    avatar's wrist twists half as much, the forearm turning about itself with the rest, and no joint moves."""
+    src, avatar, out = _retargeted("zeggs_067_Speech_2_x_1_0_excerpt.bvh")
+    for side in ("Left", "Right"):
+        source = _wrist_twist(src, f"{side}ForeArm", f"{side}Hand")
+        shown = _wrist_twist(out, f"{side}LowerArm", f"{side}Hand")
+        assert np.median(np.abs(source)) > 60.0  # the file does wring its wrists
+        assert np.median(np.abs(shown - source / 2)) < 6.0, f"{side}: wrist twist {np.median(shown):.0f}, source {np.median(source):.0f}"
+        assert np.abs(shown).max() < 0.55 * np.abs(source).max() + 5.0
