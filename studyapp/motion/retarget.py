@@ -298,4 +298,39 @@ def retarget(
         # hips' parent (e.g. an armature node) is never animated: express the point in its rest frame
         pg = t_g0[ph]
         trans[:, th] = (hips_world - pg[:3, 3]) @ np.linalg.inv(pg[:3, :3]).T
+    _carry_detached(target, rot, trans, t_bone, _parent_map(set(axes.primary)), t_g0)
     return Motion(target, float(source.fps), rot, trans, source=source.source)
+
+
+def _is_ancestor(skeleton: Skeleton, a: int, j: int) -> bool:
+    p = int(skeleton.parents[j])
+    while p >= 0:
+        if p == a:
+            return True
+        p = int(skeleton.parents[p])
+    return False
+
+
+def _carry_detached(target: Skeleton, rot: np.ndarray, trans: np.ndarray, t_bone: dict[str, int],
+                    parent_of: dict[str, str | None], t_g0: np.ndarray) -> None:
+    """Move each mapped bone that does not hang from its humanoid parent in the target's hierarchy with
+    that parent, in place (``trans``).
+
+    IK-rigged characters (RobotExpressive: ``Foot.L`` hangs from the armature root, next to the pole
+    targets, not from ``LowerLeg.L``; its thighs hang from ``Body``, beside ``Hips``) leave such a bone where
+    the armature puts it: with only rotations copied, the feet stayed on the rest floor spot while the legs
+    stepped and bent away from them (shins off by up to 94 degrees).
+    The bone's position is put where the parent carries its rest position (its rotation is already set).
+    """
+    # parents first (humanoid order), so that a detached thigh has moved before the foot below it is placed
+    detached = [(t_bone[b], t_bone[p]) for b, p in sorted(parent_of.items(), key=lambda bp: HUMANOID_BONES.index(bp[0]))
+                if p is not None and not _is_ancestor(target, t_bone[p], t_bone[b])]
+    for j, pj in detached:
+        glob = global_transforms(target, rot, trans)
+        at_rest = np.linalg.inv(t_g0[pj]) @ t_g0[j, :, 3]  # the bone's rest position in the parent's frame
+        want = glob[:, pj] @ at_rest
+        hp = int(target.parents[j])
+        if hp < 0:
+            trans[:, j] = want[:, :3]
+        else:
+            trans[:, j] = (np.linalg.inv(glob[:, hp]) @ want[..., None])[:, :3, 0]

@@ -226,3 +226,39 @@ def test_the_avatars_forearm_takes_half_of_the_hands_twist():
         assert np.median(np.abs(source)) > 60.0  # the file does wring its wrists
         assert np.median(np.abs(shown - source / 2)) < 6.0, f"{side}: wrist twist {np.median(shown):.0f}, source {np.median(source):.0f}"
         assert np.abs(shown).max() < 0.55 * np.abs(source).max() + 5.0
+
+
+#: RobotExpressive's bone map (three.js example character): its feet hang from the armature root beside the IK
+#: pole targets, its thighs from ``Body`` beside ``Hips``.
+ROBOT_MAP = {"Abdomen": "Spine", "Torso": "Chest", "UpperArm.L": "LeftUpperArm", "LowerArm.L": "LeftLowerArm",
+             "Palm2.L": "LeftHand", "UpperArm.R": "RightUpperArm", "LowerArm.R": "RightLowerArm", "Palm2.R": "RightHand",
+             "UpperLeg.L": "LeftUpperLeg", "LowerLeg.L": "LeftLowerLeg", "Foot.L": "LeftFoot",
+             "UpperLeg.R": "RightUpperLeg", "LowerLeg.R": "RightLowerLeg", "Foot.R": "RightFoot"}
+ROBOT_LIMBS = [("UpperArm.L", "LowerArm.L"), ("LowerArm.L", "Palm2.L"), ("UpperArm.R", "LowerArm.R"),
+               ("LowerArm.R", "Palm2.R"), ("UpperLeg.L", "LowerLeg.L"), ("LowerLeg.L", "Foot.L"),
+               ("UpperLeg.R", "LowerLeg.R"), ("LowerLeg.R", "Foot.R"), ("Hips", "Head")]
+
+
+@pytest.mark.parametrize("name", ["cmu_01_01_excerpt.bvh", "mixamo_Joe_SalsaDancing6_excerpt.bvh",
+                                  "lafan1_walk1_subject1_excerpt.bvh"])
+def test_an_ik_rigged_avatars_feet_go_with_its_shins(name):
+    """RobotExpressive's feet are not in its leg chains: with rotations alone they stayed on the rest floor
+    spot and its shins pointed up to 94 degrees away from the source's (CMU). Now every limb points as the
+    source's does and each foot stays at its rest distance from its knee."""
+    from studyapp.render.gltf import load_gltf
+
+    robot = load_gltf(SAMPLES / "avatars" / "RobotExpressive.glb", ROBOT_MAP)
+    src = load_motion(SAMPLES / "motion" / name)
+    out = to_avatar_skeleton(robot, src)
+    _, p_s = fk(src)
+    _, p_t = fk(out)
+    _, rest = fk(type(out).rest(robot.skeleton, 1, 30.0))
+    pairs = _names(src.skeleton, LIMBS["mixamo"])
+    s_idx, t_idx = src.skeleton.names.index, robot.skeleton.names.index
+    d_s = np.stack([p_s[:, s_idx(b)] - p_s[:, s_idx(a)] for a, b in pairs], 1)
+    d_t = np.stack([p_t[:, t_idx(b)] - p_t[:, t_idx(a)] for a, b in ROBOT_LIMBS], 1)
+    err = _angles(d_s @ _best_yaw(_unit(d_s), _unit(d_t)).T, d_t)
+    assert err.max() < 12.0, f"{name}: {ROBOT_LIMBS[int(np.argmax(err.max(0)))]} off by {err.max():.0f} degrees"
+    for knee, foot in (("LowerLeg.L", "Foot.L"), ("LowerLeg.R", "Foot.R")):
+        shin = np.linalg.norm(p_t[:, t_idx(foot)] - p_t[:, t_idx(knee)], axis=-1)
+        np.testing.assert_allclose(shin, np.linalg.norm(rest[0, t_idx(foot)] - rest[0, t_idx(knee)]), rtol=1e-6)
