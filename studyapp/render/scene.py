@@ -230,7 +230,8 @@ def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None)
     path = Path(spec)
     if not path.is_file():
         raise InputError(path, None, "avatar file not found (use 'builtin' for the built-in avatar)")
-    from studyapp.render.avatar_rig import BONE_MAP_FIX, bone_map_problems, missing_bones, not_humanoid_message
+    from studyapp.render.avatar_rig import (BONE_MAP_FIX, bone_map_problems, missing_bones, not_humanoid_message,
+                                            not_upright_problem)
 
     key = tuple(sorted((bone_map or {}).items()))
     try:
@@ -245,6 +246,10 @@ def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None)
     if bad:
         joint, problem = bad[0]
         raise InputError(path, f"[avatar.bone_map] {joint}", f"{problem}; {BONE_MAP_FIX}")
+    # an animal is refused as one before any bone-map advice (no bone map makes a fox stand)
+    upright = not_upright_problem(avatar.skeleton, avatar.bone_map)
+    if upright is not None:
+        raise InputError(path, None, upright)
     missing = missing_bones(avatar.skeleton, avatar.bone_map)
     if missing:
         raise InputError(path, None, not_humanoid_message(avatar.skeleton, missing))
