@@ -21,7 +21,7 @@ import weakref
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Mapping, Protocol, Sequence
+from typing import TYPE_CHECKING, Mapping, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
@@ -299,6 +299,14 @@ class TrialSource(Protocol):
     def avatar_bone_map(self) -> Mapping[str, str] | None: ...
 
 
+@runtime_checkable
+class SlotFaces(Protocol):
+    """A :class:`TrialSource` whose slots may show their own faces (``TrialMedia``: an SMPL-X file's jaw)."""
+
+    @property
+    def slot_faces(self) -> Sequence["FaceAnimation | None"]: ...
+
+
 class AvatarUploader(Protocol):
     """A renderer that can put an avatar on the GPU ahead of the first frame."""
 
@@ -344,10 +352,12 @@ def build_trial_scene(renderer: AvatarUploader | None, media: TrialSource,
     name_maps = tuple(media.name_maps)
     if len(name_maps) != len(motions):
         raise ValueError(f"{len(name_maps)} name maps for {len(motions)} slots")
+    own_faces = tuple(media.slot_faces) if isinstance(media, SlotFaces) else ()
     slots = []
     for i, (motion, avatar, name_map) in enumerate(zip(motions, avatars, name_maps)):
+        face = own_faces[i] if i < len(own_faces) and own_faces[i] is not None else media.face
         try:
-            slots.append(prepare_slot(avatar, motion, media.face, name_map=dict(name_map)))
+            slots.append(prepare_slot(avatar, motion, face, name_map=dict(name_map)))
         except InputError as exc:
             raise SlotError(i, motion.source or exc.path, exc.where, exc.problem) from exc
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
