@@ -173,8 +173,10 @@ def _share_wrist_twist(t_glob_q: np.ndarray, target: Skeleton, t_bone: dict[str,
         rest_rel = matrix_to_quat(r0.T @ t_g0[hj, :3, :3])
         # the hand's turn against the forearm beyond rest, in the forearm's local axes
         turn = quat_multiply(quat_multiply(quat_inverse(t_glob_q[:, fj]), t_glob_q[:, hj]), quat_inverse(rest_rel))
-        twist = 2.0 * np.arctan2(turn[:, :3] @ axis, turn[:, 3])
-        twist = (twist + np.pi) % (2 * np.pi) - np.pi
+        # continuous over the clip: a hand turned about 180 degrees (ZEGGS reaches 176) must not make the
+        # forearm jump half a turn between frames, or between a file and its float32 copy
+        twist = np.unwrap(2.0 * np.arctan2(turn[:, :3] @ axis, turn[:, 3]))
+        twist -= 2 * np.pi * np.round(np.median(twist) / (2 * np.pi))
         half = 0.5 * _FOREARM_TWIST_SHARE * twist
         spin = np.concatenate([np.sin(half)[:, None] * axis, np.cos(half)[:, None]], axis=1)
         t_glob_q[:, fj] = quat_multiply(t_glob_q[:, fj], spin)

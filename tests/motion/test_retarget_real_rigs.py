@@ -301,3 +301,27 @@ def test_an_avatar_modelled_with_bent_limbs_bends_them_where_its_mesh_creases(av
         assert bent.sum() > 20
         off = _angles(carried[bent], bend[bent])
         assert np.median(off) < 3.0, f"{chain}: crease {np.median(off):.1f} degrees off the bend"
+
+
+def test_a_hand_turning_past_half_a_turn_turns_the_forearm_smoothly():
+    """The BEAT rig's left hand turning steadily about its forearm, 0 to 300 degrees over 61 frames: the
+    avatar's forearm takes half of it at every frame, with no jump of half a turn where the hand passes 180."""
+    from studyapp.motion.skeleton import Motion
+
+    src = load_motion(SAMPLES / "beat75_diffsheg_output_excerpt.bvh", fps=15)
+    m = Motion.rest(src.skeleton, n_frames=61, fps=15.0)
+    m.translations[:] = src.translations[:1]
+    sk = m.skeleton
+    _, rest = fk(Motion.rest(sk, 1, 15.0))
+    rest_rot, _ = fk(Motion.rest(sk, 1, 15.0))
+    fore, hand = sk.index("LeftForeArm"), sk.index("LeftHand")
+    axis = rest_rot[0, hand].T @ _unit(rest[0, hand] - rest[0, fore])  # the forearm's direction in the hand's axes
+    angles = np.radians(np.linspace(0.0, 300.0, 61))
+    m.rotations[:, hand] = (Rotation.from_quat(m.rotations[:, hand]) * Rotation.from_rotvec(angles[:, None] * axis)).as_quat()
+    avatar = build_default_avatar()
+    out = to_avatar_skeleton(avatar, m)
+    rot, _ = fk(out)
+    rest_t, _ = fk(type(out).rest(avatar.skeleton, 1, 15.0))
+    j = avatar.skeleton.index("LeftLowerArm")
+    turned = np.degrees(Rotation.from_matrix(np.swapaxes(rest_t[:, j], -1, -2) @ rot[:, j]).magnitude())
+    np.testing.assert_allclose(turned, np.degrees(angles) / 2, atol=2.0)
