@@ -26,10 +26,12 @@ fingers                    along the finger                        the hand's fi
 *Where* the two directions are read depends on the rig's rest pose:
 
 - a rest pose that stands (spine up, as in T- and A-poses and every avatar) is read directly, the hinge of
-  a straight limb taken as the anatomical one (elbows bend forward, knees backward); where the clip
+  a straight limb taken as the anatomical one (elbows bend forward, knees backward) and that of a limb the
+  rest pose bends clearly (an avatar modelled with bent elbows and knees) where it bends; where the clip
   bends an upper arm's elbow or a knee clearly, the hinge it shows is used instead (a rig's rest arm can
   be turned 30 degrees about itself, as CMU's is, and the avatar's elbow would then fold askew);
-- a rest pose that does not stand carries no anatomy, so the directions are read from the animation
+- a rest pose that does not stand, or whose spine stands while its limbs are folded anywhere (not a T- or
+  A-pose, :func:`is_standing`), carries no anatomy, so the directions are read from the animation
   itself: at every frame the world-space directions (the body's left at that frame, the elbow's actual
   hinge when bent, ...) are brought into the bone's local axes and averaged over the clip, weighted by
   how well each frame defines them (a straight elbow defines no hinge).
@@ -80,11 +82,45 @@ def frame_from_axes(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
     return np.stack([p, s, np.cross(p, s)], axis=-1)
 
 
+#: A T/A-pose rest limb is straight to within this (CesiumMan's A-pose elbows bend 29 degrees).
+_MAX_REST_BEND_DEG = 40.0
+
+
 def is_standing(positions: np.ndarray, bone: dict[str, int]) -> bool:
-    """Whether a rest pose (``(J, 3)`` world positions) stands: hips to head within 45 degrees of +Y."""
+    """Whether a rest pose (``(J, 3)`` world positions) is a standing T- or A-pose whose anatomy can be read.
+
+    Hips to head within 45 degrees of +Y, and every mapped arm and leg as a T/A-pose holds it: elbows and
+    knees bent less than 40 degrees, thighs pointing down (within 45 degrees), upper arms out to the side or
+    down (less than 45 degrees forward or back, not raised above 45 degrees). A zero pose whose spine
+    happens to point up while its limbs are folded anywhere (each joint's local axes turned at will, as in
+    Bandai-Namco, LAFAN1 and some Truebones files) carries no more anatomy than a heap of bones does: read
+    as standing, its folded elbows gave the avatar's forearms a twist of 70 to 145 degrees.
+    """
     up = positions[bone["Head"]] - positions[bone["Hips"]]
     n = np.linalg.norm(up)
-    return bool(n > 1e-9 and up[1] / n > np.cos(np.radians(45.0)))
+    if not (n > 1e-9 and up[1] / n > np.cos(np.radians(45.0))):
+        return False
+    up = up / n
+    left = positions[bone["LeftUpperLeg"]] - positions[bone["RightUpperLeg"]] if {"LeftUpperLeg", "RightUpperLeg"} <= set(bone) else None
+    forward = _unit(np.cross(left, up)) if left is not None and np.linalg.norm(np.cross(left, up)) > 1e-9 else None
+    max_sin = np.sin(np.radians(45.0))
+    for s in _SIDES:
+        for top, mid, end, leg in (("UpperArm", "LowerArm", "Hand", False), ("UpperLeg", "LowerLeg", "Foot", True)):
+            names = (f"{s}{top}", f"{s}{mid}", f"{s}{end}")
+            if not all(x in bone for x in names):
+                continue
+            a = positions[bone[names[1]]] - positions[bone[names[0]]]
+            b = positions[bone[names[2]]] - positions[bone[names[1]]]
+            if np.linalg.norm(a) < 1e-9 or np.linalg.norm(b) < 1e-9:
+                continue
+            a, b = _unit(a), _unit(b)
+            if np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))) > _MAX_REST_BEND_DEG:
+                return False
+            if leg and a @ up > -np.cos(np.radians(45.0)):
+                return False
+            if not leg and (a @ up > max_sin or (forward is not None and abs(a @ forward) > max_sin)):
+                return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -192,12 +228,21 @@ def hinge_evidence(positions: np.ndarray, bone: dict[str, int], b: str) -> float
 
 
 def _rest_hinge(pos: np.ndarray, bone: dict[str, int], b: str, forward: np.ndarray) -> np.ndarray:
-    """The hinge a standing rest pose implies: elbows bend forward, knees backward."""
+    """The hinge a standing rest pose implies: elbows bend forward, knees backward; a limb the rest pose
+    itself bends clearly (RobotExpressive's elbows 31-57 degrees, its knees 41) the way it can bend hinges
+    where it bends, as its mesh was modelled."""
     side = "Left" if b.startswith("Left") else "Right"
     arm = "Arm" in b or "Hand" in b
-    top, mid = (f"{side}UpperArm", f"{side}LowerArm") if arm else (f"{side}UpperLeg", f"{side}LowerLeg")
+    top, mid, end = ((f"{side}UpperArm", f"{side}LowerArm", f"{side}Hand") if arm
+                     else (f"{side}UpperLeg", f"{side}LowerLeg", f"{side}Foot"))
     upper = _unit(pos[:, bone[mid]] - pos[:, bone[top]]) if top in bone and mid in bone else forward
-    return _unit(np.cross(upper, forward if arm else -forward))
+    assumed = _unit(np.cross(upper, forward if arm else -forward))
+    got = _hinge(pos, bone, b)
+    if got is None:
+        return assumed
+    seen, weight = got
+    use = (weight > 0)[:, None] & (np.sum(seen * assumed, -1, keepdims=True) > 0)
+    return np.where(use, seen, assumed)
 
 
 def bone_axes(rotations: np.ndarray, positions: np.ndarray, bone: dict[str, int], axes: BoneAxes,

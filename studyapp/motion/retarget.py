@@ -144,6 +144,44 @@ def _clip_hinges(glob: np.ndarray, bone: dict[str, int], axes) -> dict[str, np.n
     return bone_axes(glob[..., :3, :3], pos, bone, sub, from_motion=True)
 
 
+#: Share of the hand's twist about the forearm that the forearm takes (Mecanim's "lower arm twist" default).
+_FOREARM_TWIST_SHARE = 0.5
+
+
+def _share_wrist_twist(t_glob_q: np.ndarray, target: Skeleton, t_bone: dict[str, int], t_g0: np.ndarray,
+                       t_pos0: np.ndarray, mapped: set[str]) -> None:
+    """Move half of each hand's twist about its forearm into the forearm, in place (``t_glob_q``: world
+    quaternions of the target joints).
+
+    A wrist does not twist: pronation turns the radius, and the hand with it. Many rigs keep pronation in
+    the hand joint instead (ZEGGS' hands turn 69 and 84 degrees about the forearm, median over the sample
+    clip, up to 176), which on an avatar whose forearm skin follows its forearm bone wrings the wrist like
+    a sweet wrapper. Turning the forearm about its own axis moves no joint; split in halves, the skin twists
+    half as much at the elbow as at the wrist, as a single forearm bone can best show it.
+    """
+    for side in ("Left", "Right"):
+        fore, hand = f"{side}LowerArm", f"{side}Hand"
+        if fore not in mapped or hand not in mapped:
+            continue
+        fj, hj = t_bone[fore], t_bone[hand]
+        r0 = t_g0[fj, :3, :3]
+        axis = r0.T @ (t_pos0[hj] - t_pos0[fj])  # the forearm's axis in its own local frame
+        n = np.linalg.norm(axis)
+        if n < 1e-9:
+            continue
+        axis = axis / n
+        rest_rel = matrix_to_quat(r0.T @ t_g0[hj, :3, :3])
+        # the hand's turn against the forearm beyond rest, in the forearm's local axes
+        turn = quat_multiply(quat_multiply(quat_inverse(t_glob_q[:, fj]), t_glob_q[:, hj]), quat_inverse(rest_rel))
+        # continuous over the clip: a hand turned about 180 degrees (ZEGGS reaches 176) must not make the
+        # forearm jump half a turn between frames, or between a file and its float32 copy
+        twist = np.unwrap(2.0 * np.arctan2(turn[:, :3] @ axis, turn[:, 3]))
+        twist -= 2 * np.pi * np.round(np.median(twist) / (2 * np.pi))
+        half = 0.5 * _FOREARM_TWIST_SHARE * twist
+        spin = np.concatenate([np.sin(half)[:, None] * axis, np.cos(half)[:, None]], axis=1)
+        t_glob_q[:, fj] = quat_multiply(t_glob_q[:, fj], spin)
+
+
 def _same_rig(a: Skeleton, b: Skeleton) -> bool:
     return a is b or (a.names == b.names and a.offsets.shape == b.offsets.shape
                       and np.allclose(a.offsets, b.offsets, atol=1e-9))
@@ -189,10 +227,12 @@ def retarget(
 
     s_glob = global_transforms(source.skeleton, source.rotations, source.translations)
     s_pos0, s_g0 = _rest_points(source.skeleton)
-    standing = is_standing(s_pos0, s_bone)
+    # A rig copied onto itself needs no anatomy: its own rest frames on both sides cancel, whatever its pose.
+    same = _same_rig(source.skeleton, target)
+    standing = same or is_standing(s_pos0, s_bone)
     if standing:
         x_s, s_fwd, _, _ = _rest_frames(source.skeleton, s_bone, axes)
-        if not _same_rig(source.skeleton, target):
+        if not same:
             x_s.update(_clip_hinges(s_glob, s_bone, axes))
     else:  # the zero pose carries no anatomy: read it from the animation
         x_s = bone_axes(s_glob[..., :3, :3], s_glob[..., :3, 3], s_bone, axes, from_motion=True,
@@ -212,6 +252,8 @@ def retarget(
         corr = np.stack([x_s[b] @ x_t[b].T for b in mapped])
         t_glob_q[:, tj] = matrix_to_quat(yaw_m @ s_glob[:, sj, :3, :3] @ corr[None])
         set_global[tj] = True
+        if not same:
+            _share_wrist_twist(t_glob_q, target, t_bone, t_g0, t_pos0, set(mapped))
 
     # local rotations: walk the target in depth-first order
     rot = np.empty((f, target.n_joints, 4))
@@ -258,4 +300,39 @@ def retarget(
         # hips' parent (e.g. an armature node) is never animated: express the point in its rest frame
         pg = t_g0[ph]
         trans[:, th] = (hips_world - pg[:3, 3]) @ np.linalg.inv(pg[:3, :3]).T
+    _carry_detached(target, rot, trans, t_bone, _parent_map(set(axes.primary)), t_g0)
     return Motion(target, float(source.fps), rot, trans, source=source.source)
+
+
+def _is_ancestor(skeleton: Skeleton, a: int, j: int) -> bool:
+    p = int(skeleton.parents[j])
+    while p >= 0:
+        if p == a:
+            return True
+        p = int(skeleton.parents[p])
+    return False
+
+
+def _carry_detached(target: Skeleton, rot: np.ndarray, trans: np.ndarray, t_bone: dict[str, int],
+                    parent_of: dict[str, str | None], t_g0: np.ndarray) -> None:
+    """Move each mapped bone that does not hang from its humanoid parent in the target's hierarchy with
+    that parent, in place (``trans``).
+
+    IK-rigged characters (RobotExpressive: ``Foot.L`` hangs from the armature root, next to the pole
+    targets, not from ``LowerLeg.L``; its thighs hang from ``Body``, beside ``Hips``) leave such a bone where
+    the armature puts it: with only rotations copied, the feet stayed on the rest floor spot while the legs
+    stepped and bent away from them (shins off by up to 94 degrees).
+    The bone's position is put where the parent carries its rest position (its rotation is already set).
+    """
+    # parents first (humanoid order), so that a detached thigh has moved before the foot below it is placed
+    detached = [(t_bone[b], t_bone[p]) for b, p in sorted(parent_of.items(), key=lambda bp: HUMANOID_BONES.index(bp[0]))
+                if p is not None and not _is_ancestor(target, t_bone[p], t_bone[b])]
+    for j, pj in detached:
+        glob = global_transforms(target, rot, trans)
+        at_rest = np.linalg.inv(t_g0[pj]) @ t_g0[j, :, 3]  # the bone's rest position in the parent's frame
+        want = glob[:, pj] @ at_rest
+        hp = int(target.parents[j])
+        if hp < 0:
+            trans[:, j] = want[:, :3]
+        else:
+            trans[:, j] = (np.linalg.inv(glob[:, hp]) @ want[..., None])[:, :3, 0]

@@ -61,7 +61,8 @@ def summarize_avatar(path: str | Path, bone_map: dict[str, str] | None = None) -
     """
     from studyapp.face.arkit import ARKIT_NAMES, match_arkit_name
     from studyapp.motion.humanoid import HUMANOID_BONES, REQUIRED_BONES
-    from studyapp.render.avatar_rig import BONE_MAP_FIX, bone_map_problems, humanoid_map, not_humanoid_message
+    from studyapp.render.avatar_rig import (BONE_MAP_FIX, bone_map_problems, humanoid_map, not_humanoid_message,
+                                            not_upright_problem)
     from studyapp.render.gltf import _Doc, load_gltf
 
     path = Path(path)
@@ -95,7 +96,9 @@ def summarize_avatar(path: str | Path, bone_map: dict[str, str] | None = None) -
                                "recognised names" + (" and the bone map" if avatar.bone_map else ""))
     for joint, problem in bone_map_problems(sk.names, bone_map or {}, avatar.joint_aliases):
         problems.append(f"[avatar.bone_map] {joint}: {problem}; {BONE_MAP_FIX}")
-    if missing:
+    if (upright := not_upright_problem(sk, avatar.bone_map)) is not None:
+        problems.append(upright)
+    elif missing:
         problems.append(not_humanoid_message(sk, missing))
     targets = _target_names(gltf)
     arkit = {match_arkit_name(t) for t in targets} - {None}

@@ -124,6 +124,31 @@ def not_humanoid_message(skeleton: Skeleton, missing: list[str]) -> str:
             "give [avatar.bone_map] entries (joint name = humanoid bone) or another avatar")
 
 
+#: An avatar whose rest pose leans its hips-to-head line further than this from +Y is not an upright figure.
+MAX_REST_LEAN_DEG = 45.0
+
+
+def not_upright_problem(skeleton: Skeleton, bone_map: dict[str, str] | None) -> str | None:
+    """What to tell the user when an avatar's rest pose does not stand (its Hips and Head, found by name or
+    bone map, more than 45 degrees from +Y: a four-legged animal such as Fox.glb), else None. Checked before
+    missing bones, since no bone map makes such a figure humanoid: with its legs mapped, human motion
+    rendered the fox stood on end."""
+    from studyapp.motion.fk import rest_joint_positions
+
+    by_bone = {b: skeleton.index(j) for j, b in humanoid_map(skeleton, bone_map).items()}
+    if "Hips" not in by_bone or "Head" not in by_bone:
+        return None
+    pos = rest_joint_positions(skeleton)
+    up = pos[by_bone["Head"]] - pos[by_bone["Hips"]]
+    n = float(np.linalg.norm(up))
+    lean = 90.0 if n < 1e-12 else math.degrees(math.acos(max(-1.0, min(1.0, float(up[1]) / n))))
+    if lean <= MAX_REST_LEAN_DEG:
+        return None
+    return (f"not a humanoid avatar: its rest pose does not stand upright (hips to head {lean:.0f} degrees from "
+            "up, as in a four-legged or lying figure), so human motion cannot play on it; use a humanoid avatar "
+            "(standing in a T- or A-pose)")
+
+
 def rest_facing(positions: np.ndarray, bones: dict[str, int]) -> np.ndarray | None:
     """Unit forward vector in the XZ plane from rest joint positions ``(J, 3)``, or None when no left/right
     pair of bones is known (or the pair is vertical)."""
@@ -173,7 +198,9 @@ def avatar_problems(path, bone_map: dict | None) -> list[tuple[str | None, str, 
         (f"avatar.bone_map.{joint}", f"{problem} ({path.name})", BONE_MAP_FIX)
         for joint, problem in bone_map_problems(avatar.skeleton.names, bone_map or {}, avatar.joint_aliases)]
     missing = missing_bones(avatar.skeleton, avatar.bone_map)
-    if missing:
+    if (upright := not_upright_problem(avatar.skeleton, avatar.bone_map)) is not None:
+        out.append((None, f"{path.name}: {upright}", "use another avatar"))
+    elif missing:
         out.append((None, f"{path.name}: {not_humanoid_message(avatar.skeleton, missing)}",
                     'add [avatar.bone_map] entries ("joint name" = "HumanoidBone") or use another avatar'))
     return out

@@ -21,7 +21,7 @@ import weakref
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Mapping, Protocol, Sequence
+from typing import TYPE_CHECKING, Mapping, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
@@ -230,7 +230,8 @@ def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None)
     path = Path(spec)
     if not path.is_file():
         raise InputError(path, None, "avatar file not found (use 'builtin' for the built-in avatar)")
-    from studyapp.render.avatar_rig import BONE_MAP_FIX, bone_map_problems, missing_bones, not_humanoid_message
+    from studyapp.render.avatar_rig import (BONE_MAP_FIX, bone_map_problems, missing_bones, not_humanoid_message,
+                                            not_upright_problem)
 
     key = tuple(sorted((bone_map or {}).items()))
     try:
@@ -245,6 +246,10 @@ def load_avatar(spec: str | Path | None, bone_map: dict[str, str] | None = None)
     if bad:
         joint, problem = bad[0]
         raise InputError(path, f"[avatar.bone_map] {joint}", f"{problem}; {BONE_MAP_FIX}")
+    # an animal is refused as one before any bone-map advice (no bone map makes a fox stand)
+    upright = not_upright_problem(avatar.skeleton, avatar.bone_map)
+    if upright is not None:
+        raise InputError(path, None, upright)
     missing = missing_bones(avatar.skeleton, avatar.bone_map)
     if missing:
         raise InputError(path, None, not_humanoid_message(avatar.skeleton, missing))
@@ -294,6 +299,14 @@ class TrialSource(Protocol):
     def avatar_bone_map(self) -> Mapping[str, str] | None: ...
 
 
+@runtime_checkable
+class SlotFaces(Protocol):
+    """A :class:`TrialSource` whose slots may show their own faces (``TrialMedia``: an SMPL-X file's jaw)."""
+
+    @property
+    def slot_faces(self) -> Sequence["FaceAnimation | None"]: ...
+
+
 class AvatarUploader(Protocol):
     """A renderer that can put an avatar on the GPU ahead of the first frame."""
 
@@ -339,10 +352,12 @@ def build_trial_scene(renderer: AvatarUploader | None, media: TrialSource,
     name_maps = tuple(media.name_maps)
     if len(name_maps) != len(motions):
         raise ValueError(f"{len(name_maps)} name maps for {len(motions)} slots")
+    own_faces = tuple(media.slot_faces) if isinstance(media, SlotFaces) else ()
     slots = []
     for i, (motion, avatar, name_map) in enumerate(zip(motions, avatars, name_maps)):
+        face = own_faces[i] if i < len(own_faces) and own_faces[i] is not None else media.face
         try:
-            slots.append(prepare_slot(avatar, motion, media.face, name_map=dict(name_map)))
+            slots.append(prepare_slot(avatar, motion, face, name_map=dict(name_map)))
         except InputError as exc:
             raise SlotError(i, motion.source or exc.path, exc.where, exc.problem) from exc
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:

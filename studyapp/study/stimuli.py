@@ -36,6 +36,7 @@ import numpy as np
 from studyapp.audio.wav import AudioClip
 from studyapp.errors import InputError
 from studyapp.face.animation import FaceAnimation
+from studyapp.face.arkit import ARKIT_INDEX
 from studyapp.motion.skeleton import Motion
 from studyapp.study.design import (BUILTIN_REFERENCE, FROZEN_PREFIX, Condition, Design, Stimulus, model_path,
                                    motion_path, played_pairs, resolve)
@@ -68,6 +69,9 @@ class TrialMedia:
     name_maps: per slot, the condition's ``name_map`` (source joint -> humanoid bone) for retargeting.
     avatar_bone_map: the design's ``[avatar.bone_map]`` (avatar joint -> humanoid bone).
     framing: the design's ``[display] framing`` (``"upper-body"`` or ``"full-body"``).
+    slot_faces: per slot, the face that slot shows instead of ``face``, or None: with no stimulus face file, a
+    slot whose motion file is SMPL-X opens its jaw as that file's jaw does (:func:`slot_face`); empty when no
+    slot has one.
     """
 
     plan: TrialPlan
@@ -81,6 +85,7 @@ class TrialMedia:
     name_maps: tuple[dict[str, str], ...] = ({}, {}, {})
     avatar_bone_map: dict[str, str] | None = None
     framing: str = "upper-body"
+    slot_faces: tuple[FaceAnimation | None, ...] = ()
 
     @property
     def avatar_spec(self) -> str:
@@ -276,6 +281,46 @@ def _live_motion(design: Design, condition: Condition, stimulus: Stimulus) -> Mo
     return _FILES.get(key, lambda: motion_for_stimulus(model, audio, face, head, template))
 
 
+def _smplx_jaw_face(path: Path, fps: float | None) -> FaceAnimation | None:
+    """``jawOpen`` from an SMPL-X file's jaw (:func:`studyapp.face.smplx.smplx_face`), or None for any other
+    file and for a jaw that never opens. FLAME expressions need a map no design key gives, so they are left
+    out here (``view`` and ``convert`` take ``--flame-map``)."""
+    from studyapp.motion.smpl import read_smpl, recognise_smpl
+
+    if path.suffix.lower() not in (".npz", ".npy") or recognise_smpl(path) != "smplx":
+        return None
+    from studyapp.face.smplx import smplx_face
+
+    data = read_smpl(path, fps=fps)
+    if data.jaw is None or not np.any(data.jaw):
+        return None
+    return smplx_face(data.jaw, data.fps, None, None, source=str(path))
+
+
+def slot_face(design: Design, condition: Condition, stimulus: Stimulus, sample: int, shared: FaceAnimation,
+              frozen: bool = False) -> FaceAnimation | None:
+    """The face of one slot when its motion file is SMPL-X with a jaw that moves and the stimulus has no face
+    file, else None (the slot shows the trial's shared face).
+
+    An SMPL-X file's jaw is part of what its model generated, as the body is, so with no face of the
+    stimulus's own that slot's ``jawOpen`` follows it, as in ``view`` (a frozen slot holds its first frame,
+    as its body does). A stimulus face file is the one face every figure of the trial shows: a model's jaw
+    in its place would make that figure's mouth the one that differs (BEAT2's fitted jaws open under 4
+    degrees, so its figure would all but stop speaking beside lip-synced ones).
+    """
+    if condition.model is not None or stimulus.face is not None:
+        return None
+    path = motion_path(design, condition, stimulus, sample)
+    jaw = _FILES.get(("smplx jaw", _file_id(path), condition.fps), lambda: _smplx_jaw_face(path, condition.fps))
+    if jaw is None:
+        return None
+    times = np.arange(max(1, math.ceil(shared.duration * jaw.fps - 1e-9))) / jaw.fps
+    weights = np.zeros((len(times), jaw.weights.shape[1]), np.float32)
+    col = ARKIT_INDEX["jawopen"]
+    weights[:, col] = jaw.weights[0, col] if frozen else jaw.sample(times)[:, col]
+    return FaceAnimation(weights, jaw.fps, source=f"jaw of {path}")
+
+
 def frozen_motion(motion: Motion, duration_s: float) -> Motion:
     """The first frame of ``motion`` held for ``duration_s`` (the frozen slot of an attention check)."""
     n = max(1, math.ceil(duration_s * motion.fps - 1e-9))
@@ -311,13 +356,18 @@ def _assemble(design: Design, plan: TrialPlan) -> TrialMedia:
                                duration, cond.motion_end)
                     for i, (cid, cond, k) in enumerate(zip(plan.slots, conds, plan.samples)))
     maps = tuple(dict(cond.name_map) for cond in conds)
+    # A mismatch trial shows the shared face in every slot: a jaw speaking another clip would give its figure away.
+    own_clip = all(plan.motion_stimulus(i) == plan.stimulus_id for i in range(len(plan.slots)))
+    faces = tuple(slot_face(design, cond, stimulus, k, face, frozen=cid.startswith(FROZEN_PREFIX)) if own_clip else None
+                  for cid, cond, k in zip(plan.slots, conds, plan.samples))
     # a dry run's plan (validate) belongs to no block: it shows every criterion
     block = next((b for b in design.trial_blocks if b.id == plan.block), None)
     return TrialMedia(plan=plan, audio=cut_audio(audio, duration), face=face, motions=motions,  # type: ignore[arg-type]
                       avatar=design.avatar_for(stimulus), labels=design.slot_labels_for(len(plan.slots)),
                       duration_s=float(duration),
                       criteria=block.criteria if block is not None else tuple(design.criterion_ids), name_maps=maps,  # type: ignore[arg-type]
-                      avatar_bone_map=dict(design.avatar_bone_map), framing=design.display.framing)
+                      avatar_bone_map=dict(design.avatar_bone_map), framing=design.display.framing,
+                      slot_faces=faces if any(f is not None for f in faces) else ())
 
 
 # ---------------------------------------------------------------------------------------------------------

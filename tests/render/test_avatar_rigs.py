@@ -203,14 +203,50 @@ def test_vrm1_props_render_and_follow_the_head(renderer):
     assert (np.abs(tilted - img).sum(-1) > 60).mean() > 0.01
 
 
-def test_fox_is_refused_as_a_humanoid_avatar_with_its_joints_listed():
+def _glb_node_positions(path) -> dict[str, np.ndarray]:
+    """World positions of a GLB's nodes by name, read here from its JSON chunk (TRS only, scipy rotations)."""
+    import json
+    import struct
+
+    raw = path.read_bytes()
+    length = struct.unpack_from("<I", raw, 12)[0]
+    nodes = json.loads(raw[20:20 + length])["nodes"]
+    parent = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
+
+    def world(i):
+        n = nodes[i]
+        m = np.eye(4)
+        m[:3, :3] = Rotation.from_quat(n.get("rotation", [0, 0, 0, 1])).as_matrix() * n.get("scale", [1, 1, 1])
+        m[:3, 3] = n.get("translation", [0, 0, 0])
+        return m if i not in parent else world(parent[i]) @ m
+
+    return {n.get("name", str(i)): world(i)[:3, 3] for i, n in enumerate(nodes)}
+
+
+def test_fox_is_refused_as_not_humanoid_in_one_line_even_with_its_legs_mapped(tmp_path, capsys):
+    """A four-legged figure is refused as such, with or without a bone map: mapped by name, its legs made it
+    'humanoid' and human motion rendered the fox stood on end."""
+    from studyapp.cli import main
     from studyapp.render.scene import load_avatar
 
-    with pytest.raises(InputError) as err:
-        load_avatar(AVATARS / "Fox.glb")
-    text = str(err.value)
-    assert "Fox.glb: not a humanoid avatar: no bones for " in text
-    assert "b_LeftUpperArm_09" in text and "give [avatar.bone_map] entries" in text and "another avatar" in text
+    pos = _glb_node_positions(AVATARS / "Fox.glb")
+    up = pos["b_Head_05"] - pos["b_Hip_01"]
+    lean = np.degrees(np.arccos(up[1] / np.linalg.norm(up)))
+    assert 60 < lean < 85  # the fox's spine runs along its body, not up
+    legs = {"b_LeftLeg01_015": "LeftUpperLeg", "b_LeftLeg02_016": "LeftLowerLeg", "b_LeftFoot01_017": "LeftFoot",
+            "b_RightLeg01_019": "RightUpperLeg", "b_RightLeg02_020": "RightLowerLeg", "b_RightFoot01_021": "RightFoot"}
+    for bone_map in (None, legs):
+        with pytest.raises(InputError) as err:
+            load_avatar(AVATARS / "Fox.glb", bone_map)
+        text = str(err.value)
+        assert "Fox.glb: not a humanoid avatar: its rest pose does not stand upright" in text and "\n" not in text
+        assert f"hips to head {lean:.0f} degrees from up" in text and "use a humanoid avatar" in text
+    out = tmp_path / "fox.png"
+    code = main(["view", str(SAMPLES / "motion" / "lafan1_walk1_subject1_excerpt.bvh"), "--avatar",
+                 str(AVATARS / "Fox.glb"), "--avatar-bone-map", ",".join(f"{j}={b}" for j, b in legs.items()),
+                 "--offscreen", "--out", str(out)])
+    err_lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
+    assert code != 0 and not out.exists() and len(err_lines) == 1 and "not stand upright" in err_lines[0]
 
 
 def test_avatar_bone_map_is_kept_and_used_for_retargeting():
