@@ -95,3 +95,23 @@ def test_float32_agrees_with_the_float64_reference_within_the_documented_toleran
     assert pos_err <= fk.FLOAT32_TOLERANCE * height, pos_err / height
     assert rot_err <= fk.FLOAT32_TOLERANCE, rot_err
     np.testing.assert_array_equal(got32[..., 3, :], np.broadcast_to([0, 0, 0, 1], (f, sk.n_joints, 4)))
+
+
+def test_any_forest_and_any_frame_count_matches_the_reference():
+    """Random depth-first forests (several roots, fans, chains: every kind of level walk) at frame counts
+    around the frame block, float64 and float32, transforms and positions."""
+    rng = np.random.default_rng(11)
+    for trial in range(12):
+        j = int(rng.integers(1, 40))
+        parents = np.array([-1] + [int(rng.integers(-1, k)) if rng.random() < 0.1 else int(rng.integers(max(0, k - 3), k))
+                                   for k in range(1, j)])
+        sk = Skeleton(tuple(f"j{k}" for k in range(j)), parents, rng.normal(size=(j, 3)))
+        f = int(rng.choice([0, 1, 2, fk._FRAME_BLOCK - 1, fk._FRAME_BLOCK, fk._FRAME_BLOCK + 1, 2 * fk._FRAME_BLOCK + 7]))
+        rot = quat_normalize(rng.normal(size=(f, j, 4)))
+        trans = rng.normal(size=(f, j, 3))
+        ref = _reference_transforms(sk, rot, trans)
+        got = fk.global_transforms(sk, rot, trans)
+        assert got.shape == (f, j, 4, 4) and got.flags.c_contiguous
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9, err_msg=f"trial {trial}: {parents.tolist()}, {f} frames")
+        np.testing.assert_allclose(fk.global_transforms(sk, rot, trans, np.float32), ref, rtol=0, atol=1e-4)
+        np.testing.assert_allclose(fk.joint_positions(Motion(sk, 30, rot, trans)), ref[..., :3, 3], rtol=0, atol=1e-9)
