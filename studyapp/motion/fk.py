@@ -1,8 +1,10 @@
 """Forward kinematics: local joint rotations/translations to world transforms, all frames at once.
 
 Joints are depth-first (``parents[j] < j``), so parents are always computed before their children:
-all joints of one tree depth are done together for every frame at once, never a Python loop over
-frames.
+all joints of one tree depth are done together for a block of frames at once, never a Python loop over
+frames or joints (:func:`_world_blocks` says how, and why that layout). ``dtype=np.float32`` is the fast
+path, what the renderer uses: about half the time of float64, measured by ``benchmarks/bench_motion.py``
+(key ``fk_ms``: 7,200 frames of BEAT's 75 joints).
 
 >>> import numpy as np
 >>> from studyapp.motion.skeleton import Skeleton, Motion
