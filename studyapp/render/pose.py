@@ -1,8 +1,8 @@
 """Turn a motion (any skeleton) and a face animation into per-frame GPU inputs for one avatar slot.
 
 Everything heavy happens once, when a trial loads: retargeting, resampling to the playback rate, forward
-kinematics and the skinning palettes (float32, what the GPU takes; see :data:`PALETTE_FLOAT32_TOLERANCE`). Per displayed frame :meth:`SlotAnimation.frame_at` only blends two
-neighbouring precomputed frames.
+kinematics and the skinning palettes (float32, what the GPU takes; see :data:`PALETTE_FLOAT32_TOLERANCE`).
+Per displayed frame :meth:`SlotAnimation.frame_at` only blends two neighbouring precomputed frames.
 
 Interpolation: the source motion (often 15 fps) is resampled at load to ``playback_fps`` (60 by default)
 with quaternion slerp of the local rotations and linear interpolation of translations, then
