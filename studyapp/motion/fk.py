@@ -1,8 +1,10 @@
 """Forward kinematics: local joint rotations/translations to world transforms, all frames at once.
 
 Joints are depth-first (``parents[j] < j``), so parents are always computed before their children:
-all joints of one tree depth are done together for every frame at once, never a Python loop over
-frames.
+all joints of one tree depth are done together for a block of frames at once, never a Python loop over
+frames or joints (:func:`_world_blocks` says how, and why that layout). ``dtype=np.float32`` is the fast
+path, what the renderer uses: about half the time of float64, measured by ``benchmarks/bench_motion.py``
+(key ``fk_ms``: 7,200 frames of BEAT's 75 joints).
 
 >>> import numpy as np
 >>> from studyapp.motion.skeleton import Skeleton, Motion
@@ -14,7 +16,9 @@ frames.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,94 +36,158 @@ __all__ = [
 ]
 
 
-_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 #: How far float32 forward kinematics may put a joint from the float64 result, as a fraction of the figure's
 #: height (measured on BEAT's 75 joints, 15 levels deep: under 5e-7, i.e. a thousandth of a millimetre on a
 #: 1.8 m figure; a GPU vertex is float32 anyway). Rotation matrix entries agree within the same figure.
 FLOAT32_TOLERANCE = 1e-5
-# Frames are processed in blocks of this many: each block's work arrays (about 1 MB) stay in cache
-# between the ~40 vector operations per block instead of streaming 7,200-frame rows through memory
-# each time. 256 balances that against the per-block Python overhead (~90 numpy calls a block): on
-# BEAT's 75 joints it measured 58 ms against 66 ms for 128 and 85 ms for 512 (bench_motion.py, float64;
-# float32 measured the same from 256 to 1,024).
-_FRAME_BLOCK = 256
+# Frames are processed in blocks of this many: a block's work arrays (under 1 MB in float32) stay in the
+# 2 MB L2 cache between the ~80 numpy calls per block instead of streaming 7,200-frame rows through memory
+# each time, and the blocks are long enough for those calls' fixed cost (~1-4 us each) to stay small.
+# On BEAT's 75 joints, float32, bench_motion.py's data, interleaved: 192 frames measured best, 128 and
+# 256 within a few per cent, 512 ~25 % slower.
+_FRAME_BLOCK = 192
+
+
+class _Plan(NamedTuple):
+    """How one hierarchy is walked: joints regrouped by depth so that each depth is one contiguous run."""
+
+    #: Joint indices in level order (depth 0 first; within a depth, by the parent's place in the level above).
+    order: np.ndarray
+    #: Place of each joint in ``order`` (the inverse permutation).
+    place: np.ndarray
+    #: Per depth: ``(lo, hi, parents)``: the depth's joints are ``order[lo:hi]``; ``parents`` gives their
+    #: parents as places in the previous depth's run: a slice when they are consecutive (chains: fingers,
+    #: spine) or a single joint repeated (a slice of length 1, broadcast), else an index array; None for roots.
+    levels: tuple[tuple[int, int, slice | np.ndarray | None], ...]
 
 
 @lru_cache(maxsize=64)
-def _levels_cached(parents_bytes: bytes) -> tuple[np.ndarray, ...]:
+def _plan_cached(parents_bytes: bytes) -> _Plan:
     parents = np.frombuffer(parents_bytes, dtype=np.int64)
     depth = np.zeros(len(parents), dtype=np.int64)
     for k, p in enumerate(parents):
         if p >= 0:
             depth[k] = depth[p] + 1
-    return tuple(np.flatnonzero(depth == d) for d in range(int(depth.max(initial=0)) + 1))
+    order: list[int] = []
+    within = np.zeros(len(parents), dtype=np.int64)  # a joint's place inside its depth's run
+    levels = []
+    for d in range(int(depth.max(initial=0)) + 1):
+        idx = np.flatnonzero(depth == d)
+        par: slice | np.ndarray | None = None
+        if d:
+            # Sorting by the parent's place keeps each chain in one lane from depth to depth, so a chain's
+            # parents are a plain view of the level above instead of a gather.
+            idx = idx[np.argsort(within[parents[idx]], kind="stable")]
+            pl = within[parents[idx]]
+            if np.array_equal(pl, np.arange(pl[0], pl[0] + len(pl))):
+                par = slice(int(pl[0]), int(pl[0]) + len(pl))
+            elif (pl == pl[0]).all():
+                par = slice(int(pl[0]), int(pl[0]) + 1)
+            else:
+                par = pl
+        within[idx] = np.arange(len(idx))
+        levels.append((len(order), len(order) + len(idx), par))
+        order.extend(idx.tolist())
+    order_a = np.array(order, dtype=np.int64)
+    return _Plan(order_a, np.argsort(order_a), tuple(levels))
 
 
-def _depth_levels(parents: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Joint indices grouped by depth below the root(s), shallowest first (cached per hierarchy:
-    the viewer runs forward kinematics every frame on the same skeleton)."""
-    return _levels_cached(np.ascontiguousarray(parents, dtype=np.int64).tobytes())
+def _plan(parents: np.ndarray) -> _Plan:
+    """The walk of a hierarchy (cached per hierarchy: the viewer runs forward kinematics every frame on the
+    same skeleton)."""
+    return _plan_cached(np.ascontiguousarray(parents, dtype=np.int64).tobytes())
 
 
-def _matrix_components(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices of unit quaternions ``(4, ...)`` (component-first) as ``(3, 3, ...)``.
+def _local_matrices(q: np.ndarray, out: np.ndarray) -> None:
+    """Rotation matrices of unit quaternions ``q`` ``(4, ...)`` (x, y, z, w first) written column-major into
+    ``out`` ``(4 or more, 3, ...)``: ``out[c, r]`` is entry (r, c).
 
     Motion rotations are unit by contract, so no normalisation pass here (this is the hot loop).
     """
     x, y, z, w = q
-    m = np.empty((3, 3) + q.shape[1:], dtype=q.dtype)
     x2, y2, z2 = x + x, y + y, z + z
     xx, yy, zz = x * x2, y * y2, z * z2
-    np.subtract(1.0, yy + zz, out=m[0, 0])
-    np.subtract(1.0, xx + zz, out=m[1, 1])
-    np.subtract(1.0, xx + yy, out=m[2, 2])
+    np.subtract(1.0, yy + zz, out=out[0, 0])
+    np.subtract(1.0, xx + zz, out=out[1, 1])
+    np.subtract(1.0, xx + yy, out=out[2, 2])
     del xx, yy, zz
     xy, wz = x * y2, w * z2
-    np.subtract(xy, wz, out=m[0, 1])
-    np.add(xy, wz, out=m[1, 0])
+    np.subtract(xy, wz, out=out[1, 0])
+    np.add(xy, wz, out=out[0, 1])
     xz, wy = x * z2, w * y2
-    np.add(xz, wy, out=m[0, 2])
-    np.subtract(xz, wy, out=m[2, 0])
+    np.add(xz, wy, out=out[2, 0])
+    np.subtract(xz, wy, out=out[0, 2])
     yz, wx = y * z2, w * x2
-    np.subtract(yz, wx, out=m[1, 2])
-    np.add(yz, wx, out=m[2, 1])
-    return m
+    np.subtract(yz, wx, out=out[2, 1])
+    np.add(yz, wx, out=out[1, 2])
 
 
-def _global_rt(parents: np.ndarray, rotations: np.ndarray, translations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World rotations ``(3, 3, J, F)`` and positions ``(3, J, F)`` from local ``(F, J, 4)`` / ``(F, J, 3)``
-    (views of :func:`_global_rows`' one array)."""
-    g = _global_rows(parents, rotations, translations)
-    return g[:, :3], g[:, 3]
+def _check(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray) -> None:
+    j = skeleton.n_joints
+    if rotations.ndim != 3 or rotations.shape[1:] != (j, 4):
+        raise ValueError(f"rotations must be (frames, {j}, 4), got {rotations.shape}")
+    if translations.shape != rotations.shape[:2] + (3,):
+        raise ValueError(f"translations must be (frames, {j}, 3), got {translations.shape}")
 
 
-def _global_rows(parents: np.ndarray, rotations: np.ndarray, translations: np.ndarray,
-                 g: np.ndarray | None = None, dtype: type = np.float64) -> np.ndarray:
-    """World ``[R | t]`` rows ``(3, 4, J, F)`` from local ``(F, J, 4)`` / ``(F, J, 3)``.
+def _world_blocks(plan: _Plan, rotations: np.ndarray, translations: np.ndarray,
+                  dtype: np.dtype) -> Iterator[tuple[int, int, list[np.ndarray]]]:
+    """World ``[R | t]`` of every joint, one block of frames at a time: yields ``(a, b, worlds)`` for frames
+    ``a:b``, where ``worlds[d]`` is a ``(3, 4, m, b - a)`` array (row, column, joint, frame) of depth ``d``'s
+    joints in :attr:`_Plan.order`. The arrays are reused by the next block.
 
-    Component-first, frame-last layout with all joints of one depth handled together: numpy's
-    ``matmul`` on stacks of 3x3 matrices is slow (one tiny product at a time), while an ``einsum``
-    over long contiguous frame rows is two vector operations per tree level (15 levels for BEAT).
-    Rotation and translation share one array so the (F, J, 4, 4) output is one strided copy.
-    ``g``, when given, is a ``(4 or more, 4, J, F)`` array whose first three rows are filled in; the
-    arithmetic is done in ``g``'s type (else ``dtype``).
+    Layout, the reasons for it, and what each step costs (profiled on BEAT's 75 joints; copies, not
+    arithmetic, dominate):
+
+    * component-first, frame-last: every numpy call runs over long contiguous rows of frames, all joints
+      of one depth at once (15 levels for BEAT), never a Python loop over frames or joints;
+    * joints in level order, so a level's local transforms and results are contiguous runs: no gather of
+      the locals and no scatter of the results; parents are a view of the level above except where a
+      joint has several children (BEAT: 5 of 15 levels gather);
+    * local transforms column-major (``local[c, r]``) and each level's result in its own contiguous array:
+      ``einsum`` composes ``[R | t]`` of a level in one call (``R = Rp R_l``, ``t = Rp t_l``, then
+      ``+ tp``), about 1.5x faster in these layouts than with a row-major local, 2x than into a strided output;
+    * input blocks are cast to ``dtype`` while still contiguous (a vector cast), then transposed: a
+      strided casting copy measured 1.5x slower.
     """
-    dtype = g.dtype if g is not None else dtype
-    local_r = _matrix_components(np.ascontiguousarray(rotations.transpose(2, 1, 0), dtype=dtype))
-    local_t = np.ascontiguousarray(translations.transpose(2, 1, 0), dtype=dtype)
-    if g is None:
-        g = np.empty((3, 4) + local_r.shape[2:], dtype=dtype)
-    g_r, g_t = g[:3, :3], g[:3, 3]
-    for level in _depth_levels(parents):
-        par = parents[level]
-        if par[0] < 0:  # roots are depth 0 and only roots are
-            g_r[:, :, level] = local_r[:, :, level]
-            g_t[:, level] = local_t[:, level]
-            continue
-        pr = g_r[:, :, par]
-        g_r[:, :, level] = np.einsum("iknf,kjnf->ijnf", pr, local_r[:, :, level])
-        g_t[:, level] = np.einsum("iknf,knf->inf", pr, local_t[:, level]) + g_t[:, par]
-    return g[:3]
+    f, j = rotations.shape[:2]
+    block = min(_FRAME_BLOCK, max(f, 1))
+    rb = np.empty((block, j, 4), dtype)
+    tb = np.empty((block, j, 3), dtype)
+    q_joint = np.empty((4, j, block), dtype)
+    t_joint = np.empty((3, j, block), dtype)
+    q_level = np.empty((4, j, block), dtype)
+    local = np.empty((4, 3, j, block), dtype)
+    worlds = [np.empty((3, 4, hi - lo, block), dtype) for lo, hi, _ in plan.levels]
+    gathered = [np.empty((3, 4, hi - lo, block), dtype) if isinstance(par, np.ndarray) else None
+                for lo, hi, par in plan.levels]
+    for a in range(0, f, block):
+        b = min(a + block, f)
+        n = b - a
+        np.copyto(rb[:n], rotations[a:b])
+        np.copyto(tb[:n], translations[a:b])
+        np.copyto(q_joint[..., :n], rb[:n].transpose(2, 1, 0))
+        np.copyto(t_joint[..., :n], tb[:n].transpose(2, 1, 0))
+        # mode="clip": numpy buffers take() into ``out`` in the default mode; indices are valid by construction
+        np.take(q_joint[..., :n], plan.order, axis=1, out=q_level[..., :n], mode="clip")
+        np.take(t_joint[..., :n], plan.order, axis=1, out=local[3, ..., :n], mode="clip")
+        _local_matrices(q_level[..., :n], local[..., :n])
+        out: list[np.ndarray] = []
+        for d, (lo, hi, par) in enumerate(plan.levels):
+            w = worlds[d][..., :n]
+            loc = local[:, :, lo:hi, :n]
+            if par is None:
+                np.copyto(w, loc.transpose(1, 0, 2, 3))
+            else:
+                if isinstance(par, slice):
+                    pw = out[-1][:, :, par]
+                else:
+                    pw = gathered[d][..., :n]
+                    np.take(out[-1], par, axis=2, out=pw, mode="clip")
+                np.einsum("ikmf,jkmf->ijmf", pw[:, :3], loc, out=w)
+                w[:, 3] += pw[:, 3]
+            out.append(w)
+        yield a, b, out
 
 
 def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
@@ -135,27 +203,29 @@ def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: n
         raise ValueError(f"dtype must be float32 or float64, got {dtype}")
     rotations = np.asarray(rotations)
     translations = np.asarray(translations)
-    j = skeleton.n_joints
-    if rotations.ndim != 3 or rotations.shape[1:] != (j, 4):
-        raise ValueError(f"rotations must be (frames, {j}, 4), got {rotations.shape}")
-    if translations.shape != rotations.shape[:2] + (3,):
-        raise ValueError(f"translations must be (frames, {j}, 3), got {translations.shape}")
-    f = rotations.shape[0]
+    _check(skeleton, rotations, translations)
+    f, j = rotations.shape[:2]
     out = np.empty((f, j, 4, 4), dtype=dtype)
-    block = min(_FRAME_BLOCK, max(f, 1))
-    g = np.empty((4, 4, j, block), dtype=dtype)
-    g[3] = _LAST_ROW[:, None, None]
-    # The (16, J, n) -> (n, J, 16) reorder goes through a (J, n, 16) buffer: a plain 2-D transpose
-    # and then a copy of whole 128-byte matrices, about twice as fast as one 4-D strided copy.
-    staging = np.empty((j, block, 16), dtype=dtype)
-    for a in range(0, f, block):
-        b = min(a + block, f)
+    if f == 0 or j == 0:
+        return out
+    plan = _plan(skeleton.parents)
+    block = min(_FRAME_BLOCK, f)
+    # Each block goes (3, 4, m, n) per level -> (J, n, 16) in level order (a 2-D transpose per level; the
+    # last row [0 0 0 1] is written once) -> (J, n, 16) in joint order (a take of whole rows) -> (n, J, 16)
+    # in the output (a copy of whole 4x4 matrices, as 64- or 128-byte items). That is cheaper than one
+    # strided 4-D copy, or than writing each joint's matrices into the output directly (measured).
+    staged = np.empty((j, block, 16), dtype=dtype)
+    staged[..., 12:] = np.array([0, 0, 0, 1], dtype=dtype)
+    ordered = np.empty((j, block, 16), dtype=dtype)
+    matrix = np.dtype((np.void, 16 * dtype.itemsize))
+    out_m = out.reshape(f, j, 16).view(matrix)[..., 0]
+    ordered_m = ordered.view(matrix)[..., 0]
+    for a, b, worlds in _world_blocks(plan, rotations, translations, dtype):
         n = b - a
-        gb = g[..., :n]
-        _global_rows(skeleton.parents, rotations[a:b], translations[a:b], gb)
-        st = staging[:, :n]
-        np.copyto(st, gb.reshape(16, j, n).transpose(1, 2, 0))
-        out[a:b] = st.reshape(j, n, 4, 4).transpose(1, 0, 2, 3)
+        for (lo, hi, _), w in zip(plan.levels, worlds):
+            np.copyto(staged[lo:hi, :n, :12], w.reshape(12, hi - lo, n).transpose(1, 2, 0))
+        np.take(staged[:, :n], plan.place, axis=0, out=ordered[:, :n], mode="clip")
+        np.copyto(out_m[a:b], ordered_m[:, :n].T)
     return out
 
 
@@ -167,13 +237,15 @@ def forward_kinematics(motion: Motion, dtype: type = np.float64) -> np.ndarray:
 
 def joint_positions(motion: Motion) -> np.ndarray:
     """World joint positions ``(F, J, 3)`` (cheaper than :func:`forward_kinematics` when only positions matter)."""
-    rotations, translations = motion.rotations, motion.translations
-    f = rotations.shape[0]
-    out = np.empty((f, motion.skeleton.n_joints, 3))
-    for a in range(0, f, _FRAME_BLOCK):
-        b = min(a + _FRAME_BLOCK, f)
-        _, g_t = _global_rt(motion.skeleton.parents, rotations[a:b], translations[a:b])
-        out[a:b] = g_t.transpose(2, 1, 0)
+    rotations, translations = np.asarray(motion.rotations), np.asarray(motion.translations)
+    _check(motion.skeleton, rotations, translations)
+    out = np.empty(rotations.shape[:2] + (3,))
+    if out.size == 0:
+        return out
+    plan = _plan(motion.skeleton.parents)
+    for a, b, worlds in _world_blocks(plan, rotations, translations, np.dtype(np.float64)):
+        for (lo, hi, _), w in zip(plan.levels, worlds):
+            out[a:b, plan.order[lo:hi]] = w[:, 3].transpose(2, 1, 0)
     return out
 
 
