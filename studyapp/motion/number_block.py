@@ -234,7 +234,7 @@ def parse_block(text: bytes, n_columns: int) -> np.ndarray | None:
         for k in list(slow):
             d = int(dots[k])
             start = d - int(np.bitwise_count(run[k])) - int(signed[k])
-            values[k] = abs(float(bytes(buf[start : d + 4 + nf + int(two[k])])))
+            values[k] = abs(float(bytes(buf[start : start + _WIDTH + 8]).split()[0]))
 
     # the tokens found cover every non-space byte: no token without a point, no stray byte
     if n * (1 + nf) + int_digits + int(np.count_nonzero(signed)) + exp_bytes != non_space:
