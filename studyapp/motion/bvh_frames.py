@@ -294,14 +294,14 @@ def _in_pieces(first: bytes, read: Reader, bytes_left: int, start: int, n_channe
             raise InputError(path, f"line {line + at + 1}",
                              f"frame line is {length:,} characters long; {n_channels} channels take at most {limit:,} "
                              "(are the line breaks missing?)")
+        line_ends = None
         if _NON_SPACE.search(piece):
             if n_channels == 0:
                 raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
-            values = parse_block(piece, n_channels) if vector else None
-            if values is None and vector and n == 0:
+            block = parse_block(piece, n_channels) if vector else None
+            if block is None and vector and n == 0:
                 return None
-            if values is None:
-                values = _fast_piece(piece, n_channels)
+            values, line_ends = block if block is not None else (_fast_piece(piece, n_channels), None)
             if values is None:
                 values = slow_frames(_decode(piece).splitlines(), line, n_channels, path, n, last=not nxt)
             consumed += len(piece)
@@ -316,7 +316,7 @@ def _in_pieces(first: bytes, read: Reader, bytes_left: int, start: int, n_channe
             n += len(values)
         else:
             consumed += len(piece)
-        line += piece.count(b"\n")
+        line += piece.count(b"\n") if line_ends is None else line_ends
         piece = nxt
     if n == out.shape[0]:
         return out

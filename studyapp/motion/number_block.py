@@ -71,6 +71,29 @@ def _eight_digits(v: np.ndarray) -> np.ndarray:
     return v
 
 
+_ONE_DIGIT, _UP, _SLOW, _BAD = 128, 22, 100, 127
+_CODES: dict[int, np.ndarray] = {}
+
+
+def _exponent_codes(nf: int) -> np.ndarray:
+    """For ``nf`` fraction digits: a code per exponent key (byte 0: first digit, byte 1: second digit or the
+    space after one digit, bit 16: a minus sign). Low 7 bits: the divisor's index in :data:`_POW10` (``nf``
+    minus the exponent, 0 to 22), or :data:`_UP` plus the multiplier's index (1 to 22), or :data:`_SLOW` for
+    a power of ten beyond the exact range, or :data:`_BAD` when the bytes are not an exponent; plus
+    :data:`_ONE_DIGIT` for a one-digit exponent."""
+    if nf not in _CODES:
+        key = np.arange(1 << 17)
+        d1, d2, minus = key & 0xFF, (key >> 8) & 0xFF, key >> 16
+        digit1, digit2 = (d1 >= 48) & (d1 <= 57), (d2 >= 48) & (d2 <= 57)
+        one = digit1 & (d2 <= 32)
+        exponent = np.where(digit2, 10 * (d1 - 48) + d2 - 48, d1 - 48) * np.where(minus == 1, -1, 1)
+        index = nf - exponent
+        code = np.where((index >= 0) & (index <= 22), index,
+                        np.where((index < 0) & (index >= -22), _UP - index, _SLOW)) + np.where(one, _ONE_DIGIT, 0)
+        _CODES[nf] = np.where(digit1 & (digit2 | one), code, _BAD).astype(np.uint8)
+    return _CODES[nf]
+
+
 def _layout(buf: np.ndarray, first_dot: int) -> tuple[int, bool] | None:
     """(fraction digits, has exponent) of the token whose point is at ``first_dot``."""
     tail = bytes(buf[first_dot + 1 : first_dot + 12])
@@ -80,9 +103,10 @@ def _layout(buf: np.ndarray, first_dot: int) -> tuple[int, bool] | None:
     return nf, tail[nf : nf + 1] in (b"e", b"E")
 
 
-def parse_block(text: bytes, n_columns: int) -> np.ndarray | None:
-    """``(lines, n_columns)`` float64 values of ``text`` (whole lines; the last may lack its line end), or
-    ``None`` when the text is not in an accepted layout or anything in it is wrong."""
+def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
+    """``(lines, n_columns)`` float64 values of ``text`` (whole lines; the last may lack its line end) and the
+    count of its line ends, or ``None`` when the text is not in an accepted layout or anything in it is
+    wrong."""
     size = len(text)
     if n_columns <= 0 or not size:
         return None
@@ -128,30 +152,17 @@ def parse_block(text: bytes, n_columns: int) -> np.ndarray | None:
     run = np.bitwise_xor(a, _LOW7_80)  # high bits of the integer digits
     int_digits = int(np.bitwise_count(run).sum())
     np.right_shift(a, _U(8), out=b)
-    b ^= a  # high bit of the lead byte (a space or a sign) alone
-    # its byte, compared with a space, '-' and '+' put at its place
+    b ^= a  # high bit of the lead byte alone (none when the 7 bytes are digits)
+    # the lead byte is a sign or not; whatever else it is stays out of the token, and the byte count below
+    # refuses the piece (a sign after a non-space byte likewise: no token can hold that byte)
     one = np.right_shift(b, _U(7))  # 0x01 at the lead byte
-    raw = np.bitwise_xor(x, _X30)
-    lead = np.multiply(one, _U(0xFF), out=c)
-    lead &= raw
-    np.multiply(one, _U(0x20), out=a)
-    space = lead <= a
-    np.multiply(one, _U(0x2D), out=a)
-    minus = lead == a
-    np.multiply(one, _U(0x2B), out=a)
-    signed = lead == a
+    np.multiply(one, _U(0xFF), out=c)
+    c &= x
+    np.multiply(one, _U(0x2D ^ 0x30), out=a)
+    minus = c == a
+    np.multiply(one, _U(0x2B ^ 0x30), out=a)
+    signed = c == a
     signed |= minus
-    # before a sign, a space: the byte below the lead byte, which must lie in the window
-    one >>= _U(8)
-    np.multiply(one, _U(0xFF), out=a)
-    a &= raw
-    one *= _U(0x20)
-    signed &= a <= one
-    signed &= b > _U(0x80)
-    space &= b != _U(0)
-    space |= signed
-    if not space.all():
-        return None
     if nf == 0 and not run.all():  # "." or "-.": no digit at all
         return None
     np.right_shift(run, _U(7), out=b)
@@ -186,59 +197,48 @@ def parse_block(text: bytes, n_columns: int) -> np.ndarray | None:
         if nf:
             values /= _POW10[nf]
     else:
-        # 'e' or 'E', a sign, one or two digits, a space
+        # 'e' or 'E', a sign, one or two digits (one: DiffSHEG's cut last number of a line)
         np.bitwise_and(c, _U(0xFFFF), out=a)
         a |= _U(0x20)
-        e_minus = a == _U(0x2D65)
-        e_sign = a == _U(0x2B65)
-        e_sign |= e_minus
+        e_sign = a == _U(0x2D65)
+        e_sign |= a == _U(0x2B65)
         if not e_sign.all():
             return None
-        # two digits then a space (one digit: DiffSHEG's cut last number of a line, fixed up below)
+        # the two bytes after the sign, and the sign's 0x04 bit ('-' has it, '+' not) as bit 16
         np.right_shift(c, _U(16), out=a)
-        a ^= _X30
-        np.bitwise_and(a, _U(0xFFFF), out=b)
-        _non_digits(b, b, c)
-        short = np.flatnonzero(b)
-        np.right_shift(a, _U(16), out=c)
-        c &= _U(0xFF)
-        c ^= _U(0x30)  # the byte after two digits
-        if short.size:
-            c[short] = (a[short] >> _U(8)) & _U(0xFF) ^ _U(0x30)
-            if b[short].max() > 0x8000 or b[short].min() < 0x8000:  # the second byte alone is not a digit
+        a &= _U(0xFFFF)
+        c <<= _U(6)
+        c &= _U(0x10000)
+        a |= c
+        code = _exponent_codes(nf).take(a.view(np.int64))
+        one_digit = code >= _ONE_DIGIT
+        exp_bytes = 4 * n - int(np.count_nonzero(one_digit))
+        code &= np.uint8(_ONE_DIGIT - 1)
+        slow = ()
+        if code.max() > 22:
+            if code.max() == _BAD:
                 return None
-            a[short] &= _U(0xFF)  # the formula below then gives 10 * digit
-        if c.max() > 32:
-            return None
-        a &= _U(0x0F0F)
-        a *= _U(2561)
-        a >>= _U(8)
-        a &= _U(0xFF)  # 10 * first + second digit
-        exponent = a.astype(np.int64)
-        if short.size:
-            exponent[short] //= 10
-        exp_bytes = 4 * n - short.size
-        np.negative(exponent, out=exponent, where=e_minus)
-        exponent -= nf  # the power of ten of the integer mant
-        low, high = int(exponent.min()), int(exponent.max())
-        slow = np.flatnonzero((exponent < -22) | (exponent > 22)) if low < -22 or high > 22 else ()
-        if len(slow) > _MAX_SLOW_SHARE * n:
-            return None
-        if high > 0:
-            up = np.flatnonzero(exponent > 0)
-            values[up] *= _POW10.take(np.minimum(exponent[up], 22))
-            exponent[up] = 0
-        np.negative(exponent, out=exponent)
-        np.minimum(exponent, 22, out=exponent)
-        values /= _POW10.take(exponent)
+            slow = np.flatnonzero(code == _SLOW)
+            if slow.size > _MAX_SLOW_SHARE * n:
+                return None
+            code[slow] = 0  # float() reads these below
+            up = np.flatnonzero(code > 22)
+            values[up] *= _POW10.take(code[up] - _UP)
+            code[up] = 0
+        values /= _POW10.take(code)
         for k in list(slow):
             d = int(dots[k])
             start = d - int(np.bitwise_count(run[k])) - int(signed[k])
-            values[k] = abs(float(bytes(buf[start : start + _WIDTH + 8]).split()[0]))
+            token = bytes(buf[start : start + _WIDTH + 8]).split()[0]
+            exp_bytes += len(token) - (d - start) - 1 - nf - (3 if one_digit[k] else 4)  # as counted above
+            try:
+                values[k] = abs(float(token))
+            except ValueError:
+                return None
 
     # the tokens found cover every non-space byte: no token without a point, no stray byte
     if n * (1 + nf) + int_digits + int(np.count_nonzero(signed)) + exp_bytes != non_space:
         return None
     bits = values.view(_U)
     bits |= minus.view(np.uint8).astype(_U) << _U(63)  # the sign (-0.0 stays negative)
-    return values.reshape(n // n_columns, n_columns)
+    return values.reshape(n // n_columns, n_columns), newlines.size

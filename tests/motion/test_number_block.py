@@ -4,6 +4,7 @@ that the general parser reads it; real files load exactly as numpy's C reader re
 from __future__ import annotations
 
 import warnings
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,16 @@ import pytest
 
 from studyapp.motion import bvh_frames
 from studyapp.motion.bvh import read_bvh_channels
-from studyapp.motion.number_block import parse_block
+from studyapp.motion import number_block
+
+
+def parse_block(text: bytes, n_columns: int) -> np.ndarray | None:
+    """The values alone, after checking the count of line ends that comes with them."""
+    got = number_block.parse_block(text, n_columns)
+    if got is None:
+        return None
+    assert got[1] == text.count(b"\n")
+    return got[0]
 
 SAMPLES = Path("/work/shared/samples")
 
@@ -45,7 +55,7 @@ def _values(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
     ("%+.2e", " ", "\n"),
 ])
 def test_values_are_pythons_float_bit_for_bit(fmt, sep, end):
-    rng = np.random.default_rng(abs(hash(fmt + sep)) % 2**32)
+    rng = np.random.default_rng(zlib.crc32((fmt + sep + end).encode()))
     vals = _values(rng, (300, 57))
     if fmt == "%.0f":
         vals = np.round(vals)
