@@ -150,7 +150,8 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
         np.right_shift(a, _U(k), out=b)
         a |= b
     run = np.bitwise_xor(a, _LOW7_80)  # high bits of the integer digits
-    int_digits = int(np.bitwise_count(run).sum())
+    widths = np.bitwise_count(run)  # integer digits per token
+    int_digits, widest = int(widths.sum()), int(widths.max())
     np.right_shift(a, _U(8), out=b)
     b ^= a  # high bit of the lead byte alone (none when the 7 bytes are digits)
     # the lead byte is a sign or not; whatever else it is stays out of the token, and the byte count below
@@ -167,20 +168,29 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
         return None
     np.right_shift(run, _U(7), out=b)
     b *= _U(0xFF)
-    x &= b
-    x <<= _U(8)
-    mant = _eight_digits(x)
+    x &= b  # the integer digits' values at bytes 6 and down, nothing else
 
-    # fraction: nf digits right after the point
+    # fraction: nf digits right after the point; with the integer digits, one integer of up to 8 digits when
+    # they fit (``%e``: always), else two
     np.bitwise_xor(words[:, 1], _X30, out=a)
     if nf:
         _non_digits(a, b, c)
         b <<= _U(64 - 8 * nf)
         if b.max():
             return None
-        mant *= _U(10**nf)
         np.left_shift(a, _U(64 - 8 * nf), out=c)
-        mant += _eight_digits(c)
+        if widest <= 8 - nf:
+            x >>= _U(8 * (nf - 1))
+            x |= c
+            mant = _eight_digits(x)
+        else:
+            x <<= _U(8)
+            mant = _eight_digits(x)
+            mant *= _U(10**nf)
+            mant += _eight_digits(c)
+    else:
+        x <<= _U(8)
+        mant = _eight_digits(x)
     # the 8 bytes after the fraction, byte 0 first: the token's end or its exponent
     if nf:
         np.right_shift(words[:, 1], _U(8 * nf), out=c)
@@ -204,6 +214,10 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
         e_sign |= a == _U(0x2B65)
         if not e_sign.all():
             return None
+        # after two digits, a space (the table below checks the byte after one digit)
+        np.right_shift(c, _U(32), out=b)
+        b &= _U(0xFF)
+        ends = b <= _U(32)
         # the two bytes after the sign, and the sign's 0x04 bit ('-' has it, '+' not) as bit 16
         np.right_shift(c, _U(16), out=a)
         a &= _U(0xFFFF)
@@ -212,6 +226,9 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
         a |= c
         code = _exponent_codes(nf).take(a.view(np.int64))
         one_digit = code >= _ONE_DIGIT
+        ends |= one_digit
+        if not ends.all():
+            return None
         exp_bytes = 4 * n - int(np.count_nonzero(one_digit))
         code &= np.uint8(_ONE_DIGIT - 1)
         slow = ()

@@ -128,6 +128,11 @@ def test_random_digit_strings_against_float():
     "1.5e+01 2.5e+01 3.5e01\n",  # no exponent sign
     "1.5e+01 2.5e+01 3.5\n",
     "1.5e+01 2.5e+01 3.5e+\n",
+    "1.5e+01 2.5e+01-3.5e+01\n1.5e+01 2.5e+01 3.5e+01 4.5e+01\n",  # two numbers glued (DiffSHEG cut: 'e+0')
+    "1.5e+01 2.5e+0-3.5e+01\n1.5e+01 2.5e+01 3.5e+01 4.5e+01\n",
+    "1.5 2.5-3.5\n1.5 2.5 3.5 4.5\n",
+    "1.5e+01 2.5e+01 3.5e+01x\n",
+    "1.5e+01 2.5e+01 3.5e-99x\n",  # a power float() reads, then junk
 ])
 def test_anything_else_is_refused(bad):
     assert parse_block(bad.encode("latin-1"), 3) is None
