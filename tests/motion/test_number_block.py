@@ -128,9 +128,9 @@ def test_random_digit_strings_against_float():
     "1.5e+01 2.5e+01 3.5e01\n",  # no exponent sign
     "1.5e+01 2.5e+01 3.5\n",
     "1.5e+01 2.5e+01 3.5e+\n",
-    "1.5e+01 2.5e+01-3.5e+01\n1.5e+01 2.5e+01 3.5e+01 4.5e+01\n",  # two numbers glued (DiffSHEG cut: 'e+0')
-    "1.5e+01 2.5e+0-3.5e+01\n1.5e+01 2.5e+01 3.5e+01 4.5e+01\n",
-    "1.5 2.5-3.5\n1.5 2.5 3.5 4.5\n",
+    "1.5e+01 2.5e+01-3.5e+01\n",  # two numbers glued (three points, two tokens)
+    "1.5e+01 2.5e+0-3.5e+01\n",  # (DiffSHEG's cut exponent: 'e+0')
+    "1.5 2.5-3.5\n",
     "1.5e+01 2.5e+01 3.5e+01x\n",
     "1.5e+01 2.5e+01 3.5e-99x\n",  # a power float() reads, then junk
 ])
@@ -159,3 +159,47 @@ def test_real_files_load_exactly_as_numpys_reader_reads_them(sample, tmp_path, m
         monkeypatch.setattr(bvh_frames, "parse_block", lambda *a: None)
         old = read_bvh_channels(p).channels
     assert new.dtype == old.dtype and _same(new, old)
+
+
+def _strict_reference(text: bytes, n_columns: int) -> np.ndarray | None:
+    """What the general reader makes of ``text``: lines with exactly ``n_columns`` finite numbers or nothing."""
+    try:
+        rows = []
+        for ln in text.decode("ascii").split("\n"):
+            if ln.strip():
+                toks = ln.split()
+                if len(toks) != n_columns:
+                    return None
+                rows.append([float(t) for t in toks])
+    except (UnicodeDecodeError, ValueError):
+        return None
+    values = np.array(rows, dtype=np.float64).reshape(len(rows), n_columns)
+    return values if np.isfinite(values).all() else None
+
+
+@pytest.mark.parametrize("fmt,sep,end", [("%e", " ", " \n"), ("%.6f", " ", "\n"), ("%.4f", "\t", "\r\n")])
+def test_damaged_text_is_refused_or_read_exactly(fmt, sep, end):
+    """Random damage (a byte inserted, deleted or replaced by one of the bytes that matter) to valid text: the
+    parser either refuses the piece or returns exactly what float() reads from it."""
+    rng = np.random.default_rng(zlib.crc32(fmt.encode()))
+    vals = _values(rng, (6, 9))
+    clean = "".join(sep.join(fmt % v for v in row) + end for row in vals.tolist()).encode()
+    alphabet = b"0123456789.eE+- \t\r\nx\x00\x0b"
+    accepted = 0
+    for _ in range(3000):
+        text = bytearray(clean)
+        for _ in range(int(rng.integers(1, 3))):
+            at = int(rng.integers(0, len(text)))
+            kind = int(rng.integers(0, 3))
+            byte = alphabet[int(rng.integers(0, len(alphabet)))]
+            if kind == 0:
+                text.insert(at, byte)
+            elif kind == 1:
+                del text[at]
+            else:
+                text[at] = byte
+        got = parse_block(bytes(text), 9)
+        if got is not None:
+            accepted += 1
+            assert _same(got, _strict_reference(bytes(text), 9)), bytes(text)
+    assert accepted > 50  # harmless damage (a space more, a digit changed) is still read
