@@ -5,14 +5,13 @@ from __future__ import annotations
 
 import warnings
 import zlib
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from studyapp.motion import bvh_frames
+from motion_helpers import SAMPLES
+from studyapp.motion import bvh_frames, number_block
 from studyapp.motion.bvh import read_bvh_channels
-from studyapp.motion import number_block
 
 
 def parse_block(text: bytes, n_columns: int) -> np.ndarray | None:
@@ -23,7 +22,6 @@ def parse_block(text: bytes, n_columns: int) -> np.ndarray | None:
     assert got[1] == text.count(b"\n")
     return got[0]
 
-SAMPLES = Path("/work/shared/samples")
 
 
 def _reference(text: str) -> np.ndarray:
@@ -143,7 +141,14 @@ def test_blank_lines_and_a_missing_last_line_end():
     assert _same(parse_block(text.encode(), 3), _reference(text))
 
 
-@pytest.mark.parametrize("sample", sorted(SAMPLES.rglob("*.bvh")), ids=lambda p: p.name)
+BVH_SAMPLES = sorted(SAMPLES.rglob("*.bvh"))
+
+
+def test_the_samples_are_there():
+    assert len(BVH_SAMPLES) >= 8  # the real files of tests/data/samples (copies of the shared samples)
+
+
+@pytest.mark.parametrize("sample", BVH_SAMPLES, ids=lambda p: p.name)
 def test_real_files_load_exactly_as_numpys_reader_reads_them(sample, tmp_path, monkeypatch):
     """Every sample file, its MOTION block repeated over many pieces, gives the same array bit for bit with the
     vectorized parser on and off (numpy's C reader: the reader before it)."""
