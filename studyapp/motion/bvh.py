@@ -13,10 +13,11 @@ Semantics used here (and by the writer, so round trips are exact):
 * Position channels *replace* the joint's OFFSET on the axes they name (axes without a position
   channel keep the OFFSET value); that is how the root's ``Xposition..Zposition`` is read too.
 
-The frame data is parsed by numpy's C text reader (:mod:`studyapp.motion.bvh_frames`: values exactly as
-``float()`` reads them, bounded memory, no pandas), as one stream up to 64 MB and piece by piece into one
-preallocated array beyond; only a piece in which that pass finds something wrong is read again line by
-line, to name the offending line.
+The frame data is parsed piece by piece into one preallocated array (:mod:`studyapp.motion.bvh_frames`:
+values exactly as ``float()`` reads them, bounded memory, no pandas) by a vectorized numpy parser over the
+raw bytes (:mod:`studyapp.motion.number_block`) in the layouts writers use (``%e``, ``%.6f``); other
+layouts go to numpy's C text reader, as one stream up to 64 MB; only a piece in which that pass finds
+something wrong is read again line by line, to name the offending line.
 
 Limits, checked before the parsers see the text, so that no file can make reading hang or exhaust
 memory (each is an :class:`~studyapp.errors.InputError` naming the line):

@@ -111,19 +111,20 @@ def test_the_header_claim_only_sizes_the_first_allocation(tmp_path, small_pieces
     assert d.channels.base is None or d.channels.base.shape[0] < 2 * 120  # no 10^12-row (or grown, unused) buffer
 
 
-@pytest.mark.parametrize("path", ["stream", "pieces"])
+@pytest.mark.parametrize("path", ["vector", "stream", "pieces"])
 def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch, path):
-    """4,000 frames (~12 MB of text, ~7 MB of float64) read in 256 KB pieces: the peak stays near the array."""
+    """4,000 frames (~12 MB of text, ~7 MB of float64) read in 256 KB pieces: the peak stays near the array.
+    ``%e`` lines go to the vectorized parser; lines alternating ``%e`` and ``%.6f`` to numpy's C reader."""
     monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 256 << 10)
     if path == "pieces":
         monkeypatch.setattr(bvh_frames, "STREAM_MAX_BYTES", -1)
     rng = np.random.default_rng(2)
     vals = rng.normal(scale=50.0, size=(4000, N_CH))
-    line = "  ".join(["%e"] * N_CH) + " \n"
+    lines = ["  ".join(["%e"] * N_CH) + " \n", " ".join(["%.6f"] * N_CH) + "\n"]
     p = tmp_path / "long.bvh"
     with open(p, "w") as fh:
         fh.write(f"{HEADER}Frames: 4000\nFrame Time: 0.008333\n")
-        fh.writelines(line % tuple(r) for r in vals.tolist())
+        fh.writelines(lines[k % 2 if path != "vector" else 0] % tuple(r) for k, r in enumerate(vals.tolist()))
     text_bytes = p.stat().st_size
     tracemalloc.start()
     try:
@@ -132,9 +133,13 @@ def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch, pat
     finally:
         tracemalloc.stop()
     assert d.channels.shape == (4000, N_CH)
-    # the stream's array grows as it reads (numpy's reader over-allocates by up to a quarter, then trims)
+    assert np.array_equal(d.channels, np.array([[float(t) for t in ln.split()] for ln in
+                                                 p.read_text().splitlines()[-4000:]]))
+    # the stream's array grows as it reads (numpy's reader over-allocates by up to a quarter, then trims); the
+    # vectorized parser's work arrays take about 16 bytes per byte of a piece
     slack = d.channels.nbytes // 4 if path == "stream" else 0
-    assert peak < d.channels.nbytes + slack + 3 * (256 << 10) + (1 << 20), (peak, d.channels.nbytes, text_bytes)
+    work = 16 * (256 << 10) if path == "vector" else 3 * (256 << 10)
+    assert peak < d.channels.nbytes + slack + work + (1 << 20), (peak, d.channels.nbytes, text_bytes)
     assert peak < text_bytes  # holding the text alone would pass this bound
 
 
@@ -177,7 +182,13 @@ def test_the_stream_takes_a_clean_block_and_hands_a_bad_one_over(tmp_path, small
     line is refused by it and read piece by piece, which names the line."""
     taken = []
     real = bvh_frames._in_pieces
-    monkeypatch.setattr(bvh_frames, "_in_pieces", lambda *a, **k: taken.append(1) or real(*a, **k))
+
+    def counted(*a, **k):  # numpy's reader piece by piece (the vectorized parser refuses these mixed layouts)
+        if not k.get("vector"):
+            taken.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(bvh_frames, "_in_pieces", counted)
     rows, expected = _rows(60)
     p = tmp_path / "m.bvh"
     p.write_text(_text(rows), newline="")
@@ -188,3 +199,68 @@ def test_the_stream_takes_a_clean_block_and_hands_a_bad_one_over(tmp_path, small
     with pytest.raises(InputError, match=f"frame 31 has {N_CH - 1} values"):
         read_bvh_channels(p)
     assert len(taken) == (1 if small_pieces == "stream" else 2)
+
+
+def _uniform_rows(n: int) -> tuple[list[str], np.ndarray]:
+    """DiffSHEG's layout (``%e``, double spaces, a trailing space) in every line: the vectorized parser's."""
+    vals = np.random.default_rng(5).normal(scale=30.0, size=(n, N_CH))
+    rows = ["  ".join("%e" % v for v in r) + " \n" for r in vals.tolist()]
+    return rows, np.array([[float(t) for t in row.split()] for row in rows])
+
+
+@pytest.fixture
+def vector_pieces(monkeypatch):
+    """~12 frame lines a piece; counts the pieces the vectorized parser reads."""
+    monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 40_000)
+    read = []
+    real = bvh_frames.parse_block
+
+    def counted(text, n):
+        got = real(text, n)
+        read.append(got is not None)
+        return got
+
+    monkeypatch.setattr(bvh_frames, "parse_block", counted)
+    return read
+
+
+@pytest.mark.parametrize("bad_frame", [0, 11, 12, 150, 299])
+@pytest.mark.parametrize("damage", ["short", "not a number", "glued"])
+def test_a_bad_line_in_a_vectorized_file_is_named_as_before(tmp_path, vector_pieces, bad_frame, damage):
+    """The vectorized parser refuses the piece with the bad line; numpy's reader and the line-by-line pass
+    then name it exactly as they do for any file (and the pieces before it were read vectorized)."""
+    rows, _ = _uniform_rows(300)
+    toks = rows[bad_frame].split()
+    if damage == "short":
+        toks = toks[:-1]
+    elif damage == "not a number":
+        toks[7] = "1.5e+0x"
+    else:
+        toks[7:9] = [toks[7] + toks[8]]
+    rows[bad_frame] = "  ".join(toks) + " \n"
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows), newline="")
+    line = HEADER.count("\n") + 3 + bad_frame
+    with pytest.raises(InputError) as err:
+        read_bvh_channels(p)
+    assert err.value.where == f"line {line}"
+    if damage == "not a number":
+        assert err.value.problem == "value 8 is not a number: '1.5e+0x'"
+    else:
+        hint = " (the file looks truncated)" if bad_frame == 299 else ""
+        assert err.value.problem == (f"frame {bad_frame + 1} has {N_CH - 1} values but the hierarchy declares "
+                                     f"{N_CH} channels{hint}")
+    assert any(vector_pieces) == (bad_frame >= 12)  # the first piece holds frames 1-12 (bad: all goes to numpy's)
+
+
+def test_a_vectorized_file_loads_exactly_whatever_the_header_claims(tmp_path, vector_pieces):
+    rows, expected = _uniform_rows(300)
+    rows.insert(40, "\n")
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows, frames=299), newline="")
+    with pytest.warns(UserWarning, match="header says Frames: 299 but the file has 300 data lines"):
+        got = read_bvh_channels(p).channels
+    assert np.array_equal(got, expected) and all(vector_pieces) and len(vector_pieces) > 20
+    with pytest.warns(UserWarning, match="header says Frames: 299"):
+        got32 = read_bvh_channels(p, dtype=np.float32).channels
+    assert np.array_equal(got32, expected.astype(np.float32))
