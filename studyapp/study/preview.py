@@ -90,9 +90,13 @@ def preview_condition(motion: str | Path, **settings: Any) -> Condition:
     cond, problems = condition_from_settings({"motion": str(motion), **given}, motion)
     if problems:
         p = problems[0]
-        where = f"--{p.key.split('.')[0].replace('_', '-')}" if p.key else None
+        key = p.key.split('.')[0] if p.key else ""
         rest = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
-        fix = f"; fix: {_cli_fix(p.fix)}" if p.fix else ""
+        if key == "motion":  # the file itself, given as `view`'s argument: there is no --motion option
+            where, fix = None, "; fix: give a .bvh, .npz or .npy motion file (`studyapp convert` makes one)"
+        else:
+            where = f"--{key.replace('_', '-')}" if key else None
+            fix = f"; fix: {_cli_fix(p.fix)}" if p.fix else ""
         raise InputError(motion, where, f"{p.message}{fix}{rest}")
     assert cond is not None
     return cond

@@ -96,6 +96,12 @@ def test_view_array_options_are_checked_like_a_design(tmp_path, capsys):
     # an array setting on a BVH is refused, as in a design
     assert main(["view", str(BEAT), "--radians", "--offscreen", "--out", str(tmp_path / "x.png")]) == 2
     assert "--degrees" in capsys.readouterr().err
+    # the file itself is the positional argument: the message names no option that `view` lacks
+    design = tmp_path / "demo.toml"
+    design.write_text("[study]\n")
+    assert main(["view", str(design), "--offscreen", "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "demo.toml" in err and ".bvh" in err and "--motion" not in err and "pattern" not in err
 
 
 def _renamed_copy(src, dst) -> dict[str, str]:
