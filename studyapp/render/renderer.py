@@ -8,7 +8,9 @@ over as a texture (:meth:`Renderer.render_texture`, so the picture is not copied
 whole canvas of the window's size with the scene in its viewport (:meth:`Renderer.draw_canvas`, what the
 participant UI's scene cache copies in: one copy, no clear, no quad). On software rasterisers (llvmpipe) MSAA is replaced by default (see
 :class:`Renderer`): every full-frame pass there waits for the CPU raster threads while holding the
-Python interpreter (and with it the audio callback), so the software path draws with no extra pass.
+Python interpreter (and with it the audio callback), so the software path draws with no extra pass;
+and there it flushes after each slot (:func:`~studyapp.render.context.gl_flush`), so llvmpipe's raster
+threads fill one slot while the calling thread shades the next one's vertices.
 
 Example (headless)::
 
@@ -34,6 +36,7 @@ import moderngl
 import numpy as np
 
 from studyapp.render.avatar import Avatar
+from studyapp.render.context import gl_flush
 from studyapp.render.gpu import MAX_ACTIVE_MORPHS, AvatarMesh, rasterize_label
 from studyapp.resources import read_shader
 
@@ -162,6 +165,10 @@ class Renderer:
         if lighting not in (None, "pixel", "vertex"):
             raise ValueError(f"lighting must be 'pixel', 'vertex' or None, got {lighting!r}")
         self.lighting = lighting or ("vertex" if software else "pixel")
+        # llvmpipe shades vertices on the calling thread and rasterises only when flushed: a flush after
+        # each slot lets its raster threads fill one slot while this thread shades the next one's vertices
+        # (without it the frame is all vertex work, then all raster work)
+        self.flush_slots = software
         # per lighting ("pixel", "vertex", "vertex-untextured"), compiled when an avatar first needs it
         self._progs: dict[str, moderngl.Program] = {}
         self.prog = self._program(self.lighting)
@@ -502,6 +509,8 @@ class Renderer:
             ctx.disable(moderngl.DEPTH_TEST)
             if scene.labels:
                 self._draw_label(scene.labels[i], vp)
+            if self.flush_slots and i + 1 < len(vps):
+                gl_flush()
         fbo.viewport = viewport
 
     def _joint_boxes(self, avatar: Avatar) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -202,3 +202,30 @@ def test_morph_rows_are_the_vertices_any_morph_moves():
     for m in range(5):
         for r, v in enumerate(moved):
             assert flat[m * len(moved) + r, :3].tolist() == d[m, v].tolist()
+
+
+def test_software_renderer_flushes_between_slots_and_keeps_the_picture(gl_ctx, avatar, monkeypatch):
+    """Each slot but the last is handed to llvmpipe's raster threads (a real glFlush, found through the GL
+    dispatch library) while the next one's vertices are shaded; the picture is the unflushed one."""
+    import studyapp.render.context as context
+    import studyapp.render.renderer as renderer_mod
+    from studyapp.render.renderer import is_software_renderer
+
+    if not is_software_renderer(gl_ctx):
+        pytest.skip("flushing between slots is for software rasterisers")
+    scene = _scene(avatar)
+    r = Renderer(gl_ctx)
+    assert r.flush_slots
+    calls = []
+
+    def counted():
+        calls.append(1)
+        context.gl_flush()
+
+    monkeypatch.setattr(renderer_mod, "gl_flush", counted)
+    flushed = _frame(r, scene, (640, 360))
+    assert len(calls) == scene.n_slots - 1
+    context.gl_flush()
+    assert context._GL_FLUSH[0] is not None  # a real glFlush (EGL through glvnd here), not the do-nothing fallback
+    r.flush_slots = False
+    assert np.array_equal(_frame(r, scene, (640, 360)), flushed)
