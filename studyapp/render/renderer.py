@@ -670,8 +670,10 @@ class Renderer:
         self._label_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
         self.ctx.disable(moderngl.BLEND)
 
-    def draw_bare(self, avatar: Avatar, scene, target_fbo: moderngl.Framebuffer, program: moderngl.Program) -> None:
-        """Benchmark baseline: the same triangles in the same slots with a trivial shader."""
+    def draw_bare(self, avatar: Avatar, scene, target_fbo: moderngl.Framebuffer, program: moderngl.Program,
+                  *, flush_slots: bool = False) -> None:
+        """Benchmark baseline: the same triangles in the same slots with a trivial shader, one draw per slot
+        (``flush_slots``: flushed after each but the last, as the renderer does on a software rasteriser)."""
         w, h = target_fbo.size
         self.frames_drawn += 1
         self._ensure_buffers((w, h))
@@ -683,9 +685,11 @@ class Renderer:
         vao = mesh.bare_vao(program)
         vps = slot_viewports((0, 0, w, h), scene.n_slots)
         program["u_view_proj"].write(np.ascontiguousarray(scene.camera.view_proj(vps[0][2] / vps[0][3]).T, np.float32).tobytes())
-        for vp in vps:
+        for i, vp in enumerate(vps):
             fbo.viewport = vp
             vao.render(moderngl.TRIANGLES)
+            if flush_slots and i + 1 < len(vps):
+                gl_flush()
         self.ctx.disable(moderngl.DEPTH_TEST)
         self._present(target_fbo, (0, 0, w, h), scene.n_slots)
 
