@@ -2,7 +2,8 @@
 
 Per frame the CPU only blends two precomputed palettes per slot, writes them to three small uniform
 buffers and sets the handful of non-zero morph weights; skinning and morphing run in the vertex
-shader. Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
+shader, specialised per group of triangles (:func:`~studyapp.render.gpu.skin_groups`: the morph loop only
+where a morph moves a vertex, only as many joints as the group's weights use). Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
 caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's), or handed
 over as a texture (:meth:`Renderer.render_texture`, so the picture is not copied once more), or as a
 whole canvas of the window's size with the scene in its viewport (:meth:`Renderer.draw_canvas`, what the
