@@ -1,6 +1,6 @@
 """The participant frame against a bare draw: three built-in avatars at 1280x720, read back every frame.
 
-Three pipelines run interleaved in one process (rounds of a few frames each, the order rotated every
+Four pipelines run interleaved in one process (rounds of a few frames each, the order rotated every
 round), so a busy shared machine slows all of them alike:
 
 * **participant frame**: what the participant window draws on every trial frame -- the renderer's
@@ -10,7 +10,11 @@ round), so a busy shared machine slows all of them alike:
   app's background around it, in one framebuffer copy), the ImGui overlay on top (panel, buttons,
   progress bar), read back;
 * **renderer only**: ``draw_trial`` straight into the target, read back;
-* **bare draw**: the same triangles in the same three viewports with a trivial shader, read back.
+* **bare draw**: the same triangles in the same three viewports with a trivial shader, read back;
+* **bare draw, flushed**: the same, flushed after each slot like the renderer on a software rasteriser
+  (there a flush lets the raster threads fill one slot while the next one's vertices are shaded): how much
+  of the ratio that scheduling buys, printed and recorded next to the ratio, which is against the plain
+  bare draw.
 
 Printed: median frame time with its spread (25th-75th percentile) per pipeline, the ratio participant /
 bare as the median of per-round ratios with their spread, and the calling thread's CPU per frame split
@@ -192,12 +196,18 @@ def main(argv: list[str]) -> int:
         bare.draw_bare(avatar, scene, fbo, bare_prog)
         target.read_rgb()
 
-    pipelines = {"participant frame": participant, "renderer only": renderer_only, "bare draw": bare_draw}
+    def bare_flushed(t: float) -> None:
+        bare.draw_bare(avatar, scene, fbo, bare_prog, flush_slots=True)
+        target.read_rgb()
+
+    pipelines = {"participant frame": participant, "renderer only": renderer_only, "bare draw": bare_draw,
+                 "bare draw, flushed": bare_flushed}
     for step in pipelines.values():  # warm up: shader compiles, uploads, fonts
         step(0.0)
         step(0.1)
     times: dict[str, list[float]] = {k: [] for k in pipelines}
     ratios = []
+    ratios_flushed = []
     names = list(pipelines)
     frame = 0
     loads = [load_average()]
@@ -215,6 +225,7 @@ def main(argv: list[str]) -> int:
             times[name] += ms
             round_ms[name] = float(np.median(ms))
         ratios.append(round_ms["participant frame"] / round_ms["bare draw"])
+        ratios_flushed.append(round_ms["participant frame"] / round_ms["bare draw, flushed"])
         loads.append(load_average())
     cpu = {name: cpu_split(step, max(2, args.frames)) for name, step in pipelines.items()}
 
@@ -232,10 +243,14 @@ def main(argv: list[str]) -> int:
     print(f"participant frame / bare draw: {q2:.2f}x [{q1:.2f}-{q3:.2f}] (median of per-round ratios; goal <= {GOAL}x)")
     r1, r2, r3 = np.percentile(np.array(times["renderer only"]) / np.median(times["bare draw"]), [25, 50, 75])
     print(f"renderer only / bare draw: {r2:.2f}x")
+    f1, f2, f3 = np.percentile(ratios_flushed, [25, 50, 75])
+    print(f"participant frame / bare draw flushed per slot: {f2:.2f}x [{f1:.2f}-{f3:.2f}]")
     record("render_frame_ratio_vs_bare", round(float(q2), 3), 1.0, "x bare-draw frame time",
            spread=[round(float(q1), 3), round(float(q3), 3)], goal=GOAL,
            participant_ms=round(float(np.median(times["participant frame"])), 2),
            bare_ms=round(float(np.median(times["bare draw"])), 2),
+           ratio_vs_bare_flushed=[round(float(f1), 3), round(float(f2), 3), round(float(f3), 3)],
+           renderer_flushes_slots=renderer.flush_slots,
            size=f"{size[0]}x{size[1]}", gl_renderer=ctx.info["GL_RENDERER"], antialiasing=renderer.antialiasing,
            lighting=renderer.lighting, load_average=[min(loads), max(loads)], cpu_count=os.cpu_count())
     overlay.layer.shutdown()

@@ -48,11 +48,20 @@ flat out int v_material;
 
 const int MORPH_TEX_W = 2048;
 
+// Specialised per group of triangles (studyapp.render.gpu.skin_groups): SKIN_BONES, the joints any vertex of
+// the group is weighted to (1, 2 or 4), and NO_MORPHS where no morph moves any of them. llvmpipe runs both
+// sides of every branch for 8 vertices at once, so the loop and the gathers left out here are work it would
+// otherwise do (masked) for every vertex; the sums are the same.
+#ifndef SKIN_BONES
+#define SKIN_BONES 4
+#endif
+
 mat4 bone(int j) { return u_bones[j]; }
 
 void main() {
     vec3 p = in_position;
     vec3 n = in_normal;
+#ifndef NO_MORPHS
     if (in_morph_row >= 0) {
         for (int i = 0; i < u_morph_count; ++i) {
             int idx = u_morph_ids[i] * u_morph_rows + in_morph_row;
@@ -61,11 +70,16 @@ void main() {
             n += u_morph_w[i] * texelFetch(u_morph_nrm, tc, 0).xyz;
         }
     }
-    // most vertices follow one or two bones; skipping zero weights saves work on CPU rasterisers
+#endif
+    // zero weights add nothing (a GPU skips them; the group's SKIN_BONES leaves the rest out)
     mat4 skin = in_weights.x * bone(in_joints.x);
+#if SKIN_BONES > 1
     if (in_weights.y > 0.0) skin += in_weights.y * bone(in_joints.y);
+#endif
+#if SKIN_BONES > 2
     if (in_weights.z > 0.0) skin += in_weights.z * bone(in_joints.z);
     if (in_weights.w > 0.0) skin += in_weights.w * bone(in_joints.w);
+#endif
     vec4 world = u_model * skin * vec4(p, 1.0);
     vec3 normal = mat3(u_model) * mat3(skin) * n;
 #if !(defined(VERTEX_LIGHTING) && defined(UNTEXTURED))

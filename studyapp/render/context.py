@@ -115,6 +115,44 @@ class _GlfwLoader:
         pass
 
 
+_GL_FLUSH: list = []  # [glFlush or None], looked up once
+
+
+def gl_flush() -> None:
+    """``glFlush`` on the current context: hand what was drawn so far to the driver without waiting for it.
+
+    moderngl has no flush (only ``finish``, which waits). On llvmpipe a flush starts the raster threads
+    on the commands binned so far while the calling thread goes on shading the next vertices: the
+    renderer flushes after each slot (see :class:`~studyapp.render.renderer.Renderer`). Looked up through
+    the GL dispatch library (glvnd's ``libOpenGL``, else ``libGL`` / ``opengl32``), which reaches GLX and
+    EGL contexts alike; where none is found (or for OSMesa, outside that dispatch) it does nothing, which
+    is only slower.
+    """
+    if not _GL_FLUSH:
+        _GL_FLUSH.append(_find_gl_flush())
+    fn = _GL_FLUSH[0]
+    if fn is not None:
+        fn()
+
+
+def _find_gl_flush():
+    import ctypes
+    import ctypes.util
+
+    for name in ("OpenGL", "GL", "opengl32"):
+        path = ctypes.util.find_library(name)
+        if not path:
+            continue
+        try:
+            fn = getattr(ctypes.CDLL(path), "glFlush")
+        except (OSError, AttributeError):
+            continue
+        fn.restype = None
+        fn.argtypes = []
+        return fn
+    return None
+
+
 class OffscreenTarget:
     """A colour + depth framebuffer of a fixed size, optionally multisampled.
 

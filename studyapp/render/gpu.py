@@ -65,10 +65,48 @@ def vertex_local_order(indices: np.ndarray) -> np.ndarray:
     return idx[np.argsort(idx.astype(np.int64).sum(axis=1), kind="stable")]
 
 
+SKIN_BONES = (1, 2, 4)  # the shader variants' joint counts per vertex (SKIN_BONES in skinned.vert)
+
+
+def skin_groups(indices: np.ndarray, weights: np.ndarray, morph_rows: np.ndarray
+                ) -> tuple[np.ndarray, list[tuple[bool, int, int, int]]]:
+    """The triangles grouped by what their vertices need of the vertex shader, for its specialised variants.
+
+    Returns ``(triangles, groups)``: the triangles reordered, group after group, each group in
+    :func:`vertex_local_order`; and per group ``(morphs, bones, first, count)`` -- whether any of its
+    vertices has a morph row, how many leading joint slots its vertices' weights use (the smallest of
+    :data:`SKIN_BONES` holding the last non-zero weight of each), and its range in the index buffer (first
+    index, number of indices). Weights past ``bones`` are zero, so a variant that leaves them out sums the
+    same skinning matrix.
+
+    >>> tris = np.array([[0, 1, 2], [1, 2, 3]])
+    >>> w = np.array([[1, 0, 0, 0], [1, 0, 0, 0], [0.5, 0.5, 0, 0], [0.4, 0.3, 0.2, 0.1]], np.float32)
+    >>> order, groups = skin_groups(tris, w, np.array([-1, -1, -1, -1]))
+    >>> order.tolist(), groups
+    ([[0, 1, 2], [1, 2, 3]], [(False, 2, 0, 3), (False, 4, 3, 3)])
+    """
+    tri = np.asarray(indices).reshape(-1, 3)
+    w = np.asarray(weights)
+    used = np.where(w.any(axis=1), w.shape[1] - np.argmax(w[:, ::-1] != 0, axis=1), 1)
+    bones = np.asarray(SKIN_BONES)[np.searchsorted(SKIN_BONES, np.minimum(used, SKIN_BONES[-1]))]
+    tri_bones = bones[tri].max(axis=1)
+    tri_morph = (np.asarray(morph_rows)[tri] >= 0).any(axis=1)
+    parts, groups, first = [], [], 0
+    for morphs in (False, True):
+        for b in SKIN_BONES:
+            sel = tri[(tri_morph == morphs) & (tri_bones == b)]
+            if len(sel):
+                parts.append(vertex_local_order(sel))
+                groups.append((morphs, int(b), first, 3 * len(sel)))
+                first += 3 * len(sel)
+    order = np.concatenate(parts) if parts else tri[:0]
+    return order, groups
+
+
 class AvatarMesh:
     """Vertex buffers, morph textures and base-colour texture of one avatar, shared by every slot."""
 
-    def __init__(self, ctx: moderngl.Context, avatar: Avatar, program: moderngl.Program,
+    def __init__(self, ctx: moderngl.Context, avatar: Avatar,
                  palette_rows: int = 4) -> None:  # one per slot: render.scene.MAX_SLOTS
         self.ctx = ctx
         self.avatar = avatar
@@ -98,11 +136,9 @@ class AvatarMesh:
             "in_morph_row": ctx.buffer(rows.tobytes()),
             "in_uv": ctx.buffer(np.ascontiguousarray(uv, np.float32).tobytes()),
         }
-        self.index_buffer = ctx.buffer(vertex_local_order(avatar.indices).astype(np.uint32).tobytes())
-        fmt = {"in_position": "3f", "in_normal": "3f", "in_color": "4f", "in_shading": "3f", "in_joints": "4i", "in_weights": "4f",
-               "in_morph_row": "i", "in_uv": "2f"}
-        content = [(self._buffers[name], fmt[name], name) for name in fmt if name in program]
-        self.vao = ctx.vertex_array(program, content, self.index_buffer, index_element_size=4)
+        order, self.groups = skin_groups(avatar.indices, avatar.weights, rows)
+        self.index_buffer = ctx.buffer(order.astype(np.uint32).tobytes())
+        self._vaos: dict[int, tuple[moderngl.Program, moderngl.VertexArray]] = {}
         if avatar.texture is not None:
             img = np.ascontiguousarray(avatar.texture[::-1], np.uint8)  # GL wants the bottom row first
             self.texture = ctx.texture((img.shape[1], img.shape[0]), img.shape[2], img.tobytes())
@@ -123,6 +159,18 @@ class AvatarMesh:
             out[: len(packed), :3] = packed
         return out.reshape(shape)
 
+    def vao_for(self, program: moderngl.Program) -> moderngl.VertexArray:
+        """The vertex array of this mesh for ``program`` (the attributes it uses), made once per program;
+        draw a group's range of it (:attr:`groups`)."""
+        hit = self._vaos.get(id(program))
+        if hit is None or hit[0] is not program:
+            fmt = {"in_position": "3f", "in_normal": "3f", "in_color": "4f", "in_shading": "3f", "in_joints": "4i",
+                   "in_weights": "4f", "in_morph_row": "i", "in_uv": "2f"}
+            content = [(self._buffers[name], fmt[name], name) for name in fmt if name in program]
+            hit = (program, self.ctx.vertex_array(program, content, self.index_buffer, index_element_size=4))
+            self._vaos[id(program)] = hit
+        return hit[1]
+
     def bare_vao(self, program: moderngl.Program) -> moderngl.VertexArray:
         """Same triangles, positions only (benchmark baseline)."""
         if self._bare_vao is None:
@@ -133,7 +181,10 @@ class AvatarMesh:
     def release(self) -> None:
         for b in self._buffers.values():
             b.release()
-        for obj in (self.index_buffer, self.vao, self.morph_pos, self.morph_nrm, self.texture, self._bare_vao):
+        for _, vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        for obj in (self.index_buffer, self.morph_pos, self.morph_nrm, self.texture, self._bare_vao):
             if obj is not None:
                 obj.release()
         self.palette.release()

@@ -2,13 +2,16 @@
 
 Per frame the CPU only blends two precomputed palettes per slot, writes them to three small uniform
 buffers and sets the handful of non-zero morph weights; skinning and morphing run in the vertex
-shader. Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
+shader, specialised per group of triangles (:func:`~studyapp.render.gpu.skin_groups`: the morph loop only
+where a morph moves a vertex, only as many joints as the group's weights use). Drawing goes to a multisample framebuffer owned by the renderer, which is then resolved into the
 caller's framebuffer (an :class:`~studyapp.render.context.OffscreenTarget` or a window's), or handed
 over as a texture (:meth:`Renderer.render_texture`, so the picture is not copied once more), or as a
 whole canvas of the window's size with the scene in its viewport (:meth:`Renderer.draw_canvas`, what the
 participant UI's scene cache copies in: one copy, no clear, no quad). On software rasterisers (llvmpipe) MSAA is replaced by default (see
 :class:`Renderer`): every full-frame pass there waits for the CPU raster threads while holding the
-Python interpreter (and with it the audio callback), so the software path draws with no extra pass.
+Python interpreter (and with it the audio callback), so the software path draws with no extra pass;
+and there it flushes after each slot (:func:`~studyapp.render.context.gl_flush`), so llvmpipe's raster
+threads fill one slot while the calling thread shades the next one's vertices.
 
 Example (headless)::
 
@@ -34,6 +37,7 @@ import moderngl
 import numpy as np
 
 from studyapp.render.avatar import Avatar
+from studyapp.render.context import gl_flush
 from studyapp.render.gpu import MAX_ACTIVE_MORPHS, AvatarMesh, rasterize_label
 from studyapp.resources import read_shader
 
@@ -91,13 +95,17 @@ def floor_bounds(hips, feet) -> tuple[float, float, float, float]:
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
 
-def skinned_program(ctx: moderngl.Context, vertex_lighting: bool, textured: bool = True) -> moderngl.Program:
+def skinned_program(ctx: moderngl.Context, vertex_lighting: bool, textured: bool = True, *,
+                    morphs: bool = True, bones: int = 4) -> moderngl.Program:
     """The avatar program: ``skinned.vert`` + ``skinned.frag`` with ``lighting.glsl`` pasted in after their
     ``#version`` line (one definition of the lighting for both stages), lit per pixel, or per vertex when
     ``vertex_lighting`` (``#define VERTEX_LIGHTING``); ``textured=False`` there leaves out the texture
-    path and its varyings (``#define UNTEXTURED``)."""
+    path and its varyings (``#define UNTEXTURED``). ``morphs=False`` and ``bones`` (1, 2 or 4) specialise
+    it for a group of triangles (:func:`~studyapp.render.gpu.skin_groups`): no morph loop, only the first
+    ``bones`` joint weights."""
     defines = ("#define VERTEX_LIGHTING\n" if vertex_lighting else "") + \
-              ("#define UNTEXTURED\n" if vertex_lighting and not textured else "")
+              ("#define UNTEXTURED\n" if vertex_lighting and not textured else "") + \
+              ("" if morphs else "#define NO_MORPHS\n") + f"#define SKIN_BONES {int(bones)}\n"
     head = defines + read_shader("lighting.glsl")
 
     def source(name: str) -> str:
@@ -162,6 +170,10 @@ class Renderer:
         if lighting not in (None, "pixel", "vertex"):
             raise ValueError(f"lighting must be 'pixel', 'vertex' or None, got {lighting!r}")
         self.lighting = lighting or ("vertex" if software else "pixel")
+        # llvmpipe shades vertices on the calling thread and rasterises only when flushed: a flush after
+        # each slot lets its raster threads fill one slot while this thread shades the next one's vertices
+        # (without it the frame is all vertex work, then all raster work)
+        self.flush_slots = software
         # per lighting ("pixel", "vertex", "vertex-untextured"), compiled when an avatar first needs it
         self._progs: dict[str, moderngl.Program] = {}
         self.prog = self._program(self.lighting)
@@ -194,39 +206,50 @@ class Renderer:
         self._boxes: dict[int, tuple[Avatar, tuple]] = {}
         self._ids = np.zeros(MAX_ACTIVE_MORPHS, np.int32)
         self._w = np.zeros(MAX_ACTIVE_MORPHS, np.float32)
+        self._n_morphs = 0
 
     # -- resources ------------------------------------------------------------------------------
-    def _program(self, kind: str) -> moderngl.Program:
-        prog = self._progs.get(kind)
+    def _program(self, kind: str, morphs: bool = True, bones: int = 4) -> moderngl.Program:
+        key = (kind, morphs, bones)
+        prog = self._progs.get(key)
         if prog is None:
-            prog = skinned_program(self.ctx, kind != "pixel", textured=kind != "vertex-untextured")
+            prog = skinned_program(self.ctx, kind != "pixel", textured=kind != "vertex-untextured",
+                                   morphs=morphs, bones=bones)
             prog["Bones"].binding = 0
-            prog["u_morph_pos"].value = 1
-            prog["u_morph_nrm"].value = 2
-            if "u_base_color" in prog:
-                prog["u_base_color"].value = 3
+            for name, unit in (("u_morph_pos", 1), ("u_morph_nrm", 2), ("u_base_color", 3)):
+                if name in prog:
+                    prog[name].value = unit
             prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
-            self._progs[kind] = prog
+            self._progs[key] = prog
         return prog
+
+    def _kind_for(self, avatar: Avatar) -> str:
+        if self.lighting != "vertex":
+            return self.lighting
+        if avatar.double_sided:
+            return "pixel"
+        if avatar.texture is None or avatar.uv is None:
+            return "vertex-untextured"
+        return self.lighting
 
     def program_for(self, avatar: Avatar) -> moderngl.Program:
         """The avatar program that draws ``avatar``: per-pixel lighting for a double-sided avatar even
         when lighting per vertex (only a pixel knows which side of its surface it shows); per vertex,
         without the texture path for an avatar with no texture; else :attr:`prog`."""
-        if self.lighting != "vertex":
-            return self.prog
-        if avatar.double_sided:
-            return self._program("pixel")
-        if avatar.texture is None or avatar.uv is None:
-            return self._program("vertex-untextured")
-        return self.prog
+        return self._program(self._kind_for(avatar))
+
+    def group_programs(self, avatar: Avatar, mesh: AvatarMesh) -> list[tuple[moderngl.Program, int, int]]:
+        """``(program, first, count)`` per group of ``mesh``'s triangles: :meth:`program_for`'s lighting,
+        specialised for the group (:func:`~studyapp.render.gpu.skin_groups`)."""
+        kind = self._kind_for(avatar)
+        return [(self._program(kind, morphs, bones), first, count) for morphs, bones, first, count in mesh.groups]
 
     def upload_avatar(self, avatar: Avatar) -> AvatarMesh:
         """GPU buffers of ``avatar`` (created once per avatar object and reused by every slot)."""
         key = id(avatar)
         mesh = self._meshes.pop(key, None)
         if mesh is None or mesh.avatar is not avatar:
-            mesh = AvatarMesh(self.ctx, avatar, self.program_for(avatar))
+            mesh = AvatarMesh(self.ctx, avatar)
         self._meshes[key] = mesh  # most recently used last
         while len(self._meshes) > MAX_CACHED_AVATARS:
             self._meshes.pop(next(iter(self._meshes))).release()
@@ -452,9 +475,11 @@ class Renderer:
             mesh.palette.upload()
         # the eye of the camera as refitted to this viewport, the one the picture is taken from
         eye = tuple(float(v) for v in scene.camera.for_aspect(aspect).eye)
-        for prog in {id(p): p for p in map(self.program_for, scene.avatars)}.values():
+        groups = [self.group_programs(a, m) for a, m in zip(scene.avatars, meshes)]
+        for prog in {id(p): p for g in groups for p, _, _ in g}.values():
             prog["u_view_proj"].write(vp_bytes)
-            prog["u_camera_pos"].value = eye
+            if "u_camera_pos" in prog:
+                prog["u_camera_pos"].value = eye
         self.floor_prog["u_view_proj"].write(vp_bytes)
         self._aa_rects = []
         for i, vp in enumerate(vps):
@@ -483,25 +508,29 @@ class Renderer:
             # avatar
             ctx.enable(moderngl.DEPTH_TEST)
             mesh = meshes[i]
-            prog = self.program_for(scene.avatars[i])
-            self._set_morphs(prog, frames[i])
-            prog["u_morph_rows"].value = mesh.morph_rows
-            if "u_has_texture" in prog:
-                prog["u_has_texture"].value = mesh.has_texture
-            prog["u_base_factor"].value = tuple(float(v) for v in scene.avatars[i].base_color_factor)
+            base_factor = tuple(float(v) for v in scene.avatars[i].base_color_factor)
+            self._active_morphs(frames[i])
             mesh.palette.bind(i, 0)
             mesh.morph_pos.use(1)
             mesh.morph_nrm.use(2)
             mesh.texture.use(3)
-            if figures:
-                if not scene.avatars[i].double_sided:
-                    ctx.enable(moderngl.CULL_FACE)
-                    ctx.front_face = "ccw"
-                mesh.vao.render(moderngl.TRIANGLES)
-                ctx.disable(moderngl.CULL_FACE)
+            if not scene.avatars[i].double_sided:
+                ctx.enable(moderngl.CULL_FACE)
+                ctx.front_face = "ccw"
+            for prog, first, count in groups[i] if figures else ():
+                if "u_morph_count" in prog:
+                    self._set_morphs(prog)
+                    prog["u_morph_rows"].value = mesh.morph_rows
+                if "u_has_texture" in prog:
+                    prog["u_has_texture"].value = mesh.has_texture
+                prog["u_base_factor"].value = base_factor
+                mesh.vao_for(prog).render(moderngl.TRIANGLES, vertices=count, first=first)
+            ctx.disable(moderngl.CULL_FACE)
             ctx.disable(moderngl.DEPTH_TEST)
             if scene.labels:
                 self._draw_label(scene.labels[i], vp)
+            if self.flush_slots and i + 1 < len(vps):
+                gl_flush()
         fbo.viewport = viewport
 
     def _joint_boxes(self, avatar: Avatar) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -608,14 +637,18 @@ class Renderer:
                 rects.append((x0, int(b0), x1 - x0, int(b1 - b0)))
         return rects
 
-    def _set_morphs(self, prog: moderngl.Program, weights: np.ndarray) -> None:
+    def _active_morphs(self, weights: np.ndarray) -> None:
+        """This slot's non-zero morph weights, for :meth:`_set_morphs` (the same for each of its groups)."""
         active = np.flatnonzero(np.abs(weights) > MORPH_EPS)[:MAX_ACTIVE_MORPHS]
         n = len(active)
         self._ids[:] = 0
         self._w[:] = 0
         self._ids[:n] = active
         self._w[:n] = weights[active]
-        prog["u_morph_count"].value = n
+        self._n_morphs = n
+
+    def _set_morphs(self, prog: moderngl.Program) -> None:
+        prog["u_morph_count"].value = self._n_morphs
         prog["u_morph_ids"].write(self._ids.tobytes())
         prog["u_morph_w"].write(self._w.tobytes())
 
@@ -638,8 +671,10 @@ class Renderer:
         self._label_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
         self.ctx.disable(moderngl.BLEND)
 
-    def draw_bare(self, avatar: Avatar, scene, target_fbo: moderngl.Framebuffer, program: moderngl.Program) -> None:
-        """Benchmark baseline: the same triangles in the same slots with a trivial shader."""
+    def draw_bare(self, avatar: Avatar, scene, target_fbo: moderngl.Framebuffer, program: moderngl.Program,
+                  *, flush_slots: bool = False) -> None:
+        """Benchmark baseline: the same triangles in the same slots with a trivial shader, one draw per slot
+        (``flush_slots``: flushed after each but the last, as the renderer does on a software rasteriser)."""
         w, h = target_fbo.size
         self.frames_drawn += 1
         self._ensure_buffers((w, h))
@@ -651,9 +686,11 @@ class Renderer:
         vao = mesh.bare_vao(program)
         vps = slot_viewports((0, 0, w, h), scene.n_slots)
         program["u_view_proj"].write(np.ascontiguousarray(scene.camera.view_proj(vps[0][2] / vps[0][3]).T, np.float32).tobytes())
-        for vp in vps:
+        for i, vp in enumerate(vps):
             fbo.viewport = vp
             vao.render(moderngl.TRIANGLES)
+            if flush_slots and i + 1 < len(vps):
+                gl_flush()
         self.ctx.disable(moderngl.DEPTH_TEST)
         self._present(target_fbo, (0, 0, w, h), scene.n_slots)
 

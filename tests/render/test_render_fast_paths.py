@@ -9,7 +9,7 @@ from render_helpers import RELAXED, posed
 from studyapp.face.animation import FaceAnimation
 from studyapp.face.arkit import ARKIT_NAMES
 from studyapp.render.context import OffscreenTarget
-from studyapp.render.gpu import morph_texture_data, vertex_local_order
+from studyapp.render.gpu import morph_texture_data, skin_groups, vertex_local_order
 from studyapp.render.pose import prepare_slot
 from studyapp.render.renderer import Renderer
 from studyapp.render.scene import make_scene
@@ -202,3 +202,61 @@ def test_morph_rows_are_the_vertices_any_morph_moves():
     for m in range(5):
         for r, v in enumerate(moved):
             assert flat[m * len(moved) + r, :3].tolist() == d[m, v].tolist()
+
+
+def test_software_renderer_flushes_between_slots_and_keeps_the_picture(gl_ctx, avatar, monkeypatch):
+    """Each slot but the last is handed to llvmpipe's raster threads (a real glFlush, found through the GL
+    dispatch library) while the next one's vertices are shaded; the picture is the unflushed one."""
+    import studyapp.render.context as context
+    import studyapp.render.renderer as renderer_mod
+    from studyapp.render.renderer import is_software_renderer
+
+    if not is_software_renderer(gl_ctx):
+        pytest.skip("flushing between slots is for software rasterisers")
+    scene = _scene(avatar)
+    r = Renderer(gl_ctx)
+    assert r.flush_slots
+    calls = []
+
+    def counted():
+        calls.append(1)
+        context.gl_flush()
+
+    monkeypatch.setattr(renderer_mod, "gl_flush", counted)
+    flushed = _frame(r, scene, (640, 360))
+    assert len(calls) == scene.n_slots - 1
+    import ctypes.util
+
+    context.gl_flush()
+    if ctypes.util.find_library("OpenGL") or ctypes.util.find_library("GL"):
+        assert context._GL_FLUSH[0] is not None  # a real glFlush (EGL through glvnd here), not the do-nothing fallback
+    r.flush_slots = False
+    assert np.array_equal(_frame(r, scene, (640, 360)), flushed)
+
+
+def test_skin_groups_leave_out_only_zero_weights_and_unmoved_vertices(avatar):
+    rows, _ = morph_texture_data(avatar.morph_deltas)
+    order, groups = skin_groups(avatar.indices, avatar.weights, rows)
+    tris = np.asarray(avatar.indices).reshape(-1, 3)
+    assert sorted(map(tuple, order)) == sorted(map(tuple, tris))
+    assert sum(count for *_, count in groups) == order.size and groups[0][2] == 0
+    for morphs, bones, first, count in groups:
+        verts = np.unique(order.reshape(-1)[first:first + count])
+        assert not avatar.weights[verts, bones:].any()
+        if not morphs:
+            assert (rows[verts] < 0).all()
+    # the built-in avatar has every kind: the body without morphs on 1 and 4 joints, the head with morphs
+    assert {(m, b) for m, b, *_ in groups} >= {(False, 1), (False, 4), (True, 1)}
+
+
+def test_specialised_vertex_programs_draw_the_picture_of_the_general_one(gl_ctx, avatar):
+    """Each group drawn with its own variant (no morph loop, fewer joints) is, pixel for pixel, the whole
+    avatar drawn with the general program (morphs, four joints) -- in every lighting."""
+    scene = _scene(avatar)
+    for lighting in ("vertex", "pixel"):
+        r = Renderer(gl_ctx, samples=0, lighting=lighting)
+        specialised = _frame(r, scene, (640, 360))
+        mesh = r.upload_avatar(avatar)
+        assert len(mesh.groups) > 1
+        mesh.groups = [(True, 4, 0, sum(count for *_, count in mesh.groups))]
+        assert np.array_equal(_frame(r, scene, (640, 360)), specialised), lighting
