@@ -44,7 +44,7 @@ from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
 from results_analysis.ranks import (RankBlocks, participant_index, place_shares, rank_blocks, rank_blocks_by,
-                                    rank_blocks_with_trials, shared_trial_tables)
+                                    rank_blocks_with_trials, shared_trial_tables, text_levels)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
@@ -166,7 +166,7 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
         raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
-    levels = pd.Categorical(df[column].fillna("(none)").astype(str).to_numpy(dtype=object))  # sorted levels
+    levels = text_levels(df[column], "(none)")  # sorted levels
     # each criterion's trials x conditions matrix is built once and split by level (sorted, as groupby sorts)
     split = {crit: rank_blocks_by(df, crit, levels, block=block, conditions=conditions) for crit in criteria}
     for level in sorted(split[criteria[0]]) if criteria else []:

@@ -117,10 +117,14 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
     for col, default in PARADIGM_DEFAULTS.items():
         if col not in df.columns:
             df[col] = default
-    df["block"] = df["block"].fillna("main")
-    df["paradigm"] = df["paradigm"].fillna("rank")
-    df["motion_stimulus"] = df["motion_stimulus"].where(df["motion_stimulus"].notna(), df["stimulus"])
-    df["reasons"] = df["reasons"].fillna("")
+            if isinstance(default, str):
+                whole.add(col)
+    # a column known to be whole text has nothing to fill (each fillna of a million-cell object column scans it)
+    for col, fill in (("block", "main"), ("paradigm", "rank"), ("reasons", "")):
+        if col not in whole:
+            df[col] = df[col].fillna(fill)
+    if "motion_stimulus" not in whole:
+        df["motion_stimulus"] = df["motion_stimulus"].where(df["motion_stimulus"].notna(), df["stimulus"])
     for col in _NUMBER_COLUMNS:
         if col in df.columns:
             num, missing = _number_column(df[col])

@@ -82,6 +82,28 @@ def participant_index(participants: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return np.unique(p, return_inverse=True)
 
 
+def text_levels(col: pd.Series, missing: str | None = None) -> pd.Categorical:
+    """``pd.Categorical(col.fillna(missing).astype(str).to_numpy(dtype=object))`` (without the fill when
+    ``missing`` is None): each value's text, the distinct texts sorted, as a breakdown splits rows. A column
+    of text (the usual case) is factorized as it is, without writing a million strings again first.
+
+    >>> text_levels(pd.Series(["b", None, "a"], dtype=object), "(none)").tolist()
+    ['b', '(none)', 'a']
+    """
+    values = col.to_numpy(dtype=object)
+    kind = pd.api.types.infer_dtype(values, skipna=missing is not None)
+    if kind == "string" and len(values):
+        if missing is not None:
+            gap = pd.isna(values)
+            if gap.any():
+                values = values.copy()
+                values[gap] = missing
+        return pd.Categorical(values)
+    if missing is not None:
+        col = col.fillna(missing)
+    return pd.Categorical(col.astype(str).to_numpy(dtype=object))
+
+
 def ties(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``np.isclose(a, b)`` (broadcast), by plain equality where that is the same answer: ranks that are all
     finite multiples of 1/2 below 1,000 differ by at least 1/2 when they differ, far beyond isclose's
