@@ -175,8 +175,12 @@ def _sizes(codes: list[tuple[np.ndarray, int]]) -> np.ndarray:
     """Per row, the number of rows with the same values in the columns of ``codes``: what
     ``groupby(cols).transform("size")`` gives, from codes factorized once."""
     key = np.zeros(len(codes[0][0]), dtype=np.int64)
+    span = 1
     for code, n in codes:
         key = key * n + code
+        span *= n
+    if span <= 4 * len(key) + 4096:  # few possible keys (a study's design): counted directly, no hashing
+        return np.bincount(key, minlength=span)[key]
     group, _ = pd.factorize(key)
     return np.bincount(group)[group]
 
