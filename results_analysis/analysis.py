@@ -48,7 +48,7 @@ from results_analysis.ranks import (RankBlocks, participant_index, place_shares,
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
-from results_analysis.validate import check_complete, validate_structure
+from results_analysis.validate import check_complete, design_hashes, validate_structure
 
 
 @dataclass
@@ -261,7 +261,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                                      + ", ".join(f"{c} ({labels[c]})" if labels.get(c, c) != c else c
                                                  for c in conditions))
         control = by_label[control]
-    criteria = list(dict.fromkeys(kept["criterion"]))
+    criteria = list(pd.unique(kept["criterion"].to_numpy(dtype=object)))  # in order of appearance
     sm = incomplete == "skillings-mack"
     # shared_resamples: the criteria and intervals resample the same participants with the same seed, so the
     # resample matrix is drawn once (mean-rank, Bradley-Terry and effect-size intervals alike); it is drawn in
@@ -289,7 +289,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         q = questionnaire[~questionnaire["participant"].astype(str).isin(set(excluded["participant"]))]
         items, reliability, item_rel = item_summary(q), scale_reliability_ci(q, ci=ci), item_reliability(q)
     key = ["participant", "trial_index"]
-    hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
+    hashes = design_hashes(kept)
     paradigm_blocks = {}
     if len(others):
         gone = set(excluded["participant"].astype(str))
@@ -297,7 +297,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         rest.attrs.update(others.attrs)
         paradigm_blocks = analyze_blocks(rest, **block_options)
     return Analysis(paradigm_blocks=paradigm_blocks, criteria=results, conditions=conditions, block=block, alpha=alpha,
-                    n_participants=int(kept["participant"].nunique()),
+                    n_participants=n_part,
                     n_trials=int(kept[key].drop_duplicates().shape[0]), exclusions=excluded,
                     attention=attention_summary(checked), n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)),
                     dropped_incomplete=int(kept.attrs.get("dropped_incomplete", 0)), incomplete=incomplete,
@@ -320,7 +320,7 @@ def _paradigms_only(df: pd.DataFrame, *, block: str, exclude_failed_attention: b
         raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
                                  "(practice and attention-check trials are never analysed)")
     conditions = condition_order(kept)
-    hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
+    hashes = design_hashes(kept)
     notes: list[str] = []
     if len(hashes) > 1:
         notes.append(f"results mix {len(hashes)} study designs: {', '.join(map(str, hashes))}")

@@ -37,6 +37,18 @@ def rated_mask(df: pd.DataFrame) -> pd.Series:
     return mask
 
 
+def design_hashes(df: pd.DataFrame) -> list:
+    """The distinct design hashes of a frame, sorted (missing ones left out): ``sorted(df["design_hash"].dropna()
+    .unique())``, by one pass over the column (a dropna of a million-cell text column is a pass of its own).
+
+    >>> design_hashes(pd.DataFrame({"design_hash": ["b", None, "a", "b"]}))
+    ['a', 'b']
+    """
+    if "design_hash" not in df.columns:
+        return []
+    return sorted(h for h in pd.unique(df["design_hash"].to_numpy(dtype=object)) if not pd.isna(h))
+
+
 def validate_results(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFrame:
     """Check a tidy results frame; return it, without incomplete rated trials when ``incomplete='drop'``.
 
@@ -108,7 +120,7 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
                                  f"rank {_fmt(rank.iloc[i])} is outside 1..{bound[i]} ({bound[i]} conditions)")
 
     if "design_hash" in df.columns:
-        hashes = sorted(h for h in df["design_hash"].dropna().unique())
+        hashes = design_hashes(df)
         if len(hashes) > 1:
             per = df.groupby("design_hash")["participant"].nunique()
             detail = ", ".join(f"{h} ({per[h]} participant{'s' if per[h] != 1 else ''})" for h in hashes)
