@@ -172,7 +172,11 @@ def resample_weights(n_clusters: int, n_boot: int, seed: int, *, background: boo
     """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes
     (``background``: see :func:`shared_draw`)."""
     def draw(n: int) -> np.ndarray:
-        idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters))
+        # int32 draws are the same numbers as scipy's int64 ones (numpy draws either from the same 32-bit
+        # stream when the range fits in 32 bits) in half the memory: 80 MB instead of 160 for 2,000 x 10,000
+        small = n_clusters <= np.iinfo(np.int32).max
+        idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters),
+                                                   dtype=np.int32 if small else np.int64)
         out = np.empty((n, n_clusters))
         # counted a few rows at a time: no second and third (n, P) array, and the counts being incremented
         # (about 2 MB) stay in the processor's cache (a block of 500 rows of 10,000 took 4x as long)
