@@ -48,7 +48,7 @@ from results_analysis.ranks import (RankBlocks, participant_index, place_shares,
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order
-from results_analysis.validate import check_complete, design_hashes, validate_structure
+from results_analysis.validate import check_complete, design_hashes, distinct_rows, validate_structure
 
 
 @dataclass
@@ -298,7 +298,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         paradigm_blocks = analyze_blocks(rest, **block_options)
     return Analysis(paradigm_blocks=paradigm_blocks, criteria=results, conditions=conditions, block=block, alpha=alpha,
                     n_participants=n_part,
-                    n_trials=int(kept[key].drop_duplicates().shape[0]), exclusions=excluded,
+                    n_trials=distinct_rows(kept, key), exclusions=excluded,
                     attention=attention_summary(checked), n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)),
                     dropped_incomplete=int(kept.attrs.get("dropped_incomplete", 0)), incomplete=incomplete,
                     incomplete_blocks=int(kept.attrs.get("incomplete_blocks", 0)),
@@ -326,7 +326,7 @@ def _paradigms_only(df: pd.DataFrame, *, block: str, exclude_failed_attention: b
         notes.append(f"results mix {len(hashes)} study designs: {', '.join(map(str, hashes))}")
     return Analysis(criteria={}, conditions=conditions, block=block, alpha=alpha,
                     n_participants=int(kept["participant"].nunique()),
-                    n_trials=int(kept[["participant", "trial_index"]].drop_duplicates().shape[0]),
+                    n_trials=distinct_rows(kept, ["participant", "trial_index"]),
                     exclusions=excluded, attention=attention_summary(df),
                     n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)), dropped_incomplete=0,
                     incomplete=incomplete, warnings=notes, source=df.attrs.get("source"),

@@ -18,7 +18,7 @@ from scipy.stats import rankdata
 from results_analysis.bootstrap import resample_weights
 from results_analysis.paradigms import other_rows, paradigm_of, rank_rows
 from results_analysis.ranks import _row_ranks, _sorted_distinct, rank_blocks, text_levels, tie_sizes, ties
-from results_analysis.validate import _codes, _sizes, design_hashes
+from results_analysis.validate import _codes, _sizes, design_hashes, distinct_rows
 
 
 def _ranks_with_ties(rng: np.random.Generator, n: int, k: int, step: float) -> np.ndarray:
@@ -138,3 +138,15 @@ def test_design_hashes_equal_sorted_unique():
     df = pd.DataFrame({"design_hash": ["b", None, "a", np.nan, "b", "c"]})
     assert design_hashes(df) == sorted(df["design_hash"].dropna().unique()) == ["a", "b", "c"]
     assert design_hashes(pd.DataFrame({"x": [1]})) == []
+
+
+def test_distinct_rows_equal_drop_duplicates():
+    df = _tidy(np.random.default_rng(4))
+    for cols in (["participant", "trial_index"], ["participant", "trial_index", "criterion", "condition"]):
+        assert distinct_rows(df, cols) == df[cols].drop_duplicates().shape[0]
+    wide = pd.DataFrame({c: np.arange(5000) for c in "abcd"})
+    wide.loc[7] = wide.loc[3]
+    assert distinct_rows(wide, list("abcd")) == 4999
+    gaps = pd.DataFrame({"p": ["a", None, None, "b"], "t": [0.0, 1.0, 1.0, np.nan]})
+    assert distinct_rows(gaps, ["p", "t"]) == gaps.drop_duplicates().shape[0] == 3
+    assert distinct_rows(df.iloc[:0], ["participant", "trial_index"]) == 0
