@@ -183,18 +183,40 @@ def _codes(df: pd.DataFrame, cols: list[str]) -> list[tuple[np.ndarray, int]] | 
     return out
 
 
-def _sizes(codes: list[tuple[np.ndarray, int]]) -> np.ndarray:
-    """Per row, the number of rows with the same values in the columns of ``codes``: what
-    ``groupby(cols).transform("size")`` gives, from codes factorized once."""
+def _combined(codes: list[tuple[np.ndarray, int]]) -> tuple[np.ndarray, int]:
+    """One lexicographic int64 code per row from the columns' codes, and the number of possible codes."""
     key = np.zeros(len(codes[0][0]), dtype=np.int64)
     span = 1
     for code, n in codes:
         key = key * n + code
         span *= n
+    return key, span
+
+
+def _sizes(codes: list[tuple[np.ndarray, int]]) -> np.ndarray:
+    """Per row, the number of rows with the same values in the columns of ``codes``: what
+    ``groupby(cols).transform("size")`` gives, from codes factorized once."""
+    key, span = _combined(codes)
     if span <= 4 * len(key) + 4096:  # few possible keys (a study's design): counted directly, no hashing
         return np.bincount(key, minlength=span)[key]
     group, _ = pd.factorize(key)
     return np.bincount(group)[group]
+
+
+def distinct_rows(df: pd.DataFrame, cols: list[str]) -> int:
+    """``df[cols].drop_duplicates().shape[0]``: the number of distinct combinations, from codes factorized once
+    per column and counted over their few possible keys (a study's trials) where that is possible.
+
+    >>> distinct_rows(pd.DataFrame({"p": ["a", "a", "b"], "t": [0.0, 0.0, 0.0]}), ["p", "t"])
+    2
+    """
+    codes = _codes(df, cols) if len(df) else None
+    if codes is None:
+        return int(df[cols].drop_duplicates().shape[0])
+    key, span = _combined(codes)
+    if span <= 4 * len(key) + 4096:
+        return int(np.count_nonzero(np.bincount(key, minlength=span)))
+    return int(pd.unique(key).size)
 
 
 def _fmt(v) -> str:
