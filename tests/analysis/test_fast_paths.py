@@ -16,8 +16,10 @@ import pytest
 from scipy.stats import rankdata
 
 from results_analysis.bootstrap import resample_weights
+from results_analysis.errors import AnalysisInputError
 from results_analysis.paradigms import other_rows, paradigm_of, rank_rows
 from results_analysis.ranks import _row_ranks, _sorted_distinct, rank_blocks, text_levels, tie_sizes, ties
+from results_analysis.study_meta import condition_labels, condition_order
 from results_analysis.validate import _codes, _sizes, design_hashes, distinct_rows
 
 
@@ -150,3 +152,54 @@ def test_distinct_rows_equal_drop_duplicates():
     gaps = pd.DataFrame({"p": ["a", None, None, "b"], "t": [0.0, 1.0, 1.0, np.nan]})
     assert distinct_rows(gaps, ["p", "t"]) == gaps.drop_duplicates().shape[0] == 3
     assert distinct_rows(df.iloc[:0], ["participant", "trial_index"]) == 0
+
+
+def _order_and_labels_row_by_row(df: pd.DataFrame) -> tuple[list[str], dict[str, str]]:
+    """condition_order and condition_labels as they walked every row before (the reference)."""
+    ids = sorted(df["condition"].astype(str).unique())
+    pos = pd.to_numeric(df["condition_position"], errors="coerce")
+    place, owner = {}, {}
+    for cid, p, w in zip(df["condition"].astype(str), pos, df["_where"]):
+        if pd.isna(p):
+            continue
+        if place.setdefault(cid, p) != p:
+            raise AnalysisInputError(None, f"{w}, column 'condition_position'", f"{cid} two positions")
+        if owner.setdefault(p, cid) != cid:
+            raise AnalysisInputError(None, f"{w}, column 'condition_position'", f"{p} two conditions")
+    order = sorted(ids, key=lambda c: (c not in place, place.get(c, 0.0), c))
+    found = {}
+    for cid, label, w in zip(df["condition"].astype(str), df["condition_label"], df["_where"]):
+        if label is None or (isinstance(label, float) and np.isnan(label)) or not str(label).strip():
+            continue
+        label = " ".join(str(label).split())
+        if found.setdefault(cid, label) != label:
+            raise AnalysisInputError(None, f"{w}, column 'condition_label'", f"{cid} two labels")
+    return order, {c: found.get(c, c) for c in order}
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_condition_order_and_labels_equal_the_row_by_row_walk(seed):
+    rng = np.random.default_rng(seed)
+    n = 4000
+    cond = rng.choice(["A", "B", "C"], n)
+    position = pd.Series({"A": 2.0, "B": 0.0, "C": 1.0}).reindex(cond).to_numpy(copy=True)
+    label = pd.Series({"A": "Alpha", "B": "Beta  model", "C": None}).reindex(cond).to_numpy(dtype=object, copy=True)
+    position[rng.random(n) < 0.2] = np.nan  # rows without a position or label
+    label[rng.random(n) < 0.2] = rng.choice([None, np.nan, "", "  "])
+    if seed % 3 == 1:  # a conflict somewhere: the same row must be named
+        i = int(rng.integers(100, n))
+        position[i] = 5.0 if seed % 2 else {"A": 0.0, "B": 1.0, "C": 2.0}[cond[i]]
+    if seed % 3 == 2:
+        label[int(rng.integers(100, n))] = pd.NA if seed % 2 else "Gamma"
+    df = pd.DataFrame({"condition": cond, "condition_position": position, "condition_label": label,
+                       "_where": [f"line {i + 2}" for i in range(n)]})
+    try:
+        want = _order_and_labels_row_by_row(df)
+    except AnalysisInputError as exc:
+        with pytest.raises(AnalysisInputError) as got:
+            order = condition_order(df)
+            condition_labels(df, order)
+        assert str(got.value).split(",")[0] == str(exc).split(",")[0]  # the same row named first
+        return
+    order = condition_order(df)
+    assert (order, condition_labels(df, order)) == want
