@@ -191,7 +191,8 @@ def test_condition_order_and_labels_equal_the_row_by_row_walk(seed):
         position[i] = 5.0 if seed % 2 else {"A": 0.0, "B": 1.0, "C": 2.0}[cond[i]]
     if seed % 3 == 2:
         label[int(rng.integers(100, n))] = pd.NA if seed % 2 else "Gamma"
-    df = pd.DataFrame({"condition": cond, "condition_position": position, "condition_label": label,
+    df = pd.DataFrame({"condition": cond, "condition_position": position,
+                       "condition_label": pd.Series(label, dtype=object),  # as read: None, NaN, pd.NA kept apart
                        "_where": [f"line {i + 2}" for i in range(n)]})
     try:
         want = _order_and_labels_row_by_row(df)
