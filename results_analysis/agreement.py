@@ -24,7 +24,7 @@ import pandas as pd
 
 from results_analysis.adjust import ADJUSTMENT_NAMES, adjust_pvalues
 from results_analysis.friedman import friedman_ranks
-from results_analysis.ranks import rank_blocks_by
+from results_analysis.ranks import rank_blocks_by, text_levels
 
 AGREEMENT_COLUMNS = ["criterion", "stimulus", "n_raters", "kendall_w", "chi2", "df", "p", "p_adjusted",
                      "adjustment"]
@@ -47,7 +47,7 @@ def stimulus_agreement(df: pd.DataFrame, *, conditions: list[str], criteria: Seq
     rows = []
     # one trials x conditions matrix per criterion (shared with the rest of the analysis within
     # shared_trial_tables), split by stimulus (sorted); the stimuli factorized once for every criterion
-    stimuli = pd.Categorical(df["stimulus"].astype(str).to_numpy(dtype=object))
+    stimuli = text_levels(df["stimulus"])
     for crit in criteria:
         rated = stimuli.categories[np.unique(stimuli.codes[df["criterion"].to_numpy(dtype=object) == crit])]
         first = len(rows)

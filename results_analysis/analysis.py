@@ -45,11 +45,11 @@ from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
 from results_analysis.ranks import (RankBlocks, participant_index, place_shares, rank_blocks, rank_blocks_by,
-                                    rank_blocks_with_trials, shared_trial_tables)
+                                    rank_blocks_with_trials, shared_trial_tables, text_levels)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order, criterion_labels
-from results_analysis.validate import check_complete, validate_structure
+from results_analysis.validate import check_complete, design_hashes, distinct_rows, validate_structure
 
 
 @dataclass
@@ -173,7 +173,7 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
         raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
-    levels = pd.Categorical(df[column].fillna("(none)").astype(str).to_numpy(dtype=object))  # sorted levels
+    levels = text_levels(df[column], "(none)")  # sorted levels
     # each criterion's trials x conditions matrix is built once and split by level (sorted, as groupby sorts)
     split = {crit: rank_blocks_by(df, crit, levels, block=block, conditions=conditions) for crit in criteria}
     for level in sorted(split[criteria[0]]) if criteria else []:
@@ -269,7 +269,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                                      + ", ".join(f"{c} ({labels[c]})" if labels.get(c, c) != c else c
                                                  for c in conditions))
         control = by_label[control]
-    criteria = list(dict.fromkeys(kept["criterion"]))
+    criteria = list(pd.unique(kept["criterion"].to_numpy(dtype=object)))  # in order of appearance
     sm = incomplete == "skillings-mack"
     # shared_resamples: the criteria and intervals resample the same participants with the same seed, so the
     # resample matrix is drawn once (mean-rank, Bradley-Terry and effect-size intervals alike); it is drawn in
@@ -297,7 +297,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         q = questionnaire[~questionnaire["participant"].astype(str).isin(set(excluded["participant"]))]
         items, reliability, item_rel = item_summary(q), scale_reliability_ci(q, ci=ci), item_reliability(q)
     key = ["participant", "trial_index"]
-    hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
+    hashes = design_hashes(kept)
     paradigm_blocks = {}
     if len(others):
         gone = set(excluded["participant"].astype(str))
@@ -305,8 +305,8 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         rest.attrs.update(others.attrs)
         paradigm_blocks = analyze_blocks(rest, **block_options)
     return Analysis(paradigm_blocks=paradigm_blocks, criteria=results, conditions=conditions, block=block, alpha=alpha,
-                    n_participants=int(kept["participant"].nunique()),
-                    n_trials=int(kept[key].drop_duplicates().shape[0]), exclusions=excluded,
+                    n_participants=n_part,
+                    n_trials=distinct_rows(kept, key), exclusions=excluded,
                     attention=attention_summary(checked), n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)),
                     dropped_incomplete=int(kept.attrs.get("dropped_incomplete", 0)), incomplete=incomplete,
                     incomplete_blocks=int(kept.attrs.get("incomplete_blocks", 0)),
@@ -328,13 +328,13 @@ def _paradigms_only(df: pd.DataFrame, names: dict[str, str], *, block: str, excl
         raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
                                  "(practice and attention-check trials are never analysed)")
     conditions = condition_order(kept)
-    hashes = sorted(kept["design_hash"].dropna().unique()) if "design_hash" in kept.columns else []
+    hashes = design_hashes(kept)
     notes: list[str] = []
     if len(hashes) > 1:
         notes.append(f"results mix {len(hashes)} study designs: {', '.join(map(str, hashes))}")
     return Analysis(criteria={}, conditions=conditions, block=block, alpha=alpha,
                     n_participants=int(kept["participant"].nunique()),
-                    n_trials=int(kept[["participant", "trial_index"]].drop_duplicates().shape[0]),
+                    n_trials=distinct_rows(kept, ["participant", "trial_index"]),
                     exclusions=excluded, attention=attention_summary(df),
                     n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)), dropped_incomplete=0,
                     incomplete=incomplete, warnings=notes, source=df.attrs.get("source"),

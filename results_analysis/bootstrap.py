@@ -39,6 +39,8 @@ INTERVAL_NAMES = {"bca": "BCa", "percentile": "percentile"}
 
 #: Resamples whose weight matrix is held at once (R x P floats), to bound memory on large studies.
 _CHUNK = 500
+#: Cells of the weight matrix counted at once when drawing it (their counters fit in the processor's cache).
+_COUNT_CELLS = 1 << 18
 
 WeightedStatistic = Callable[[np.ndarray], np.ndarray]
 
@@ -170,11 +172,19 @@ def resample_weights(n_clusters: int, n_boot: int, seed: int, *, background: boo
     """(n_boot, n_clusters) multiplicities (read-only), from the index draws scipy.stats.bootstrap makes
     (``background``: see :func:`shared_draw`)."""
     def draw(n: int) -> np.ndarray:
-        idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters))
+        # int32 draws are the same numbers as scipy's int64 ones (numpy draws either from the same 32-bit
+        # stream when the range fits in 32 bits) in half the memory: 80 MB instead of 160 for 2,000 x 10,000
+        small = n_clusters <= np.iinfo(np.int32).max
+        idx = np.random.default_rng(seed).integers(0, n_clusters, (n, n_clusters),
+                                                   dtype=np.int32 if small else np.int64)
         out = np.empty((n, n_clusters))
-        for i in range(0, n, _CHUNK):  # counted a block of rows at a time: no second and third (n, P) array
-            rows = idx[i:i + _CHUNK]
-            flat = (rows + (np.arange(len(rows)) * n_clusters)[:, None]).ravel()
+        # counted a few rows at a time: no second and third (n, P) array, and the counts being incremented
+        # (about 2 MB) stay in the processor's cache (a block of 500 rows of 10,000 took 4x as long)
+        step = max(1, _COUNT_CELLS // max(n_clusters, 1))
+        offset = (np.arange(step) * n_clusters)[:, None]
+        for i in range(0, n, step):
+            rows = idx[i:i + step]
+            flat = (rows + offset[:len(rows)]).ravel()
             out[i:i + len(rows)] = np.bincount(flat, minlength=rows.size).reshape(len(rows), n_clusters)
         return out
 

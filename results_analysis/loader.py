@@ -116,21 +116,29 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
                                      "empty value")
     for col, default in PARADIGM_DEFAULTS.items():
         if col not in df.columns:
-            df[col] = default
-    df["block"] = df["block"].fillna("main")
-    df["paradigm"] = df["paradigm"].fillna("rank")
-    df["motion_stimulus"] = df["motion_stimulus"].where(df["motion_stimulus"].notna(), df["stimulus"])
-    df["reasons"] = df["reasons"].fillna("")
+            if isinstance(default, str):  # text as object, like every text column here (pandas' str dtype
+                # would be converted again by the next normalize_results, as the analysis calls it)
+                df[col] = pd.Series(np.full(len(df), default, dtype=object), index=df.index, dtype=object)
+                whole.add(col)
+            else:
+                df[col] = default
+    # a column known to be whole text has nothing to fill (each fillna of a million-cell object column scans it)
+    for col, fill in (("block", "main"), ("paradigm", "rank"), ("reasons", "")):
+        if col not in whole:
+            df[col] = df[col].fillna(fill)
+    if "motion_stimulus" not in whole:
+        df["motion_stimulus"] = df["motion_stimulus"].where(df["motion_stimulus"].notna(), df["stimulus"])
     for col in _NUMBER_COLUMNS:
         if col in df.columns:
             num, missing = _number_column(df[col])
-            bad = num.isna() & ~missing
+            gap = np.isnan(num.to_numpy())
+            bad = gap & ~missing
             if col == "trial_index":
-                bad |= num.isna()
-            elif col == "rank":  # a rank row needs its rank; other paradigms' rows have none
-                bad |= num.isna() & (df["paradigm"] == "rank")
+                bad |= gap
+            elif col == "rank" and gap.any():  # a rank row needs its rank; other paradigms' rows have none
+                bad |= gap & (df["paradigm"] == "rank").to_numpy()
             if bad.any():
-                i = int(np.argmax(bad.to_numpy()))
+                i = int(np.argmax(bad))
                 raise AnalysisInputError(src, f"{df['_where'].iloc[i]}, column '{col}'",
                                          f"{df[col].iloc[i]!r} is not a number")
             df[col] = num.astype(float)

@@ -48,7 +48,8 @@ def rank_rows(df: pd.DataFrame) -> pd.DataFrame:
     """
     if "paradigm" not in df.columns:
         return df
-    out = df[(paradigm_of(df) == "rank").to_numpy()]
+    mine = _is_rank(df)
+    out = df.copy(deep=False) if mine.all() else df[mine]  # a study of rank blocks only: no copy of every column
     out.attrs.update(df.attrs)
     return out
 
@@ -59,8 +60,21 @@ def other_rows(df: pd.DataFrame) -> pd.DataFrame:
     >>> other_rows(pd.DataFrame({"paradigm": ["rank", "pairwise"], "rank": [1.0, None]}))["paradigm"].tolist()
     ['pairwise']
     """
-    out = df.iloc[:0] if "paradigm" not in df.columns else df[(paradigm_of(df) != "rank").to_numpy()]
+    out = df.iloc[:0] if "paradigm" not in df.columns else df[~_is_rank(df)]
     out.attrs.update(df.attrs)
+    return out
+
+
+def _is_rank(df: pd.DataFrame) -> np.ndarray:
+    """``(paradigm_of(df) == "rank").to_numpy()`` for a frame with the column, by one comparison of the column
+    with "rank"; only the (few) other cells are looked at again for an empty or missing paradigm."""
+    try:
+        out = np.asarray(df["paradigm"].to_numpy(dtype=object) == "rank", dtype=bool)
+    except TypeError:  # a value that does not compare to a bool (pd.NA): the general rule for every row
+        return (paradigm_of(df) == "rank").to_numpy()
+    other = np.flatnonzero(~out)
+    if other.size:
+        out[other] = (paradigm_of(df.iloc[other]) == "rank").to_numpy()
     return out
 
 

@@ -33,6 +33,24 @@ from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX, _scale_of
 T = TypeVar("T")
 
 
+def first_pairs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Positions of the first row of each distinct (a, b) pair, in row order (missing values of ``b`` count as
+    one value). A check that walks the rows in order and remembers the first value seen per key meets its
+    first conflict at such a row, so walking these few rows instead of a large study's every row gives the
+    same answer and names the same row.
+
+    >>> first_pairs(np.array(["A", "A", "B", "A"], dtype=object), np.array([1.0, 1.0, np.nan, 2.0])).tolist()
+    [0, 2, 3]
+    """
+    if not len(a):
+        return np.zeros(0, dtype=np.int64)
+    ca, ua = pd.factorize(a)
+    cb, ub = pd.factorize(b)  # a missing value is code -1
+    key = (ca.astype(np.int64) + 1) * (len(ub) + 1) + (cb + 1)
+    _, first = np.unique(key, return_index=True)
+    return np.sort(first)
+
+
 def condition_order(df: pd.DataFrame) -> list[str]:
     """The conditions of ``df`` in the design's order (``condition_position``); conditions without a
     position (or a table without the column) follow, ordered by id. Raises :class:`AnalysisInputError` when
@@ -44,7 +62,9 @@ def condition_order(df: pd.DataFrame) -> list[str]:
     where = df["_where"] if "_where" in df.columns else pd.Series([f"row {i + 1}" for i in range(len(df))])
     place: dict[str, float] = {}
     owner: dict[float, str] = {}
-    for cid, p, w in zip(df["condition"].astype(str), pos, where):
+    cids = df["condition"].astype(str).to_numpy(dtype=object)
+    first = first_pairs(cids, pos.to_numpy())
+    for cid, p, w in zip(cids[first], pos.to_numpy()[first], where.to_numpy()[first]):
         if pd.isna(p):
             continue
         if place.setdefault(cid, p) != p:
@@ -66,7 +86,13 @@ def condition_labels(df: pd.DataFrame, conditions: list[str] | None = None) -> d
     found: dict[str, str] = {}
     if "condition_label" in df.columns:
         where = df["_where"] if "_where" in df.columns else pd.Series([f"row {i + 1}" for i in range(len(df))])
-        for cid, label, w in zip(df["condition"].astype(str), df["condition_label"], where):
+        cids, raw = df["condition"].astype(str).to_numpy(dtype=object), df["condition_label"].to_numpy(dtype=object)
+        first = first_pairs(cids, raw)
+        gap = np.flatnonzero(pd.isna(raw))
+        if gap.size:  # a missing value other than None or NaN (pd.NA, NaT) reads as a label below: walk each
+            odd = np.fromiter((not (v is None or isinstance(v, float)) for v in raw[gap]), dtype=bool, count=gap.size)
+            first = np.union1d(first, gap[odd])
+        for cid, label, w in zip(cids[first], raw[first], where.to_numpy()[first]):
             if label is None or (isinstance(label, float) and np.isnan(label)) or not str(label).strip():
                 continue
             label = " ".join(str(label).split())  # one line: it heads table rows and figure axes
@@ -93,18 +119,19 @@ def criterion_labels(df: pd.DataFrame) -> dict[str, str]:
     {'sync': 'In time', 'real': 'real'}
     """
     found: dict[str, str] = {}
-    ids = list(dict.fromkeys(df["criterion"].astype(str)))
+    cids = df["criterion"].astype(str).to_numpy(dtype=object)
+    ids = list(pd.unique(cids))  # in order of appearance
     if "criterion_label" in df.columns:
-        where = df["_where"] if "_where" in df.columns else pd.Series([f"row {i + 1}" for i in range(len(df))],
-                                                                       index=df.index)
-        first = ~df[["criterion", "criterion_label"]].astype(str).duplicated()  # one look per distinct pair
-        for cid, label, w in zip(df["criterion"][first].astype(str), df["criterion_label"][first], where[first]):
+        labels = df["criterion_label"].to_numpy(dtype=object)
+        for i in first_pairs(cids, labels):  # one look per distinct (id, label) pair, in row order
+            label = labels[i]
             if label is None or (isinstance(label, float) and np.isnan(label)) or not str(label).strip():
                 continue
             label = " ".join(str(label).split())  # one line: it heads paragraphs, tables and figure panels
-            if found.setdefault(cid, label) != label:
+            if found.setdefault(cids[i], label) != label:
+                w = df["_where"].iloc[i] if "_where" in df.columns else f"row {i + 1}"
                 raise AnalysisInputError(df.attrs.get("source"), f"{w}, column 'criterion_label'",
-                                         f"criterion {cid!r} is labelled both {found[cid]!r} and {label!r}")
+                                         f"criterion {cids[i]!r} is labelled both {found[cids[i]]!r} and {label!r}")
     return {c: found.get(c, c) for c in ids}
 
 

@@ -37,6 +37,18 @@ def rated_mask(df: pd.DataFrame) -> pd.Series:
     return mask
 
 
+def design_hashes(df: pd.DataFrame) -> list:
+    """The distinct design hashes of a frame, sorted (missing ones left out): ``sorted(df["design_hash"].dropna()
+    .unique())``, by one pass over the column (a dropna of a million-cell text column is a pass of its own).
+
+    >>> design_hashes(pd.DataFrame({"design_hash": ["b", None, "a", "b"]}))
+    ['a', 'b']
+    """
+    if "design_hash" not in df.columns:
+        return []
+    return sorted(h for h in pd.unique(df["design_hash"].to_numpy(dtype=object)) if not pd.isna(h))
+
+
 def validate_results(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFrame:
     """Check a tidy results frame; return it, without incomplete rated trials when ``incomplete='drop'``.
 
@@ -108,7 +120,7 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
                                  f"rank {_fmt(rank.iloc[i])} is outside 1..{bound[i]} ({bound[i]} conditions)")
 
     if "design_hash" in df.columns:
-        hashes = sorted(h for h in df["design_hash"].dropna().unique())
+        hashes = design_hashes(df)
         if len(hashes) > 1:
             per = df.groupby("design_hash")["participant"].nunique()
             detail = ", ".join(f"{h} ({per[h]} participant{'s' if per[h] != 1 else ''})" for h in hashes)
@@ -171,14 +183,40 @@ def _codes(df: pd.DataFrame, cols: list[str]) -> list[tuple[np.ndarray, int]] | 
     return out
 
 
+def _combined(codes: list[tuple[np.ndarray, int]]) -> tuple[np.ndarray, int]:
+    """One lexicographic int64 code per row from the columns' codes, and the number of possible codes."""
+    key = np.zeros(len(codes[0][0]), dtype=np.int64)
+    span = 1
+    for code, n in codes:
+        key = key * n + code
+        span *= n
+    return key, span
+
+
 def _sizes(codes: list[tuple[np.ndarray, int]]) -> np.ndarray:
     """Per row, the number of rows with the same values in the columns of ``codes``: what
     ``groupby(cols).transform("size")`` gives, from codes factorized once."""
-    key = np.zeros(len(codes[0][0]), dtype=np.int64)
-    for code, n in codes:
-        key = key * n + code
+    key, span = _combined(codes)
+    if span <= 4 * len(key) + 4096:  # few possible keys (a study's design): counted directly, no hashing
+        return np.bincount(key, minlength=span)[key]
     group, _ = pd.factorize(key)
     return np.bincount(group)[group]
+
+
+def distinct_rows(df: pd.DataFrame, cols: list[str]) -> int:
+    """``df[cols].drop_duplicates().shape[0]``: the number of distinct combinations, from codes factorized once
+    per column and counted over their few possible keys (a study's trials) where that is possible.
+
+    >>> distinct_rows(pd.DataFrame({"p": ["a", "a", "b"], "t": [0.0, 0.0, 0.0]}), ["p", "t"])
+    2
+    """
+    codes = _codes(df, cols) if len(df) else None
+    if codes is None:
+        return int(df[cols].drop_duplicates().shape[0])
+    key, span = _combined(codes)
+    if span <= 4 * len(key) + 4096:
+        return int(np.count_nonzero(np.bincount(key, minlength=span)))
+    return int(pd.unique(key).size)
 
 
 def _fmt(v) -> str:

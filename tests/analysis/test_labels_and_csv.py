@@ -13,7 +13,7 @@ from results_analysis import analyze
 from results_analysis.cli import main
 from results_analysis.errors import AnalysisInputError
 from results_analysis.simulate import simulate_results
-from results_analysis.study_meta import condition_labels, condition_order, questionnaire_from_results
+from results_analysis.study_meta import condition_labels, condition_order, criterion_labels, questionnaire_from_results
 
 
 @pytest.fixture(scope="module")
@@ -114,6 +114,19 @@ def test_order_and_labels_from_the_columns_and_their_errors() -> None:
     moved = pd.concat([df, df.assign(condition_position=[5, 1, 2, None], _where="line 7")])
     with pytest.raises(AnalysisInputError, match="line 7, column 'condition_position'.*positions 0 and 5"):
         condition_order(moved)
+
+
+def test_criterion_labels_in_order_of_appearance_and_a_second_label_named_at_its_row() -> None:
+    df = pd.DataFrame({"criterion": ["sync", "real", "sync", "div", "real"],
+                       "criterion_label": ["In  time\nwith speech", "Realism", "In time with speech", None, "Realism"]})
+    assert criterion_labels(df) == {"sync": "In time with speech", "real": "Realism", "div": "div"}
+    assert criterion_labels(df.drop(columns="criterion_label")) == {"sync": "sync", "real": "real", "div": "div"}
+    two = df.assign(criterion_label=["A", "R", "A", None, "Other"])
+    with pytest.raises(AnalysisInputError, match=r"row 5, column 'criterion_label'.*'real' is labelled both 'R' and"):
+        criterion_labels(two)
+    where = two.assign(_where=[f"line {k}" for k in range(2, 7)])
+    with pytest.raises(AnalysisInputError, match=r"line 6, column 'criterion_label'"):
+        criterion_labels(where)
 
 
 def test_questionnaire_columns_become_answers_and_disagreeing_rows_are_refused() -> None:
