@@ -274,8 +274,8 @@ def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] |
             ax.set_xlabel("mean rank (1 = best)")
             ax.grid(axis="x", color="#e5e5e5", lw=0.6)
             ax.set_axisbelow(True)
-        _fit_width(fig, fig.text(0.5, _caption_y(fig), f"Dots: mean rank; lines: {ci:.0%} percentile bootstrap interval "
-                                 "(participants resampled). Dotted line: chance.", ha="center", va="bottom",
+        _fit_width(fig, fig.text(0.5, _caption_y(fig), f"Dots: mean rank; lines: {ci:.0%} percentile bootstrap "
+                                 "interval (participants resampled). Dotted line: chance.", ha="center", va="bottom",
                                  fontsize=7.5, color="#444444"))
         fig.tight_layout(rect=(0, 0.05, 1, 1))
         return fig
@@ -319,8 +319,8 @@ def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = No
             ax.set_title(str(crit))
             ax.set_xlabel("Bradley-Terry strength")
         # the note of a flagged condition goes on a line of its own, which the axes make room for
-        _fit_width(fig, fig.text(0.5, _caption_y(fig), f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap interval "
-                                 "over participants. Dotted line: equal strengths." + (
+        _fit_width(fig, fig.text(0.5, _caption_y(fig), f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap "
+                                 "interval over participants. Dotted line: equal strengths." + (
                                      "\nRed: no finite strength (the condition never won or never lost)."
                                      if flagged else ""), ha="center", va="bottom", fontsize=7.5, color="#444444"))
         fig.tight_layout(rect=(0, 0.05 + (0.13 / fig.get_figheight() if flagged else 0.0), 1, 1))
