@@ -231,3 +231,23 @@ stimuli = ["s1"]
     s1 = table[table["stimulus"] == "s1"].set_index("condition")
     assert s1.loc["extra2", "jerk_m_s3"] == pytest.approx(s1.loc["lagged", "jerk_m_s3"])  # the same motion
     clear_cache()
+
+
+def test_plan_of_a_block_design_tests_the_conditions_its_rank_trials_show(tmp_path):
+    """TWO_BLOCKS: a rank block on three conditions and a pairwise block adding a fourth. The fourth has no rank,
+    so it sat at mean rank 0 for every participant: with equal strengths the 'power' was about 1 instead of the
+    false-positive rate. Now the power is the direct Monte-Carlo's on the three ranked conditions, whatever
+    strength the fourth is given, and plan says that strength is not used."""
+    from test_played_pairs import TWO_BLOCKS, blocked_study
+
+    design = load_design(blocked_study(tmp_path / "s", TWO_BLOCKS, seconds=0.5), check_files=False)
+    assert design.condition_ids == ["synced", "lagged", "static", "extra"]
+    m = rated_conditions(design, 1).shape[1]
+    null = power_at(design, 10, [1.0, 1.0, 1.0, 1.0], n_sim=400, seed=3)
+    assert null < 0.05 + 3 * np.sqrt(0.05 * 0.95 / 400)
+    ours = power_at(design, 10, [3.0, 1.5, 1.0, 50.0], n_sim=600, seed=1)
+    direct = _direct_power(10, m, [3.0, 1.5, 1.0], 600, 0.05, seed=2)
+    assert abs(ours - direct) < 3.5 * np.sqrt(2 * 0.25 / 600), (ours, direct)
+    r = plan_study(design, 6, parse_strengths("1,1,1,7", design), n_sim=50, max_n=8)
+    assert "extra in no rank block: its strength is not used (other paradigms are not simulated)" in r.notes
+    assert any("all strengths are equal" in n for n in r.notes)
