@@ -13,8 +13,8 @@ beat alignment on the audio onsets of the trial's audio (:mod:`studyapp.audio.on
 
 One row per played condition x stimulus x sample, columns :data:`COLUMNS`. The conditions of one clip
 are measured in scenes of at most :data:`studyapp.render.scene.MAX_SLOTS` figures (a design's blocks
-together may play more on one clip than a trial shows); a figure's motion does not depend on the others. With an encoder, ``fgd`` is each
-condition's Frechet Gesture Distance to the reference condition over all its windows of all stimuli (a
+together may play more on one clip than a trial shows); a figure's motion does not depend on the others.
+With an encoder, ``fgd`` is each condition's Frechet Gesture Distance to the reference condition over all its windows of all stimuli (a
 distribution-level number, repeated on each of the condition's rows; 0 for the reference itself).
 
 >>> from studyapp.resources import demo_design

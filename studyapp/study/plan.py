@@ -5,8 +5,9 @@ database assigns them), each participant's rated trials are the ``rank`` trials 
 :func:`studyapp.study.schedule.participant_schedule` (practice and attention checks are never analysed; the
 other response paradigms are not simulated, and a design without a rank block is refused).
 Each rated trial's ranking of the conditions in its three slots is drawn from a Plackett-Luce model with the
-given strengths (one per design condition; those of conditions in no rank block are not used) (the best place goes to condition ``i`` with probability ``s_i / sum s``, then the next
-among the rest; drawn with the Gumbel-max trick), independently of the slot, trial and participant.
+given strengths, one per design condition (the best place goes to condition ``i`` with probability
+``s_i / sum s``, then the next among the rest; drawn with the Gumbel-max trick), independently of the slot,
+trial and participant. A condition in no rank block is left out of the test, and its strength is not used.
 
 The test is the analysis's headline (:mod:`results_analysis.analysis`, ``block='participant'``): each
 participant's mean within-trial rank per condition, re-ranked within the participant, then Friedman's
