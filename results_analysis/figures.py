@@ -45,8 +45,10 @@ def font_families() -> list[str]:
 _STYLE = {
     "font.size": 9, "axes.titlesize": 10, "axes.titleweight": "bold", "axes.labelsize": 9,
     "xtick.labelsize": 8.5, "ytick.labelsize": 8.5, "legend.fontsize": 8.5, "axes.spines.top": False,
-    "axes.spines.right": False, "svg.fonttype": "none", "figure.dpi": 100, "savefig.dpi": 200,
-    "font.family": font_families(),
+    "axes.spines.right": False, "svg.fonttype": "none", "savefig.dpi": 200,
+    # laid out and measured at the resolution the PNG is written at: hinted text is about 7 % narrower at
+    # 100 dpi, so a layout made there cut captions that then looked as if they fitted
+    "figure.dpi": 200, "font.family": font_families(),
 }
 #: Colour-blind-safe qualitative colours (Okabe-Ito) for conditions.
 CONDITION_COLORS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
@@ -60,6 +62,16 @@ def _caption_y(fig: Figure) -> float:
     """Height (figure fraction) of a caption's baseline: a small margin below it, as the files have no
     ``bbox_inches="tight"`` padding (see :func:`save`)."""
     return 0.06 / fig.get_figheight()
+
+
+def _fit_width(fig: Figure, *artists) -> None:
+    """Widen ``fig`` until every artist spanning it (a centred caption, the legend across the top) fits inside,
+    with a small margin. The files are saved without ``bbox_inches="tight"`` (see :func:`save`), so a figure
+    sized for one narrow panel (a block that asks one criterion, as the README recommends) would cut them at
+    both edges. Measuring text needs no draw of the figure."""
+    need = max(a.get_window_extent().width for a in artists) / fig.dpi + 0.25
+    if need > fig.get_figwidth():
+        fig.set_figwidth(need)
 
 
 def rank_colors(k: int) -> list[tuple[float, float, float]]:
@@ -133,7 +145,8 @@ def rank_share_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] 
             n = int(s["n"].iloc[0])
             ax.set_xlabel(f"% of answers (n = {n})")
         handles, labels = axes[0][0].get_legend_handles_labels()
-        fig.legend(handles, labels, loc="upper center", ncol=k, frameon=False, bbox_to_anchor=(0.5, 1.0))
+        _fit_width(fig, fig.legend(handles, labels, loc="upper center", ncol=k, frameon=False,
+                                   bbox_to_anchor=(0.5, 1.0)))
         fig.tight_layout(rect=(0, 0, 1, 0.9))
         return fig
 
@@ -261,8 +274,9 @@ def mean_rank_figure(summaries: dict[str, pd.DataFrame], conditions: list[str] |
             ax.set_xlabel("mean rank (1 = best)")
             ax.grid(axis="x", color="#e5e5e5", lw=0.6)
             ax.set_axisbelow(True)
-        fig.text(0.5, _caption_y(fig), f"Dots: mean rank; lines: {ci:.0%} percentile bootstrap interval (participants "
-                 "resampled). Dotted line: chance.", ha="center", va="bottom", fontsize=7.5, color="#444444")
+        _fit_width(fig, fig.text(0.5, _caption_y(fig), f"Dots: mean rank; lines: {ci:.0%} percentile bootstrap "
+                                 "interval (participants resampled). Dotted line: chance.", ha="center", va="bottom",
+                                 fontsize=7.5, color="#444444"))
         fig.tight_layout(rect=(0, 0.05, 1, 1))
         return fig
 
@@ -297,15 +311,17 @@ def bt_figure(tables: dict[str, pd.DataFrame], conditions: list[str] | None = No
                     ax.plot([t.loc[c, "ci_low"], t.loc[c, "ci_high"]], [y[i], y[i]], color="black", lw=1.2)
             ax.axvline(1.0 / k, color="#999999", lw=0.8, ls=":")
             ax.set_xlim(0, min(1.0, top * 1.1))
+            ax.set_ylim(-0.6, k - 0.4)  # every row, also one with no bar (its note would sit on the axis)
             ax.set_yticks(y)
             ax.set_yticklabels(conds)
             ax.tick_params(axis="y", length=0)
             ax.spines["left"].set_visible(False)
             ax.set_title(str(crit))
             ax.set_xlabel("Bradley-Terry strength")
-        fig.text(0.5, _caption_y(fig), f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap interval over participants. "
-                 "Dotted line: equal strengths." + (" Red: no finite strength (the condition never won or never "
-                                                    "lost)." if flagged else ""),
-                 ha="center", va="bottom", fontsize=7.5, color="#444444")
-        fig.tight_layout(rect=(0, 0.05, 1, 1))
+        # the note of a flagged condition goes on a line of its own, which the axes make room for
+        _fit_width(fig, fig.text(0.5, _caption_y(fig), f"Bars: strengths (sum to 1); lines: {ci:.0%} bootstrap "
+                                 "interval over participants. Dotted line: equal strengths." + (
+                                     "\nRed: no finite strength (the condition never won or never lost)."
+                                     if flagged else ""), ha="center", va="bottom", fontsize=7.5, color="#444444"))
+        fig.tight_layout(rect=(0, 0.05 + (0.13 / fig.get_figheight() if flagged else 0.0), 1, 1))
         return fig

@@ -16,7 +16,7 @@ import matplotlib
 import numpy as np
 import pandas as pd
 
-from results_analysis.figures import _STYLE, _caption_y, _figure, condition_color
+from results_analysis.figures import _STYLE, _caption_y, _figure, _fit_width, condition_color
 
 
 def interval_figure(tables: dict[str, pd.DataFrame], conditions: Sequence[str], *, value: str, xlabel: str,
@@ -70,7 +70,8 @@ def interval_figure(tables: dict[str, pd.DataFrame], conditions: Sequence[str], 
             ax.set_xlabel(xlabel)
             ax.grid(axis="x", color="#e5e5e5", lw=0.6)
             ax.set_axisbelow(True)
-        fig.text(0.5, _caption_y(fig), caption, ha="center", va="bottom", fontsize=7.5, color="#444444")
+        _fit_width(fig, fig.text(0.5, _caption_y(fig), caption, ha="center", va="bottom", fontsize=7.5,
+                                 color="#444444"))
         fig.tight_layout(rect=(0, 0.06, 1, 1))
         return fig
 
@@ -89,7 +90,8 @@ def win_matrix_figure(wins: dict[str, pd.DataFrame], conditions: Sequence[str]):
         k = len(conds)
         side = 0.75 * k + 1.2
         fig = _figure((side * len(crits) + 1.0, side + 0.6))
-        axes = fig.subplots(1, len(crits), squeeze=False)
+        # matplotlib's default bottom margin (0.11) plus room for the caption line under the axis label
+        axes = fig.subplots(1, len(crits), squeeze=False, gridspec_kw={"bottom": 0.11 + 0.2 / fig.get_figheight()})
         cmap = matplotlib.colormaps["RdBu"]
         image = None
         for ax, crit in zip(axes[0], crits):
@@ -115,6 +117,7 @@ def win_matrix_figure(wins: dict[str, pd.DataFrame], conditions: Sequence[str]):
             for s in ax.spines.values():
                 s.set_visible(False)
         fig.colorbar(image, ax=list(axes[0]), shrink=0.8, label="share of points (row over column)")
-        fig.text(0.5, _caption_y(fig), "Cell: how often the row condition was preferred to the column condition "
-                 "(ties half); wins/ties/losses below.", ha="center", va="bottom", fontsize=7.5, color="#444444")
+        _fit_width(fig, fig.text(0.5, _caption_y(fig), "Cell: how often the row condition was preferred to the column "
+                                 "condition (ties half); wins/ties/losses below.", ha="center", va="bottom",
+                                 fontsize=7.5, color="#444444"))
         return fig

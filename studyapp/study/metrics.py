@@ -1,7 +1,9 @@
 """Objective metrics of a design's conditions, per condition and stimulus, from the motion as played.
 
 For every stimulus of the rotation (the clips participants rank) and every sample of
-every condition, the trial media are built exactly as a session builds them
+every condition some trial plays on it (:func:`studyapp.study.design.played_pairs`: a design with
+``[[blocks]]`` shows a condition only on its blocks' clips, and has motion files for those only), the trial
+media are built exactly as a session builds them
 (:func:`studyapp.study.stimuli.load_trial_media`: the condition's loader, its ``motion_end``, cut to the
 trial's timeline) and turned into the scene the participant sees
 (:func:`studyapp.render.scene.build_trial_scene`: retargeted onto the avatar with the condition's
@@ -9,8 +11,10 @@ trial's timeline) and turned into the scene the participant sees
 hips). The metrics (:mod:`studyapp.motion.metrics`) run on that scene's world joint positions (metres), and
 beat alignment on the audio onsets of the trial's audio (:mod:`studyapp.audio.onsets`).
 
-One row per condition x stimulus x sample, columns :data:`COLUMNS`. With an encoder, ``fgd`` is each
-condition's Frechet Gesture Distance to the reference condition over all its windows of all stimuli (a
+One row per played condition x stimulus x sample, columns :data:`COLUMNS`. The conditions of one clip
+are measured in scenes of at most :data:`studyapp.render.scene.MAX_SLOTS` figures (a design's blocks
+together may play more on one clip than a trial shows); a figure's motion does not depend on the others.
+With an encoder, ``fgd`` is each condition's Frechet Gesture Distance to the reference condition over all its windows of all stimuli (a
 distribution-level number, repeated on each of the condition's rows; 0 for the reference itself).
 
 >>> from studyapp.resources import demo_design
@@ -29,7 +33,8 @@ import pandas as pd
 from studyapp.audio.onsets import onset_times
 from studyapp.errors import InputError
 from studyapp.motion import metrics as mm
-from studyapp.study.design import Design
+from studyapp.render.scene import MAX_SLOTS
+from studyapp.study.design import Design, played_pairs
 from studyapp.study.schedule import TrialPlan
 from studyapp.study.stimuli import load_trial_media
 
@@ -80,18 +85,20 @@ def design_metrics(design: Design, *, encoder: FeatureEncoder | None = None, fgd
     rows: list[dict] = []
     features: dict[str, list[np.ndarray]] = {c: [] for c in ids}
     n_samples = {c.id: max(1, c.samples) for c in design.conditions}
+    played = played_pairs(design)
     for sid in design.rotation_stimuli:
         onsets = None
         for sample in range(1, max(n_samples.values()) + 1):
-            conds = tuple(c for c in ids if n_samples[c] >= sample)
-            joints, fps, audio, sr, duration = played_joints(design, sid, conds, (sample,) * len(conds))
-            if onsets is None:  # every sample plays the same audio
-                onsets = onset_times(audio, sr)
-            for cid, pos in zip(conds, joints):
-                rows.append({"condition": cid, "stimulus": sid, "sample": sample, "duration_s": duration,
-                             "fps": fps, **motion_metrics(pos, fps, onsets, segment_s)})
-                if encoder is not None:
-                    features[cid].append(encoder.encode(pos))
+            conds = tuple(c for c in ids if n_samples[c] >= sample and sid in played[c])
+            for part in (conds[i:i + MAX_SLOTS] for i in range(0, len(conds), MAX_SLOTS)):
+                joints, fps, audio, sr, duration = played_joints(design, sid, part, (sample,) * len(part))
+                if onsets is None:  # every sample plays the same audio
+                    onsets = onset_times(audio, sr)
+                for cid, pos in zip(part, joints):
+                    rows.append({"condition": cid, "stimulus": sid, "sample": sample, "duration_s": duration,
+                                 "fps": fps, **motion_metrics(pos, fps, onsets, segment_s)})
+                    if encoder is not None:
+                        features[cid].append(encoder.encode(pos))
     table = pd.DataFrame(rows, columns=list(COLUMNS))
     if encoder is not None:
         table["fgd"] = table["condition"].map(fgd_by_condition(features, fgd_reference or ids[0], design))

@@ -5,8 +5,9 @@ database assigns them), each participant's rated trials are the ``rank`` trials 
 :func:`studyapp.study.schedule.participant_schedule` (practice and attention checks are never analysed; the
 other response paradigms are not simulated, and a design without a rank block is refused).
 Each rated trial's ranking of the conditions in its three slots is drawn from a Plackett-Luce model with the
-given strengths (the best place goes to condition ``i`` with probability ``s_i / sum s``, then the next
-among the rest; drawn with the Gumbel-max trick), independently of the slot, trial and participant.
+given strengths, one per design condition (the best place goes to condition ``i`` with probability
+``s_i / sum s``, then the next among the rest; drawn with the Gumbel-max trick), independently of the slot,
+trial and participant. A condition in no rank block is left out of the test, and its strength is not used.
 
 The test is the analysis's headline (:mod:`results_analysis.analysis`, ``block='participant'``): each
 participant's mean within-trial rank per condition, re-ranked within the participant, then Friedman's
@@ -116,6 +117,9 @@ def simulate_p_values(slots: np.ndarray, strengths: Sequence[float], n_sim: int,
     """Headline p-values of ``n_sim`` simulated studies on the trials ``slots`` (from :func:`rated_conditions`)."""
     log_s = np.log(np.asarray(strengths, dtype=np.float64))
     k = len(log_s)
+    # the test compares the conditions the rank trials show: a block design's other conditions have no rank
+    # (left in, each would sit at mean rank 0, "best" for every participant, and make any design look powerful)
+    ranked = np.unique(slots[slots >= 0])
     valid = slots[..., 0] >= 0  # (N, m)
     idx = np.where(slots >= 0, slots, 0)
     out = np.empty(n_sim)
@@ -132,7 +136,7 @@ def simulate_p_values(slots: np.ndarray, strengths: Sequence[float], n_sim: int,
         # each participant's mean within-trial rank per condition (every trial shows every condition here)
         means = per_cond.sum(axis=2) / np.maximum(seen.sum(axis=1), 1)[None]
         for i in range(b):
-            out[start + i] = friedman_ranks(within_block_ranks(means[i])).p
+            out[start + i] = friedman_ranks(within_block_ranks(means[i][:, ranked])).p
     return out
 
 
@@ -212,7 +216,12 @@ def plan_study(design: Design, n_participants: int, strengths: dict[str, float],
     if n_participants % rows:
         notes.append(f"{n_participants} participants is not a multiple of the design's {rows} rows: clip order and "
                      "slots are not fully balanced (see the counts)")
-    if len(set(s)) == 1:
+    ranked = {c for b in design.trial_blocks if b.paradigm == "rank" for c in b.conditions}
+    unranked = [c for c in design.condition_ids if c not in ranked]
+    if unranked:
+        whose = "its strength is" if len(unranked) == 1 else "their strengths are"
+        notes.append(f"{', '.join(unranked)} in no rank block: {whose} not used (other paradigms are not simulated)")
+    if len({strengths[c] for c in ranked}) == 1:
         notes.append("all strengths are equal: the 'power' is the test's false-positive rate (about alpha)")
     return PlanResult(n_participants=n_participants, strengths=dict(strengths), alpha=alpha, n_sim=n_sim,
                       power=power, target=target, n_for_target=needed, max_n=max_n, curve=dict(sorted(curve.items())),

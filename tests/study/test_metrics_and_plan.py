@@ -182,3 +182,72 @@ def test_plan_command_on_the_demo(capsys):
     assert "Session length: 6 trials" in out
     assert main(["plan", str(demo_design()), "-n", "12", "--strengths", "2,0,1"]) == 2
     assert "--strengths" in capsys.readouterr().err
+
+
+def test_a_block_design_is_measured_on_the_pairs_it_plays(tmp_path):
+    """A design with [[blocks]] has motion files only for the (condition, clip) pairs some trial plays: metrics
+    measures exactly those (it opened every condition's file for every clip, and stopped at the first missing
+    one), with the same numbers as when every file is there; a clip on which the blocks together play more
+    conditions than a trial shows (5 here) is measured too (a scene holds at most 4 figures)."""
+    from test_played_pairs import TWO_BLOCKS, TWO_BLOCKS_PLAYS, blocked_study
+
+    clear_cache()
+    only = blocked_study(tmp_path / "only", TWO_BLOCKS, seconds=1.0, only_played=True)
+    full = blocked_study(tmp_path / "full", TWO_BLOCKS, seconds=1.0)
+    got = design_metrics(load_design(only))
+    rotation = {"s1", "s2", "s3", "s4"}
+    assert sorted(zip(got["condition"], got["stimulus"])) == sorted(
+        (c, s) for c, clips in TWO_BLOCKS_PLAYS.items() for s in clips if s in rotation)
+    every = design_metrics(load_design(full)).set_index(["condition", "stimulus", "sample"])
+    cols = ["beat_align", "l1_diversity_m", "acceleration_m_s2", "jerk_m_s3", "frozen_share"]
+    np.testing.assert_allclose(got.set_index(["condition", "stimulus", "sample"])[cols].to_numpy(),
+                               every.loc[got.set_index(["condition", "stimulus", "sample"]).index,
+                                         cols].to_numpy())
+
+    # five conditions on s1: a rank block of three and a rating block of two more
+    five = blocked_study(tmp_path / "five", '''
+[[blocks]]
+id = "ranked"
+paradigm = "rank"
+criteria = ["realism"]
+conditions = ["synced", "lagged", "static"]
+stimuli = ["s1", "s2"]
+
+[[blocks]]
+id = "rated"
+paradigm = "rating"
+criteria = ["realism"]
+conditions = ["extra", "extra2"]
+stimuli = ["s1"]
+''', seconds=1.0)
+    import shutil
+
+    shutil.copytree(tmp_path / "five" / "motion" / "lagged", tmp_path / "five" / "motion" / "extra2")
+    five.write_text(five.read_text().replace('[slots]', f'[[conditions]]\nid = "extra2"\n'
+                                             f'motion = "motion/extra2/{{stimulus}}.bvh"\nfps = {FPS}\n\n[slots]', 1))
+    table = design_metrics(load_design(five))
+    assert sorted(table.loc[table["stimulus"] == "s1", "condition"]) == sorted(
+        ["synced", "lagged", "static", "extra", "extra2"])
+    s1 = table[table["stimulus"] == "s1"].set_index("condition")
+    assert s1.loc["extra2", "jerk_m_s3"] == pytest.approx(s1.loc["lagged", "jerk_m_s3"])  # the same motion
+    clear_cache()
+
+
+def test_plan_of_a_block_design_tests_the_conditions_its_rank_trials_show(tmp_path):
+    """TWO_BLOCKS: a rank block on three conditions and a pairwise block adding a fourth. The fourth has no rank,
+    so it sat at mean rank 0 for every participant: with equal strengths the 'power' was about 1 instead of the
+    false-positive rate. Now the power is the direct Monte-Carlo's on the three ranked conditions, whatever
+    strength the fourth is given, and plan says that strength is not used."""
+    from test_played_pairs import TWO_BLOCKS, blocked_study
+
+    design = load_design(blocked_study(tmp_path / "s", TWO_BLOCKS, seconds=0.5), check_files=False)
+    assert design.condition_ids == ["synced", "lagged", "static", "extra"]
+    m = rated_conditions(design, 1).shape[1]
+    null = power_at(design, 10, [1.0, 1.0, 1.0, 1.0], n_sim=400, seed=3)
+    assert null < 0.05 + 3 * np.sqrt(0.05 * 0.95 / 400)
+    ours = power_at(design, 10, [3.0, 1.5, 1.0, 50.0], n_sim=600, seed=1)
+    direct = _direct_power(10, m, [3.0, 1.5, 1.0], 600, 0.05, seed=2)
+    assert abs(ours - direct) < 3.5 * np.sqrt(2 * 0.25 / 600), (ours, direct)
+    r = plan_study(design, 6, parse_strengths("1,1,1,7", design), n_sim=50, max_n=8)
+    assert "extra in no rank block: its strength is not used (other paradigms are not simulated)" in r.notes
+    assert any("all strengths are equal" in n for n in r.notes)
