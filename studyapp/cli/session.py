@@ -351,7 +351,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
         args.csv.parent.mkdir(parents=True, exist_ok=True)
         df.to_csv(args.csv, index=False)
         n_part = df["participant"].nunique() if len(df) else 0
-        print(f"Wrote {len(df)} rows ({n_part} participants) to {args.csv}")
+        print(f"Wrote {len(df)} row{'s' * (len(df) != 1)} ({n_part} participant{'s' * (n_part != 1)}) to {args.csv}")
     if args.questionnaire_csv:
         q = questionnaire_dataframe(args.db)
         args.questionnaire_csv.parent.mkdir(parents=True, exist_ok=True)
