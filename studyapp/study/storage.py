@@ -414,6 +414,8 @@ class ResultsDB:
         create: bool = True,
     ) -> None:
         self._backend = sql_backend.backend_for(path)
+        #: Inside :meth:`batch`: how many savepoints it has made; None outside one.
+        self._batch: int | None = None
         #: The file, or (PostgreSQL) the URL without its password: what messages name.
         self.path: Path | str = self._backend.target
         if design is not None:
@@ -615,12 +617,23 @@ class ResultsDB:
         return self._backend.name
 
     class _Tx:
-        def __init__(self, con: sqlite3.Connection, backend: sql_backend.Backend, what: str) -> None:
+        def __init__(self, con: sqlite3.Connection, backend: sql_backend.Backend, what: str,
+                     nested: int | None = None) -> None:
             self.con = con
             self.backend = backend
             self.what = what
+            #: inside :meth:`ResultsDB.batch`: this transaction's savepoint number (its COMMIT is the batch's)
+            self.nested = nested
 
         def __enter__(self) -> sqlite3.Connection:
+            if self.nested is not None:
+                # the batch's transaction must still be open: an engine error may have rolled it back, and a
+                # savepoint outside a transaction would commit on its own, ahead of the batch's one answer
+                if not self.con.in_transaction:
+                    raise InputError(self.backend.target, None, f"{self.what} (an earlier error ended the "
+                                     "transaction of this group of requests)")
+                self.con.execute(f"SAVEPOINT tx{self.nested}")
+                return self.con
             # the write lock up front (SQLite: BEGIN IMMEDIATE), so two processes on one database serialise
             # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
             try:
@@ -631,6 +644,11 @@ class ResultsDB:
             return self.con
 
         def __exit__(self, exc_type, exc, tb) -> None:
+            if self.nested is not None:
+                self._leave_savepoint(exc_type is None)
+                if isinstance(exc, self.backend.errors) and self.backend.kind(exc) != "other":
+                    raise self.backend.problem(exc, self.what) from None
+                return
             if exc_type is None:
                 try:
                     # the checksums of the rows this transaction wrote, in the same transaction
@@ -645,6 +663,17 @@ class ResultsDB:
                 raise self.backend.problem(exc, self.what) from None
             if exc_type is None:
                 raise exc
+
+        def _leave_savepoint(self, keep: bool) -> None:
+            # kept: its rows are sealed with the batch's commit; undone: as if it never ran
+            name = f"tx{self.nested}"
+            try:
+                if not keep:
+                    self.con.execute(f"ROLLBACK TO {name}")
+                self.con.execute(f"RELEASE {name}")
+            except self.backend.errors as exc:
+                if keep:
+                    raise self.backend.problem(exc, self.what) from None
 
         def _rollback(self) -> None:
             # leave no half-open transaction behind; a failing ROLLBACK (the disk gone) changes nothing on disk
@@ -676,7 +705,43 @@ class ResultsDB:
         """``with db.transaction() as con:`` — all statements inside commit together or not at all, with the
         checksums of every row they wrote; a full disk, a read-only file or a lock held too long raise
         :class:`InputError` (nothing of the transaction is stored; ``what`` says so in the message)."""
+        if self._batch is not None:
+            self._batch += 1
+            return ResultsDB._Tx(self._con, self._backend, what, nested=self._batch)
         return ResultsDB._Tx(self._con, self._backend, what)
+
+    @contextmanager
+    def batch(self, what: str = _NOT_SAVED) -> Iterator[None]:
+        """``with db.batch():`` — group commit: every :meth:`transaction` inside is a savepoint of one write
+        transaction, committed (with every checksum) when the block ends, so many small changes cost one fsync.
+        A transaction that fails is undone alone, as it would be on its own; when the commit fails nothing of the
+        block is stored and the error is raised (an :class:`InputError`, as :meth:`transaction`'s). Nothing done
+        inside is durable before the block ends: a caller answers only then (the study server's database thread,
+        :mod:`studyapp.web.dbthread`)."""
+        if self._batch is not None:
+            raise RuntimeError("batches do not nest")
+        with self.transaction(what):
+            self._batch = 0
+            try:
+                yield
+            finally:
+                self._batch = None
+
+    def reader(self) -> "ResultsDB":
+        """A second connection to this database, for a long read (the study server's export) in another thread
+        than this one's, which it does not hold up: opened without checking the database again (this one
+        did), for reading only; close it when done."""
+        twin = object.__new__(ResultsDB)
+        twin.__dict__.update(self.__dict__)
+        twin._batch = None
+        twin.on_participant_finished = None
+        twin._con = self._backend.connect(self.LOCK_TIMEOUT_S)
+        try:
+            self._backend.configure(twin._con)
+        except self._backend.errors as exc:
+            twin.close()
+            raise self._backend.problem(exc, "the results database could not be opened for reading") from None
+        return twin
 
     def close(self) -> None:
         try:

@@ -14,10 +14,12 @@ Routes (nothing else is served: no directory listing, no file by path)::
 
 Every participant page is one HTML shell with the page's state as JSON (``<script type="application/json">``,
 not executed) and ``/a/app.js``, which draws it and posts actions; each action's reply is the next state.
-All database work runs on the event loop's thread, one request at a time (SQLite's connection belongs to
-one thread; an answer's commit takes milliseconds), so two requests of one participant cannot interleave; with
-several server processes on PostgreSQL the flow takes a per-participant lock for the same guarantee
-(:mod:`studyapp.web.flow`, "One session, any process").
+All database work runs on the process's database thread (:mod:`studyapp.web.dbthread`), one request at a
+time, so two requests of one participant cannot interleave and the event loop keeps serving while a commit waits
+for the disk; on SQLite the requests that queue up meanwhile are committed together (group commit), each one
+answered only once it is on disk. With several server processes on PostgreSQL the flow takes a per-participant
+lock for the same guarantee (:mod:`studyapp.web.flow`, "One session, any process"). The dashboard's export
+reads on a connection of its own in another thread, so participants are served while it runs.
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from studyapp.errors import InputError
 from studyapp.web.dashboard import Dashboard
+from studyapp.web.dbthread import DatabaseThread
 from studyapp.web.flow import Flow, NotSaved, Refused
 from studyapp.web.security import SECURITY_HEADERS, BadRequest, RateLimiter, parse_json, same_origin
 from studyapp.web.tokens import same
@@ -121,14 +124,28 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
 
     @asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
-        flow = open_flow()
+        db_thread = DatabaseThread()
+        try:
+            flow = await db_thread.run(open_flow)   # the connection is made on the thread that uses it
+        except BaseException:
+            db_thread.close()
+            raise
+        if flow.db.backend == "sqlite":   # one process: group commit (see studyapp.web.dbthread)
+            db_thread.group_commit(flow.db)
+        state["db"] = db_thread
         state["flow"] = flow
-        state["dashboard"] = Dashboard(flow, password)
+        state["dashboard"] = Dashboard(flow, password, db_thread)
         state["uploads"] = UploadDesk(flow.design, flow.db)
         try:
             yield
         finally:
-            flow.db.close()
+            db_thread.group_commit(None)
+            await db_thread.run(flow.db.close)
+            db_thread.close()
+
+    def in_db(fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)`` on the database thread (awaitable)."""
+        return state["db"].run(fn, *args)
 
     def flow() -> Flow:
         return state["flow"]
@@ -143,17 +160,20 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         st = {"screen": "refused", "heading": flow().design.title, "text": flow().t(exc.key)}
         return HTMLResponse(page(flow().design.title, flow().design.language, st), status_code=status)
 
-    async def body_of(request: Request) -> dict[str, Any]:
+    def checked_body(request: Request, raw: bytes) -> dict[str, Any]:
         """The JSON body of a state-changing request, after the CSRF-relevant checks every one of them gets."""
         if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
             raise BadRequest("content type must be application/json")
         if not same_origin(request.headers.get("origin"), request.headers.get("host"), request.url.scheme):
             raise BadRequest("cross-origin request")
-        return parse_json(await request.body())
+        return parse_json(raw)
+
+    async def body_of(request: Request) -> dict[str, Any]:
+        return checked_body(request, await request.body())
 
     async def entry(request: Request) -> Response:
         try:
-            st = flow().entry(request.query_params)
+            st = await in_db(flow().entry, dict(request.query_params))
         except Refused as exc:
             return refusal(exc)
         if "redirect" in st:
@@ -164,7 +184,7 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         if not lim["start"].allow(client(request)):
             return too_many()
         try:
-            token = flow().start(await body_of(request))
+            token = await in_db(flow().start, await body_of(request))
         except BadRequest as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
         except Refused as exc:
@@ -172,9 +192,11 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         return JSONResponse({"go": f"/s/{token}/"})
 
     async def participant_page(request: Request) -> Response:
+        def work(token: str) -> dict[str, Any]:
+            return flow().state(flow().participant_for(token))
+
         try:
-            pid = flow().participant_for(request.path_params["token"])
-            st = flow().state(pid)
+            st = await in_db(work, request.path_params["token"])
         except Refused as exc:
             return refusal(exc, 404)
         return HTMLResponse(page(flow().design.title, flow().design.language, st))
@@ -183,14 +205,20 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         token, name = request.path_params["token"], request.path_params["action"]
         if not lim["action"].allow(token):
             return too_many()
-        try:
+        raw = await request.body()
+        csrf = request.headers.get("x-csrf-token")
+
+        def work() -> dict[str, Any]:   # the checks in this order, then the action, in one database job
             pid = flow().participant_for(token)
             if name not in ACTIONS:
                 raise BadRequest("unknown action")
-            body = await body_of(request)
-            if not same(request.headers.get("x-csrf-token"), flow().tokens.csrf(pid)):
+            body = checked_body(request, raw)
+            if not same(csrf, flow().tokens.csrf(pid)):
                 raise BadRequest("missing or wrong CSRF token")
-            return JSONResponse(flow().act(pid, name, body))
+            return flow().act(pid, name, body)
+
+        try:
+            return JSONResponse(await in_db(work))
         except Refused as exc:
             return JSONResponse({"refused": flow().t(exc.key)}, status_code=404)
         except BadRequest as exc:
@@ -206,12 +234,11 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         token = request.path_params["token"]
         if not lim["media"].allow(token):
             return too_many()
+        name = request.path_params["name"]
         try:
-            pid = flow().participant_for(token)
-            path = flow().media(pid, request.path_params["name"])
+            path = await in_db(lambda: flow().media(flow().participant_for(token), name))
         except Refused:
             return Response(status_code=404)
-        name = request.path_params["name"]
         # no real modification time, no file name: both could tell two participants' clips apart or alike
         return FileResponse(path, media_type="video/mp4", stat_result=os.stat(path),
                             headers={"etag": f'"{name}"', "last-modified": "Thu, 01 Jan 1970 00:00:00 GMT"})
@@ -238,7 +265,7 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
                 return JSONResponse({"error": f"upload over {MAX_UPLOAD_BYTES} bytes"}, status_code=413)
             chunks.append(chunk)
         try:
-            return JSONResponse(state["uploads"].receive(request.headers, b"".join(chunks)))
+            return JSONResponse(await in_db(state["uploads"].receive, request.headers, b"".join(chunks)))
         except UploadRefused as exc:
             return JSONResponse({"error": str(exc)}, status_code=exc.status)
         except InputError as exc:   # the database could not store it: nothing was saved, the sender tries again
