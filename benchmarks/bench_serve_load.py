@@ -64,8 +64,9 @@ def write_design(folder: Path, n_stimuli: int) -> Path:
 # ------------------------------------------------------------------ the server process
 def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path) -> None:
     """Run the study server on ``port`` until SIGINT (what ``studyapp serve`` runs, with stand-in videos);
-    then write how long each answer's commit took inside the server (``ResultsDB.save_trial``) to
-    ``commits_out``, so the figures split the commit from the queueing in front of it."""
+    then write how long each answer took inside the server from ``ResultsDB.save_trial`` until the COMMIT that
+    made it durable (its own, or its group's: :meth:`ResultsDB.batch`) to ``commits_out``, so the figures split
+    the commit from the queueing in front of it."""
     import uvicorn
 
     from fixtures.web_study import ClipVideos
@@ -73,14 +74,23 @@ def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path
     from studyapp.study.storage import ResultsDB
 
     commits: list[float] = []
-    save_trial = ResultsDB.save_trial
+    pending: list[float] = []   # answers given to the database, not yet durable
+    save_trial, tx_exit = ResultsDB.save_trial, ResultsDB._Tx.__exit__
 
     def timed(self: ResultsDB, *args: Any, **kw: Any) -> None:
-        t0 = time.perf_counter()
+        pending.append(time.perf_counter())
         save_trial(self, *args, **kw)
-        commits.append(time.perf_counter() - t0)
+
+    def durable(self: Any, *exc: Any) -> None:
+        # a COMMIT (not a savepoint of a group commit): the answers given since are on disk now
+        tx_exit(self, *exc)
+        if getattr(self, "nested", None) is None and exc[0] is None:
+            now = time.perf_counter()
+            commits.extend(now - t0 for t0 in pending)
+            pending.clear()
 
     ResultsDB.save_trial = timed  # type: ignore[method-assign]
+    ResultsDB._Tx.__exit__ = durable  # type: ignore[method-assign]
     app = make_app(design_path, db, None, design_path.with_name("serve-secret"), None,
                    videos=ClipVideos(videos, seconds=CLIP_S))
     profile_to = os.environ.get("STUDYAPP_BENCH_PROFILE")  # a file: where the server's time goes (cProfile)
@@ -90,6 +100,23 @@ def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path
 
         profiler = cProfile.Profile()
         profiler.enable()
+        try:   # the database thread too (cProfile sees one thread)
+            from studyapp.web.dbthread import DatabaseThread
+        except ImportError:
+            pass
+        else:
+            loop = DatabaseThread._loop
+
+            def profiled(self: Any) -> None:
+                p = cProfile.Profile()
+                p.enable()
+                try:
+                    loop(self)
+                finally:
+                    p.disable()
+                    p.dump_stats(f"{profile_to}.dbthread")
+
+            DatabaseThread._loop = profiled  # type: ignore[method-assign]
     try:
         uvicorn.run(app, host="127.0.0.1", port=port, proxy_headers=True, forwarded_allow_ips="127.0.0.1",
                     server_header=False, log_level="warning", backlog=2048)
@@ -318,7 +345,7 @@ def main(argv: list[str]) -> int:
     print(f"{args.participants} participants at once on loopback, {trials} trials each (clip {CLIP_S:.0f} s watched "
           f"in real time), {args.workers} server process(es); {os.cpu_count()} cores")
     print("answer round trip: the participant's POST until the reply, which the server sends once the answer is "
-          "committed; commit: the commit itself inside the server (ResultsDB.save_trial)")
+          "committed; commit: inside the server, from ResultsDB.save_trial until the COMMIT that made it durable")
     print(f"{'backend':<11} {'done':>5} {'answers':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'commit p50':>10} "
           f"{'commit p99':>10} {'ans/s':>7} {'wall s':>7} {'lost':>5} {'dup':>4}  load avg (1 min) before/after")
     ok = True

@@ -162,6 +162,7 @@ class Flow:
         self._minutes: int | None = None
         self._swept: float | None = None
         self._n_rows: int | None = None
+        self._texts: dict[str, str] = {}
         #: Participants' schedules, worked out from the design, their id and row alone (never changed by what
         #: they do): kept so a request restores a session without drawing its schedule again. Losing them
         #: changes nothing (any process draws the same), so this is no participant state.
@@ -169,7 +170,12 @@ class Flow:
 
     # ------------------------------------------------------------------ texts
     def t(self, key: str, **values: Any) -> str:
-        return self.design.text(key, **values)
+        if values:
+            return self.design.text(key, **values)
+        text = self._texts.get(key)   # a page shows dozens of fixed texts: each is filled in once
+        if text is None:
+            text = self._texts[key] = self.design.text(key)
+        return text
 
     def _page(self, screen: str, **extra: Any) -> dict[str, Any]:
         return {"screen": screen, "title": self.design.title, "lang": self.design.language, **extra}
