@@ -115,10 +115,6 @@ def _digester(table: str, columns: list[str]) -> Callable[[tuple], str]:
     return digest
 
 
-def _digest(table: str, columns: list[str], row: tuple) -> str:
-    return _digester(table, columns)(row)
-
-
 def _typed(value: object) -> tuple[str, object]:
     """A PostgreSQL value as (SQLite storage class, value as :func:`_value_bytes` reads it)."""
     if value is None:
