@@ -113,7 +113,7 @@ class SecurityHeaders:
 
 def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
               limits: dict[str, RateLimiter] | None = None) -> ASGIApp:
-    """The server of one study. ``open_flow`` is called once at start-up, on the server's event loop thread
+    """The server of one study. ``open_flow`` is called once at start-up, on the process's database thread
     (the database connection is made there); ``password``: the dashboard's (None: the dashboard is off)."""
     state: dict[str, Any] = {}
     lim = {"action": RateLimiter(per_s=10.0, burst=40), "media": RateLimiter(per_s=20.0, burst=80),
@@ -275,6 +275,11 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
     async def not_found(request: Request) -> Response:
         return Response(status_code=404)
 
+    async def database_problem(request: Request, exc: Exception) -> Response:
+        # a read that shared a group commit that failed, or a database gone: one line in the log, 503 to the page
+        _log.error("%s", exc)
+        return JSONResponse({"error": "server error"}, status_code=503)
+
     routes = [
         Route("/", entry, methods=["GET"]),
         Route("/start", start, methods=["POST"]),
@@ -286,5 +291,5 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         Route("/dashboard", dashboard, methods=["GET", "POST"]),
         Route("/dashboard/{rest:str}", dashboard, methods=["GET", "POST"]),
     ]
-    app = Starlette(routes=routes, lifespan=lifespan)
+    app = Starlette(routes=routes, lifespan=lifespan, exception_handlers={InputError: database_problem})
     return SecurityHeaders(app)

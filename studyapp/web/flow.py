@@ -23,7 +23,8 @@ One session, any process
     changes nothing a participant sees. The session continued is the participant's latest one when it is an
     open browser session, else a new one starts. One participant's requests run one at a time across processes
     (:meth:`~studyapp.study.storage.ResultsDB.exclusive`, a PostgreSQL advisory lock per participant), as they
-    do on one process's event loop.
+    do on one process's database thread (:mod:`studyapp.web.dbthread`). What a process keeps is only what the
+    design and a participant's id and row determine (schedules, texts, tokens): worked out again by any process.
 
 Coming back
     Reloading a page shows the same state, and so does a server restart. The study link opened again with the
