@@ -36,6 +36,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -107,14 +108,14 @@ def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path
         else:
             loop = DatabaseThread._loop
 
-            def profiled(self: Any) -> None:
+            def profiled(self: Any, *args: Any) -> None:
                 p = cProfile.Profile()
                 p.enable()
                 try:
-                    loop(self)
+                    loop(self, *args)
                 finally:
                     p.disable()
-                    p.dump_stats(f"{profile_to}.dbthread")
+                    p.dump_stats(f"{profile_to}.dbthread.{threading.current_thread().name}")
 
             DatabaseThread._loop = profiled  # type: ignore[method-assign]
     try:

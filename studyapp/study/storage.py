@@ -727,10 +727,10 @@ class ResultsDB:
             finally:
                 self._batch = None
 
-    def reader(self) -> "ResultsDB":
-        """A second connection to this database, for a long read (the study server's export) in another thread
-        than this one's, which it does not hold up: opened without checking the database again (this one
-        did), for reading only; close it when done."""
+    def twin(self) -> "ResultsDB":
+        """Another connection to this database, for another thread: a long read that must not hold up this
+        connection (the study server's export), or one more of a server's database threads on PostgreSQL.
+        Opened without checking the database again (this one did); close it when done."""
         twin = object.__new__(ResultsDB)
         twin.__dict__.update(self.__dict__)
         twin._batch = None

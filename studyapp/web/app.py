@@ -41,7 +41,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from studyapp.errors import InputError
 from studyapp.web.dashboard import Dashboard
-from studyapp.web.dbthread import DatabaseThread
+from studyapp.web.dbthread import PG_THREADS, DatabaseThread
 from studyapp.web.flow import Flow, NotSaved, Refused
 from studyapp.web.security import SECURITY_HEADERS, BadRequest, RateLimiter, parse_json, same_origin
 from studyapp.web.tokens import same
@@ -132,16 +132,18 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
             raise
         if flow.db.backend == "sqlite":   # one process: group commit (see studyapp.web.dbthread)
             db_thread.group_commit(flow.db)
+        else:                             # connections side by side
+            db_thread.add_threads(PG_THREADS - 1, flow.use_own_connection, flow.close_own_connection)
         state["db"] = db_thread
         state["flow"] = flow
         state["dashboard"] = Dashboard(flow, password, db_thread)
-        state["uploads"] = UploadDesk(flow.design, flow.db)
+        state["uploads"] = UploadDesk(flow.design, lambda: flow.db)   # the calling thread's connection
         try:
             yield
         finally:
             db_thread.group_commit(None)
-            await db_thread.run(flow.db.close)
-            db_thread.close()
+            await db_thread.run(flow.db.close)   # SQLite's on its own thread (the only one there is)
+            db_thread.close()                    # the others' connections are closed by their threads
 
     def in_db(fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)`` on the database thread (awaitable)."""

@@ -129,11 +129,11 @@ class Dashboard:
 
 def export_csv(db: ResultsDB) -> str:
     """The results as CSV (``studyapp export``'s table), read on a second connection to ``db``
-    (:meth:`~studyapp.study.storage.ResultsDB.reader`): a long export in another thread leaves ``db``'s own
+    (:meth:`~studyapp.study.storage.ResultsDB.twin`): a long export in another thread leaves ``db``'s own
     connection, and so every participant's request, free."""
     from studyapp.study.export import export_dataframe
 
-    reader = db.reader()
+    reader = db.twin()
     try:
         return export_dataframe(reader).to_csv(index=False)
     finally:

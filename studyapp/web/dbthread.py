@@ -2,9 +2,11 @@
 
 Every request's database work (restoring a session, the action, the commit) is a job run here, one job at a
 time in arrival order: on SQLite, whose connection belongs to one thread, this is what keeps two requests of
-one participant from interleaving (on PostgreSQL the per-participant lock does that across processes too). While
-a job waits on the disk (a commit's fsync) or on the database server, the event loop goes on reading requests,
-writing replies and sending videos to every other participant.
+one participant from interleaving. While a job waits on the disk (a commit's fsync) or on the database server,
+the event loop goes on reading requests, writing replies and sending videos to every other participant. On
+PostgreSQL a process has :data:`PG_THREADS` such threads, each with its own connection (a request's dozen
+statements are round trips to the server: several requests wait on them side by side); the per-participant lock
+that keeps one participant's requests apart across processes keeps them apart across threads too.
 
 Group commit (:meth:`DatabaseThread.group_commit`): jobs that queued up while one ran are run together in one
 write transaction, every transaction of theirs a savepoint of it, committed (one fsync) before any of them is
@@ -17,15 +19,19 @@ participant's lock another process holds.
 from __future__ import annotations
 
 import asyncio
+import logging
 import queue
 import threading
 from concurrent.futures import Future
 from contextlib import AbstractContextManager
 from typing import Any, Callable, Protocol, TypeVar
 
+_log = logging.getLogger(__name__)
 T = TypeVar("T")
 #: The most jobs committed together (a bound on how long the first one waits for the others).
 MAX_BATCH = 64
+#: Database threads (connections) of one server process on PostgreSQL; ``--workers N`` makes N times as many.
+PG_THREADS = 4
 
 
 class Batching(Protocol):
@@ -40,11 +46,29 @@ class DatabaseThread:
     def __init__(self, name: str = "studyapp-db") -> None:
         self._jobs: queue.SimpleQueue[tuple[Callable[[], Any], Future] | None] = queue.SimpleQueue()
         self._batching: Batching | None = None
-        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-        self._thread.start()
+        self._name = name
+        self._threads: list[threading.Thread] = []
+        self._start(None, None)
+
+    def add_threads(self, n: int, setup: Callable[[], None], teardown: Callable[[], None]) -> None:
+        """``n`` more threads taking jobs from the same queue, each running ``setup`` first (opening its own
+        connection) and ``teardown`` when it stops. For PostgreSQL, whose connections work side by side; one
+        participant's requests still run one at a time (the flow's per-participant lock)."""
+        if self._batching is not None:
+            raise RuntimeError("group commit needs the one thread")
+        for _ in range(n):
+            self._start(setup, teardown)
+
+    def _start(self, setup: Callable[[], None] | None, teardown: Callable[[], None] | None) -> None:
+        thread = threading.Thread(target=self._loop, args=(setup, teardown), daemon=True,
+                                  name=f"{self._name}-{len(self._threads)}")
+        self._threads.append(thread)
+        thread.start()
 
     def group_commit(self, db: Batching | None) -> None:
         """Commit the jobs that queue up together on ``db`` from now on (None: each job commits its own)."""
+        if db is not None and len(self._threads) > 1:
+            raise RuntimeError("group commit needs the one thread")
         self._batching = db
 
     def submit(self, fn: Callable[[], T]) -> "Future[T]":
@@ -57,11 +81,26 @@ class DatabaseThread:
         return await asyncio.wrap_future(self.submit(lambda: fn(*args)))
 
     def close(self) -> None:
-        """Run the jobs already queued, then stop the thread."""
-        self._jobs.put(None)
-        self._thread.join()
+        """Run the jobs already queued, then stop the threads."""
+        for _ in self._threads:
+            self._jobs.put(None)
+        for thread in self._threads:
+            thread.join()
 
-    def _loop(self) -> None:
+    def _loop(self, setup: Callable[[], None] | None, teardown: Callable[[], None] | None) -> None:
+        if setup is not None:
+            try:
+                setup()
+            except Exception:   # no connection for this thread: the others serve
+                _log.exception("a database thread could not start")
+                return
+        try:
+            self._serve()
+        finally:
+            if teardown is not None:
+                teardown()
+
+    def _serve(self) -> None:
         while True:
             job = self._jobs.get()
             if job is None:

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import re
 import secrets
+import threading
 import time
 from collections import OrderedDict
 from datetime import datetime, timezone
@@ -155,7 +156,8 @@ class Flow:
     def __init__(self, design: Any, db: ResultsDB, tokens: Tokens, videos: TrialVideos,
                  clock: Callable[[], float] = time.time) -> None:
         self.design = design
-        self.db = db
+        self._db = db
+        self._local = threading.local()
         self.tokens = tokens
         self.videos = videos
         self.clock = clock
@@ -168,6 +170,25 @@ class Flow:
         #: they do): kept so a request restores a session without drawing its schedule again. Losing them
         #: changes nothing (any process draws the same), so this is no participant state.
         self._plans: OrderedDict[tuple[str, int], list[Any]] = OrderedDict()
+
+    # ------------------------------------------------------------------ the database
+    @property
+    def db(self) -> ResultsDB:
+        """The results database as the calling thread reaches it: its own connection when it opened one
+        (:meth:`use_own_connection`), else the one the flow was made with."""
+        return getattr(self._local, "db", None) or self._db
+
+    def use_own_connection(self) -> None:
+        """Give the calling thread a connection of its own to the database (one more of a server process's
+        database threads on PostgreSQL, whose requests then run side by side)."""
+        if getattr(self._local, "db", None) is None:
+            self._local.db = self._db.twin()
+
+    def close_own_connection(self) -> None:
+        db = getattr(self._local, "db", None)
+        if db is not None:
+            self._local.db = None
+            db.close()
 
     # ------------------------------------------------------------------ texts
     def t(self, key: str, **values: Any) -> str:
@@ -287,13 +308,19 @@ class Flow:
             plans = participant_schedule(self.design, pid, int(row))
             self._keep(pid, row, plans)
         else:
-            self._plans.move_to_end(key)
+            try:
+                self._plans.move_to_end(key)
+            except KeyError:   # another database thread dropped it meanwhile: it is kept again next time
+                pass
         return plans
 
     def _keep(self, pid: str, row: int, plans: list[Any]) -> None:
         self._plans[(pid, int(row))] = list(plans)
         while len(self._plans) > PLANS_KEPT:
-            self._plans.popitem(last=False)
+            try:
+                self._plans.popitem(last=False)
+            except KeyError:
+                break
 
     def participant_for(self, token: str) -> str:
         # the ids are read only when the token is not one this process has seen (a participant another process
