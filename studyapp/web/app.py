@@ -14,11 +14,12 @@ Routes (nothing else is served: no directory listing, no file by path)::
 
 Every participant page is one HTML shell with the page's state as JSON (``<script type="application/json">``,
 not executed) and ``/a/app.js``, which draws it and posts actions; each action's reply is the next state.
-All database work runs on the process's database thread (:mod:`studyapp.web.dbthread`), one request at a
-time, so two requests of one participant cannot interleave and the event loop keeps serving while a commit waits
-for the disk; on SQLite the requests that queue up meanwhile are committed together (group commit), each one
-answered only once it is on disk. With several server processes on PostgreSQL the flow takes a per-participant
-lock for the same guarantee (:mod:`studyapp.web.flow`, "One session, any process"). The dashboard's export
+All database work runs on the process's database thread (:mod:`studyapp.web.dbthread`), so the event loop
+keeps serving while a commit waits for the disk. On SQLite it is one thread, one request at a time, so two
+requests of one participant cannot interleave, and the requests that queue up meanwhile are committed together
+(group commit), each one answered only once it is on disk. On PostgreSQL a few threads, each with its own
+connection, run requests side by side, and the flow takes a per-participant lock for the same guarantee across
+threads and server processes (:mod:`studyapp.web.flow`, "One session, any process"). The dashboard's export
 reads on a connection of its own in another thread, so participants are served while it runs.
 """
 from __future__ import annotations
