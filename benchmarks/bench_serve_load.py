@@ -36,6 +36,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -64,8 +65,9 @@ def write_design(folder: Path, n_stimuli: int) -> Path:
 # ------------------------------------------------------------------ the server process
 def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path) -> None:
     """Run the study server on ``port`` until SIGINT (what ``studyapp serve`` runs, with stand-in videos);
-    then write how long each answer's commit took inside the server (``ResultsDB.save_trial``) to
-    ``commits_out``, so the figures split the commit from the queueing in front of it."""
+    then write how long each answer took inside the server from ``ResultsDB.save_trial`` until the COMMIT that
+    made it durable (its own, or its group's: :meth:`ResultsDB.batch`) to ``commits_out``, so the figures split
+    the commit from the queueing in front of it."""
     import uvicorn
 
     from fixtures.web_study import ClipVideos
@@ -73,14 +75,23 @@ def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path
     from studyapp.study.storage import ResultsDB
 
     commits: list[float] = []
-    save_trial = ResultsDB.save_trial
+    pending: list[float] = []   # answers given to the database, not yet durable
+    save_trial, tx_exit = ResultsDB.save_trial, ResultsDB._Tx.__exit__
 
     def timed(self: ResultsDB, *args: Any, **kw: Any) -> None:
-        t0 = time.perf_counter()
+        pending.append(time.perf_counter())
         save_trial(self, *args, **kw)
-        commits.append(time.perf_counter() - t0)
+
+    def durable(self: Any, *exc: Any) -> None:
+        # a COMMIT (not a savepoint of a group commit): the answers given since are on disk now
+        tx_exit(self, *exc)
+        if getattr(self, "nested", None) is None and exc[0] is None:
+            now = time.perf_counter()
+            commits.extend(now - t0 for t0 in pending)
+            pending.clear()
 
     ResultsDB.save_trial = timed  # type: ignore[method-assign]
+    ResultsDB._Tx.__exit__ = durable  # type: ignore[method-assign]
     app = make_app(design_path, db, None, design_path.with_name("serve-secret"), None,
                    videos=ClipVideos(videos, seconds=CLIP_S))
     profile_to = os.environ.get("STUDYAPP_BENCH_PROFILE")  # a file: where the server's time goes (cProfile)
@@ -90,13 +101,31 @@ def serve(design_path: Path, db: str, port: int, videos: Path, commits_out: Path
 
         profiler = cProfile.Profile()
         profiler.enable()
+        try:   # the database thread too (cProfile sees one thread)
+            from studyapp.web.dbthread import DatabaseThread
+        except ImportError:
+            pass
+        else:
+            loop = DatabaseThread._loop
+
+            def profiled(self: Any, *args: Any) -> None:
+                p = cProfile.Profile()
+                p.enable()
+                try:
+                    loop(self, *args)
+                finally:
+                    p.disable()
+                    p.dump_stats(f"{profile_to}.dbthread.{threading.current_thread().name}")
+
+            DatabaseThread._loop = profiled  # type: ignore[method-assign]
     try:
         uvicorn.run(app, host="127.0.0.1", port=port, proxy_headers=True, forwarded_allow_ips="127.0.0.1",
                     server_header=False, log_level="warning", backlog=2048)
     except KeyboardInterrupt:  # uvicorn shuts down on SIGINT, then raises it again
         pass
     finally:
-        commits_out.write_text(json.dumps(commits))
+        # the server's CPU time (all its threads): what the requests cost, whatever else the machine runs
+        commits_out.write_text(json.dumps({"commits": commits, "cpu_s": time.process_time()}))
         if profiler is not None:
             profiler.disable()
             profiler.dump_stats(f"{profile_to}.{Path(db).name[:20]}")
@@ -273,10 +302,12 @@ def run_backend(name: str, target: Path | str, server_url: str, design_path: Pat
     lost, dup, done = check_database(target, design, acked)
     ms = sorted(x * 1e3 for x in latencies)
     p50, p99 = _pct(ms, 0.5), _pct(ms, 0.99)
-    commits = sorted(x * 1e3 for out in outs if out.exists() for x in json.loads(out.read_text()))
+    logs = [json.loads(out.read_text()) for out in outs if out.exists()]
+    commits = sorted(x * 1e3 for log in logs for x in log["commits"])
+    cpu_s = sum(log["cpu_s"] for log in logs)
     return {"backend": name if workers == 1 else f"{name}x{workers}", "participants": n, "done": done, "answers": len(ms), "p50_ms": p50, "p99_ms": p99,
             "commit_p50_ms": _pct(commits, 0.5), "commit_p99_ms": _pct(commits, 0.99), "commits": len(commits),
-            "max_ms": ms[-1] if ms else float("nan"), "answers_per_s": len(ms) / wall, "wall_s": wall,
+            "max_ms": ms[-1] if ms else float("nan"), "server_cpu_s": cpu_s, "answers_per_s": len(ms) / wall, "wall_s": wall,
             "lost": lost, "duplicated": dup, "failures": failures, "load_before": load_before,
             "load_after": load_after}
 
@@ -318,14 +349,15 @@ def main(argv: list[str]) -> int:
     print(f"{args.participants} participants at once on loopback, {trials} trials each (clip {CLIP_S:.0f} s watched "
           f"in real time), {args.workers} server process(es); {os.cpu_count()} cores")
     print("answer round trip: the participant's POST until the reply, which the server sends once the answer is "
-          "committed; commit: the commit itself inside the server (ResultsDB.save_trial)")
+          "committed; commit: inside the server, from ResultsDB.save_trial until the COMMIT that made it durable; cpu s: "
+          "the server processes' CPU time (all threads, start-up included)")
     print(f"{'backend':<11} {'done':>5} {'answers':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'commit p50':>10} "
-          f"{'commit p99':>10} {'ans/s':>7} {'wall s':>7} {'lost':>5} {'dup':>4}  load avg (1 min) before/after")
+          f"{'commit p99':>10} {'ans/s':>7} {'wall s':>7} {'cpu s':>6} {'lost':>5} {'dup':>4}  load avg (1 min) before/after")
     ok = True
     for r in rows:
         print(f"{r['backend']:<11} {r['done']:>5} {r['answers']:>8} {r['p50_ms']:>8.1f} {r['p99_ms']:>8.1f} "
               f"{r['max_ms']:>8.1f} {r['commit_p50_ms']:>10.1f} {r['commit_p99_ms']:>10.1f} "
-              f"{r['answers_per_s']:>7.1f} {r['wall_s']:>7.1f} {r['lost']:>5} "
+              f"{r['answers_per_s']:>7.1f} {r['wall_s']:>7.1f} {r['server_cpu_s']:>6.1f} {r['lost']:>5} "
               f"{r['duplicated']:>4}  {r['load_before']:.2f} / {r['load_after']:.2f}")
         for f in r["failures"][:5]:
             print(f"  participant failed: {f}")
@@ -336,6 +368,7 @@ def main(argv: list[str]) -> int:
         record(f"serve_{r['backend']}_answer_commit_p99_ms", r["p99_ms"], None, "ms", **extra)
         record(f"serve_{r['backend']}_commit_p50_ms", r["commit_p50_ms"], None, "ms", **extra)
         record(f"serve_{r['backend']}_commit_p99_ms", r["commit_p99_ms"], None, "ms", **extra)
+        record(f"serve_{r['backend']}_server_cpu_s", r["server_cpu_s"], None, "s", **extra)
         record(f"serve_{r['backend']}_lost_or_duplicated", r["lost"] + r["duplicated"], None, "answers", **extra)
     print("every acknowledged answer stored exactly once" if ok else "FAILED: see above")
     return 0 if ok else 1

@@ -44,6 +44,8 @@ CREATE_TABLE = (f"CREATE TABLE {TABLE} (tbl TEXT NOT NULL, rid INTEGER NOT NULL,
 _PREFIX = b"studyapp-row-v1"
 #: Temporary (per-connection) table of the rows a transaction touched; sealed and emptied at commit.
 _DIRTY = "temp._studyapp_dirty_rows"
+#: Rows read per statement when sealing (under SQLite's default limit of 999 parameters).
+_SEAL_CHUNK = 500
 
 
 def _is_sqlite(con: object) -> bool:
@@ -111,10 +113,6 @@ def _digester(table: str, columns: list[str]) -> Callable[[tuple], str]:
                       _field(_value_bytes(kind, row[2 + 2 * i])))
         return hashlib.sha256(b"".join(parts)).hexdigest()
     return digest
-
-
-def _digest(table: str, columns: list[str], row: tuple) -> str:
-    return _digester(table, columns)(row)
 
 
 def _typed(value: object) -> tuple[str, object]:
@@ -188,13 +186,20 @@ def _seal(con: sqlite3.Connection, table: str, rids: Iterable[int]) -> None:
     if not _is_sqlite(con):
         _seal_together(con, table, columns, list(rids))
         return
-    for rid in rids:
-        row = next(_read(con, table, columns, " WHERE rowid = ?", (rid,)), None)
-        if row is None:
-            con.execute(f"DELETE FROM {TABLE} WHERE tbl = ? AND rid = ?", (table, rid))
-        else:
-            con.execute(f"INSERT OR REPLACE INTO {TABLE} (tbl, rid, sha256) VALUES (?, ?, ?)",
-                        (table, rid, _digest(table, columns, row)))
+    # one read per _SEAL_CHUNK rows (not one per row): a group commit seals hundreds at once
+    digest = _digester(table, columns)
+    rids = list(rids)
+    found: dict[int, str] = {}
+    for k in range(0, len(rids), _SEAL_CHUNK):
+        chunk = tuple(rids[k:k + _SEAL_CHUNK])
+        found.update((int(r[0]), digest(r)) for r in _read(con, table, columns,
+                                                            f" WHERE rowid IN ({', '.join('?' * len(chunk))})", chunk))
+    gone = [rid for rid in rids if rid not in found]
+    if gone:
+        con.executemany(f"DELETE FROM {TABLE} WHERE tbl = ? AND rid = ?", [(table, rid) for rid in gone])
+    if found:
+        con.executemany(f"INSERT OR REPLACE INTO {TABLE} (tbl, rid, sha256) VALUES (?, ?, ?)",
+                        [(table, rid, d) for rid, d in found.items()])
 
 
 def _seal_together(con: sqlite3.Connection, table: str, columns: list[str], rids: list[int]) -> None:

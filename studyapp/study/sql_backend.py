@@ -259,7 +259,7 @@ class SQLiteBackend:
         con.execute("BEGIN IMMEDIATE")
 
     def hold(self, con: Connection, key: int, held: bool) -> None:
-        pass   # one server process: its event loop already runs a participant's requests one at a time
+        pass   # one server process: its database thread already runs a participant's requests one at a time
 
     def kind(self, exc: BaseException) -> str:
         return _kind(exc)

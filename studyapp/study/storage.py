@@ -386,6 +386,8 @@ _WRITTEN: dict[str, tuple[str, ...]] = {
     "plays": ("participant", "trial_index", "session", "started", "ended", "completed", "app_version"),
     "questionnaire": ("participant", "item", "kind", "scale", "value", "app_version"),
 }
+#: The tables whose rows are keyed by an id the database gives (a caller may need the new ones).
+_ROW_IDS = ("sessions", "plays")
 
 
 def open_results(target: str | Path, design: Any = None, **options: Any) -> "ResultsDB":
@@ -426,6 +428,8 @@ class ResultsDB:
         create: bool = True,
     ) -> None:
         self._backend = sql_backend.backend_for(path)
+        #: Inside :meth:`batch`: how many savepoints it has made; None outside one.
+        self._batch: int | None = None
         #: The file, or (PostgreSQL) the URL without its password: what messages name.
         self.path: Path | str = self._backend.target
         if design is not None:
@@ -634,12 +638,23 @@ class ResultsDB:
         return self._backend.name
 
     class _Tx:
-        def __init__(self, con: sqlite3.Connection, backend: sql_backend.Backend, what: str) -> None:
+        def __init__(self, con: sqlite3.Connection, backend: sql_backend.Backend, what: str,
+                     nested: int | None = None) -> None:
             self.con = con
             self.backend = backend
             self.what = what
+            #: inside :meth:`ResultsDB.batch`: this transaction's savepoint number (its COMMIT is the batch's)
+            self.nested = nested
 
         def __enter__(self) -> sqlite3.Connection:
+            if self.nested is not None:
+                # the batch's transaction must still be open: an engine error may have rolled it back, and a
+                # savepoint outside a transaction would commit on its own, ahead of the batch's one answer
+                if not self.con.in_transaction:
+                    raise InputError(self.backend.target, None, f"{self.what} (an earlier error ended the "
+                                     "transaction of this group of requests)")
+                self.con.execute(f"SAVEPOINT tx{self.nested}")
+                return self.con
             # the write lock up front (SQLite: BEGIN IMMEDIATE), so two processes on one database serialise
             # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
             try:
@@ -650,6 +665,11 @@ class ResultsDB:
             return self.con
 
         def __exit__(self, exc_type, exc, tb) -> None:
+            if self.nested is not None:
+                self._leave_savepoint(exc_type is None)
+                if isinstance(exc, self.backend.errors) and self.backend.kind(exc) != "other":
+                    raise self.backend.problem(exc, self.what) from None
+                return
             if exc_type is None:
                 try:
                     # the checksums of the rows this transaction wrote, in the same transaction
@@ -664,6 +684,17 @@ class ResultsDB:
                 raise self.backend.problem(exc, self.what) from None
             if exc_type is None:
                 raise exc
+
+        def _leave_savepoint(self, keep: bool) -> None:
+            # kept: its rows are sealed with the batch's commit; undone: as if it never ran
+            name = f"tx{self.nested}"
+            try:
+                if not keep:
+                    self.con.execute(f"ROLLBACK TO {name}")
+                self.con.execute(f"RELEASE {name}")
+            except self.backend.errors as exc:
+                if keep:
+                    raise self.backend.problem(exc, self.what) from None
 
         def _rollback(self) -> None:
             # leave no half-open transaction behind; a failing ROLLBACK (the disk gone) changes nothing on disk
@@ -695,7 +726,43 @@ class ResultsDB:
         """``with db.transaction() as con:`` — all statements inside commit together or not at all, with the
         checksums of every row they wrote; a full disk, a read-only file or a lock held too long raise
         :class:`InputError` (nothing of the transaction is stored; ``what`` says so in the message)."""
+        if self._batch is not None:
+            self._batch += 1
+            return ResultsDB._Tx(self._con, self._backend, what, nested=self._batch)
         return ResultsDB._Tx(self._con, self._backend, what)
+
+    @contextmanager
+    def batch(self, what: str = _NOT_SAVED) -> Iterator[None]:
+        """``with db.batch():`` — group commit: every :meth:`transaction` inside is a savepoint of one write
+        transaction, committed (with every checksum) when the block ends, so many small changes cost one fsync.
+        A transaction that fails is undone alone, as it would be on its own; when the commit fails nothing of the
+        block is stored and the error is raised (an :class:`InputError`, as :meth:`transaction`'s). Nothing done
+        inside is durable before the block ends: a caller answers only then (the study server's database thread,
+        :mod:`studyapp.web.dbthread`)."""
+        if self._batch is not None:
+            raise RuntimeError("batches do not nest")
+        with self.transaction(what):
+            self._batch = 0
+            try:
+                yield
+            finally:
+                self._batch = None
+
+    def twin(self) -> "ResultsDB":
+        """Another connection to this database, for another thread: a long read that must not hold up this
+        connection (the study server's export), or one more of a server's database threads on PostgreSQL.
+        Opened without checking the database again (this one did); close it when done."""
+        twin = object.__new__(ResultsDB)
+        twin.__dict__.update(self.__dict__)
+        twin._batch = None
+        twin.on_participant_finished = None
+        twin._con = self._backend.connect(self.LOCK_TIMEOUT_S)
+        try:
+            self._backend.configure(twin._con)
+        except self._backend.errors as exc:
+            twin.close()
+            raise self._backend.problem(exc, "the results database could not be opened for reading") from None
+        return twin
 
     def close(self) -> None:
         try:
@@ -732,6 +799,10 @@ class ResultsDB:
 
     def participants(self) -> list[ParticipantRecord]:
         return [self._participant(r) for r in self._con.execute("SELECT * FROM participants ORDER BY created, id")]
+
+    def participant_ids(self) -> list[str]:
+        """Every participant's id (what :meth:`participants` reads, without decoding each record)."""
+        return [r[0] for r in self._con.execute("SELECT id FROM participants ORDER BY created, id")]
 
     def row_counts(self, n_rows: int) -> list[int]:
         """How many participants follow each Latin-square row ``0 .. n_rows-1``. A participant who declined
@@ -895,9 +966,15 @@ class ResultsDB:
             self._insert(con, "judgements", judged)
 
     def _insert(self, con: sqlite3.Connection, table: str, rows: list[dict[str, Any]]) -> list[int]:
-        """Insert rows of one table, every row stamped with this database's design hash; the row ids."""
+        """Insert rows of one table, every row stamped with this database's design hash; the new row ids of a
+        table keyed by them (:data:`_ROW_IDS`), else none: those rows go in one statement call (one round trip
+        to PostgreSQL for an answer's dozen rows, not one each)."""
         cols = _WRITTEN[table]
         sql = f"INSERT INTO {table} ({', '.join(cols)}, design_hash) VALUES ({', '.join('?' * (len(cols) + 1))})"
+        if table not in _ROW_IDS:
+            if rows:
+                con.executemany(sql, [(*(r.get(c) for c in cols), self.design_hash) for r in rows])
+            return []
         ids = []
         for r in rows:
             ids.append(int(con.execute(sql, (*(r.get(c) for c in cols), self.design_hash)).lastrowid))

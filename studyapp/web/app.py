@@ -14,10 +14,13 @@ Routes (nothing else is served: no directory listing, no file by path)::
 
 Every participant page is one HTML shell with the page's state as JSON (``<script type="application/json">``,
 not executed) and ``/a/app.js``, which draws it and posts actions; each action's reply is the next state.
-All database work runs on the event loop's thread, one request at a time (SQLite's connection belongs to
-one thread; an answer's commit takes milliseconds), so two requests of one participant cannot interleave; with
-several server processes on PostgreSQL the flow takes a per-participant lock for the same guarantee
-(:mod:`studyapp.web.flow`, "One session, any process").
+All database work runs on the process's database thread (:mod:`studyapp.web.dbthread`), so the event loop
+keeps serving while a commit waits for the disk. On SQLite it is one thread, one request at a time, so two
+requests of one participant cannot interleave, and the requests that queue up meanwhile are committed together
+(group commit), each one answered only once it is on disk. On PostgreSQL a few threads, each with its own
+connection, run requests side by side, and the flow takes a per-participant lock for the same guarantee across
+threads and server processes (:mod:`studyapp.web.flow`, "One session, any process"). The dashboard's export
+reads on a connection of its own in another thread, so participants are served while it runs.
 """
 from __future__ import annotations
 
@@ -39,6 +42,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from studyapp.errors import InputError
 from studyapp.web.dashboard import Dashboard
+from studyapp.web.dbthread import PG_THREADS, DatabaseThread
 from studyapp.web.flow import Flow, NotSaved, Refused
 from studyapp.web.security import SECURITY_HEADERS, BadRequest, RateLimiter, parse_json, same_origin
 from studyapp.web.tokens import same
@@ -110,7 +114,7 @@ class SecurityHeaders:
 
 def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
               limits: dict[str, RateLimiter] | None = None) -> ASGIApp:
-    """The server of one study. ``open_flow`` is called once at start-up, on the server's event loop thread
+    """The server of one study. ``open_flow`` is called once at start-up, on the process's database thread
     (the database connection is made there); ``password``: the dashboard's (None: the dashboard is off)."""
     state: dict[str, Any] = {}
     lim = {"action": RateLimiter(per_s=10.0, burst=40), "media": RateLimiter(per_s=20.0, burst=80),
@@ -121,14 +125,30 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
 
     @asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
-        flow = open_flow()
+        db_thread = DatabaseThread()
+        try:
+            flow = await db_thread.run(open_flow)   # the connection is made on the thread that uses it
+        except BaseException:
+            db_thread.close()
+            raise
+        if flow.db.backend == "sqlite":   # one process: group commit (see studyapp.web.dbthread)
+            db_thread.group_commit(flow.db)
+        else:                             # connections side by side
+            db_thread.add_threads(PG_THREADS - 1, flow.use_own_connection, flow.close_own_connection)
+        state["db"] = db_thread
         state["flow"] = flow
-        state["dashboard"] = Dashboard(flow, password)
-        state["uploads"] = UploadDesk(flow.design, flow.db)
+        state["dashboard"] = Dashboard(flow, password, db_thread)
+        state["uploads"] = UploadDesk(flow.design, lambda: flow.db)   # the calling thread's connection
         try:
             yield
         finally:
-            flow.db.close()
+            db_thread.group_commit(None)
+            await db_thread.run(flow.db.close)   # SQLite's on its own thread (the only one there is)
+            db_thread.close()                    # the others' connections are closed by their threads
+
+    def in_db(fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)`` on the database thread (awaitable)."""
+        return state["db"].run(fn, *args)
 
     def flow() -> Flow:
         return state["flow"]
@@ -143,17 +163,20 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         st = {"screen": "refused", "heading": flow().design.title, "text": flow().t(exc.key)}
         return HTMLResponse(page(flow().design.title, flow().design.language, st), status_code=status)
 
-    async def body_of(request: Request) -> dict[str, Any]:
+    def checked_body(request: Request, raw: bytes) -> dict[str, Any]:
         """The JSON body of a state-changing request, after the CSRF-relevant checks every one of them gets."""
         if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
             raise BadRequest("content type must be application/json")
         if not same_origin(request.headers.get("origin"), request.headers.get("host"), request.url.scheme):
             raise BadRequest("cross-origin request")
-        return parse_json(await request.body())
+        return parse_json(raw)
+
+    async def body_of(request: Request) -> dict[str, Any]:
+        return checked_body(request, await request.body())
 
     async def entry(request: Request) -> Response:
         try:
-            st = flow().entry(request.query_params)
+            st = await in_db(flow().entry, dict(request.query_params))
         except Refused as exc:
             return refusal(exc)
         if "redirect" in st:
@@ -164,7 +187,7 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         if not lim["start"].allow(client(request)):
             return too_many()
         try:
-            token = flow().start(await body_of(request))
+            token = await in_db(flow().start, await body_of(request))
         except BadRequest as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
         except Refused as exc:
@@ -172,9 +195,11 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         return JSONResponse({"go": f"/s/{token}/"})
 
     async def participant_page(request: Request) -> Response:
+        def work(token: str) -> dict[str, Any]:
+            return flow().state(flow().participant_for(token))
+
         try:
-            pid = flow().participant_for(request.path_params["token"])
-            st = flow().state(pid)
+            st = await in_db(work, request.path_params["token"])
         except Refused as exc:
             return refusal(exc, 404)
         return HTMLResponse(page(flow().design.title, flow().design.language, st))
@@ -183,14 +208,20 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         token, name = request.path_params["token"], request.path_params["action"]
         if not lim["action"].allow(token):
             return too_many()
-        try:
+        raw = await request.body()
+        csrf = request.headers.get("x-csrf-token")
+
+        def work() -> dict[str, Any]:   # the checks in this order, then the action, in one database job
             pid = flow().participant_for(token)
             if name not in ACTIONS:
                 raise BadRequest("unknown action")
-            body = await body_of(request)
-            if not same(request.headers.get("x-csrf-token"), flow().tokens.csrf(pid)):
+            body = checked_body(request, raw)
+            if not same(csrf, flow().tokens.csrf(pid)):
                 raise BadRequest("missing or wrong CSRF token")
-            return JSONResponse(flow().act(pid, name, body))
+            return flow().act(pid, name, body)
+
+        try:
+            return JSONResponse(await in_db(work))
         except Refused as exc:
             return JSONResponse({"refused": flow().t(exc.key)}, status_code=404)
         except BadRequest as exc:
@@ -206,12 +237,11 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         token = request.path_params["token"]
         if not lim["media"].allow(token):
             return too_many()
+        name = request.path_params["name"]
         try:
-            pid = flow().participant_for(token)
-            path = flow().media(pid, request.path_params["name"])
+            path = await in_db(lambda: flow().media(flow().participant_for(token), name))
         except Refused:
             return Response(status_code=404)
-        name = request.path_params["name"]
         # no real modification time, no file name: both could tell two participants' clips apart or alike
         return FileResponse(path, media_type="video/mp4", stat_result=os.stat(path),
                             headers={"etag": f'"{name}"', "last-modified": "Thu, 01 Jan 1970 00:00:00 GMT"})
@@ -238,7 +268,7 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
                 return JSONResponse({"error": f"upload over {MAX_UPLOAD_BYTES} bytes"}, status_code=413)
             chunks.append(chunk)
         try:
-            return JSONResponse(state["uploads"].receive(request.headers, b"".join(chunks)))
+            return JSONResponse(await in_db(state["uploads"].receive, request.headers, b"".join(chunks)))
         except UploadRefused as exc:
             return JSONResponse({"error": str(exc)}, status_code=exc.status)
         except InputError as exc:   # the database could not store it: nothing was saved, the sender tries again
@@ -247,6 +277,11 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
 
     async def not_found(request: Request) -> Response:
         return Response(status_code=404)
+
+    async def database_problem(request: Request, exc: Exception) -> Response:
+        # a read that shared a group commit that failed, or a database gone: one line in the log, 503 to the page
+        _log.error("%s", exc)
+        return JSONResponse({"error": "server error"}, status_code=503)
 
     routes = [
         Route("/", entry, methods=["GET"]),
@@ -259,5 +294,5 @@ def build_app(open_flow: Callable[[], Flow], *, password: str | None = None,
         Route("/dashboard", dashboard, methods=["GET", "POST"]),
         Route("/dashboard/{rest:str}", dashboard, methods=["GET", "POST"]),
     ]
-    app = Starlette(routes=routes, lifespan=lifespan)
+    app = Starlette(routes=routes, lifespan=lifespan, exception_handlers={InputError: database_problem})
     return SecurityHeaders(app)

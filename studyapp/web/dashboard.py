@@ -16,6 +16,7 @@ import secrets
 import statistics
 from typing import TYPE_CHECKING, Any, Awaitable, Callable
 
+import anyio.to_thread
 from starlette.requests import Request
 from starlette.responses import HTMLResponse, JSONResponse, Response
 
@@ -24,6 +25,7 @@ from studyapp.web.security import BadRequest, RateLimiter
 from studyapp.web.tokens import same
 
 if TYPE_CHECKING:
+    from studyapp.web.dbthread import DatabaseThread
     from studyapp.web.flow import Flow
 
 COOKIE = "studyapp_dashboard"
@@ -65,9 +67,10 @@ def summarize(db: ResultsDB, n_rows: int) -> dict[str, Any]:
 class Dashboard:
     """The ``/dashboard`` pages of one server (``password`` None: off)."""
 
-    def __init__(self, flow: "Flow", password: str | None) -> None:
+    def __init__(self, flow: "Flow", password: str | None, db_thread: "DatabaseThread") -> None:
         self.flow = flow
         self.password = password
+        self.db_thread = db_thread
 
     def _logged_in(self, request: Request) -> bool:
         return self.flow.tokens.dashboard_valid(request.cookies.get(COOKIE))
@@ -99,11 +102,8 @@ class Dashboard:
         if request.method == "GET" and rest == "":
             if not self._logged_in(request):
                 return self._page({"screen": "login", "title": self.flow.design.title})
-            self.flow.sweep(force=True)
-            from studyapp.study.schedule import n_rows
-
             return self._page({"screen": "dashboard", "title": self.flow.design.title,
-                               **summarize(self.flow.db, n_rows(self.flow.design))})
+                               **await self.db_thread.run(self._figures)})
         if not self._logged_in(request):
             return Response(status_code=401)
         if rest == "logout" and request.method == "POST":
@@ -115,9 +115,26 @@ class Dashboard:
             resp.delete_cookie(COOKIE, path="/dashboard")
             return resp
         if rest == "export.csv" and request.method == "GET":
-            from studyapp.study.export import export_dataframe
-
-            csv = export_dataframe(self.flow.db).to_csv(index=False)
+            # in a thread of its own, on a connection of its own: participants are served meanwhile
+            csv = await anyio.to_thread.run_sync(export_csv, self.flow.db)
             return Response(csv, media_type="text/csv; charset=utf-8",
                             headers={"content-disposition": 'attachment; filename="results.csv"'})
         return Response(status_code=404)
+
+    def _figures(self) -> dict[str, Any]:
+        """The dashboard's figures, after looking for abandoned participants (on the database thread)."""
+        self.flow.sweep(force=True)
+        return summarize(self.flow.db, self.flow.n_rows())
+
+
+def export_csv(db: ResultsDB) -> str:
+    """The results as CSV (``studyapp export``'s table), read on a second connection to ``db``
+    (:meth:`~studyapp.study.storage.ResultsDB.twin`): a long export in another thread leaves ``db``'s own
+    connection, and so every participant's request, free."""
+    from studyapp.study.export import export_dataframe
+
+    reader = db.twin()
+    try:
+        return export_dataframe(reader).to_csv(index=False)
+    finally:
+        reader.close()

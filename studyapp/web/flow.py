@@ -23,7 +23,8 @@ One session, any process
     changes nothing a participant sees. The session continued is the participant's latest one when it is an
     open browser session, else a new one starts. One participant's requests run one at a time across processes
     (:meth:`~studyapp.study.storage.ResultsDB.exclusive`, a PostgreSQL advisory lock per participant), as they
-    do on one process's event loop.
+    do on one process's database thread (:mod:`studyapp.web.dbthread`). What a process keeps is only what the
+    design and a participant's id and row determine (schedules, texts, tokens): worked out again by any process.
 
 Coming back
     Reloading a page shows the same state, and so does a server restart. The study link opened again with the
@@ -61,15 +62,17 @@ from __future__ import annotations
 
 import re
 import secrets
+import threading
 import time
+from collections import OrderedDict
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from studyapp.study.design.texts import fill
 from studyapp.study.session import (ParticipantFinishedError, RankingError, Session, SessionError, State,
                                     trial_duration_s)
-from studyapp.study.storage import ABANDONED, ResultsDB, now_iso
+from studyapp.study.storage import ABANDONED, ParticipantRecord, ResultsDB, now_iso
 from studyapp.web.media import TrialVideos, duration_s
 from studyapp.web.security import BadRequest, finite_number
 from studyapp.web.tokens import Tokens
@@ -88,6 +91,8 @@ SEEN_EVERY_S = 60.0
 SEEN_AT = "seen_at"
 #: The longest text answer kept (a questionnaire comment).
 MAX_TEXT_CHARS = 5000
+#: How many participants' schedules a server process keeps (see :meth:`Flow.plans`).
+PLANS_KEPT = 4096
 
 
 def digit_points(n_anchors: int) -> list[float]:
@@ -131,6 +136,11 @@ def prolific_params(query: Mapping[str, str]) -> dict[str, str]:
     return out
 
 
+def _lazy(read: Callable[[], Iterable[str]]) -> Iterator[str]:
+    """``read()``'s items, read only when the first one is asked for."""
+    yield from read()
+
+
 def _seconds(iso: str | None) -> float | None:
     if not iso:
         return None
@@ -146,17 +156,48 @@ class Flow:
     def __init__(self, design: Any, db: ResultsDB, tokens: Tokens, videos: TrialVideos,
                  clock: Callable[[], float] = time.time) -> None:
         self.design = design
-        self.db = db
+        self._db = db
+        self._local = threading.local()
         self.tokens = tokens
         self.videos = videos
         self.clock = clock
         self._lengths: dict[Path, float] = {}
         self._minutes: int | None = None
         self._swept: float | None = None
+        self._n_rows: int | None = None
+        self._texts: dict[str, str] = {}
+        #: Participants' schedules, worked out from the design, their id and row alone (never changed by what
+        #: they do): kept so a request restores a session without drawing its schedule again. Losing them
+        #: changes nothing (any process draws the same), so this is no participant state.
+        self._plans: OrderedDict[tuple[str, int], list[Any]] = OrderedDict()
+
+    # ------------------------------------------------------------------ the database
+    @property
+    def db(self) -> ResultsDB:
+        """The results database as the calling thread reaches it: its own connection when it opened one
+        (:meth:`use_own_connection`), else the one the flow was made with."""
+        return getattr(self._local, "db", None) or self._db
+
+    def use_own_connection(self) -> None:
+        """Give the calling thread a connection of its own to the database (one more of a server process's
+        database threads on PostgreSQL, whose requests then run side by side)."""
+        if getattr(self._local, "db", None) is None:
+            self._local.db = self._db.twin()
+
+    def close_own_connection(self) -> None:
+        db = getattr(self._local, "db", None)
+        if db is not None:
+            self._local.db = None
+            db.close()
 
     # ------------------------------------------------------------------ texts
     def t(self, key: str, **values: Any) -> str:
-        return self.design.text(key, **values)
+        if values:
+            return self.design.text(key, **values)
+        text = self._texts.get(key)   # a page shows dozens of fixed texts: each is filled in once
+        if text is None:
+            text = self._texts[key] = self.design.text(key)
+        return text
 
     def _page(self, screen: str, **extra: Any) -> dict[str, Any]:
         return {"screen": screen, "title": self.design.title, "lang": self.design.language, **extra}
@@ -212,7 +253,7 @@ class Flow:
         self.sweep()
         with self.db.exclusive(pid):
             try:
-                session = self._open(pid, params)
+                session, seen = self._open(pid, params, rec=self.db.participant(pid))
             except ParticipantFinishedError:
                 raise Refused("online.expired" if self._abandoned(pid) else "online.already_done") from None
             if session.state is State.WELCOME and not session.resumed:
@@ -220,42 +261,83 @@ class Flow:
                     session.accept_consent()
                 else:
                     session.decline_consent()
-            self._touch(session)
+            self._touch(session, seen)
         return self.tokens.session(pid)
 
-    def _open(self, pid: str, params: Mapping[str, str] | None = None, create: bool = True) -> Session:
+    def _open(self, pid: str, params: Mapping[str, str] | None = None, create: bool = True,
+              rec: ParticipantRecord | None = None) -> tuple[Session, float | None]:
         """The participant's session, restored from the database: their open browser session (see "One
         session, any process"), else (``create``) a new one (a new participant is registered on the least used
-        row); without ``create`` and with no open session, :class:`Refused`."""
+        row); without ``create`` and with no open session, :class:`Refused`. ``rec``: the participant's record
+        when the caller read it (None: a new participant). Also returns when the session's presence was last
+        written (:data:`SEEN_AT`, seconds; None when never)."""
         sessions = self.db.sessions(pid)
         last = sessions[-1] if sessions else None
+        plans = None if rec is None else self.plans(pid, rec.latin_row)
         if last is not None and last["ended"] is None and last["machine"].get("frontend") == "browser":
-            return Session(self.design, self.db, pid, session_id=last["id"], play_duration_s=self._length)
+            session = Session(self.design, self.db, pid, session_id=last["id"], play_duration_s=self._length,
+                              plans=plans, n_rows=self.n_rows())
+            return session, _seconds(last["machine"].get(SEEN_AT))
         if not create:
             raise Refused("online.bad_link")
-        existed = self.db.participant(pid) is not None
-        session = Session(self.design, self.db, pid, machine={
-            "frontend": "browser", SEEN_AT: self._now_iso(),
-            **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
-        if existed and not session.resumed:
+        now = self._now_iso()
+        session = Session(self.design, self.db, pid, plans=plans, n_rows=self.n_rows(), machine={
+            "frontend": "browser", SEEN_AT: now, **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
+        if rec is None:
+            self._keep(session.participant_id, session.row, session.plans)
+        elif not session.resumed:
             session.accept_consent()   # consented when the record was made; nothing answered yet
-        return session
+        return session, _seconds(now)
+
+    def n_rows(self) -> int:
+        """The design's number of Latin-square rows (worked out once)."""
+        if self._n_rows is None:
+            from studyapp.study.schedule import n_rows
+
+            self._n_rows = int(n_rows(self.design))
+        return self._n_rows
+
+    def plans(self, pid: str, row: int) -> list[Any]:
+        """The participant's schedule (:func:`~studyapp.study.schedule.participant_schedule`), drawn once per
+        process for the last :data:`PLANS_KEPT` participants seen."""
+        key = (pid, int(row))
+        plans = self._plans.get(key)
+        if plans is None:
+            from studyapp.study.schedule import participant_schedule
+
+            plans = participant_schedule(self.design, pid, int(row))
+            self._keep(pid, row, plans)
+        else:
+            try:
+                self._plans.move_to_end(key)
+            except KeyError:   # another database thread dropped it meanwhile: it is kept again next time
+                pass
+        return plans
+
+    def _keep(self, pid: str, row: int, plans: list[Any]) -> None:
+        self._plans[(pid, int(row))] = list(plans)
+        while len(self._plans) > PLANS_KEPT:
+            try:
+                self._plans.popitem(last=False)
+            except KeyError:
+                break
 
     def participant_for(self, token: str) -> str:
-        pid = self.tokens.participant_for(token, (p.id for p in self.db.participants()))
+        # the ids are read only when the token is not one this process has seen (a participant another process
+        # registered): a known token costs no query
+        pid = self.tokens.participant_for(token, _lazy(self.db.participant_ids))
         if pid is None:
             raise Refused("online.bad_link")
         return pid
 
     # ------------------------------------------------------------------ abandonment
-    def _touch(self, session: Session) -> None:
+    def _touch(self, session: Session, seen: float | None) -> None:
         """Record that the participant is here (their session's :data:`SEEN_AT`, at most once per
-        :data:`SEEN_EVERY_S`): a page read for a long time is activity too, whichever process served it."""
+        :data:`SEEN_EVERY_S`; ``seen``: when it was written last, as :meth:`_open` read it): a page read for a
+        long time is activity too, whichever process served it."""
         if session.finished:
             return
         now = self.clock()
-        row = next((s for s in self.db.sessions(session.participant_id) if s["id"] == session.session_id), None)
-        seen = _seconds(row["machine"].get(SEEN_AT)) if row is not None else None
         if seen is None or now - seen >= SEEN_EVERY_S:
             self.db.update_session_machine(session.session_id, {SEEN_AT: self._now_iso()})
 
@@ -316,8 +398,8 @@ class Flow:
                 raise Refused("online.bad_link")
             if rec.status != "active":
                 return self._final(pid, rec.status)
-            session = self._open(pid)
-            self._touch(session)
+            session, seen = self._open(pid, rec=rec)
+            self._touch(session, seen)
             return self._show(session, pid)
 
     def _show(self, session: Session, pid: str) -> dict[str, Any]:
@@ -488,7 +570,7 @@ class Flow:
         rec = self.db.participant(pid)
         if rec is None or rec.status != "active":
             raise Refused("online.bad_link")
-        plan = self._open(pid, create=False).current_trial()
+        plan = self._open(pid, create=False, rec=rec)[0].current_trial()
         if plan is None or name != self.tokens.media(pid, plan.trial_index):
             raise Refused("online.bad_link")
         return self.videos.video(plan)
@@ -509,8 +591,8 @@ class Flow:
                 raise Refused("online.bad_link")
             if rec.status != "active":
                 return self._final(pid, rec.status)
-            session = self._open(pid)
-            self._touch(session)
+            session, seen = self._open(pid, rec=rec)
+            self._touch(session, seen)
             extra = self._act(session, pid, action, body)
             if session.finished:
                 return self._final(pid, "done" if session.state is State.DONE else "ended_early")

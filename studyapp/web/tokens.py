@@ -60,6 +60,9 @@ class Tokens:
     def __init__(self, secret: bytes) -> None:
         self._secret = bytes(secret)
         self._known: dict[str, str] = {}
+        # a participant's session and CSRF tokens, made once (every page and action of theirs needs both)
+        self._session_of: dict[str, str] = {}
+        self._csrf_of: dict[str, str] = {}
 
     def _mac(self, *parts: object) -> str:
         msg = "\0".join(str(p) for p in parts).encode("utf-8")
@@ -68,8 +71,10 @@ class Tokens:
 
     def session(self, participant: str) -> str:
         """The participant's session token (their pages live under ``/s/<token>/``)."""
-        tok = self._mac("session", participant)
-        self._known[tok] = participant
+        tok = self._session_of.get(participant)
+        if tok is None:
+            tok = self._session_of[participant] = self._mac("session", participant)
+            self._known[tok] = participant
         return tok
 
     def media(self, participant: str, trial_index: int) -> str:
@@ -78,7 +83,10 @@ class Tokens:
 
     def csrf(self, participant: str) -> str:
         """The token every state-changing request of this participant must carry."""
-        return self._mac("csrf", participant)
+        tok = self._csrf_of.get(participant)
+        if tok is None:
+            tok = self._csrf_of[participant] = self._mac("csrf", participant)
+        return tok
 
     def play(self, participant: str, play_id: int, started: float) -> str:
         """The ticket of one play, ``<play id>.<start time in ms>.<mac>``: the page sends it back when the clip

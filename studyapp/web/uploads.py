@@ -28,7 +28,7 @@ from __future__ import annotations
 import hmac
 import json
 import logging
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from studyapp.study.returned import Finding, check_returned, map_ids
 from studyapp.study.session import trial_duration_s
@@ -68,9 +68,15 @@ def _answers(trials: list[dict[str, Any]], responses: list[dict[str, Any]],
 class UploadDesk:
     """The upload endpoint's logic for one study (no HTTP here: :mod:`studyapp.web.app` puts it on the network)."""
 
-    def __init__(self, design: Any, db: ResultsDB) -> None:
-        self.design, self.db = design, db
+    def __init__(self, design: Any, db: ResultsDB | Callable[[], ResultsDB]) -> None:
+        """``db``: the results database, or a function giving the one to use now (the calling database
+        thread's connection, :attr:`studyapp.web.flow.Flow.db`)."""
+        self.design, self._db = design, db
         self._durations: dict[str, float | None] = {}
+
+    @property
+    def db(self) -> ResultsDB:
+        return self._db() if callable(self._db) else self._db
 
     def receive(self, headers: Mapping[str, str], body: bytes) -> dict[str, Any]:
         """Check and store one upload; the state the server now holds. Raises :class:`UploadRefused`."""
