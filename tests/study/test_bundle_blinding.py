@@ -78,13 +78,14 @@ def _occurrences(b: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def _groups_a_condition(occ: list[dict[str, Any]], attr: Callable[[dict[str, Any]], Hashable]) -> list[Any]:
-    """Values of ``attr`` that pick files of one condition only, on two or more different clips."""
+def _groups_a_condition(occ: list[dict[str, Any]], attr: Callable[[dict[str, Any]], Hashable],
+                        min_clips: int = 2) -> list[Any]:
+    """Values of ``attr`` that pick files of one condition only, on ``min_clips`` or more different clips."""
     seen: dict[Hashable, set[tuple[str, str]]] = defaultdict(set)
     for o in occ:
         seen[attr(o)].add((o["condition"], o["clip"]))
     return [v for v, pairs in seen.items()
-            if len({c for c, _ in pairs}) == 1 and len({clip for _, clip in pairs}) >= 2]
+            if len({c for c, _ in pairs}) == 1 and len({clip for _, clip in pairs}) >= min_clips]
 
 
 def test_no_shipped_attribute_groups_one_models_files_across_clips(demo_bundle) -> None:
@@ -100,8 +101,11 @@ def test_no_shipped_attribute_groups_one_models_files_across_clips(demo_bundle) 
         stems = {Path(o["name"]).stem[2:] for o in occ if o["condition"] == cond}
         assert len(stems) >= 2
         assert not set.intersection(*({s[i:i + 4] for i in range(len(s) - 3)} for s in stems)), cond
+        # Names are random per bundle, so two of one model's names share some 4 hex characters by chance now
+        # and then (one fresh-clone run met 'aa03'; 15 % of simulated bundles of 30 random names), three
+        # names in none of 2,000: a fragment counts as grouping from three clips on.
         for fragment in {s[i:i + 4] for s in stems for i in range(len(s) - 3)}:
-            assert not _groups_a_condition(occ, lambda o: fragment in o["name"]), (cond, fragment)
+            assert not _groups_a_condition(occ, lambda o: fragment in o["name"], min_clips=3), (cond, fragment)
     # tokens mean nothing across trials: each token stands for every condition somewhere
     for tok in {o["token"] for o in occ}:
         assert {o["condition"] for o in occ if o["token"] == tok} == {c.id for c in design.conditions}, tok
