@@ -36,7 +36,7 @@ def apply_exclusions(df: pd.DataFrame, *, exclude_failed_attention: bool = False
     for p in exclude:
         reasons.setdefault(p, []).append("excluded by name (--exclude)" if p in known
                                          else "excluded by name (--exclude), but has no answers")
-    checks = df[df["is_attention_check"].astype(bool)] if "is_attention_check" in df.columns else df.iloc[:0]
+    checks = _checks(df) if "is_attention_check" in df.columns else df.iloc[:0]
     if len(checks):
         # One verdict per attention-check trial: a trial failed when any of its rows says so.
         per_trial = checks.groupby(trial_key(checks))["attention_passed"].all().reset_index()
@@ -64,8 +64,15 @@ def attention_summary(df: pd.DataFrame) -> pd.DataFrame:
     """Per participant: attention-check trials seen and failed (empty when there are none)."""
     if "is_attention_check" not in df.columns or not df["is_attention_check"].any():
         return pd.DataFrame(columns=["participant", "checks", "failed"])
-    checks = df[df["is_attention_check"].astype(bool)]
+    checks = _checks(df)
     per_trial = checks.groupby(trial_key(checks))["attention_passed"].all().reset_index()
     s = per_trial.groupby("participant")["attention_passed"].agg(checks="size", passed="sum").reset_index()
     s["failed"] = s["checks"] - s["passed"]
     return s[["participant", "checks", "failed"]]
+
+
+def _checks(df: pd.DataFrame) -> pd.DataFrame:
+    """The attention-check rows, with only the columns their verdicts read (a copy of every column of a
+    large study's checks would be most of the work)."""
+    cols = [c for c in dict.fromkeys([*trial_key(df), "attention_passed"]) if c in df.columns]
+    return df.loc[df["is_attention_check"].astype(bool).to_numpy(), cols]
