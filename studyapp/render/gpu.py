@@ -73,17 +73,24 @@ def skin_groups(indices: np.ndarray, weights: np.ndarray, morph_rows: np.ndarray
     """The triangles grouped by what their vertices need of the vertex shader, for its specialised variants.
 
     Returns ``(triangles, groups)``: the triangles reordered, group after group, each group in
-    :func:`vertex_local_order`; and per group ``(morphs, bones, first, count)`` -- whether any of its
-    vertices has a morph row, how many leading joint slots its vertices' weights use (the smallest of
-    :data:`SKIN_BONES` holding the last non-zero weight of each), and its range in the index buffer (first
-    index, number of indices). Weights past ``bones`` are zero, so a variant that leaves them out sums the
-    same skinning matrix.
+    :func:`vertex_local_order`; and per group ``(morphs, bones, first, count)`` -- whether its vertices have
+    morph rows (one group without, one with), how many leading joint slots its vertices' weights use (the
+    smallest of :data:`SKIN_BONES` holding the last non-zero weight of every vertex of the group), and its
+    range in the index buffer (first index, number of indices). Weights past ``bones`` are zero, so a variant
+    that leaves them out sums the same skinning matrix.
+
+    Two groups, not one per joint count: on llvmpipe each variant is compiled at its first draw, about
+    0.2 s with an empty shader cache (a participant's first run), and splitting by joint count as well (five
+    variants for the built-in avatar) made the first trial frame 2.6 s instead of 1.6 s on a fresh machine
+    for no frame time measurable in ``bench_render.py`` (1.25x either way, interleaved, load 1.6).
 
     >>> tris = np.array([[0, 1, 2], [1, 2, 3]])
     >>> w = np.array([[1, 0, 0, 0], [1, 0, 0, 0], [0.5, 0.5, 0, 0], [0.4, 0.3, 0.2, 0.1]], np.float32)
     >>> order, groups = skin_groups(tris, w, np.array([-1, -1, -1, -1]))
     >>> order.tolist(), groups
-    ([[0, 1, 2], [1, 2, 3]], [(False, 2, 0, 3), (False, 4, 3, 3)])
+    ([[0, 1, 2], [1, 2, 3]], [(False, 4, 0, 6)])
+    >>> skin_groups(tris, w, np.array([-1, -1, -1, 0]))[1]
+    [(False, 2, 0, 3), (True, 4, 3, 3)]
     """
     tri = np.asarray(indices).reshape(-1, 3)
     w = np.asarray(weights)
@@ -93,12 +100,12 @@ def skin_groups(indices: np.ndarray, weights: np.ndarray, morph_rows: np.ndarray
     tri_morph = (np.asarray(morph_rows)[tri] >= 0).any(axis=1)
     parts, groups, first = [], [], 0
     for morphs in (False, True):
-        for b in SKIN_BONES:
-            sel = tri[(tri_morph == morphs) & (tri_bones == b)]
-            if len(sel):
-                parts.append(vertex_local_order(sel))
-                groups.append((morphs, int(b), first, 3 * len(sel)))
-                first += 3 * len(sel)
+        sel = tri[tri_morph == morphs]
+        if len(sel):
+            b = int(tri_bones[tri_morph == morphs].max())
+            parts.append(vertex_local_order(sel))
+            groups.append((morphs, b, first, 3 * len(sel)))
+            first += 3 * len(sel)
     order = np.concatenate(parts) if parts else tri[:0]
     return order, groups
 
