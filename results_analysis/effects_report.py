@@ -130,7 +130,9 @@ def posthoc_caption(a: Analysis) -> str:
              if a.control is not None else f"all {n_comparisons(a)} pairs")
     hl = ("distribution-free interval from the Wilcoxon test" if a.block == "participant"
           else f"{INTERVAL_NAMES[a.interval]} participant-bootstrap interval")
-    return (f"Table 3. Post-hoc comparisons, {which} (Δ: difference of mean ranks; r_rb: matched-pairs "
+    delta = ("difference of the Friedman test's mean ranks, as placed in Figure 2" if a.block == "participant"
+             else "difference of mean ranks")
+    return (f"Table 3. Post-hoc comparisons, {which} (Δ: {delta}; r_rb: matched-pairs "
             f"rank-biserial correlation of the Wilcoxon test with its {INTERVAL_NAMES[a.interval]} "
             f"participant-bootstrap interval; HL: Hodges–Lehmann estimate of the difference of ranks, first "
             f"minus second, with its {hl}; Wilcoxon p-values adjusted by {adjustment_name(a)} over the "

@@ -183,12 +183,13 @@ def cliques(mean_ranks: np.ndarray, cd: float) -> list[tuple[int, int]]:
 
 
 def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: float = 0.05,
-               order: list[str] | None = None):
+               order: list[str] | None = None, rank_name: str = "Mean rank"):
     """Critical-difference diagrams, one panel per criterion (Demsar 2006, Fig. 1 style).
 
     ``results``: criterion -> (mean rank per condition, critical difference). Rank 1 (best) is on the
     left; thick black bars join conditions whose mean ranks differ by less than the CD. ``order`` fixes
-    the colour of each condition (the same as in the other figures).
+    the colour of each condition (the same as in the other figures). ``rank_name`` says in the caption which
+    mean rank the axis shows (the Friedman test's, of its blocks, can differ from the mean over all answers).
     """
     with matplotlib.rc_context(_STYLE):
         crits = list(results)
@@ -238,8 +239,9 @@ def cd_diagram(results: dict[str, tuple[dict[str, float], float]], *, alpha: flo
                 y = -0.22 - 0.16 * c_i
                 ax.plot([sorted_vals[a] - 0.05, sorted_vals[b] + 0.05], [y, y], color="black", lw=3,
                         solid_capstyle="round")
-        fig.text(0.5, _caption_y(fig), f"Mean rank (1 = best). Bars join conditions the Nemenyi test does not separate "
-                 f"(α = {alpha:g}).", ha="center", va="bottom", fontsize=7.5, color="#444444")
+        _fit_width(fig, fig.text(0.5, _caption_y(fig), f"{rank_name} (1 = best). Bars join conditions the Nemenyi "
+                                 f"test does not separate (α = {alpha:g}).", ha="center", va="bottom", fontsize=7.5,
+                                 color="#444444"))
         fig.tight_layout(rect=(0, 0.03, 1, 1))
         return fig
 

@@ -215,7 +215,9 @@ def write_figures(a: Analysis, out: Path) -> None:
     figures.save(figures.rank_share_figure(summaries, order), out, "rank_shares")
     cd_input = {a.criterion_name(k): (dict(zip(a.conditions, c.friedman.mean_rank)), c.critical_difference)
                 for k, c in a.criteria.items()}
-    figures.save(figures.cd_diagram(cd_input, alpha=a.alpha, order=order), out, "critical_difference")
+    figures.save(figures.cd_diagram(cd_input, alpha=a.alpha, order=order, rank_name=(
+        "Friedman mean rank: each participant's mean ranks ranked again" if a.block == "participant"
+        else "Mean rank over trials")), out, "critical_difference")
     figures.save(figures.mean_rank_figure(summaries, order, ci=a.ci), out, "mean_ranks")
     figures.save(figures.bt_figure({a.criterion_name(k): c.bradley_terry for k, c in a.criteria.items()}, order,
                                    ci=a.ci), out, "bradley_terry")
@@ -470,8 +472,8 @@ def build_document(a: Analysis, title: str) -> Document:
                              f"{a.ci:.0%} CI": f"{_num(r.ci_low)}–{_num(r.ci_high)}", "median": f"{r.median_rank:g}",
                              **dict(zip((f"rank {i}" for i in range(1, len(a.conditions) + 1)), _percentages(
                                  [getattr(r, f"share_rank_{i}") for i in range(1, len(a.conditions) + 1)])))})
-        doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean with participant-bootstrap "
-                  "interval, median, and share of answers at each rank (a tied answer shared between the places it "
+        doc.table(pd.DataFrame(rows), "Table 2. Ranks per condition (1 = best): mean over all answers with "
+                  "participant-bootstrap interval, median, and share of answers at each rank (a tied answer shared between the places it "
                   "spans, so each row sums to 100 %).")
         doc.table(effects_report.posthoc_table(a), effects_report.posthoc_caption(a))
         btrows = [{"criterion": a.criterion_name(crit), "condition": r["condition"], "strength": _bt_cell(r),
@@ -482,7 +484,10 @@ def build_document(a: Analysis, title: str) -> Document:
         doc.figure("rank_shares", "Figure 1. Share of answers at each rank, per condition and criterion (ties shared "
                    "between the places they span).")
         doc.figure("critical_difference", f"Figure 2. Critical-difference diagrams (Nemenyi, α = {_alpha(a.alpha)}): "
-                   "conditions joined by a bar are not significantly different.")
+                   "conditions joined by a bar are not significantly different." + (
+                       " Positions are the Friedman test's mean ranks: each participant's mean rank per condition, "
+                       "ranked again within the participant, averaged over participants; they can differ from "
+                       "Table 2's mean over all answers." if a.block == "participant" else ""))
         doc.figure("mean_ranks", f"Figure 3. Mean rank with {a.ci:.0%} participant-bootstrap interval.")
         doc.figure("bradley_terry", f"Figure 4. Bradley–Terry strengths with {a.ci:.0%} participant-bootstrap interval.")
         effects_report.agreement_section(a, doc)

@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from results_analysis import analyze
+from results_analysis.analysis import run_analysis
 from results_analysis.cli import main
 from results_analysis.errors import AnalysisInputError
 from results_analysis.simulate import simulate_results
@@ -161,3 +162,25 @@ def test_analyze_from_python_uses_the_labels(tmp_path: Path) -> None:
     # the questionnaire columns are answers, not a grouping
     from results_analysis.analysis import group_columns
     assert group_columns(df.assign(**{"questionnaire:ease:q1": "3"})) == ["speaker", "device"]
+
+
+def test_the_report_names_the_friedman_mean_ranks_apart_from_the_mean_over_all_answers(tmp_path) -> None:
+    """With several trials per participant the participant-level Friedman test ranks each participant's mean
+    ranks again, so Figure 2 and Table 3 place a condition elsewhere than Table 2's mean over all answers: the
+    captions must say which is which (a reviewer saw 2.67 in one and 2.50 in the other, both 'mean rank')."""
+    df = simulate_results(9, 4, criteria=("realism",), n_attention=0, seed=3)
+    a = run_analysis(df, n_boot=50)
+    c = a.criteria["realism"]
+    friedman = dict(zip(a.conditions, c.friedman.mean_rank))
+    plain = c.summary.set_index("condition")["mean_rank"]
+    assert max(abs(friedman[x] - plain[x]) for x in a.conditions) > 0.05  # the two really differ here
+    df.to_csv(tmp_path / "r.csv", index=False)
+    assert main([str(tmp_path / "r.csv"), "--out", str(tmp_path / "p"), "--bootstrap", "50"]) == 0
+    report = (tmp_path / "p" / "report.md").read_text(encoding="utf-8")
+    assert "Positions are the Friedman test's mean ranks" in report
+    assert "Δ: difference of the Friedman test's mean ranks, as placed in Figure 2" in report
+    assert "Table 2. Ranks per condition (1 = best): mean over all answers" in report
+    # trial blocks: the Friedman ranks are the answers' own, and nothing claims otherwise
+    assert main([str(tmp_path / "r.csv"), "--out", str(tmp_path / "t"), "--bootstrap", "50", "--block", "trial"]) == 0
+    trial = (tmp_path / "t" / "report.md").read_text(encoding="utf-8")
+    assert "Friedman test's mean ranks" not in trial and "Δ: difference of mean ranks" in trial
