@@ -15,6 +15,11 @@ first trial). Two parsers, both giving exactly Python's ``float()`` of every num
 A block whose first piece the vectorized parser refuses goes whole to the C reader (one stream when it is
 under :data:`STREAM_MAX_BYTES`).
 
+The vectorized parser works one piece ahead on a second thread (:func:`_ahead`): its numpy calls release the
+interpreter lock, so on a machine with a free core the next piece is parsed while this one is checked and
+copied into the array -- the two cores ``pandas.read_csv`` also uses (pandas 3 splits a large file between
+threads). Everything a piece decides (errors, line numbers, refusals) is still taken in file order.
+
 Checks, each an :class:`~studyapp.errors.InputError` naming the file line:
 
 * a line is at most :func:`line_limit` characters (64 per channel plus 1,024): a file whose line breaks
@@ -30,9 +35,12 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import re
+import threading
 import warnings
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -62,6 +70,43 @@ try:
     from numpy._core._multiarray_umath import _load_from_filelike as _C_READER
 except ImportError:  # pragma: no cover - other numpy layouts
     _C_READER = None
+
+
+_AHEAD: tuple[int, ThreadPoolExecutor] | None = None
+_AHEAD_LOCK = threading.Lock()
+
+
+def _ahead() -> ThreadPoolExecutor:
+    """The one thread that parses the next piece ahead (made on first use, shared by every read of this
+    process). A forked child (``prerender --jobs``, a multiprocessing pool) inherits the executor but not its
+    thread, and work queued there would never run: each process makes its own."""
+    global _AHEAD
+    with _AHEAD_LOCK:
+        if _AHEAD is None or _AHEAD[0] != os.getpid():
+            _AHEAD = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="bvh-ahead"))
+        return _AHEAD[1]
+
+
+#: Parse the next piece on the ahead thread; False parses every piece on the calling thread when it is
+#: reached (``bench_motion.py``'s one-thread row, against ``pandas.read_csv`` held to one thread).
+PARSE_AHEAD = True
+
+
+class _WhenAsked:
+    """``parse_block(piece)`` run when its result is asked for, on the asking thread."""
+
+    def __init__(self, piece: bytes, n_channels: int) -> None:
+        self._args = (piece, n_channels)
+
+    def result(self) -> tuple[np.ndarray, int] | None:
+        return parse_block(*self._args)
+
+
+def _parse_later(piece: bytes, n_channels: int) -> Future | _WhenAsked | None:
+    """``parse_block(piece)`` started on the ahead thread (None for a piece with no frames)."""
+    if not piece or not _NON_SPACE.search(piece):
+        return None
+    return _ahead().submit(parse_block, piece, n_channels) if PARSE_AHEAD else _WhenAsked(piece, n_channels)
 
 
 class _LineTooLong(Exception):
@@ -285,8 +330,10 @@ def _in_pieces(first: bytes, read: Reader, bytes_left: int, start: int, n_channe
     pieces = _pieces(first, read, max(CHUNK_BYTES, 2 * limit))
     piece = next(pieces, b"")
     consumed = 0
+    parsing = _parse_later(piece, n_channels) if vector and n_channels > 0 else None
     while piece:
         nxt = next(pieces, b"")
+        parsing_next = _parse_later(nxt, n_channels) if vector and n_channels > 0 else None
         too_long = first_long_line(piece, limit) if _has_long_line(piece, limit) else None
         if too_long is not None:
             at, length = too_long
@@ -299,8 +346,10 @@ def _in_pieces(first: bytes, read: Reader, bytes_left: int, start: int, n_channe
         if _NON_SPACE.search(piece):
             if n_channels == 0:
                 raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
-            block = parse_block(piece, n_channels) if vector else None
+            block = parsing.result() if parsing is not None else None
             if block is None and vector and n == 0:
+                if isinstance(parsing_next, Future):
+                    parsing_next.result()  # its work arrays are freed before numpy's reader starts
                 return None
             values, line_ends = block if block is not None else (_fast_piece(piece, n_channels), None)
             if values is None:
@@ -318,7 +367,7 @@ def _in_pieces(first: bytes, read: Reader, bytes_left: int, start: int, n_channe
         else:
             consumed += len(piece)
         line += piece.count(b"\n") if line_ends is None else line_ends
-        piece = nxt
+        piece, parsing = nxt, parsing_next
     if n == out.shape[0]:
         return out
     # trimmed by a copy when a real share would be wasted (a header claiming far more frames than sent)
