@@ -101,7 +101,14 @@ def test_remote_run_and_merge_maps_back_to_real_ids(lab, tmp_path: Path) -> None
     want = [next(token_rank[tok] for tok, real in trials[("R02", r.trial_index)]["conditions"].items()
                  if real == r.condition) for r in remote.itertuples()]
     assert remote["rank"].tolist() == want
-    assert remote.groupby("condition")["rank"].nunique().min() > 1  # no condition always got the same rank
+    # tokens mean nothing across trials: over the bundle's trials (both participants') every condition stands
+    # behind several tokens. (Over R02's six trials alone one condition keeps one token in ~1 % of salts: a
+    # fresh-clone run met it; over all of the key's trials that is ~1e-5.)
+    tokens_of: dict[str, set[str]] = {}
+    for t in info.key["trials"].values():
+        for tok, real in t["conditions"].items():
+            tokens_of.setdefault(real, set()).add(tok)
+    assert set(tokens_of) == set(REAL_CONDITIONS) and min(map(len, tokens_of.values())) > 1, tokens_of
     assert ResultsDB(results, design).participant("R02").latin_row == info.roster["R02"]
 
     # merging the same file again is reported as already merged (not an error), and nothing changes
