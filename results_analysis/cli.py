@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -119,20 +120,22 @@ def main(argv: list[str] | None = None) -> int:
         fr = c.friedman
         w = c.effect_sizes.kendall_w.iloc[0] if c.effect_sizes is not None else None
         w_ci = f" ({a.ci:.0%} CI {w['ci_low']:.2f}-{w['ci_high']:.2f})" if w is not None else ""
-        print(f"{crit}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}{w_ci}, "
+        print(f"{a.criterion_name(crit)}: chi2({fr.df}) = {fr.chi2:.2f}, p = {fr.p:.3g}, W = {fr.kendall_w:.2f}{w_ci}, "
               f"n = {fr.n_blocks} {a.block}s")
     for b in a.paradigm_blocks.values():
-        print(block_summary(b))
+        print(block_summary(b, a.criterion_labels))
     if len(a.exclusions):
         print("excluded: " + "; ".join(f"{r.participant} ({r.reason})" for r in a.exclusions.itertuples()))
     print(f"report: {args.out / 'report.html'}")
     return 0
 
 
-def block_summary(b) -> str:
-    """One line per pairwise, mismatch or rating block: its headline numbers per criterion."""
+def block_summary(b, names: Mapping[str, str] | None = None) -> str:
+    """One line per pairwise, mismatch or rating block: its headline numbers per criterion, each named by its
+    label in ``names`` (criterion id -> label; default: the id), as the report names it."""
     parts = []
     for crit, r in b.results.items():
+        crit = (names or {}).get(crit, crit)
         if b.paradigm == "pairwise":
             parts.append(f"{crit}: Elo " + ", ".join(
                 f"{row.condition} " + (f"{row.elo:+.0f}" if np.isfinite(row.elo) else "not estimable")

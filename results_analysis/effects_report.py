@@ -14,6 +14,7 @@ from results_analysis.analysis import Analysis, CriterionAnalysis
 from results_analysis.bootstrap import INTERVAL_NAMES
 from results_analysis.document import Document
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N
+from results_analysis.study_meta import with_criterion_label
 
 
 def adjustment_name(a: Analysis) -> str:
@@ -62,15 +63,18 @@ def meta(a: Analysis) -> dict:
 def write_tables(a: Analysis, out: Path) -> None:
     """effect_sizes.csv, kendall_w.csv, agreement.csv, agreement_summary.csv and
     questionnaire_item_reliability.csv in ``out``."""
+    def csv(t: pd.DataFrame, name: str) -> None:  # criteria by id, and by label beside it
+        with_criterion_label(t, a.criterion_labels).to_csv(out / name, index=False)
+
     eff = [c.effect_sizes for c in a.criteria.values() if c.effect_sizes is not None]
     if eff:
-        pd.concat([e.pairs.assign(criterion=k) for k, e in zip(a.criteria, eff)])[
-            ["criterion"] + list(eff[0].pairs.columns)].to_csv(out / "effect_sizes.csv", index=False)
-        pd.concat([e.kendall_w.assign(criterion=k) for k, e in zip(a.criteria, eff)])[
-            ["criterion"] + list(eff[0].kendall_w.columns)].to_csv(out / "kendall_w.csv", index=False)
+        csv(pd.concat([e.pairs.assign(criterion=k) for k, e in zip(a.criteria, eff)])[
+            ["criterion"] + list(eff[0].pairs.columns)], "effect_sizes.csv")
+        csv(pd.concat([e.kendall_w.assign(criterion=k) for k, e in zip(a.criteria, eff)])[
+            ["criterion"] + list(eff[0].kendall_w.columns)], "kendall_w.csv")
     if a.agreement is not None:
-        a.agreement.to_csv(out / "agreement.csv", index=False)
-        a.agreement_summary.to_csv(out / "agreement_summary.csv", index=False)
+        csv(a.agreement, "agreement.csv")
+        csv(a.agreement_summary, "agreement_summary.csv")
     if a.questionnaire_item_reliability is not None:
         a.questionnaire_item_reliability.to_csv(out / "questionnaire_item_reliability.csv", index=False)
 

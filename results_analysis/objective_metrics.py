@@ -27,6 +27,7 @@ import pandas as pd
 from scipy import stats
 
 from results_analysis.errors import AnalysisInputError
+from results_analysis.study_meta import with_criterion_label
 
 #: Columns of a metrics table that describe a row, not measure the motion.
 DESCRIPTIVE = frozenset({"condition", "stimulus", "sample", "duration_s", "fps", "n_motion_beats", "n_onsets"})
@@ -106,6 +107,8 @@ class MetricsComparison:
     extra: list[str]    # conditions of the metrics file the analysis does not have
     #: condition id -> the name the report shows (its design label); stats.json and the tables keep ids
     labels: dict[str, str] = field(default_factory=dict)
+    #: criterion id -> the name the report shows (its design label); the table has it beside the id
+    criterion_labels: dict[str, str] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return {"means": {c: {m: _num(v) for m, v in row.items()} for c, row in self.means.iterrows()},
@@ -116,7 +119,8 @@ class MetricsComparison:
     def write_tables(self, folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         self.means.reset_index().to_csv(folder / "metrics_by_condition.csv", index=False)
-        self.correlations.to_csv(folder / "metrics_rank_correlation.csv", index=False)
+        with_criterion_label(self.correlations, self.criterion_labels).to_csv(
+            folder / "metrics_rank_correlation.csv", index=False)
 
     def add_to(self, doc) -> None:
         """Append the section to a :class:`results_analysis.document.Document`."""
@@ -139,6 +143,7 @@ class MetricsComparison:
         show.index.name = "condition"
         doc.table(show.reset_index(), "Objective metrics per condition (mean over stimuli).")
         corr = self.correlations.copy()
+        corr["criterion"] = [self.criterion_labels.get(c, c) for c in corr["criterion"]]
         corr["rho"] = [("—" if not math.isfinite(v) else f"{v:.2f}") for v in corr["rho"]]
         corr["p"] = [("—" if not math.isfinite(v) else f"{v:.3g}") for v in corr["p"]]
         doc.table(corr.rename(columns={"rho": "Spearman ρ", "p": "p (exact)", "n": "conditions"}),
@@ -146,14 +151,17 @@ class MetricsComparison:
 
 
 def compare_metrics(table: pd.DataFrame, mean_ranks: dict[str, dict[str, float]],
-                    labels: dict[str, str] | None = None) -> MetricsComparison:
+                    labels: dict[str, str] | None = None,
+                    criterion_labels: dict[str, str] | None = None) -> MetricsComparison:
     """Per-condition means of a metrics table and their correlations with ``mean_ranks`` (criterion ->
-    condition -> mean rank); ``labels`` (id -> label) only changes what the report section shows."""
+    condition -> mean rank); ``labels`` (condition id -> label) only changes what the report section shows,
+    ``criterion_labels`` (criterion id -> label) that and the table's ``criterion_label`` column."""
     means = metric_means(table)
     analysed = list(dict.fromkeys(c for r in mean_ranks.values() for c in r))
     return MetricsComparison(means=means, correlations=metric_correlations(means, mean_ranks),
                              missing=[c for c in analysed if c not in means.index],
-                             extra=[c for c in means.index if c not in analysed], labels=dict(labels or {}))
+                             extra=[c for c in means.index if c not in analysed], labels=dict(labels or {}),
+                             criterion_labels=dict(criterion_labels or {}))
 
 
 def _num(v):

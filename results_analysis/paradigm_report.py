@@ -17,6 +17,7 @@ from results_analysis.bradley_terry import BOOT_PRIOR
 from results_analysis.document import Document
 from results_analysis.paradigm_analysis import BlockAnalysis, MismatchResult, PairwiseResult, RatingResult, n_boot_note
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N
+from results_analysis.study_meta import with_criterion_label
 
 
 def _safe(name: str) -> str:
@@ -71,12 +72,13 @@ def block_tables(b: BlockAnalysis) -> dict[str, pd.DataFrame]:
     return out
 
 
-def write_block_tables(blocks: dict[str, BlockAnalysis], out: Path) -> None:
-    """Every block's :func:`block_tables` as ``out/<stem>.csv``."""
+def write_block_tables(blocks: dict[str, BlockAnalysis], out: Path, names: Mapping[str, str] | None = None) -> None:
+    """Every block's :func:`block_tables` as ``out/<stem>.csv``; a table's ``criterion`` column (ids) gets each
+    criterion's name in ``names`` (id -> label; default: the id) beside it, as ``criterion_label``."""
     out.mkdir(parents=True, exist_ok=True)
     for b in blocks.values():
         for name, t in block_tables(b).items():
-            t.to_csv(out / f"{name}.csv", index=False)
+            with_criterion_label(t, names or {}).to_csv(out / f"{name}.csv", index=False)
 
 
 # --- figures ------------------------------------------------------------------------------------------

@@ -28,7 +28,7 @@ from results_analysis.objective_metrics import compare_metrics
 from results_analysis.paradigm_analysis import stats_entry
 from results_analysis.paradigm_report import add_sections, write_block_figures, write_block_tables
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, nemenyi_q_alpha
-from results_analysis.study_meta import relabel
+from results_analysis.study_meta import relabel, with_criterion_label
 
 
 def analyze(df: pd.DataFrame, out_dir: str | Path, *, title: str = "User study results",
@@ -57,7 +57,7 @@ def write_outputs(a: Analysis, out: Path, *, title: str, metrics: pd.DataFrame |
     # the metrics CSV names conditions by id: join before relabelling
     objective = None if metrics is None else compare_metrics(metrics, {
         crit: dict(zip(c.summary["condition"], c.summary["mean_rank"])) for crit, c in a.criteria.items()},
-        labels=a.labels)
+        labels=a.labels, criterion_labels=a.criterion_labels)
     stats = stats_dict(a) | ({} if objective is None else {"_objective_metrics": objective.as_dict()})
     (out / "stats.json").write_text(json.dumps(_clean(stats), indent=2, allow_nan=False) + "\n")
     a = relabel(a, a.labels)
@@ -171,22 +171,28 @@ def friedman_table(a: Analysis) -> pd.DataFrame:
 
 
 def write_tables(a: Analysis, out: Path) -> None:
+    """Every CSV table of the analysis into ``out``. A table that names criteria keeps their ids in ``criterion``
+    and has each one's label in ``criterion_label`` beside it (:func:`results_analysis.study_meta.with_criterion_label`)."""
     out.mkdir(parents=True, exist_ok=True)
-    write_block_tables(a.paradigm_blocks, out)
+    names = a.criterion_labels
+
+    def csv(t: pd.DataFrame, name: str) -> None:
+        with_criterion_label(t, names).to_csv(out / name, index=False)
+
+    write_block_tables(a.paradigm_blocks, out, names)
     if a.criteria:  # the rank blocks' tables (a study of other paradigms only has none)
-        friedman_table(a).to_csv(out / "friedman.csv", index=False)
-        pd.concat([c.summary.assign(criterion=k) for k, c in a.criteria.items()])[
-            ["criterion"] + list(next(iter(a.criteria.values())).summary.columns)].to_csv(out / "conditions.csv",
-                                                                                         index=False)
+        csv(friedman_table(a), "friedman.csv")
+        csv(pd.concat([c.summary.assign(criterion=k) for k, c in a.criteria.items()])[
+            ["criterion"] + list(next(iter(a.criteria.values())).summary.columns)], "conditions.csv")
         methods = sorted({m for c in a.criteria.values() for m in c.posthoc})
         for m in methods:
             t = pd.concat([c.posthoc[m].assign(criterion=k) for k, c in a.criteria.items() if m in c.posthoc])
-            t[["criterion"] + [x for x in t.columns if x != "criterion"]].to_csv(out / f"posthoc_{m}.csv", index=False)
+            csv(t[["criterion"] + [x for x in t.columns if x != "criterion"]], f"posthoc_{m}.csv")
         bt = pd.concat([c.bradley_terry.assign(criterion=k) for k, c in a.criteria.items()])
-        bt[["criterion"] + [x for x in bt.columns if x != "criterion"]].to_csv(out / "bradley_terry.csv", index=False)
+        csv(bt[["criterion"] + [x for x in bt.columns if x != "criterion"]], "bradley_terry.csv")
     a.exclusions.to_csv(out / "exclusions.csv", index=False)
     for g, t in a.groups.items():
-        t.to_csv(out / f"by_{_safe(g)}.csv", index=False)
+        csv(t, f"by_{_safe(g)}.csv")
     if a.questionnaire_items is not None:
         a.questionnaire_items.to_csv(out / "questionnaire_items.csv", index=False)
         a.questionnaire_reliability.to_csv(out / "questionnaire_reliability.csv", index=False)

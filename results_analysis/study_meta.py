@@ -135,6 +135,26 @@ def criterion_labels(df: pd.DataFrame) -> dict[str, str]:
     return {c: found.get(c, c) for c in ids}
 
 
+def with_criterion_label(table: pd.DataFrame, names: Mapping[str, str]) -> pd.DataFrame:
+    """``table`` with a ``criterion_label`` column right after its ``criterion`` column: each criterion's name
+    in ``names`` (id -> label, see :func:`criterion_labels`), else its id. ``criterion`` keeps the id, so a
+    script that selects or joins on it works as before; the label sits beside it, as in the tidy export. A
+    table without a ``criterion`` column, or that has a label already, is returned as it is. For every CSV
+    in ``tables/`` that names criteria.
+
+    >>> with_criterion_label(pd.DataFrame({"criterion": ["sync", "real"], "p": [0.5, 0.1]}), {"sync": "In time"})
+      criterion criterion_label    p
+    0      sync         In time  0.5
+    1      real            real  0.1
+    """
+    if "criterion" not in table.columns or "criterion_label" in table.columns:
+        return table
+    out = table.copy()
+    out.insert(out.columns.get_loc("criterion") + 1, "criterion_label",
+               [names.get(c, c) for c in out["criterion"]])
+    return out
+
+
 def study_title(df: pd.DataFrame) -> str | None:
     """The study's title from the ``study_title`` column (whitespace collapsed), or None when the table has
     none. Titles of merged tables that differ are joined with " / "."""

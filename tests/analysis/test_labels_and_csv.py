@@ -184,3 +184,62 @@ def test_the_report_names_the_friedman_mean_ranks_apart_from_the_mean_over_all_a
     assert main([str(tmp_path / "r.csv"), "--out", str(tmp_path / "t"), "--bootstrap", "50", "--block", "trial"]) == 0
     trial = (tmp_path / "t" / "report.md").read_text(encoding="utf-8")
     assert "Friedman test's mean ranks" not in trial and "Δ: difference of mean ranks" in trial
+
+
+def _labelled_study(tmp_path: Path) -> tuple[Path, dict[str, str]]:
+    """A rank study with a pairwise, a mismatch and a rating block, its criteria labelled (a schema 7 export)."""
+    from results_analysis.simulate import simulate_paradigm
+
+    labels = {"realism": "Looks real", "synchronization": "Synchronization with speech", "diversity": "Variety"}
+    ranks = simulate_results(8, 3, speakers=2, seed=3)
+    parts, offset = [ranks], int(ranks["trial_index"].max()) + 1
+    for i, paradigm in enumerate(("pairwise", "mismatch", "rating")):
+        parts.append(simulate_paradigm(paradigm, 8, 3, conditions=("FaceCapGes", "DiffSHEG", "CaMN"),
+                                       criteria=("realism", "synchronization"), block=paradigm[:2],
+                                       trial_offset=offset + 100 * i, seed=i))
+    df = pd.concat(parts, ignore_index=True)
+    df.assign(criterion_label=df["criterion"].map(labels)).to_csv(tmp_path / "r.csv", index=False)
+    pd.DataFrame({"condition": ["FaceCapGes", "DiffSHEG", "CaMN"], "stimulus": "s1",
+                  "jerk": [1.0, 2.5, 3.1]}).to_csv(tmp_path / "metrics.csv", index=False)
+    return tmp_path / "r.csv", labels
+
+
+def test_tables_keep_criterion_ids_with_their_labels_beside_and_the_console_names_labels(tmp_path, capsys) -> None:
+    """Every CSV table that names criteria keeps the id in ``criterion`` (what a script selects and joins on)
+    and has the design's label in ``criterion_label`` right after it, as the tidy export does; the console
+    summary, like the report, names each criterion by its label."""
+    results, labels = _labelled_study(tmp_path)
+    args = ["--bootstrap", "50", "--paradigm-bootstrap", "50", "--permutations", "0", "--group", "speaker",
+            "--metrics", str(tmp_path / "metrics.csv")]
+    assert main([str(results), "--out", str(tmp_path / "a"), *args]) == 0
+    console = capsys.readouterr().out
+    named = 0
+    for path in sorted((tmp_path / "a" / "tables").glob("*.csv")):
+        t = pd.read_csv(path)
+        if "criterion" not in t.columns:
+            continue
+        named += 1
+        cols = list(t.columns)
+        assert cols[cols.index("criterion") + 1] == "criterion_label", path.name
+        assert set(t["criterion"]) <= set(labels), path.name  # the ids stay
+        assert (t["criterion_label"] == t["criterion"].map(labels)).all(), path.name
+    # the rank tables, effect sizes, agreement, the breakdown, the metrics and every block's tables
+    assert named >= 20
+    lines = console.splitlines()
+    for crit, label in labels.items():
+        assert any(x.startswith(f"{label}: chi2(2) = ") for x in lines), console
+        assert not any(x.startswith(f"{crit}:") for x in lines), console
+    blocks = [x for x in lines if x.startswith("block ")]
+    assert len(blocks) == 3 and all("Looks real: " in x and "Synchronization with speech: " in x and
+                                    "realism:" not in x for x in blocks), blocks
+    # the report's objective-metrics table names criteria by label too
+    md = (tmp_path / "a" / "report.md").read_text(encoding="utf-8")
+    assert "| Looks real | jerk |" in md and "| realism | jerk |" not in md
+
+    # a file without labels (an export before schema 7): the label column is the id, so scripts see one layout
+    pd.read_csv(results).drop(columns="criterion_label").to_csv(tmp_path / "old.csv", index=False)
+    assert main([str(tmp_path / "old.csv"), "--out", str(tmp_path / "b"), *args]) == 0
+    assert any(x.startswith("realism: chi2(2) = ") for x in capsys.readouterr().out.splitlines())
+    old = pd.read_csv(tmp_path / "b" / "tables" / "friedman.csv")
+    assert list(old.columns[:2]) == ["criterion", "criterion_label"]
+    assert (old["criterion_label"] == old["criterion"]).all()
