@@ -53,6 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--questionnaire-csv", type=Path, help="questionnaire answers, one row per participant x item")
     e.add_argument("--exclude-practice", action="store_true",
                    help="leave practice trials out (by default they are kept and flagged in is_practice)")
+    e.add_argument("--design", type=Path, metavar="STUDY.toml",
+                   help="the study's design: records its labels in the database first, for a database that has "
+                   "none (made before schema 7: criteria named by their ids); it must be the design the database "
+                   "was made for")
     e.set_defaults(func=_cmd_export)
 
     b = sub.add_parser(
@@ -340,14 +344,24 @@ def _upload_line(uploader: Any) -> Callable[[], str]:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from studyapp.study.export import export_dataframe, questionnaire_dataframe
+    from studyapp.study.export import criteria_unlabelled, export_dataframe, questionnaire_dataframe, record_design
+
+    if args.design is not None:
+        record_design(args.db, args.design)
+
+    def table() -> Any:
+        df = export_dataframe(args.db, include_practice=not args.exclude_practice)
+        if len(df) and args.design is None and criteria_unlabelled(args.db):  # on stderr: stdout may be the CSV
+            print("note: the database records no criterion labels (made before schema 7), so the export names "
+                  "criteria by their ids; add --design STUDY.toml to record the design's labels", file=sys.stderr)
+        return df
 
     if not args.csv and not args.questionnaire_csv:
         # no output named: the long table goes to stdout (for a pipe or a quick look); nothing else is printed
-        export_dataframe(args.db, include_practice=not args.exclude_practice).to_csv(sys.stdout, index=False)
+        table().to_csv(sys.stdout, index=False)
         return 0
     if args.csv:
-        df = export_dataframe(args.db, include_practice=not args.exclude_practice)
+        df = table()
         args.csv.parent.mkdir(parents=True, exist_ok=True)
         df.to_csv(args.csv, index=False)
         n_part = df["participant"].nunique() if len(df) else 0

@@ -872,7 +872,7 @@ def _is_bundle(path: Path) -> bool:
 def _merge_design(db: Any, db_path: Path | str, design_path: str | Path | None) -> Any:
     """The study design the database was made for, to recompute every returned participant's schedule:
     ``design_path``, else ``<name>.toml`` next to ``<name>.results.sqlite`` (where ``run`` and ``bundle`` put it)."""
-    from studyapp.study.design import load_design
+    from studyapp.study.design import load_design_of
 
     if design_path is None:
         name = db_path.name if isinstance(db_path, Path) else ""  # a server database (URL) has no design beside it
@@ -883,12 +883,7 @@ def _merge_design(db: Any, db_path: Path | str, design_path: str | Path | None) 
                              "needs the design: give it with --design STUDY.toml" +
                              (f" (it is not at {guess})" if guess is not None else ""))
         design_path = guess
-    design = load_design(design_path, check_files=False)
-    if design.design_hash != db.design_hash:
-        raise InputError(design_path, None, f"not the design this results database was made for (design hash "
-                         f"{design.design_hash[:12]}…, the database's {db.design_hash[:12]}…); give the study's "
-                         "own design with --design")
-    return design
+    return load_design_of(design_path, db.design_hash)
 
 
 @dataclass

@@ -58,6 +58,33 @@ def export_dataframe(db: str | Path | ResultsDB, *, include_practice: bool = Tru
     return df
 
 
+def record_design(db: str | Path | ResultsDB, design: str | Path) -> None:
+    """Record in the database the labels its export shows, from ``design``: the criteria's labels and questions,
+    the conditions' labels and places and the stimuli's tags, as a session, ``serve`` or ``merge`` does when it
+    opens the database with its design (what is stored already is kept). For a database made or upgraded
+    before it stored them (criterion labels: schema 7). ``design`` must be the one the database was made for
+    (:func:`~studyapp.study.design.load_design_of`: one-line :class:`~studyapp.errors.InputError` otherwise)."""
+    from studyapp.study.design import load_design_of
+
+    rdb, owned = _open(db)
+    try:
+        rdb.store_design_metadata(load_design_of(design, rdb.design_hash))
+    finally:
+        if owned:
+            rdb.close()
+
+
+def criteria_unlabelled(db: str | Path | ResultsDB) -> bool:
+    """Whether the database stores no criteria (a database upgraded from schema 6 that no session, ``serve`` or
+    ``merge`` has opened with its design since): its export names every criterion by its id."""
+    rdb, owned = _open(db)
+    try:
+        return not rdb.criteria()
+    finally:
+        if owned:
+            rdb.close()
+
+
 def questionnaire_dataframe(db: str | Path | ResultsDB) -> pd.DataFrame:
     """Questionnaire answers: participant, item, scale, kind, value (Likert points and number answers;
     empty for the rest), text (the answer to text and choice items; a JSON list when several may be

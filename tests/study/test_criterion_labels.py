@@ -167,3 +167,46 @@ def test_a_returned_file_s_criteria_are_checked_and_merge_records_the_design_s(l
     assert report.ok, report.problems
     with ResultsDB(target, create=False) as db:
         assert [(c["id"], c["label"]) for c in db.criteria()] == list(LABELS.items())
+
+
+def test_export_with_the_design_records_the_labels_of_an_upgraded_schema_6_database(tmp_path: Path, capsys) -> None:
+    """A schema 6 database (tests/data/results_schema6.sqlite, made by the old code from the synthetic study
+    rebuilt here byte for byte) exports criteria by their ids with a one-line note saying how to get the labels;
+    ``export --design`` refuses another design in one line, recording nothing, and with the study's own design
+    records its labels, which every later export keeps."""
+    from studyapp.cli import main
+    from studyapp.study.design import load_design
+
+    path = tmp_path / "r.sqlite"
+    shutil.copy(DATA / "results_schema6.sqlite", path)
+    design = write_synthetic_study(tmp_path / "study", n_stimuli=2, seconds=1.0, practice=False)
+    with sqlite3.connect(path) as con:
+        recorded = con.execute("SELECT design_hash FROM study").fetchone()[0]
+    con.close()
+    assert load_design(design, check_files=False).design_hash == recorded, "the fixture no longer rebuilds the study"
+    out = tmp_path / "a.csv"
+
+    assert main(["export", str(path), "--csv", str(out)]) == 0
+    notes = [x for x in capsys.readouterr().err.splitlines() if x.startswith("note:")]
+    assert notes == ["note: the database records no criterion labels (made before schema 7), so the export names "
+                     "criteria by their ids; add --design STUDY.toml to record the design's labels"]
+    before = pd.read_csv(out)
+    assert (before["criterion_label"] == before["criterion"]).all()
+
+    other = write_synthetic_study(tmp_path / "other", n_stimuli=3, seconds=1.0, practice=False)
+    assert main(["export", str(path), "--csv", str(tmp_path / "b.csv"), "--design", str(other)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {other}: not the design this results database was made for (design hash ")
+    assert "\n" not in err and not (tmp_path / "b.csv").exists()
+    with ResultsDB(path, create=False) as db:
+        assert db.criteria() == []  # nothing recorded from another design
+
+    assert main(["export", str(path), "--csv", str(out), "--design", str(design)]) == 0
+    assert "note:" not in capsys.readouterr().err
+    labelled = pd.read_csv(out)
+    names = {"realism": "Realism", "synchronization": "Synchronization", "diversity": "Diversity"}
+    assert dict(zip(labelled["criterion"], labelled["criterion_label"])) == names
+    pd.testing.assert_frame_equal(labelled.drop(columns="criterion_label"), before.drop(columns="criterion_label"))
+    assert main(["export", str(path), "--csv", str(tmp_path / "c.csv")]) == 0  # recorded: no --design needed now
+    assert "note:" not in capsys.readouterr().err
+    assert dict(zip(*pd.read_csv(tmp_path / "c.csv")[["criterion", "criterion_label"]].T.values)) == names

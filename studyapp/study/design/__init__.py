@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from studyapp.errors import InputError
 from studyapp.study.design import validated
 from studyapp.study.design.blinding import conditions_named_in, visible_text_leaks
 from studyapp.study.design.files import (SAMPLE_FIELD, design_hash, fill_sample, has_sample_field, model_path, motion_key, motion_path,
@@ -48,7 +49,7 @@ __all__ = [
     "MOTION_SUFFIXES", "ORDERINGS", "QUESTION_KINDS", "REPRESENTATIONS", "SLOT_ASSIGNMENTS", "SLOT_LABELS", "TABLES",
     "PARADIGMS", "PREFERENCE_LEVELS", "Block", "DesignWarning", "criterion_aspect",
     "AttentionCheck", "Condition", "Criterion", "Design", "DesignError", "Display", "Playback", "Problem", "QuestionItem",
-    "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "model_path", "motion_path",
+    "Stimulus", "condition_from_settings", "conditions_named_in", "design_hash", "load_design", "load_design_of", "model_path", "motion_path",
     "mismatch_sources", "played_pairs", "pattern_fields", "problems_to_json", "referenced_files", "resolve", "validate_design", "visible_text_leaks",
 ]
 
@@ -84,6 +85,19 @@ def load_design(path: str | Path, *, check_files: bool = True, reuse_check: bool
         raise DesignError(path, problems)
     if check_files:
         validated.record(design.design_hash)
+    return design
+
+
+def load_design_of(path: str | Path, recorded_hash: str) -> Design:
+    """The design at ``path``, which must be the one a results database was made for: its hash (which covers
+    the bytes of every stimulus file) equal to the database's ``recorded_hash``. The stimulus files are hashed,
+    not checked again (the database's first session checked them). Raises :class:`DesignError` for a design
+    with problems, and an :class:`~studyapp.errors.InputError` naming ``path`` when it is another design."""
+    design = load_design(path, check_files=False)
+    if design.design_hash != recorded_hash:
+        raise InputError(path, None, f"not the design this results database was made for (design hash "
+                         f"{design.design_hash[:12]}…, the database's {recorded_hash[:12]}…); give the study's "
+                         "own design with --design")
     return design
 
 
