@@ -392,6 +392,12 @@ class Flow:
     # ------------------------------------------------------------------ what a page shows
     def state(self, pid: str) -> dict[str, Any]:
         """The page the participant sees now, as JSON."""
+        return self._step(pid, lambda session: self._show(session, pid))
+
+    def _step(self, pid: str, step: Callable[[Session], dict[str, Any]]) -> dict[str, Any]:
+        """``step(session)`` on the participant's session, restored and marked seen, while no other request of
+        theirs runs (:meth:`~studyapp.study.storage.ResultsDB.exclusive`); the final page instead for one who
+        no longer takes part, :class:`Refused` for an unknown one. What every request of a page goes through."""
         with self.db.exclusive(pid):
             rec = self.db.participant(pid)
             if rec is None:
@@ -400,7 +406,7 @@ class Flow:
                 return self._final(pid, rec.status)
             session, seen = self._open(pid, rec=rec)
             self._touch(session, seen)
-            return self._show(session, pid)
+            return step(session)
 
     def _show(self, session: Session, pid: str) -> dict[str, Any]:
         tok = self.tokens.session(pid)
@@ -585,18 +591,13 @@ class Flow:
     def act(self, pid: str, action: str, body: Mapping[str, Any]) -> dict[str, Any]:
         """Do one participant action and return the page to show next (raises :class:`NotSaved` with the
         participant's message when the session refuses an answer, :class:`BadRequest` for a malformed one)."""
-        with self.db.exclusive(pid):
-            rec = self.db.participant(pid)
-            if rec is None:
-                raise Refused("online.bad_link")
-            if rec.status != "active":
-                return self._final(pid, rec.status)
-            session, seen = self._open(pid, rec=rec)
-            self._touch(session, seen)
+        def step(session: Session) -> dict[str, Any]:
             extra = self._act(session, pid, action, body)
             if session.finished:
                 return self._final(pid, "done" if session.state is State.DONE else "ended_early")
             return {**self._show(session, pid), **extra}
+
+        return self._step(pid, step)
 
     def _act(self, session: Session, pid: str, action: str, body: Mapping[str, Any]) -> dict[str, Any]:
         """Do ``action`` on the session; what the reply carries besides the page (the ticket of a play)."""
