@@ -350,12 +350,14 @@ def prepare_participant(
     groups: Mapping[str, str] | None = None,
     allow_rerun: bool = False,
     n_rows: int | None = None,
+    known: ParticipantRecord | None = None,
 ) -> ParticipantRecord:
     """The participant record a session should run: existing (resume), new (next free row), or a rerun.
 
     Raises :class:`ParticipantFinishedError` for a participant who already finished (unless
     ``allow_rerun``: then a new participant ``<id>-rerun<k>`` on the same row is registered), and
     :class:`InputError` when ``row`` contradicts the row a resumed participant already follows.
+    ``known``: the participant's record as the caller has just read it (the same checks, one query less).
     """
 
     def rows() -> int:
@@ -369,7 +371,7 @@ def prepare_participant(
         base = {k: str(v) for k, v in (getattr(design, "groups", None) or {}).items()}
         return db.add_participant(pid, rows(), row=on_row, groups={**base, **extra})
 
-    rec = db.participant(participant_id)
+    rec = known if known is not None and known.id == participant_id else db.participant(participant_id)
     if rec is None:
         return new(participant_id, row, dict(groups or {}))
     if rec.status != "active":
@@ -423,6 +425,9 @@ class Session:
     play_duration_s:
         With ``session_id``: ``f(plan)``, the scene length the front end gave :meth:`record_play_started`
         (stored with the answer as ``trial_duration_s`` when the current clip was played in this session).
+    participant:
+        The participant's record as the front end has just read it (the browser server, under the
+        participant's lock): not read again (see :func:`prepare_participant`).
     """
 
     def __init__(
@@ -440,6 +445,7 @@ class Session:
         machine: Mapping[str, Any] | None = None,
         session_id: int | None = None,
         play_duration_s: Callable[[Any], float | None] | None = None,
+        participant: ParticipantRecord | None = None,
     ) -> None:
         self.design = design
         self.db = db
@@ -447,7 +453,7 @@ class Session:
         self.criteria: list[str] = [c.id for c in design.criteria]
         self.playback = design.playback
         rec = prepare_participant(design, db, participant_id, row=row, groups=groups, allow_rerun=allow_rerun,
-                                  n_rows=n_rows)
+                                  n_rows=n_rows, known=participant)
         self.participant: ParticipantRecord = rec
         self.participant_id: str = rec.id
         self.row: int = rec.latin_row

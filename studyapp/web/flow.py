@@ -276,12 +276,12 @@ class Flow:
         plans = None if rec is None else self.plans(pid, rec.latin_row)
         if last is not None and last["ended"] is None and last["machine"].get("frontend") == "browser":
             session = Session(self.design, self.db, pid, session_id=last["id"], play_duration_s=self._length,
-                              plans=plans, n_rows=self.n_rows())
+                              plans=plans, n_rows=self.n_rows(), participant=rec)
             return session, _seconds(last["machine"].get(SEEN_AT))
         if not create:
             raise Refused("online.bad_link")
         now = self._now_iso()
-        session = Session(self.design, self.db, pid, plans=plans, n_rows=self.n_rows(), machine={
+        session = Session(self.design, self.db, pid, plans=plans, n_rows=self.n_rows(), participant=rec, machine={
             "frontend": "browser", SEEN_AT: now, **{f"prolific_{k.lower()}": v for k, v in (params or {}).items()}})
         if rec is None:
             self._keep(session.participant_id, session.row, session.plans)

@@ -150,6 +150,36 @@ def test_a_reload_mid_trial_and_a_server_restart_resume_at_the_first_unanswered_
     db.close()
 
 
+def test_a_request_reads_the_participant_s_record_once(study, browser_for, monkeypatch) -> None:
+    """A page, a video and every action read the participant's record once, under the participant's lock:
+    the session restored for the request gets that record rather than reading it again."""
+    from studyapp.study.storage import ResultsDB
+
+    reads: list[str] = []
+    read = ResultsDB.participant
+
+    def counted(self, participant_id):
+        reads.append(participant_id)
+        return read(self, participant_id)
+
+    with TestClient(study.app()) as client:
+        b = browser_for(client, study)
+        _to_first_trial(b)
+        monkeypatch.setattr(ResultsDB, "participant", counted)
+        for request in (b.reload, lambda: b.get(b.state["video"]), lambda: b.act("play"),
+                        lambda: (setattr(study.clock, "now", study.clock.now + 1.0), b.act("ended"))):
+            reads.clear()
+            request()
+            assert reads == ["5f0c0ffee0ddba11"], request
+        assert b.state["can_rank"]
+        monkeypatch.setattr(ResultsDB, "participant", read)
+        b.answer_well()               # the answer went to the session restored with the record it was given
+        assert b.state["progress"] == "Clip 1 of 3"
+    db = study.db()
+    assert len(db.answered_trials("5f0c0ffee0ddba11")) == 1
+    db.close()
+
+
 def test_a_finished_participant_cannot_start_again(study, browser_for) -> None:
     with TestClient(study.app()) as client:
         b = browser_for(client, study)
