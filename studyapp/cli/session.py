@@ -344,14 +344,21 @@ def _upload_line(uploader: Any) -> Callable[[], str]:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
+    from studyapp.study.storage import ResultsDB
+
+    with ResultsDB(args.db, create=False) as db:  # opened once: opening checks every row's checksum
+        return _export(args, db)
+
+
+def _export(args: argparse.Namespace, db: Any) -> int:
     from studyapp.study.export import criteria_unlabelled, export_dataframe, questionnaire_dataframe, record_design
 
     if args.design is not None:
-        record_design(args.db, args.design)
+        record_design(db, args.design)
 
     def table() -> Any:
-        df = export_dataframe(args.db, include_practice=not args.exclude_practice)
-        if len(df) and args.design is None and criteria_unlabelled(args.db):  # on stderr: stdout may be the CSV
+        df = export_dataframe(db, include_practice=not args.exclude_practice)
+        if len(df) and args.design is None and criteria_unlabelled(db):  # on stderr: stdout may be the CSV
             print("note: the database records no criterion labels (made before schema 7), so the export names "
                   "criteria by their ids; add --design STUDY.toml to record the design's labels", file=sys.stderr)
         return df
@@ -367,7 +374,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
         n_part = df["participant"].nunique() if len(df) else 0
         print(f"Wrote {len(df)} row{'s' * (len(df) != 1)} ({n_part} participant{'s' * (n_part != 1)}) to {args.csv}")
     if args.questionnaire_csv:
-        q = questionnaire_dataframe(args.db)
+        q = questionnaire_dataframe(db)
         args.questionnaire_csv.parent.mkdir(parents=True, exist_ok=True)
         q.to_csv(args.questionnaire_csv, index=False)
         print(f"Wrote {len(q)} questionnaire answers to {args.questionnaire_csv}")

@@ -169,7 +169,8 @@ def test_a_returned_file_s_criteria_are_checked_and_merge_records_the_design_s(l
         assert [(c["id"], c["label"]) for c in db.criteria()] == list(LABELS.items())
 
 
-def test_export_with_the_design_records_the_labels_of_an_upgraded_schema_6_database(tmp_path: Path, capsys) -> None:
+def test_export_with_the_design_records_the_labels_of_an_upgraded_schema_6_database(tmp_path: Path, capsys,
+                                                                                   monkeypatch) -> None:
     """A schema 6 database (tests/data/results_schema6.sqlite, made by the old code from the synthetic study
     rebuilt here byte for byte) exports criteria by their ids with a one-line note saying how to get the labels;
     ``export --design`` refuses another design in one line, recording nothing, and with the study's own design
@@ -201,8 +202,11 @@ def test_export_with_the_design_records_the_labels_of_an_upgraded_schema_6_datab
     with ResultsDB(path, create=False) as db:
         assert db.criteria() == []  # nothing recorded from another design
 
+    checks, check = [], ResultsDB._check_rows
+    monkeypatch.setattr(ResultsDB, "_check_rows", lambda db: (checks.append(db.path), check(db))[1])
     assert main(["export", str(path), "--csv", str(out), "--design", str(design)]) == 0
     assert "note:" not in capsys.readouterr().err
+    assert checks == [path]  # opened once (each opening checks every row), not once per step
     labelled = pd.read_csv(out)
     names = {"realism": "Realism", "synchronization": "Synchronization", "diversity": "Diversity"}
     assert dict(zip(labelled["criterion"], labelled["criterion_label"])) == names
