@@ -10,6 +10,10 @@ the Latin-square rows balanced and every row matching its checksum.
 """
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from concurrent.futures import Future
@@ -22,6 +26,7 @@ from studyapp.study import row_checksums
 from studyapp.study.storage import DuplicateAnswerError, Response, TrialRecord, now_iso, open_results
 
 HASH = "cc" * 20
+CLI = [sys.executable, "-m", "studyapp.cli"]
 
 
 def _trial(pid: str, index: int, session: int) -> tuple[TrialRecord, list[Response]]:
@@ -186,3 +191,62 @@ def test_many_participants_answering_at_once_store_every_answer_exactly_once(res
             want = {f"seen_by_{w}_{i}" for w in (k, (k + 1) % n_conn) for i in range(n_trials)}
             assert want <= set(machine), sorted(want - set(machine))
         assert all(p.status == "done" for p in db.participants())
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.skipif(os.name != "posix", reason="SIGKILL is POSIX")
+def test_participants_in_processes_of_their_own_one_killed_lose_no_answer(tmp_path: Path, postgres_server) -> None:
+    """Four `studyapp run` processes, four participants, one PostgreSQL database, answering at once; one process
+    is SIGKILLed right after it reported its second answer saved, and run again to the end: every answer a
+    process reported saved is stored, every participant's answers are those of an uninterrupted SQLite run
+    with the same seed (each trial once, all its ranks), and every row matches its checksum."""
+    from studyapp.bots import run_bot
+    from studyapp.study.design import load_design
+    from studyapp.study.session import prepare_participant
+    from fixtures.synthetic import write_synthetic_study
+
+    design = write_synthetic_study(tmp_path / "study", n_stimuli=8, seconds=0.5, questionnaire=True)
+    loaded = load_design(design)
+    url = postgres_server.new_database("processes")
+    pids = [f"K{k}" for k in range(4)]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+    def run(pid: str, pace: float) -> subprocess.Popen:
+        return subprocess.Popen([*CLI, "run", str(design), "--participant", pid, "--results", url, "--no-render",
+                                 "--bot", "random", "--seed", "5", "--bot-pace", str(pace)], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, env=env)
+
+    procs = {pid: run(pid, 0.05 if pid == "K0" else 0.01) for pid in pids}
+    reported: dict[str, set[int]] = {pid: set() for pid in pids}
+    for line in procs["K0"].stdout:   # type: ignore[union-attr]
+        if line.startswith("saved trial"):
+            reported["K0"].add(int(line.split()[-1]))
+            if len(reported["K0"]) == 2:
+                os.kill(procs["K0"].pid, signal.SIGKILL)
+                break
+    procs["K0"].wait(timeout=30)
+    assert procs["K0"].returncode == -signal.SIGKILL, "K0 finished before it was killed"
+    for pid in pids[1:]:
+        out, err = procs[pid].communicate(timeout=240)
+        assert procs[pid].returncode == 0, err[-2000:]
+        reported[pid] = {int(ln.split()[-1]) for ln in out.splitlines() if ln.startswith("saved trial")}
+    stored = {pid: {r[0] for r in _raw(url, f"SELECT trial_index FROM trials WHERE participant = '{pid}'")}
+              for pid in pids}
+    assert reported["K0"] <= stored["K0"], "an answer reported saved was lost"
+    again = subprocess.run([*CLI, "run", str(design), "--participant", "K0", "--results", url, "--no-render", "--bot",
+                            "random", "--seed", "5"], capture_output=True, text=True, env=env, timeout=240)
+    assert again.returncode == 0, again.stderr[-2000:]
+
+    answers = ("SELECT r.participant, r.trial_index, r.criterion, r.slot, r.condition, r.rank FROM responses r "
+               "ORDER BY 1, 2, 3, 4")
+    rows = dict(_raw(url, "SELECT id, latin_row FROM participants"))
+    assert sorted(rows.values()) == [0, 1, 2, 3]   # registered at once, each on a row of their own
+    reference = tmp_path / "reference.sqlite"     # each participant alone, on the row they got
+    with open_results(reference, loaded) as ref:
+        for pid in pids:
+            prepare_participant(loaded, ref, pid, row=rows[pid])
+            assert run_bot(loaded, ref, pid, "random", 5, render=False) == 0
+    assert _raw(url, answers) == _raw(reference, answers) and len(_raw(url, answers)) == 4 * 9 * 9
+    assert _raw(url, "SELECT COUNT(*) FROM trials")[0][0] == 4 * 9
+    with open_results(url, create=False) as db:   # every row checked against its checksum
+        assert row_checksums.verify(db.connection) == []
