@@ -9,12 +9,27 @@ holds only what differs between the two engines, behind one :class:`Backend` sea
   set to the same wait as SQLite's busy timeout. A connection the server dropped is made again at the next
   statement outside a transaction (a study server outlives a database restart); a transaction cut short is
   reported as not saved, never repeated.
-- ``begin_write``: SQLite's ``BEGIN IMMEDIATE`` takes the database's write lock up front. PostgreSQL's
-  equivalent is ``BEGIN`` followed by a transaction-scoped advisory lock (:data:`WRITE_LOCK_KEY`): every
-  write transaction of every server process on one database runs one at a time, exactly as on SQLite, so
-  each check-then-write in storage.py (the least-used Latin-square row, "already answered", "already
-  merged", "already upgraded") reads what every earlier commit wrote and can never be raced. Readers never
-  wait. Each write is a few statements, so the lock is held for milliseconds.
+- ``begin_write``: SQLite's ``BEGIN IMMEDIATE`` takes the database's write lock up front: every write runs
+  alone. PostgreSQL's equivalent is ``BEGIN`` followed by transaction-scoped advisory locks, in one of two
+  scopes (storage.py says which each write is):
+
+  - the whole database (``participant=None``): :data:`WRITE_LOCK_KEY` held exclusively. Such a write runs
+    alone among every writer of every server process, exactly as on SQLite, so each check-then-write that
+    reads other participants' rows or the study's (the least-used Latin-square row, "already merged",
+    "already upgraded", the tables made once) reads what every earlier commit wrote and can never be raced;
+  - one participant's rows (``participant=KEY``): first that participant's lock (``PARTICIPANT_LOCK_SPACE``,
+    KEY: the key :meth:`hold` takes for a whole request, so within a request it is already held), then
+    :data:`WRITE_LOCK_KEY` *shared*. Writes of different participants commit side by side; two of one
+    participant run one at a time (so "already answered" and a read-modify-write of their session record
+    read every earlier commit of theirs); and none runs while a whole-database write does, so that one still
+    sees no write in flight. Their rows are their own (keys start with the participant), so row locks and
+    the primary keys keep them apart; row ids come from identity sequences, which never wait.
+
+  Every transaction takes its locks in that order (a participant's, then the database's) before its first
+  row lock, and no transaction holding the database's lock waits for a participant's, so the locks cannot
+  deadlock. PostgreSQL queues a shared request behind a waiting exclusive one: a whole-database write (a new
+  participant) waits only for the answers already in flight. Readers never wait. Each write is a few
+  statements, so the locks are held for milliseconds.
 - ``kind`` / ``problem``: an engine error sorted into full, readonly, busy, io, unreachable, damaged or
   other, and the one-line :class:`~studyapp.errors.InputError` that says what to do.
 - the SQL dialect: storage.py, :mod:`studyapp.study.row_checksums` and
@@ -102,8 +117,11 @@ class Backend(Protocol):
         """Per-connection settings that make every commit durable (SQLite: WAL, synchronous=FULL)."""
     def integrity_check(self, con: Connection) -> list[str]:
         """The engine's own structural check: ``["ok"]`` or one entry per problem."""
-    def begin_write(self, con: Connection) -> None:
-        """Start a write transaction that runs alone among this database's writers."""
+    def begin_write(self, con: Connection, participant: int | None = None) -> None:
+        """Start a write transaction that runs alone among this database's writers (``participant`` None), or
+        (``participant``: the key of :meth:`hold`) one that writes only that participant's rows: alone among
+        that participant's writes and the whole-database ones, beside other participants' (see the module
+        docstring; SQLite runs every write alone)."""
     def hold(self, con: Connection, key: int, held: bool) -> None:
         """Take (``held``) or give back lock ``key`` (a signed 32-bit number) across transactions, for one
         participant's requests in several server processes; SQLite serves one process and needs none."""
@@ -253,7 +271,7 @@ class SQLiteBackend:
     def integrity_check(self, con: Connection) -> list[str]:
         return [str(r[0]) for r in con.execute("PRAGMA integrity_check").fetchall()]
 
-    def begin_write(self, con: Connection) -> None:
+    def begin_write(self, con: Connection, participant: int | None = None) -> None:
         # IMMEDIATE takes the write lock up front, so two processes on one database serialise
         # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
         con.execute("BEGIN IMMEDIATE")
@@ -322,10 +340,17 @@ class PostgresBackend:
         # checked against their checksums by storage like on SQLite.
         return ["ok"]
 
-    def begin_write(self, con: Connection) -> None:
-        # READ COMMITTED: each statement after the lock sees every commit made before it was granted (a
+    def begin_write(self, con: Connection, participant: int | None = None) -> None:
+        # READ COMMITTED: each statement after the locks sees every commit made before they were granted (a
         # REPEATABLE READ snapshot would be taken by the lock's own statement, before the wait)
-        con.execute("BEGIN ISOLATION LEVEL READ COMMITTED; SELECT pg_advisory_xact_lock(%d)" % WRITE_LOCK_KEY)
+        if participant is None:
+            con.execute("BEGIN ISOLATION LEVEL READ COMMITTED; SELECT pg_advisory_xact_lock(%d)" % WRITE_LOCK_KEY)
+            return
+        # the participant's lock first, then the database's shared (the order every transaction keeps); two
+        # statements, so the second is asked only once the first is held; one round trip
+        con.execute("BEGIN ISOLATION LEVEL READ COMMITTED; SELECT pg_advisory_xact_lock(%d, %d); "
+                    "SELECT pg_advisory_xact_lock_shared(%d)" % (PARTICIPANT_LOCK_SPACE, int(participant),
+                                                                 WRITE_LOCK_KEY))
 
     def hold(self, con: Connection, key: int, held: bool) -> None:
         # a session-level advisory lock in its own key space (two keys), apart from WRITE_LOCK_KEY's

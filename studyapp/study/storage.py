@@ -4,8 +4,13 @@ The database is an SQLite file (the default) or a PostgreSQL database (a study s
 :func:`open_results` takes a path, ``sqlite:///path`` or ``postgresql://...``, and the same code writes the same
 tables on both; what differs between the engines lives in :mod:`studyapp.study.sql_backend` (connecting, the
 write lock, error messages, the SQL dialect). On PostgreSQL every commit waits for the server's WAL on disk
-(``synchronous_commit = on``) and write transactions run one at a time, as on SQLite. What follows describes
-the SQLite file; on PostgreSQL the same checks run, except the file's own (header, ``PRAGMA integrity_check``).
+(``synchronous_commit = on``). Write transactions run one at a time on SQLite; on PostgreSQL those that write
+only one participant's rows (an answer, a play, their session record: every method given the participant, see
+:meth:`ResultsDB.transaction`) commit side by side with other participants', one at a time per participant,
+while those that read or write across participants or the study's own rows (a new participant and their
+Latin-square row, a participant removed or merged, the design's metadata, the schema) still run alone, as on
+SQLite (:mod:`studyapp.study.sql_backend`, ``begin_write``). What follows describes the SQLite file; on
+PostgreSQL the same checks run, except the file's own (header, ``PRAGMA integrity_check``).
 
 Why these settings: ``journal_mode=WAL`` + ``synchronous=FULL`` make each committed transaction survive
 a killed process or a power cut (the WAL is fsynced at commit), and a trial's ranks are written in one
@@ -390,6 +395,13 @@ _WRITTEN: dict[str, tuple[str, ...]] = {
 _ROW_IDS = ("sessions", "plays")
 
 
+def lock_key(name: str) -> int:
+    """The key (a signed 32-bit number) of the lock of ``name`` (a participant's id): the same in every process,
+    for :meth:`ResultsDB.exclusive` and for a transaction of that participant's rows (:meth:`ResultsDB.transaction`),
+    so a request that holds it writes without waiting for itself."""
+    return int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:4], "big", signed=True)
+
+
 def open_results(target: str | Path, design: Any = None, **options: Any) -> "ResultsDB":
     """The results database ``target`` names: a path or ``sqlite:///path`` (an SQLite file) or
     ``postgresql://USER@HOST:PORT/DATABASE`` (an existing PostgreSQL database; its tables are created on first
@@ -639,10 +651,12 @@ class ResultsDB:
 
     class _Tx:
         def __init__(self, con: sqlite3.Connection, backend: sql_backend.Backend, what: str,
-                     nested: int | None = None) -> None:
+                     nested: int | None = None, participant: int | None = None) -> None:
             self.con = con
             self.backend = backend
             self.what = what
+            #: the key of the participant whose rows alone this transaction writes (None: any rows)
+            self.participant = participant
             #: inside :meth:`ResultsDB.batch`: this transaction's savepoint number (its COMMIT is the batch's)
             self.nested = nested
 
@@ -658,7 +672,7 @@ class ResultsDB:
             # the write lock up front (SQLite: BEGIN IMMEDIATE), so two processes on one database serialise
             # (e.g. two lab PCs assigning Latin rows) instead of failing half-way.
             try:
-                self.backend.begin_write(self.con)
+                self.backend.begin_write(self.con, self.participant)
             except self.backend.errors as exc:
                 self._rollback()
                 raise self.backend.problem(exc, self.what) from None
@@ -709,7 +723,7 @@ class ResultsDB:
         """``with db.exclusive(participant_id):`` — run this block alone among every connection to the database
         that asks for the same name (PostgreSQL: an advisory lock, so several server processes never interleave
         two requests of one participant; SQLite: nothing, one server process already does)."""
-        key = int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:4], "big", signed=True)
+        key = lock_key(name)
         try:
             self._backend.hold(self._con, key, True)
         except self._backend.errors as exc:
@@ -722,14 +736,29 @@ class ResultsDB:
             except self._backend.errors:
                 pass   # the connection is gone, and its session-level lock with it
 
-    def transaction(self, what: str = _NOT_SAVED) -> "ResultsDB._Tx":
+    def transaction(self, what: str = _NOT_SAVED, participant: str | None = None) -> "ResultsDB._Tx":
         """``with db.transaction() as con:`` — all statements inside commit together or not at all, with the
         checksums of every row they wrote; a full disk, a read-only file or a lock held too long raise
-        :class:`InputError` (nothing of the transaction is stored; ``what`` says so in the message)."""
+        :class:`InputError` (nothing of the transaction is stored; ``what`` says so in the message).
+
+        ``participant``: the transaction reads and writes only that participant's rows (none of another
+        participant's, none of the study's), and its result depends on no other participant's: on PostgreSQL
+        it then commits beside other participants' transactions (one at a time per participant); without it,
+        it runs alone (see :mod:`studyapp.study.sql_backend`). SQLite runs every write alone either way."""
         if self._batch is not None:
             self._batch += 1
             return ResultsDB._Tx(self._con, self._backend, what, nested=self._batch)
-        return ResultsDB._Tx(self._con, self._backend, what)
+        return ResultsDB._Tx(self._con, self._backend, what,
+                             participant=None if participant is None else lock_key(participant))
+
+    def _owner(self, table: str, row_id: int) -> str | None:
+        """The participant a row of ``sessions`` or ``plays`` belongs to (it never changes), for
+        :meth:`transaction`: None (a transaction that runs alone) where every write runs alone anyway (SQLite:
+        no read for nothing), or when there is no such row (the write then changes nothing)."""
+        if self._backend.name == "sqlite":
+            return None
+        row = self._con.execute(f"SELECT participant FROM {table} WHERE id = ?", (row_id,)).fetchone()
+        return None if row is None else str(row[0])
 
     @contextmanager
     def batch(self, what: str = _NOT_SAVED) -> Iterator[None]:
@@ -862,7 +891,7 @@ class ResultsDB:
     def set_status(self, participant_id: str, status: str) -> None:
         if status not in PARTICIPANT_STATUSES:
             raise ValueError(f"unknown participant status {status!r}")
-        with self.transaction() as con:
+        with self.transaction(participant=participant_id) as con:
             con.execute("UPDATE participants SET status = ?, completed = CASE WHEN ? = 'active' THEN NULL ELSE ? END "
                         "WHERE id = ?", (status, status, now_iso(), participant_id))
 
@@ -872,12 +901,12 @@ class ResultsDB:
         if rec is None:
             raise KeyError(participant_id)
         merged = {**rec.groups, **groups}
-        with self.transaction() as con:
+        with self.transaction(participant=participant_id) as con:
             con.execute("UPDATE participants SET groups = ? WHERE id = ?", (json.dumps(merged, sort_keys=True), participant_id))
 
     # ------------------------------------------------------------------ sessions
     def start_session(self, participant_id: str, machine: dict[str, Any] | None = None) -> int:
-        with self.transaction() as con:
+        with self.transaction(participant=participant_id) as con:
             cur = con.execute(
                 "INSERT INTO sessions (participant, started, app_version, design_hash, machine) VALUES (?, ?, ?, ?, ?)",
                 (participant_id, now_iso(), __version__, self.design_hash, json.dumps(machine or {}, sort_keys=True)),
@@ -885,13 +914,14 @@ class ResultsDB:
             return int(cur.lastrowid)
 
     def update_session_machine(self, session_id: int, machine: dict[str, Any]) -> None:
-        with self.transaction() as con:   # read inside: another server process may write the same record
+        # read inside: another server process may write the same record (their lock: one at a time)
+        with self.transaction(participant=self._owner("sessions", session_id)) as con:
             row = con.execute("SELECT machine FROM sessions WHERE id = ?", (session_id,)).fetchone()
             merged = {**(json.loads(row[0]) if row else {}), **machine}
             con.execute("UPDATE sessions SET machine = ? WHERE id = ?", (json.dumps(merged, sort_keys=True, default=str), session_id))
 
     def end_session(self, session_id: int) -> None:
-        with self.transaction() as con:
+        with self.transaction(participant=self._owner("sessions", session_id)) as con:
             con.execute("UPDATE sessions SET ended = ? WHERE id = ?", (now_iso(), session_id))
 
     def sessions(self, participant_id: str | None = None) -> list[dict[str, Any]]:
@@ -956,7 +986,7 @@ class ResultsDB:
                    "slot": j.slot, "condition": j.condition, "value": float(j.value),
                    "reasons": json.dumps(list(j.reasons), ensure_ascii=False), "app_version": __version__}
                   for j in judgements]
-        with self.transaction() as con:
+        with self.transaction(participant=t.participant) as con:   # "already answered": their lock, one at a time
             if con.execute("SELECT 1 FROM trials WHERE participant = ? AND trial_index = ?",
                            (t.participant, t.trial_index)).fetchone():
                 raise DuplicateAnswerError(f"trial {t.trial_index} of participant {t.participant!r} is already answered")
@@ -1021,7 +1051,7 @@ class ResultsDB:
 
     # ------------------------------------------------------------------ plays
     def start_play(self, participant_id: str, trial_index: int, session_id: int | None) -> int:
-        with self.transaction() as con:
+        with self.transaction(participant=participant_id) as con:
             cur = con.execute(
                 "INSERT INTO plays (participant, trial_index, session, started, design_hash, app_version) "
                 "VALUES (?, ?, ?, ?, ?, ?)",
@@ -1030,7 +1060,7 @@ class ResultsDB:
             return int(cur.lastrowid)
 
     def finish_play(self, play_id: int, completed: bool) -> None:
-        with self.transaction() as con:
+        with self.transaction(participant=self._owner("plays", play_id)) as con:
             con.execute("UPDATE plays SET ended = ?, completed = ? WHERE id = ?", (now_iso(), int(completed), play_id))
 
     def play_count(self, participant_id: str, trial_index: int) -> int:
@@ -1047,7 +1077,7 @@ class ResultsDB:
                            items: dict[str, tuple[str, str | None]] | None = None) -> None:
         """Store all answers in one transaction; ``items`` maps item id -> (kind, scale) for the record."""
         items = items or {}
-        with self.transaction() as con:
+        with self.transaction(participant=participant_id) as con:
             con.executemany(
                 "INSERT INTO questionnaire (participant, item, kind, scale, value, design_hash, app_version) "
                 "VALUES (?, ?, ?, ?, ?, ?, ?)",
