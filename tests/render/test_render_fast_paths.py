@@ -318,3 +318,26 @@ def test_scene_cache_blends_the_ui_into_a_new_picture_before_its_one_copy(gl_ctx
         target.release()
         old.release()
         new.release()
+
+
+def test_backdrop_is_drawn_once_for_stills_and_the_participant_canvas(gl_ctx, avatar, monkeypatch):
+    """When the slots cover the whole buffer the background colour shows nowhere, so ``draw_trial`` and the
+    participant's full-frame canvas share one cached backdrop (alternating, each redrew it on main), with
+    the same pixels as a fresh renderer."""
+    r = Renderer(gl_ctx, samples=0)
+    scene = _scene(avatar)
+    size = (480, 270)
+    drawn = []
+    real = r._empty_vao.render
+    monkeypatch.setattr(r, "_empty_vao", type("V", (), {"render": lambda self, *a, **k: (drawn.append(1), real(*a, **k))})())
+    target = OffscreenTarget(gl_ctx, size)
+    try:
+        for _ in range(2):
+            canvas = r.draw_canvas(scene, 0.0, size, (0, 0, *size), (0.11, 0.12, 0.14))
+            gl_ctx.copy_framebuffer(target.fbo, canvas)
+            via_canvas = target.read_rgb()
+            assert np.array_equal(_frame(r, scene, size), via_canvas)
+        assert len(drawn) == scene.n_slots  # one backdrop per slot, drawn once
+        assert np.array_equal(_frame(Renderer(gl_ctx, samples=0), scene, size), via_canvas)
+    finally:
+        target.release()
