@@ -3,12 +3,11 @@
 Four pipelines run interleaved in one process (rounds of a few frames each, the order rotated every
 round), so a busy shared machine slows all of them alike:
 
-* **participant frame**: what the participant window draws on every trial frame -- the renderer's
-  picture (skinning, morphs, lighting -- per vertex on a software rasteriser, see ``Renderer`` --, the
-  anti-aliasing chosen for this GL, labels) through the scene
-  cache into the window's framebuffer (as ``StudyApp.frame`` does: the renderer's canvas, scene and the
-  app's background around it, in one framebuffer copy), the ImGui overlay on top (panel, buttons,
-  progress bar), read back;
+* **participant frame**: what the participant window draws on every trial frame, in ``StudyApp.frame``'s
+  order -- the ImGui UI built (panel, buttons, progress bar), the renderer's picture (skinning, morphs,
+  lighting -- per vertex on a software rasteriser, see ``Renderer`` --, the anti-aliasing chosen for this
+  GL, labels) through the scene cache into the window's framebuffer (the renderer's canvas, scene and the
+  app's background around it, the UI drawn over it, in one framebuffer copy), read back;
 * **renderer only**: ``draw_trial`` straight into the target, read back;
 * **bare draw**: the same triangles in the same three viewports with a trivial shader, read back;
 * **bare draw, flushed**: the same, flushed after each slot like the renderer on a software rasteriser
@@ -90,7 +89,8 @@ class Overlay:
 
         self.layer = ImGuiLayer(ctx)
 
-    def draw(self, size: tuple[int, int], t: float) -> None:
+    def build(self, size: tuple[int, int], t: float) -> None:
+        """The frame's UI, as a screen builds it before the scene is drawn; :meth:`render` draws it."""
         from imgui_bundle import imgui
 
         w, h = size
@@ -106,6 +106,9 @@ class Overlay:
             imgui.same_line()
         imgui.progress_bar((t % 10) / 10, imgui.ImVec2(200 * s, 24 * s), f"0:{int(t % 10):02d} / 0:10")
         imgui.end()
+
+    def render(self, size: tuple[int, int]) -> None:
+        """Draw the built UI into the bound framebuffer."""
         self.layer.render(size)
 
 
@@ -181,11 +184,12 @@ def main(argv: list[str]) -> int:
     fbo = target.fbo
 
     def participant(t: float) -> None:  # studyapp.ui.app.StudyApp.frame on a trial
+        overlay.build(size, t)
         fbo.use()
         ctx.viewport = (0, 0, *size)
-        cache.draw(renderer, scene, t, fbo, (0, 0, *size), size, APP_BACKGROUND)  # fills the frame: no clear
+        # fills the frame (no clear), the UI over it
+        cache.draw(renderer, scene, t, fbo, (0, 0, *size), size, APP_BACKGROUND, overlay=lambda: overlay.render(size))
         fbo.use()
-        overlay.draw(size, t)
         target.read_rgb()
 
     def renderer_only(t: float) -> None:

@@ -207,6 +207,10 @@ class Renderer:
         self._ids = np.zeros(MAX_ACTIVE_MORPHS, np.int32)
         self._w = np.zeros(MAX_ACTIVE_MORPHS, np.float32)
         self._n_morphs = 0
+        # per-frame Python on the thread that shades the vertices (llvmpipe), computed once instead:
+        self._view: tuple | None = None  # (camera, aspect, view_proj, its bytes, eye) of the last frame
+        self._uniforms: dict[int, tuple[moderngl.Program, frozenset[str]]] = {}  # a program's uniform names
+        self._feet: dict[int, tuple[object, tuple[int, int, int]]] = {}  # skeleton: hips, left, right foot
 
     # -- resources ------------------------------------------------------------------------------
     def _program(self, kind: str, morphs: bool = True, bones: int = 4) -> moderngl.Program:
@@ -369,6 +373,8 @@ class Renderer:
         fill a multisample buffer). None when it must be drawn per frame."""
         if self.samples:
             return None
+        if tuple(viewport) == (0, 0, *self._size):
+            background = None  # the slots' backdrops cover it all: the same picture for any background
         key = (self._size, n_slots, viewport, background)
         if self._backdrop_key != key:
             if self._backdrop_fbo is None or self._backdrop_fbo.size != self._size:
@@ -458,8 +464,7 @@ class Renderer:
         fbo = self._msaa
         vps = slot_viewports(viewport, scene.n_slots)
         aspect = vps[0][2] / max(vps[0][3], 1)
-        view_proj = scene.camera.view_proj(aspect)
-        vp_bytes = np.ascontiguousarray(view_proj.T, np.float32).tobytes()
+        view_proj, vp_bytes, eye = self._view_of(scene.camera, aspect)
         # one palette upload per avatar per frame, all slots at once
         frames = []
         meshes = []
@@ -473,12 +478,10 @@ class Renderer:
             pals.append(pal)
         for mesh in {id(m): m for m in meshes}.values():
             mesh.palette.upload()
-        # the eye of the camera as refitted to this viewport, the one the picture is taken from
-        eye = tuple(float(v) for v in scene.camera.for_aspect(aspect).eye)
         groups = [self.group_programs(a, m) for a, m in zip(scene.avatars, meshes)]
         for prog in {id(p): p for g in groups for p, _, _ in g}.values():
             prog["u_view_proj"].write(vp_bytes)
-            if "u_camera_pos" in prog:
+            if "u_camera_pos" in self._uniform_names(prog):
                 prog["u_camera_pos"].value = eye
         self.floor_prog["u_view_proj"].write(vp_bytes)
         self._aa_rects = []
@@ -497,10 +500,10 @@ class Renderer:
             ctx.enable(moderngl.BLEND)
             ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             joints = scene.slots[i].joints_at(t)
-            sk = scene.avatars[i].skeleton
-            hips = joints[0]
+            hips, left, right = self._feet_of(scene.avatars[i].skeleton)
+            hips = joints[hips]
             self.floor_prog["u_shadow_centre"].value = (float(hips[0]), float(hips[2]))
-            feet = [joints[sk.index(n)] if n in sk.names else hips for n in ("LeftFoot", "RightFoot")]
+            feet = [joints[left], joints[right]]
             self.floor_prog["u_feet"].write(np.array([[f[0], f[2]] for f in feet], np.float32).tobytes())
             self.floor_prog["u_bounds"].value = floor_bounds(hips, feet)
             self._floor_vao.render(moderngl.TRIANGLE_STRIP)
@@ -518,10 +521,11 @@ class Renderer:
                 ctx.enable(moderngl.CULL_FACE)
                 ctx.front_face = "ccw"
             for prog, first, count in groups[i] if figures else ():
-                if "u_morph_count" in prog:
+                names = self._uniform_names(prog)
+                if "u_morph_count" in names:
                     self._set_morphs(prog)
                     prog["u_morph_rows"].value = mesh.morph_rows
-                if "u_has_texture" in prog:
+                if "u_has_texture" in names:
                     prog["u_has_texture"].value = mesh.has_texture
                 prog["u_base_factor"].value = base_factor
                 mesh.vao_for(prog).render(moderngl.TRIANGLES, vertices=count, first=first)
@@ -532,6 +536,37 @@ class Renderer:
             if self.flush_slots and i + 1 < len(vps):
                 gl_flush()
         fbo.viewport = viewport
+
+    def _view_of(self, camera, aspect: float) -> tuple[np.ndarray, bytes, tuple[float, float, float]]:
+        """``camera`` refitted to ``aspect``: its view-projection matrix, that matrix as the shaders take it
+        (column-major float32 bytes) and its eye (the lighting's camera position). Computed when the camera
+        or the aspect changes, not every frame (the fit and the look-at are Python on the thread that shades
+        the vertices)."""
+        hit = self._view
+        if hit is None or hit[0] is not camera or hit[1] != aspect:
+            view_proj = camera.view_proj(aspect)
+            eye = tuple(float(v) for v in camera.for_aspect(aspect).eye)
+            hit = self._view = (camera, aspect, view_proj,
+                                np.ascontiguousarray(view_proj.T, np.float32).tobytes(), eye)
+        return hit[2], hit[3], hit[4]
+
+    def _uniform_names(self, prog: moderngl.Program) -> frozenset[str]:
+        """The names ``prog`` declares (``name in prog`` walks all of them: moderngl has no lookup for it)."""
+        hit = self._uniforms.get(id(prog))
+        if hit is None or hit[0] is not prog:
+            hit = self._uniforms[id(prog)] = (prog, frozenset(prog))
+        return hit[1]
+
+    def _feet_of(self, skeleton) -> tuple[int, int, int]:
+        """Indices of the hips (the root) and of the feet the contact shadow follows (the hips for a foot
+        the skeleton lacks)."""
+        hit = self._feet.get(id(skeleton))
+        if hit is None or hit[0] is not skeleton:
+            feet = tuple(skeleton.names.index(n) if n in skeleton.names else 0 for n in ("LeftFoot", "RightFoot"))
+            if len(self._feet) >= MAX_CACHED_AVATARS:
+                self._feet.pop(next(iter(self._feet)))
+            hit = self._feet[id(skeleton)] = (skeleton, (0, *feet))
+        return hit[1]
 
     def _joint_boxes(self, avatar: Avatar) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Bind-pose bounds of the vertices each joint dominates: ``(J, 8, 4)`` box corners (homogeneous,

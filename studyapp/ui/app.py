@@ -295,6 +295,7 @@ class StudyApp:
         req = self._scene_req
         if req is None or req[2][2] < 1 or req[2][3] < 1:
             fbo.clear(*BACKGROUND, 1.0, depth=1.0)
+            self.layer.render(self.fb_size)
         else:  # the scene cache fills the whole frame: the scene, BACKGROUND around it (one copy, no clear)
             scene, t, (x, y, w, h) = req
             viewport = (int(x), int(self.fb_size[1] - y - h), int(w), int(h))  # GL: origin bottom-left
@@ -302,10 +303,11 @@ class StudyApp:
                 from studyapp.ui.scene_cache import SceneCache
 
                 self._scene_cache = SceneCache(self.ctx)
-            self._scene_cache.draw(self.renderer, scene, t, fbo, viewport, self.fb_size, BACKGROUND)
+            # the UI goes over the scene where the cache says (into a new picture before its copy)
+            self._scene_cache.draw(self.renderer, scene, t, fbo, viewport, self.fb_size, BACKGROUND,
+                                   overlay=lambda: self.layer.render(self.fb_size))
             fbo.use()
-        self.ctx.viewport = (0, 0, *self.fb_size)
-        self.layer.render(self.fb_size)
+            self.ctx.viewport = (0, 0, *self.fb_size)
         self.frame_index += 1
 
     def _draw_error(self) -> None:

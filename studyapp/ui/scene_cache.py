@@ -12,10 +12,17 @@ Given the colour around the scene (``background``), the whole frame comes from t
 (:meth:`~studyapp.render.renderer.Renderer.draw_canvas`: the scene in its viewport of a buffer the size of
 the target, the background around it) and reaches the target in one framebuffer copy: no clear and no
 quad, which on a software rasteriser (llvmpipe) is a full shading pass costing several copies.
+
+Given the UI drawn over the scene (``overlay``, a callable drawing into the bound framebuffer), a new
+picture gets it in the renderer's canvas before that copy: llvmpipe then rasterises the UI with the last
+slot and the frame waits for its raster threads once (at the copy), not twice (at the copy, then at the
+read-back or swap for the UI). The canvas then holds the UI, so when the same picture is asked for again
+(paused, ranking) it is drawn once more, clean, and from then on copied with the UI drawn on the target.
+The pixels are the same either way: the UI is blended over the same picture.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import moderngl
 import numpy as np
@@ -56,17 +63,20 @@ class SceneCache:
         self.canvas: moderngl.Framebuffer | None = None  # the renderer's, with the background drawn around
         self.key: tuple | None = None
         self._drawn = -1  # renderer.frames_drawn when self.tex was drawn
+        self._overlaid = False  # self.canvas holds the last frame's overlay (not the clean picture)
         self.renders = 0
 
     def draw(self, renderer: Renderer, scene: TrialScene, t: float, target: moderngl.Framebuffer,
              viewport: tuple[int, int, int, int], target_size: tuple[int, int],
-             background: tuple[float, float, float] | None = None) -> None:
+             background: tuple[float, float, float] | None = None,
+             overlay: Callable[[], None] | None = None) -> None:
         """Draw the scene at ``t`` into ``viewport`` (GL pixels, origin bottom-left) of ``target``; with
-        ``background`` (rgb), fill the rest of the target with it (the caller need not clear)."""
+        ``background`` (rgb), fill the rest of the target with it (the caller need not clear). ``overlay``
+        draws what goes over the whole frame (the UI) into the bound framebuffer, once, after the scene."""
         x, y, w, h = (int(v) for v in viewport)
         if background is not None:
             if renderer.draws_canvas:
-                self._draw_canvas(renderer, scene, t, target, (x, y, w, h), target_size, tuple(background))
+                self._draw_canvas(renderer, scene, t, target, (x, y, w, h), target_size, tuple(background), overlay)
                 return
             target.use()
             target.clear(*background, 1.0)
@@ -89,19 +99,31 @@ class SceneCache:
         self.prog["u_image"].value = 0
         self.vao.render(moderngl.TRIANGLE_STRIP)
         self.tex.filter = filt
+        if overlay is not None:
+            overlay()
 
     def _draw_canvas(self, renderer: Renderer, scene: TrialScene, t: float, target: moderngl.Framebuffer,
                      viewport: tuple[int, int, int, int], target_size: tuple[int, int],
-                     background: tuple[float, float, float]) -> None:
+                     background: tuple[float, float, float], overlay: Callable[[], None] | None) -> None:
         tw, th = (int(v) for v in target_size)
         key = ("canvas", id(scene), round(float(t), 6), viewport, (tw, th), background, id(renderer))
-        if key != self.key or self.canvas is None or self._drawn != renderer.frames_drawn:
+        again = key == self.key and self.canvas is not None and self._drawn == renderer.frames_drawn
+        if not again or self._overlaid:
             self.canvas = renderer.draw_canvas(scene, t, (tw, th), viewport, background)
             self.tex = None
             self._drawn = renderer.frames_drawn
-            self.key = key
             self.renders += 1
+            self._overlaid = False
+            if overlay is not None and not again:  # a new picture: the UI goes into it before the one copy
+                self.canvas.use()
+                overlay()
+                self._overlaid = True
+                overlay = None
+            self.key = key
         self.ctx.copy_framebuffer(target, self.canvas)
+        if overlay is not None:  # the same picture again: copied clean, the UI over it on the target
+            target.use()
+            overlay()
 
     def release(self) -> None:
         self.tex = self.canvas = None  # the renderer's: it releases them

@@ -261,3 +261,83 @@ def test_specialised_vertex_programs_draw_the_picture_of_the_general_one(gl_ctx,
         assert len(mesh.groups) > 1
         mesh.groups = [(True, 4, 0, sum(count for *_, count in mesh.groups))]
         assert np.array_equal(_frame(r, scene, (640, 360)), specialised), lighting
+
+
+def test_scene_cache_blends_the_ui_into_a_new_picture_before_its_one_copy(gl_ctx, avatar):
+    """``overlay`` (the UI) goes into the renderer's canvas of a new picture, before the copy to the
+    target (one wait for llvmpipe's raster threads, not two); the same picture asked again is drawn clean
+    once more and copied, the UI blended on the target: never twice over the picture. Every frame is,
+    pixel for pixel, the scene copied and the UI blended over it on the target."""
+    import moderngl
+
+    from studyapp.ui.scene_cache import SceneCache
+
+    renderer = Renderer(gl_ctx)
+    if not renderer.draws_canvas:
+        pytest.skip("no canvas with FXAA")
+    scene = _scene(avatar)
+    size, viewport, bg = (520, 330), (23, 51, 480, 270), (0.11, 0.12, 0.14)
+    prog = gl_ctx.program(vertex_shader="""#version 330
+        void main() { gl_Position = vec4(vec2(gl_VertexID & 1, gl_VertexID >> 1) * 3.0 - 1.0, 0.0, 1.0); }""",
+                          fragment_shader="""#version 330
+        out vec4 c; void main() { c = vec4(1.0, 0.5, 0.0, 0.5); }""")
+    vao = gl_ctx.vertex_array(prog, [])
+    bound = []
+
+    def overlay():  # half-transparent over the lower left: a second blend would show
+        bound.append(gl_ctx.fbo)
+        gl_ctx.viewport = (0, 0, size[0] // 2, size[1] // 2)
+        gl_ctx.enable(moderngl.BLEND)
+        gl_ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        gl_ctx.disable(moderngl.BLEND)
+        gl_ctx.viewport = (0, 0, *size)
+
+    target = OffscreenTarget(gl_ctx, size)
+    old, new = SceneCache(gl_ctx), SceneCache(gl_ctx)
+    try:
+        want = {}
+        for t in (0.0, 1.0):
+            old.draw(renderer, scene, t, target.fbo, viewport, size, bg)
+            target.fbo.use()
+            overlay()
+            want[t] = target.read_rgb()
+        bound.clear()
+        for t in (0.0, 0.0, 0.0, 1.0):
+            target.fbo.use()
+            target.fbo.clear(1.0, 0.0, 1.0, 1.0)
+            new.draw(renderer, scene, t, target.fbo, viewport, size, bg, overlay=overlay)
+            got = target.read_rgb()
+            assert np.array_equal(got, want[t]), (t, np.abs(got.astype(int) - want[t]).max())
+        assert len(bound) == 4
+        assert bound[0] is not target.fbo and bound[0] is new.canvas  # new picture: into the canvas
+        assert bound[1] is target.fbo and bound[2] is target.fbo  # asked again: over the clean copy
+        assert bound[3] is new.canvas
+        assert new.renders == 3  # t=0, t=0 once more clean, t=1
+    finally:
+        target.release()
+        old.release()
+        new.release()
+
+
+def test_backdrop_is_drawn_once_for_stills_and_the_participant_canvas(gl_ctx, avatar, monkeypatch):
+    """When the slots cover the whole buffer the background colour shows nowhere, so ``draw_trial`` and the
+    participant's full-frame canvas share one cached backdrop (alternating, each redrew it on main), with
+    the same pixels as a fresh renderer."""
+    r = Renderer(gl_ctx, samples=0)
+    scene = _scene(avatar)
+    size = (480, 270)
+    drawn = []
+    real = r._empty_vao.render
+    monkeypatch.setattr(r, "_empty_vao", type("V", (), {"render": lambda self, *a, **k: (drawn.append(1), real(*a, **k))})())
+    target = OffscreenTarget(gl_ctx, size)
+    try:
+        for _ in range(2):
+            canvas = r.draw_canvas(scene, 0.0, size, (0, 0, *size), (0.11, 0.12, 0.14))
+            gl_ctx.copy_framebuffer(target.fbo, canvas)
+            via_canvas = target.read_rgb()
+            assert np.array_equal(_frame(r, scene, size), via_canvas)
+        assert len(drawn) == scene.n_slots  # one backdrop per slot, drawn once
+        assert np.array_equal(_frame(Renderer(gl_ctx, samples=0), scene, size), via_canvas)
+    finally:
+        target.release()
