@@ -204,3 +204,31 @@ def test_condition_order_and_labels_equal_the_row_by_row_walk(seed):
         return
     order = condition_order(df)
     assert (order, condition_labels(df, order)) == want
+
+
+def _z_by_ranking_every_difference(x: np.ndarray, shift: float) -> float:
+    """R's wdiff, written out on every difference (the computation the distinct-value one replaces)."""
+    xd = np.round(x - shift, 10)
+    xd = xd[xd != 0]
+    n = xd.size
+    if n == 0:
+        return 0.0
+    r = rankdata(np.abs(xd))
+    z = r[xd > 0].sum() - n * (n + 1) / 4.0
+    _, t = np.unique(r, return_counts=True)
+    sigma = np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0 - np.sum(t ** 3 - t) / 48.0)
+    return float((z - np.sign(z) * 0.5) / sigma) if sigma > 0 else 0.0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_signed_rank_z_from_distinct_values_equals_ranking_every_difference(seed):
+    from results_analysis.effect_sizes import _z_shifted, walsh_distinct
+    rng = np.random.default_rng(seed)
+    # participants' mean-rank differences: multiples of 1/16 (or thirds), many ties, some zeros
+    step = 1 / 16 if seed % 2 else 1 / 3
+    x = rng.integers(-32, 33, rng.integers(1, 3000)) * step
+    values, counts = np.unique(x, return_counts=True)
+    walsh = walsh_distinct(x)[0]
+    shifts = np.r_[walsh, (walsh[:-1] + walsh[1:]) / 2.0, walsh[0] - 1.0, walsh[-1] + 1.0, 0.0]
+    for shift in rng.choice(shifts, min(60, shifts.size), replace=False):
+        assert _z_shifted(values, counts, shift) == _z_by_ranking_every_difference(x, shift)
