@@ -232,3 +232,24 @@ def test_signed_rank_z_from_distinct_values_equals_ranking_every_difference(seed
     shifts = np.r_[walsh, (walsh[:-1] + walsh[1:]) / 2.0, walsh[0] - 1.0, walsh[-1] + 1.0, 0.0]
     for shift in rng.choice(shifts, min(60, shifts.size), replace=False):
         assert _z_shifted(values, counts, shift) == _z_by_ranking_every_difference(x, shift)
+
+
+def test_resample_counts_are_the_float64_weights_in_float32():
+    from results_analysis.bootstrap import resample_counts
+    counts = resample_counts(3001, 40, 9)
+    assert counts.dtype == np.float32 and np.array_equal(counts.astype(np.float64), resample_weights(3001, 40, 9))
+
+
+@pytest.mark.parametrize("step, total_scale", [(0.5, 1), (1 / 16, 1), (1.0, 1), (1 / 3, 1), (0.5, 4001), (0.1, 1)])
+def test_counts_product_equals_the_float64_product(step, total_scale):
+    from results_analysis.bootstrap import counts_product, resample_counts
+    rng = np.random.default_rng(3)
+    clusters = 4000
+    counts = resample_counts(clusters, 300, 2)
+    # rank sums and counts (multiples of 1/2, 1/16, whole), thirds, or sums so large that float32 is not exact
+    sums = rng.integers(0, 50, (clusters, 7)) * step * total_scale
+    want = counts.astype(np.float64) @ sums
+    got = counts_product(counts, sums, clusters)
+    assert got.dtype == np.float64 and np.array_equal(got, want)
+    if step in (1 / 3, 0.1) or total_scale > 1:  # what a plain float32 product would get wrong
+        assert not np.array_equal((counts @ sums.astype(np.float32)).astype(np.float64), want)
