@@ -35,7 +35,8 @@ from results_analysis.bradley_terry import bradley_terry
 from results_analysis.descriptives import condition_summary
 from results_analysis.effect_sizes import EffectSizes, effect_sizes
 from results_analysis.errors import AnalysisInputError
-from results_analysis.exclusions import apply_exclusions, attention_summary
+from results_analysis.codes import FrameCodes, frame_codes
+from results_analysis.exclusions import apply_exclusions, attention_summary, excluded_rows
 from results_analysis.friedman import FriedmanResult, friedman_ranks
 from results_analysis.loader import CORE_COLUMNS, normalize_results
 from results_analysis.paradigm_analysis import BlockAnalysis, analyze_blocks
@@ -44,13 +45,13 @@ from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
-from results_analysis.ranks import (CriterionTable, RankBlocks, criterion_table, frame_codes, participant_index,
+from results_analysis.ranks import (CriterionTable, RankBlocks, criterion_table, participant_index,
                                     place_shares, rank_blocks, rank_blocks_by, rank_blocks_with_trials,
                                     shared_trial_tables, split_table, table_with_trials, text_levels)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order, criterion_labels
-from results_analysis.validate import check_complete, design_hashes, distinct_rows, validate_structure
+from results_analysis.validate import complete_codes, design_hashes, distinct_rows, validated_codes
 
 
 @dataclass
@@ -264,13 +265,16 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                                adjust=adjust, interval=interval, block_options=block_options)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        checked = validate_structure(df)
+        # participant, trial, criterion and condition codes, factorized once: the checks, exclusions and every
+        # criterion's trials x conditions matrix (split by breakdown level, stimulus or not at all) use them
+        checked, codes = validated_codes(df)
     notes = [str(w.message) for w in caught]
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    kept, excluded = apply_exclusions(checked, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
+    kept, excluded, keep = excluded_rows(checked, codes, exclude_failed_attention=exclude_failed_attention,
+                                         exclude=exclude)
     # Completeness is judged on what is analysed: an excluded participant's broken trial does not matter.
-    kept = check_complete(kept, incomplete=incomplete)
+    kept, codes = complete_codes(kept, codes.take(keep) if codes is not None else None, incomplete=incomplete)
     if kept.empty:
         raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
                                  "(practice and attention-check trials are never analysed)")
@@ -290,10 +294,8 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                                      + ", ".join(f"{c} ({labels[c]})" if labels.get(c, c) != c else c
                                                  for c in conditions))
         control = by_label[control]
-    # participant, trial, criterion and condition codes, factorized once: every criterion's trials x conditions
-    # matrix, split by breakdown level, stimulus or not at all, comes from them
-    codes = frame_codes(kept)
-    criteria = [str(c) for c in codes.criteria]  # in order of appearance
+    codes = codes if codes is not None else frame_codes(kept)
+    criteria = [str(c) for c in codes.criteria[codes.present("criterion")]]  # in order of appearance
     tables = {c: criterion_table(codes, c, conditions) for c in criteria}
     sm = incomplete == "skillings-mack"
     # shared_resamples: the criteria and intervals resample the same participants with the same seed, so the
@@ -301,7 +303,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     # the background (for every participant, as the criteria's blocks normally hold them all) while the
     # breakdowns, which need none, are computed
     with shared_resamples(), shared_trial_tables():
-        n_part = int(codes.participants.size)
+        n_part = codes.n_present("participant")
         if n_boot > 0 and n_part >= 2:
             resample_weights(n_part, n_boot, seed, background=True)
         by_group = {g: _group_breakdown(kept, g, tables, conditions=conditions, criteria=criteria, block=block)
@@ -343,7 +345,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                     questionnaire_item_reliability=item_rel, labels=labels, criterion_labels=names)
 
 
-def _n_trials(kept: pd.DataFrame, codes) -> int:
+def _n_trials(kept: pd.DataFrame, codes: FrameCodes) -> int:
     """``distinct_rows(kept, ["participant", "trial_index"])``, from the frame's codes."""
     key, span = codes.trial_keys()
     if (codes.participant < 0).any() or (codes.trial < 0).any():  # a missing value: as distinct_rows counts it

@@ -16,11 +16,10 @@ computed: no statistic depends on how ties were written.
 from one trials x conditions matrix per criterion, and within :func:`shared_trial_tables` (one analysis)
 that matrix is built once for all of them: the same numbers as :func:`rank_blocks` on each level's rows.
 
-:func:`frame_codes` factorizes a frame's participant, trial_index, criterion and condition columns once (the
-distinct participants and trial numbers sorted) and :func:`criterion_table` builds a criterion's matrix from
-those codes: one analysis passes them around explicitly instead of factorizing a million text cells for each
-criterion and breakdown. A subset's codes keep the order of the whole frame's sorted values, so the matrix,
-its rows and their order are the ones the frame's own factorization gives.
+:func:`criterion_table` builds a criterion's matrix from a frame's codes (:mod:`results_analysis.codes`,
+factorized once per analysis and passed around explicitly) instead of factorizing a million text cells for
+each criterion and breakdown. A subset's codes keep the order of the whole frame's sorted values, so the
+matrix, its rows and their order are the ones the frame's own factorization gives.
 """
 from __future__ import annotations
 
@@ -34,6 +33,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
+from results_analysis.codes import FrameCodes
 from results_analysis.errors import AnalysisInputError
 from results_analysis.validate import rated_mask, trial_key
 
@@ -66,42 +66,6 @@ class RankBlocks:
     @property
     def k(self) -> int:
         return int(self.ranks.shape[1])
-
-
-@dataclass(frozen=True)
-class FrameCodes:
-    """The key columns of a validated tidy frame as integer codes, factorized once (see module docstring).
-
-    participant, trial: each row's code among ``participants`` / ``trials`` (the distinct values, sorted);
-    criterion, condition: each row's code among ``criteria`` / ``conditions`` (in order of first appearance);
-    rank: each row's answer as float (NaN where missing). A code of -1 marks a missing value.
-    """
-
-    participant: np.ndarray
-    participants: np.ndarray
-    trial: np.ndarray
-    trials: np.ndarray
-    criterion: np.ndarray
-    criteria: np.ndarray
-    condition: np.ndarray
-    conditions: np.ndarray
-    rank: np.ndarray
-
-    def trial_keys(self) -> tuple[np.ndarray, int]:
-        """Each row's (participant, trial_index) as one code (participant major) and the number of codes."""
-        n_t = max(len(self.trials), 1)
-        return self.participant.astype(np.int64) * n_t + self.trial, max(len(self.participants), 1) * n_t
-
-
-def frame_codes(df: pd.DataFrame) -> FrameCodes:
-    """:class:`FrameCodes` of ``df`` (columns participant, trial_index, criterion, condition, rank)."""
-    p, pu = pd.factorize(df["participant"], sort=True)
-    t, tu = pd.factorize(df["trial_index"], sort=True)
-    c, cu = pd.factorize(df["criterion"])
-    k, ku = pd.factorize(df["condition"])
-    return FrameCodes(participant=p, participants=np.asarray(pu, dtype=object), trial=t, trials=np.asarray(tu),
-                      criterion=c, criteria=np.asarray(cu, dtype=object), condition=k,
-                      conditions=np.asarray(ku, dtype=object), rank=df["rank"].to_numpy(dtype=float))
 
 
 class CriterionTable(NamedTuple):

@@ -160,7 +160,8 @@ def test_table_from_frame_codes_equals_table_from_text_columns(seed: int) -> Non
     """criterion_table (codes factorized once for the frame) gives the matrix _criterion_table builds from the
     criterion's own rows: same rows, trials, answers, owners and ranks, on messy frames (ties, gaps, duplicates,
     shuffled rows, a criterion without rows)."""
-    from results_analysis.ranks import _criterion_table, criterion_table, frame_codes
+    from results_analysis.codes import frame_codes
+    from results_analysis.ranks import _criterion_table, criterion_table
 
     df = _messy(seed)
     codes = frame_codes(df)
