@@ -119,6 +119,13 @@ class Analysis:
         return self.criterion_labels.get(criterion, criterion)
 
 
+#: Core columns the rank analysis never reads from the rows it keeps, unless it breaks the results down by
+#: one (see run_analysis).
+_UNREAD_COLUMNS = frozenset({"session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "app_version",
+                             "study_title", "block", "paradigm", "rating", "preference", "matched",
+                             "motion_stimulus", "reasons"})
+
+
 def group_columns(df: pd.DataFrame) -> list[str]:
     """Columns that can be used for breakdowns: everything that is not a core export column or an answer
     to the questionnaire."""
@@ -271,7 +278,14 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     notes = [str(w.message) for w in caught]
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    kept, excluded, keep = excluded_rows(checked, codes, exclude_failed_attention=exclude_failed_attention,
+    # the analysis reads the key, flags, labels, design hash and group columns of the rows it keeps: the
+    # bookkeeping columns and questionnaire answers are left out of the copy of every kept row (a large study's
+    # frame has a million rows)
+    groups = list(groups)
+    needed = checked[[c for c in checked.columns if c in groups or (
+        c not in _UNREAD_COLUMNS and not str(c).startswith(QUESTIONNAIRE_PREFIX))]]
+    needed.attrs.update(checked.attrs)
+    kept, excluded, keep = excluded_rows(needed, codes, exclude_failed_attention=exclude_failed_attention,
                                          exclude=exclude)
     # Completeness is judged on what is analysed: an excluded participant's broken trial does not matter.
     kept, codes = complete_codes(kept, codes.take(keep) if codes is not None else None, incomplete=incomplete)

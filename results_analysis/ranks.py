@@ -77,6 +77,10 @@ class CriterionTable(NamedTuple):
     complete: np.ndarray      # (n_trials,) bool: the trial ranks every condition
     owner: np.ndarray         # participant of each complete trial
     values: np.ndarray        # (complete trials, k) within-trial average ranks
+    #: from codes (criterion_table): each complete trial's participant code among ``participants``, which are
+    #: all text (None from a frame's own columns)
+    owner_codes: np.ndarray | None = None
+    participants: np.ndarray | None = None
 
 
 def criterion_table(codes: FrameCodes, criterion: str, conditions: list[str]) -> CriterionTable:
@@ -85,10 +89,13 @@ def criterion_table(codes: FrameCodes, criterion: str, conditions: list[str]) ->
     found = np.flatnonzero(codes.criteria == criterion)
     rows = codes.criterion == found[0] if found.size else np.zeros(len(codes.criterion), dtype=bool)
     key = [(codes.participant[rows], codes.participants), (codes.trial[rows], codes.trials)]
-    trials, raw, n_trials, answers = _wide_codes(key, codes.condition[rows], codes.conditions, codes.rank[rows],
-                                                 conditions)
+    trials, raw, n_trials, answers, trial_codes = _wide_codes(key, codes.condition[rows], codes.conditions,
+                                                              codes.rank[rows], conditions)
     complete = ~np.isnan(raw).any(axis=1)
-    return CriterionTable(rows, n_trials, answers, complete, trials[0][complete], _trial_ranks(raw[complete]))
+    text = len(codes.participants) and pd.api.types.infer_dtype(codes.participants, skipna=False) == "string"
+    return CriterionTable(rows, n_trials, answers, complete, trials[0][complete], _trial_ranks(raw[complete]),
+                          owner_codes=trial_codes[0][complete] if text else None,
+                          participants=codes.participants if text else None)
 
 
 def participant_index(participants: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -266,7 +273,7 @@ def split_table(df: pd.DataFrame, criterion: str, table: CriterionTable,
     if not isinstance(levels, pd.Categorical):  # a breakdown's caller may pass one: factorized once for all criteria
         levels = pd.Categorical(np.asarray(levels, dtype=object))
     level_codes, names = levels.codes, levels.categories
-    rows, n_trials, (answer, trial), complete, owner, values = table
+    rows, n_trials, (answer, trial), complete, owner, values = table[:6]
     of_answer = level_codes[rows][answer]
     level = np.full(n_trials, -1, dtype=np.int64)
     level[trial] = of_answer  # one of each trial's codes (the last written) ...
@@ -284,6 +291,12 @@ def split_table(df: pd.DataFrame, criterion: str, table: CriterionTable,
     out = {}
     for code, name in enumerate(names):
         mine = level == code
+        if table.owner_codes is not None and mine.any():  # participants as codes: no comparison of their texts
+            oc, v = table.owner_codes[mine], values[mine]
+            tb = _code_blocks(oc, table.participants, v, list(conditions), "trial")
+            out[str(name)] = (tb if block == "trial" else _code_blocks(oc, table.participants, v, list(conditions),
+                                                                       block), tb)
+            continue
         tb = _blocks(owner[mine], values[mine], list(conditions), "trial", True)
         out[str(name)] = (tb if block == "trial" else _blocks(owner[mine], values[mine], list(conditions), block,
                                                               True), tb)
@@ -390,6 +403,21 @@ def _blocks(owner: np.ndarray, values: np.ndarray, conditions: list[str], block:
                       block=block)
 
 
+def _code_blocks(owner: np.ndarray, participants: np.ndarray, values: np.ndarray, conditions: list[str],
+                 block: str) -> RankBlocks:
+    """:func:`_blocks` of complete trials (at least one) whose participants are given as codes (``owner``, sorted)
+    among ``participants`` (all text): the same blocks, the runs of a participant's trials found by comparing
+    integers, not texts."""
+    if block == "participant":
+        first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+        per = np.diff(np.r_[first, len(owner)])
+        owner = owner[first]
+        values = np.add.reduceat(values, first, axis=0) / per[:, None]
+    ranks = within_block_ranks(values) if block == "participant" else values
+    return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants[owner],
+                      block=block)
+
+
 def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str],
           ) -> tuple[list[np.ndarray], np.ndarray, int, tuple[np.ndarray, np.ndarray]]:
     """The trials x conditions matrix of ranks that ``sub.pivot_table(index=key, columns="condition",
@@ -403,15 +431,14 @@ def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str],
     rank = sub["rank"].to_numpy(dtype=float)
     key_codes = [pd.factorize(sub[c], sort=True) for c in key] if len(sub) else []
     cond_codes, cond_names = pd.factorize(sub["condition"], sort=True)
-    return _wide_codes(key_codes, cond_codes, cond_names, rank, conditions, n_key=len(key))
+    return _wide_codes(key_codes, cond_codes, cond_names, rank, conditions, n_key=len(key))[:4]
 
 
 def _wide_codes(key_codes: list[tuple[np.ndarray, np.ndarray]], cond_codes: np.ndarray, cond_names,
-                rank: np.ndarray, conditions: list[str], n_key: int = 2,
-                ) -> tuple[list[np.ndarray], np.ndarray, int, tuple[np.ndarray, np.ndarray]]:
+                rank: np.ndarray, conditions: list[str], n_key: int = 2) -> tuple:
     """:func:`_wide` from the rows' codes: per key column (codes, distinct values sorted), the conditions'
     codes and names, and the ranks. Any sorted distinct values that include the rows' give the same matrix:
-    only the order of the codes matters."""
+    only the order of the codes matters. After what _wide returns comes each trial's code per key column."""
     codes, uniques = zip(*key_codes) if key_codes else ((), ())
     ok = ~np.isnan(rank) & (cond_codes >= 0)
     for c in codes:
@@ -432,13 +459,14 @@ def _wide_codes(key_codes: list[tuple[np.ndarray, np.ndarray]], cond_codes: np.n
         _, first = np.unique(cell, return_index=True)  # the first answer of each trial x condition
         out.flat[cell[first]] = rank[ok][inside][first]
     n_trials, answers = rows.size, (np.flatnonzero(ok)[inside], row_of[inside])
-    keys = []
+    keys, key_codes = [], []
     for c, u in zip(codes[::-1], uniques[::-1]):  # undo the lexicographic code, last column first
         size = max(len(u), 1)
-        keys.append(np.asarray(u)[rows % size])
+        key_codes.append(rows % size)
+        keys.append(np.asarray(u)[key_codes[-1]])
         rows = rows // size
     keys = keys[::-1] or [np.zeros(0, dtype=object) for _ in range(n_key)]
-    return keys, out, n_trials, answers
+    return keys, out, n_trials, answers, key_codes[::-1]
 
 
 def _sorted_distinct(codes: np.ndarray, span: int) -> tuple[np.ndarray, np.ndarray]:

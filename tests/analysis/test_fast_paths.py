@@ -253,3 +253,16 @@ def test_counts_product_equals_the_float64_product(step, total_scale):
     assert got.dtype == np.float64 and np.array_equal(got, want)
     if step in (1 / 3, 0.1) or total_scale > 1:  # what a plain float32 product would get wrong
         assert not np.array_equal((counts @ sums.astype(np.float32)).astype(np.float64), want)
+
+
+@pytest.mark.parametrize("k", [2, 3, 5, 6, 7])
+def test_tie_sum_from_tie_sizes_equals_runs_of_sorted_rows(k):
+    from results_analysis.friedman import _tie_sum
+    rng = np.random.default_rng(k)
+    for r in (_row_ranks(rng.integers(0, k, (3000, k)).astype(float)), _row_ranks(rng.random((50, k))),
+              np.full((10, k), (k + 1) / 2.0)):
+        s = np.sort(r, axis=1)  # sum of t^3 - t over the runs of equal values of each sorted row
+        starts = np.ones(s.shape, dtype=bool)
+        starts[:, 1:] = s[:, 1:] != s[:, :-1]
+        t = np.bincount((np.cumsum(starts, axis=1) - 1 + (np.arange(len(s)) * k)[:, None]).ravel()).astype(float)
+        assert _tie_sum(r) == float(np.sum(t ** 3 - t))
