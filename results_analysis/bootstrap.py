@@ -102,6 +102,18 @@ class ClusterSums:
         return ClusterSums(sums, of)
 
 
+def cluster_totals(cluster: np.ndarray, n_clusters: int, values: np.ndarray) -> np.ndarray:
+    """(n_clusters, ...) sums of ``values`` (one row per block) per cluster: ``np.add.at(zeros, cluster, values)``,
+    the same numbers (np.bincount adds each column's values in row order, as np.add.at does) without
+    np.add.at's per-element dispatch."""
+    values = np.asarray(values, dtype=float)
+    flat = values.reshape(len(values), int(np.prod(values.shape[1:], dtype=np.int64)))
+    out = np.empty((n_clusters, flat.shape[1]))
+    for j in range(flat.shape[1]):
+        out[:, j] = np.bincount(cluster, weights=flat[:, j], minlength=n_clusters)
+    return out.reshape((n_clusters,) + values.shape[1:])
+
+
 def _exact_float32(sums: np.ndarray) -> tuple[np.ndarray, float] | None:
     """``sums`` as float32 and the largest resample total for which products with them are exact in float32,
     or None when they are not all multiples of 1/2 or of 1/16.

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from results_analysis.bootstrap import counts_product, resample_counts, resample_weights
+from results_analysis.bootstrap import cluster_totals, counts_product, resample_counts, resample_weights
 from results_analysis.ranks import RankBlocks, as_blocks, participant_index, place_shares
 
 
@@ -27,8 +27,7 @@ def per_participant_sums(blocks: RankBlocks, values: np.ndarray | None = None) -
     """Participants (sorted), the (P, k) sums of ``values`` (default: the block ranks) and (P,) block counts."""
     values = blocks.ranks if values is None else values
     ids, inverse = participant_index(blocks.participants)
-    sums = np.zeros((ids.size, values.shape[1]))
-    np.add.at(sums, inverse, values)
+    sums = cluster_totals(inverse, ids.size, values)
     counts = np.bincount(inverse, minlength=ids.size).astype(float)
     return ids, sums, counts
 

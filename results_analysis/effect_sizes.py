@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from results_analysis.bootstrap import ClusterSums, cluster_bootstrap
+from results_analysis.bootstrap import ClusterSums, cluster_bootstrap, cluster_totals
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, pairs
 from results_analysis.ranks import RankBlocks, participant_index
 
@@ -212,9 +212,7 @@ def _row_weights(blocks: RankBlocks) -> tuple[int, np.ndarray]:
 
 def _per_cluster(cluster: np.ndarray, n_clusters: int, values: np.ndarray) -> np.ndarray:
     """(P, ...) sums of ``values`` (rows = blocks) per cluster."""
-    out = np.zeros((n_clusters,) + values.shape[1:])
-    np.add.at(out, cluster, values)
-    return out
+    return cluster_totals(cluster, n_clusters, values)
 
 
 def _tie_sums(r: np.ndarray) -> np.ndarray:

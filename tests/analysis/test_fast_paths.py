@@ -266,3 +266,15 @@ def test_tie_sum_from_tie_sizes_equals_runs_of_sorted_rows(k):
         starts[:, 1:] = s[:, 1:] != s[:, :-1]
         t = np.bincount((np.cumsum(starts, axis=1) - 1 + (np.arange(len(s)) * k)[:, None]).ravel()).astype(float)
         assert _tie_sum(r) == float(np.sum(t ** 3 - t))
+
+
+@pytest.mark.parametrize("shape", [(5000,), (5000, 3), (5000, 3, 3), (0, 4)])
+def test_cluster_totals_equal_add_at(shape):
+    from results_analysis.bootstrap import cluster_totals
+    rng = np.random.default_rng(len(shape))
+    cluster = rng.integers(0, 700, shape[0])
+    values = rng.random(shape) / 3.0  # inexact sums: the order of additions must be np.add.at's
+    want = np.zeros((700,) + shape[1:])
+    np.add.at(want, cluster, values)
+    got = cluster_totals(cluster, 700, values)
+    assert got.shape == want.shape and np.array_equal(got, want)
