@@ -24,7 +24,7 @@ import pandas as pd
 
 from results_analysis.adjust import ADJUSTMENT_NAMES, adjust_pvalues
 from results_analysis.friedman import friedman_ranks
-from results_analysis.ranks import rank_blocks_by, text_levels
+from results_analysis.ranks import CriterionTable, rank_blocks_by, split_table, text_levels
 
 AGREEMENT_COLUMNS = ["criterion", "stimulus", "n_raters", "kendall_w", "chi2", "df", "p", "p_adjusted",
                      "adjustment"]
@@ -43,15 +43,25 @@ def stimulus_agreement(df: pd.DataFrame, *, conditions: list[str], criteria: Seq
     >>> t[["stimulus", "n_raters"]].values.tolist()
     [['clip1', 6], ['clip2', 6]]
     """
+    return split_agreement(df, None, conditions=conditions, criteria=criteria, adjust=adjust)
+
+
+def split_agreement(df: pd.DataFrame, tables: dict[str, CriterionTable] | None, *, conditions: list[str],
+                    criteria: Sequence[str], adjust: str = "holm") -> pd.DataFrame:
+    """:func:`stimulus_agreement`, splitting each criterion's ``tables`` entry (from
+    :func:`results_analysis.ranks.criterion_table`) when given."""
     k = len(conditions)
     rows = []
     # one trials x conditions matrix per criterion (shared with the rest of the analysis within
-    # shared_trial_tables), split by stimulus (sorted); the stimuli factorized once for every criterion
+    # shared_trial_tables, or given), split by stimulus (sorted); the stimuli factorized once for every criterion
     stimuli = text_levels(df["stimulus"])
     for crit in criteria:
-        rated = stimuli.categories[np.unique(stimuli.codes[df["criterion"].to_numpy(dtype=object) == crit])]
+        mine = df["criterion"].to_numpy(dtype=object) == crit if tables is None else tables[crit].rows
+        rated = stimuli.categories[np.unique(stimuli.codes[mine])]
         first = len(rows)
-        for stim, (b, _) in rank_blocks_by(df, crit, stimuli, block="participant", conditions=conditions).items():
+        split = rank_blocks_by(df, crit, stimuli, block="participant", conditions=conditions) if tables is None \
+            else split_table(df, crit, tables[crit], stimuli, block="participant", conditions=conditions)
+        for stim, (b, _) in split.items():
             if stim not in rated:  # a stimulus that was never rated on this criterion has no row
                 continue
             row = {"criterion": crit, "stimulus": stim, "n_raters": b.n, "df": k - 1}

@@ -29,13 +29,14 @@ import numpy as np
 import pandas as pd
 
 from results_analysis.adjust import ADJUSTMENTS
-from results_analysis.agreement import agreement_summary, stimulus_agreement
+from results_analysis.agreement import agreement_summary, split_agreement
 from results_analysis.bootstrap import INTERVALS, resample_weights, shared_resamples
 from results_analysis.bradley_terry import bradley_terry
 from results_analysis.descriptives import condition_summary
 from results_analysis.effect_sizes import EffectSizes, effect_sizes
 from results_analysis.errors import AnalysisInputError
-from results_analysis.exclusions import apply_exclusions, attention_summary
+from results_analysis.codes import FrameCodes, frame_codes
+from results_analysis.exclusions import apply_exclusions, attention_summary, excluded_rows
 from results_analysis.friedman import FriedmanResult, friedman_ranks
 from results_analysis.loader import CORE_COLUMNS, normalize_results
 from results_analysis.paradigm_analysis import BlockAnalysis, analyze_blocks
@@ -44,12 +45,13 @@ from results_analysis.posthoc import conover as conover_test
 from results_analysis.posthoc import critical_difference, nemenyi, wilcoxon_holm
 from results_analysis.questionnaire import item_summary
 from results_analysis.reliability import item_reliability, scale_reliability_ci
-from results_analysis.ranks import (RankBlocks, participant_index, place_shares, rank_blocks, rank_blocks_by,
-                                    rank_blocks_with_trials, shared_trial_tables, text_levels)
+from results_analysis.ranks import (CriterionTable, RankBlocks, criterion_table, participant_index,
+                                    place_shares, rank_blocks, rank_blocks_by, rank_blocks_with_trials,
+                                    shared_trial_tables, split_table, table_with_trials, text_levels)
 from results_analysis.skillings_mack import SkillingsMackResult, skillings_mack
 from results_analysis.sqlite_schema import QUESTIONNAIRE_PREFIX
 from results_analysis.study_meta import condition_labels, condition_order, criterion_labels
-from results_analysis.validate import check_complete, design_hashes, distinct_rows, validate_structure
+from results_analysis.validate import complete_codes, design_hashes, distinct_rows, validated_codes
 
 
 @dataclass
@@ -117,6 +119,13 @@ class Analysis:
         return self.criterion_labels.get(criterion, criterion)
 
 
+#: Core columns the rank analysis never reads from the rows it keeps, unless it breaks the results down by
+#: one (see run_analysis).
+_UNREAD_COLUMNS = frozenset({"session", "slot", "plays", "response_time_s", "trial_duration_s", "sample", "app_version",
+                             "study_title", "block", "paradigm", "rating", "preference", "matched",
+                             "motion_stimulus", "reasons"})
+
+
 def group_columns(df: pd.DataFrame) -> list[str]:
     """Columns that can be used for breakdowns: everything that is not a core export column or an answer
     to the questionnaire."""
@@ -136,12 +145,24 @@ def analyze_criterion(df: pd.DataFrame, criterion: str, *, conditions: list[str]
     >>> a.friedman.n_blocks, a.sensitivity.n_blocks
     (12, 48)
     """
+    return _analyze_criterion(df, criterion, None, conditions=conditions, block=block, alpha=alpha, conover=conover,
+                              n_boot=n_boot, ci=ci, seed=seed, skillings_mack_test=skillings_mack_test,
+                              sm_permutations=sm_permutations, adjust=adjust, control=control, interval=interval)
+
+
+def _analyze_criterion(df: pd.DataFrame, criterion: str, table: CriterionTable | None, *, conditions: list[str],
+                       block: str, alpha: float, conover: bool, n_boot: int, ci: float, seed: int,
+                       skillings_mack_test: bool, sm_permutations: int, adjust: str, control: str | None,
+                       interval: str) -> CriterionAnalysis:
+    """:func:`analyze_criterion`, from the criterion's ``table`` when given (:func:`ranks.criterion_table`)."""
     sm = None
     if skillings_mack_test:
         sm = skillings_mack(rank_blocks(df, criterion, block="trial", conditions=conditions,
                                         complete_only=False).values, n_perm=sm_permutations, seed=seed)
     other = "participant" if block == "trial" else "trial"
-    by_participant, by_trial = rank_blocks_with_trials(df, criterion, block="participant", conditions=conditions)
+    by_participant, by_trial = (
+        rank_blocks_with_trials(df, criterion, block="participant", conditions=conditions) if table is None else
+        table_with_trials(df, criterion, table, block="participant", conditions=conditions))
     blocks, other_blocks = (by_trial, by_participant) if block == "trial" else (by_participant, by_trial)
     if blocks.n < 2:
         raise AnalysisInputError(df.attrs.get("source"), f"criterion {criterion}",
@@ -169,13 +190,21 @@ def group_breakdown(df: pd.DataFrame, column: str, *, conditions: list[str], cri
     Columns: group, level, criterion, n_blocks, n_participants, chi2, df, p, kendall_w, mean_rank_<condition>...
     and share_rank_1_<condition>....
     """
+    return _group_breakdown(df, column, None, conditions=conditions, criteria=criteria, block=block)
+
+
+def _group_breakdown(df: pd.DataFrame, column: str, tables: dict[str, CriterionTable] | None, *,
+                     conditions: list[str], criteria: Sequence[str], block: str) -> pd.DataFrame:
+    """:func:`group_breakdown`, splitting each criterion's ``tables`` entry when given."""
     if column not in df.columns:
         raise AnalysisInputError(df.attrs.get("source"), f"column '{column}'",
                                  f"no such column to group by; available: {', '.join(group_columns(df)) or 'none'}")
     rows = []
     levels = text_levels(df[column], "(none)")  # sorted levels
     # each criterion's trials x conditions matrix is built once and split by level (sorted, as groupby sorts)
-    split = {crit: rank_blocks_by(df, crit, levels, block=block, conditions=conditions) for crit in criteria}
+    split = {crit: (rank_blocks_by(df, crit, levels, block=block, conditions=conditions) if tables is None else
+                    split_table(df, crit, tables[crit], levels, block=block, conditions=conditions))
+             for crit in criteria}
     for level in sorted(split[criteria[0]]) if criteria else []:
         for crit in criteria:
             b, tb = split[crit][level]
@@ -243,13 +272,23 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                                adjust=adjust, interval=interval, block_options=block_options)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        checked = validate_structure(df)
+        # participant, trial, criterion and condition codes, factorized once: the checks, exclusions and every
+        # criterion's trials x conditions matrix (split by breakdown level, stimulus or not at all) use them
+        checked, codes = validated_codes(df)
     notes = [str(w.message) for w in caught]
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    kept, excluded = apply_exclusions(checked, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
+    # the analysis reads the key, flags, labels, design hash and group columns of the rows it keeps: the
+    # bookkeeping columns and questionnaire answers are left out of the copy of every kept row (a large study's
+    # frame has a million rows)
+    groups = list(groups)
+    needed = checked[[c for c in checked.columns if c in groups or (
+        c not in _UNREAD_COLUMNS and not str(c).startswith(QUESTIONNAIRE_PREFIX))]]
+    needed.attrs.update(checked.attrs)
+    kept, excluded, keep = excluded_rows(needed, codes, exclude_failed_attention=exclude_failed_attention,
+                                         exclude=exclude)
     # Completeness is judged on what is analysed: an excluded participant's broken trial does not matter.
-    kept = check_complete(kept, incomplete=incomplete)
+    kept, codes = complete_codes(kept, codes.take(keep) if codes is not None else None, incomplete=incomplete)
     if kept.empty:
         raise AnalysisInputError(df.attrs.get("source"), None, "no answers left after exclusions "
                                  "(practice and attention-check trials are never analysed)")
@@ -269,26 +308,28 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                                      + ", ".join(f"{c} ({labels[c]})" if labels.get(c, c) != c else c
                                                  for c in conditions))
         control = by_label[control]
-    criteria = list(pd.unique(kept["criterion"].to_numpy(dtype=object)))  # in order of appearance
+    codes = codes if codes is not None else frame_codes(kept)
+    criteria = [str(c) for c in codes.criteria[codes.present("criterion")]]  # in order of appearance
+    tables = {c: criterion_table(codes, c, conditions) for c in criteria}
     sm = incomplete == "skillings-mack"
     # shared_resamples: the criteria and intervals resample the same participants with the same seed, so the
     # resample matrix is drawn once (mean-rank, Bradley-Terry and effect-size intervals alike); it is drawn in
     # the background (for every participant, as the criteria's blocks normally hold them all) while the
     # breakdowns, which need none, are computed
     with shared_resamples(), shared_trial_tables():
-        n_part = int(kept["participant"].nunique())
+        n_part = codes.n_present("participant")
         if n_boot > 0 and n_part >= 2:
             resample_weights(n_part, n_boot, seed, background=True)
-        by_group = {g: group_breakdown(kept, g, conditions=conditions, criteria=criteria, block=block)
+        by_group = {g: _group_breakdown(kept, g, tables, conditions=conditions, criteria=criteria, block=block)
                     for g in groups}
-        agreement = stimulus_agreement(kept, conditions=conditions, criteria=criteria, adjust=adjust)
+        agreement = split_agreement(kept, tables, conditions=conditions, criteria=criteria, adjust=adjust)
         # caught: e.g. a Bradley-Terry fit that did not converge
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            results = {c: analyze_criterion(kept, c, conditions=conditions, block=block, alpha=alpha,
-                                            conover=conover, n_boot=n_boot, ci=ci, seed=seed,
-                                            skillings_mack_test=sm, sm_permutations=sm_permutations,
-                                            adjust=adjust, control=control, interval=interval) for c in criteria}
+            results = {c: _analyze_criterion(kept, c, tables[c], conditions=conditions, block=block, alpha=alpha,
+                                             conover=conover, n_boot=n_boot, ci=ci, seed=seed,
+                                             skillings_mack_test=sm, sm_permutations=sm_permutations,
+                                             adjust=adjust, control=control, interval=interval) for c in criteria}
     for w in caught:
         notes.append(str(w.message))
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -296,7 +337,6 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
     if questionnaire is not None and len(questionnaire):
         q = questionnaire[~questionnaire["participant"].astype(str).isin(set(excluded["participant"]))]
         items, reliability, item_rel = item_summary(q), scale_reliability_ci(q, ci=ci), item_reliability(q)
-    key = ["participant", "trial_index"]
     hashes = design_hashes(kept)
     paradigm_blocks = {}
     if len(others):
@@ -306,7 +346,7 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
         paradigm_blocks = analyze_blocks(rest, **block_options)
     return Analysis(paradigm_blocks=paradigm_blocks, criteria=results, conditions=conditions, block=block, alpha=alpha,
                     n_participants=n_part,
-                    n_trials=distinct_rows(kept, key), exclusions=excluded,
+                    n_trials=_n_trials(kept, codes), exclusions=excluded,
                     attention=attention_summary(checked), n_practice_rows=int(kept.attrs.get("n_practice_rows", 0)),
                     dropped_incomplete=int(kept.attrs.get("dropped_incomplete", 0)), incomplete=incomplete,
                     incomplete_blocks=int(kept.attrs.get("incomplete_blocks", 0)),
@@ -317,6 +357,16 @@ def run_analysis(df: pd.DataFrame, *, block: str = "participant", groups: Iterab
                     adjust=adjust, control=control, interval=interval, agreement=agreement,
                     agreement_summary=agreement_summary(agreement, alpha=alpha),
                     questionnaire_item_reliability=item_rel, labels=labels, criterion_labels=names)
+
+
+def _n_trials(kept: pd.DataFrame, codes: FrameCodes) -> int:
+    """``distinct_rows(kept, ["participant", "trial_index"])``, from the frame's codes."""
+    key, span = codes.trial_keys()
+    if (codes.participant < 0).any() or (codes.trial < 0).any():  # a missing value: as distinct_rows counts it
+        return distinct_rows(kept, ["participant", "trial_index"])
+    if span <= 4 * len(key) + 4096:
+        return int(np.count_nonzero(np.bincount(key, minlength=span)))
+    return int(pd.unique(key).size)
 
 
 def _paradigms_only(df: pd.DataFrame, names: dict[str, str], *, block: str, exclude_failed_attention: bool,

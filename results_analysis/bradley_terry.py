@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from scipy.sparse.csgraph import connected_components
 
-from results_analysis.descriptives import bootstrap_weights
+from results_analysis.bootstrap import cluster_totals, counts_product, resample_counts
 from results_analysis.ranks import RankBlocks, as_blocks, participant_index, ties
 
 #: Pseudo-count (wins each way per pair) that keeps bootstrap resamples with a never-winning condition finite.
@@ -181,12 +181,13 @@ def bradley_terry(blocks: RankBlocks | pd.DataFrame, criterion: str | None = Non
         r = blocks.ranks
         per = ((r[:, :, None] < r[:, None, :]) + 0.5 * ties(r[:, :, None], r[:, None, :])).astype(float)
         per[:, np.arange(k), np.arange(k)] = 0.0
-        by_participant = np.zeros((ids.size, k, k))
-        np.add.at(by_participant, inverse, per)
-        weights = bootstrap_weights(ids.size, n_boot, seed)
+        by_participant = cluster_totals(inverse, ids.size, per)
+        weights = resample_counts(ids.size, n_boot, seed)
         # one matrix product (BLAS) rather than einsum's own loop; the counts are multiples of 1/2 and the
-        # weights integers, so every sum is exact whatever the order of additions
-        resampled = (weights @ by_participant.reshape(ids.size, k * k)).reshape(-1, k, k)[:, keep][:, :, keep]
+        # weights integers, so every sum is exact whatever the order of additions (and in float32: see
+        # bootstrap.counts_product)
+        resampled = counts_product(weights, by_participant.reshape(ids.size, k * k), ids.size)
+        resampled = resampled.reshape(-1, k, k)[:, keep][:, :, keep]
         boot = fit_bradley_terry(resampled, prior=BOOT_PRIOR, tol=1e-8)
         a = (1.0 - ci) / 2.0
         lo[keep], hi[keep] = np.quantile(boot, a, axis=0), np.quantile(boot, 1.0 - a, axis=0)

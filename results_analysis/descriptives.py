@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from results_analysis.bootstrap import resample_weights
+from results_analysis.bootstrap import cluster_totals, counts_product, resample_counts, resample_weights
 from results_analysis.ranks import RankBlocks, as_blocks, participant_index, place_shares
 
 
@@ -27,8 +27,7 @@ def per_participant_sums(blocks: RankBlocks, values: np.ndarray | None = None) -
     """Participants (sorted), the (P, k) sums of ``values`` (default: the block ranks) and (P,) block counts."""
     values = blocks.ranks if values is None else values
     ids, inverse = participant_index(blocks.participants)
-    sums = np.zeros((ids.size, values.shape[1]))
-    np.add.at(sums, inverse, values)
+    sums = cluster_totals(inverse, ids.size, values)
     counts = np.bincount(inverse, minlength=ids.size).astype(float)
     return ids, sums, counts
 
@@ -72,7 +71,9 @@ def bootstrap_mean_rank_ci(blocks: RankBlocks, *, n_boot: int = 2000, ci: float 
     if blocks.n == 0 or n_boot <= 0:
         return np.full(k, np.nan), np.full(k, np.nan)
     _, sums, counts = per_participant_sums(blocks)
-    w = bootstrap_weights(sums.shape[0], n_boot, seed)
-    means = (w @ sums) / (w @ counts)[:, None]
+    # one product for the rank sums and the block counts, exact in float32 (see bootstrap.counts_product)
+    w = resample_counts(sums.shape[0], n_boot, seed)
+    both = counts_product(w, np.column_stack([sums, counts]), sums.shape[0])
+    means = both[:, :-1] / both[:, -1][:, None]
     a = (1.0 - ci) / 2.0
     return np.quantile(means, a, axis=0), np.quantile(means, 1.0 - a, axis=0)

@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from results_analysis.bootstrap import ClusterSums, cluster_bootstrap
+from results_analysis.bootstrap import ClusterSums, cluster_bootstrap, cluster_totals
 from results_analysis.posthoc import WILCOXON_EXACT_BELOW_N, pairs
 from results_analysis.ranks import RankBlocks, participant_index
 
@@ -115,29 +115,36 @@ def signed_rank_cdf(n: int) -> np.ndarray:
     return np.cumsum(counts) / 2.0 ** n
 
 
-def _z_shifted(x: np.ndarray, shift: float) -> float:
-    """R's wdiff: the continuity- and tie-corrected signed-rank z of x - shift (zeros dropped)."""
-    xd = np.round(x - shift, _DECIMALS)
-    xd = xd[xd != 0]
-    n = xd.size
+def _z_shifted(values: np.ndarray, counts: np.ndarray, shift: float) -> float:
+    """R's wdiff: the continuity- and tie-corrected signed-rank z of x - shift (zeros dropped), for the x that
+    holds each of the distinct ``values`` ``counts`` times. Block differences take few distinct values, so
+    the signed ranks come from those values' counts (each tie group's average rank is the count before it
+    plus (count + 1) / 2), not from ranking every difference again at each step of the search: the rank
+    sums are half-integers, exact in any order, so z is the number ranking all of x gives."""
+    xd = np.round(values - shift, _DECIMALS)
+    keep = xd != 0
+    xd, c = xd[keep], counts[keep]
+    n = int(c.sum())
     if n == 0:
         return 0.0
-    r = stats.rankdata(np.abs(xd))
-    z = r[xd > 0].sum() - n * (n + 1) / 4.0
-    _, t = np.unique(r, return_counts=True)
+    size_of, group = np.unique(np.abs(xd), return_inverse=True)  # tie groups of |x - shift|
+    t = np.bincount(group, weights=c, minlength=size_of.size).astype(np.int64)
+    positive = np.bincount(group, weights=np.where(xd > 0, c, 0), minlength=size_of.size)
+    average_rank = (np.cumsum(t) - t) + (t + 1) / 2.0
+    z = float((positive * average_rank).sum()) - n * (n + 1) / 4.0
     sigma = np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0 - np.sum(t ** 3 - t) / 48.0)
     return float((z - np.sign(z) * 0.5) / sigma) if sigma > 0 else 0.0
 
 
-def _first_below(walsh: np.ndarray, x: np.ndarray, level: float) -> float:
+def _first_below(walsh: np.ndarray, values: np.ndarray, counts: np.ndarray, level: float) -> float:
     """The Walsh average at which z(x - d) first falls below ``level`` as d grows (z is non-increasing in d
     and constant between Walsh averages): binary search over the gaps between them (``walsh``: the distinct
-    averages, sorted)."""
+    averages, sorted; x: ``values`` each ``counts`` times, see :func:`_z_shifted`)."""
     mids = np.r_[walsh[0] - 1.0, (walsh[:-1] + walsh[1:]) / 2.0, walsh[-1] + 1.0]
     lo, hi = 0, mids.size - 1   # z(mids[lo]) >= level > z(mids[hi])
     while hi - lo > 1:
         m = (lo + hi) // 2
-        if _z_shifted(x, mids[m]) >= level:
+        if _z_shifted(values, counts, mids[m]) >= level:
             lo = m
         else:
             hi = m
@@ -178,15 +185,17 @@ def hodges_lehmann(d: np.ndarray, *, ci: float = 0.95) -> HodgesLehmann:
         achieved = 2.0 * cdf[qu - 1]
         return HodgesLehmann(est, _walsh_at(walsh, cum, qu - 1), _walsh_at(walsh, cum, ql), "exact",
                              float(1.0 - achieved), n)
+    values, counts = np.unique(nz, return_counts=True)
     # R widens the level until the ends lie inside [min d, max d] (possible only with very few blocks).
     while alpha < 1.0:
         zq = float(stats.norm.isf(alpha / 2.0))
-        if _z_shifted(nz, nz.min()) >= zq and _z_shifted(nz, nz.max()) <= -zq:
+        if _z_shifted(values, counts, values[0]) >= zq and _z_shifted(values, counts, values[-1]) <= -zq:
             break
         alpha *= 2.0
     if alpha >= 1.0:
         return HodgesLehmann(est, np.nan, np.nan, "normal approximation", np.nan, n)
-    return HodgesLehmann(est, _first_below(walsh, nz, zq), _first_below(walsh, nz, -zq), "normal approximation",
+    return HodgesLehmann(est, _first_below(walsh, values, counts, zq), _first_below(walsh, values, counts, -zq),
+                         "normal approximation",
                          1.0 - alpha, n)
 
 
@@ -203,9 +212,7 @@ def _row_weights(blocks: RankBlocks) -> tuple[int, np.ndarray]:
 
 def _per_cluster(cluster: np.ndarray, n_clusters: int, values: np.ndarray) -> np.ndarray:
     """(P, ...) sums of ``values`` (rows = blocks) per cluster."""
-    out = np.zeros((n_clusters,) + values.shape[1:])
-    np.add.at(out, cluster, values)
-    return out
+    return cluster_totals(cluster, n_clusters, values)
 
 
 def _tie_sums(r: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
+from results_analysis.codes import FrameCodes
 from results_analysis.validate import trial_key
 
 
@@ -26,11 +27,20 @@ def apply_exclusions(df: pd.DataFrame, *, exclude_failed_attention: bool = False
     >>> kept["participant"].tolist(), who.to_dict("records")
     (['P1'], [{'participant': 'P2', 'reason': 'failed 1 of 1 attention check(s)'}])
     """
+    kept, table, _ = excluded_rows(df, None, exclude_failed_attention=exclude_failed_attention, exclude=exclude)
+    return kept, table
+
+
+def excluded_rows(df: pd.DataFrame, frame: FrameCodes | None, *, exclude_failed_attention: bool = False,
+                  exclude: Iterable[str] = ()) -> tuple[pd.DataFrame, pd.DataFrame, np.ndarray]:
+    """:func:`apply_exclusions` with the frame's codes (:mod:`results_analysis.codes`; None: the participants
+    are factorized here), and the mask of the rows kept."""
     attrs = dict(df.attrs)
     exclude = [str(p).strip() for p in exclude if str(p).strip()]
     reasons: dict[str, list[str]] = {}
     # per distinct participant, not per row: a large study has a million rows and ten thousand participants
-    codes, names = pd.factorize(df["participant"], use_na_sentinel=True)
+    codes, names = (pd.factorize(df["participant"], use_na_sentinel=True) if frame is None else
+                    (frame.participant, frame.participants))
     names = [str(p) for p in names]
     known = set(names)
     for p in exclude:
@@ -52,12 +62,13 @@ def apply_exclusions(df: pd.DataFrame, *, exclude_failed_attention: bool = False
         out |= df["is_practice"].astype(bool)
     if "is_attention_check" in df.columns:
         out |= df["is_attention_check"].astype(bool)
-    kept = df.loc[~out]  # a new frame already (copy-on-write): no second copy of every column
+    keep = ~out.to_numpy()
+    kept = df.loc[keep]  # a new frame already (copy-on-write): no second copy of every column
     kept.attrs.update(attrs)
     kept.attrs["n_practice_rows"] = int(df["is_practice"].astype(bool).sum()) if "is_practice" in df.columns else 0
     table = pd.DataFrame([{"participant": p, "reason": "; ".join(r)} for p, r in sorted(reasons.items())],
                          columns=["participant", "reason"])
-    return kept, table
+    return kept, table, keep
 
 
 def attention_summary(df: pd.DataFrame) -> pd.DataFrame:

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from results_analysis.ranks import ties, within_block_ranks
+from results_analysis.ranks import _half_steps, tie_sizes, ties, within_block_ranks
 
 
 @dataclass(frozen=True)
@@ -75,6 +75,11 @@ def friedman_ranks(ranks: np.ndarray, *, tie_correction: bool = True) -> Friedma
 
 def _tie_sum(ranks: np.ndarray) -> float:
     """sum over blocks and tied groups of t^3 - t, from average ranks (tied values share a rank)."""
+    if ranks.shape[1] <= 6 and _half_steps(ranks):
+        # each of a group's t cells ties with t cells: sum over cells of t^2 - 1 is sum over groups of t^3 - t,
+        # whole numbers (exact); for half-step ranks, ties are equal values, so the groups are the runs below
+        t = tie_sizes(ranks)
+        return float((t * t - 1).sum())
     s = np.sort(ranks, axis=1)
     n, k = s.shape
     # Run lengths of equal values per row, vectorized over rows.

@@ -19,6 +19,7 @@ with columns a, b, statistic, p, p_adjusted (and extras).
 """
 from __future__ import annotations
 
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -64,6 +65,13 @@ def nemenyi_q_alpha(k: int, alpha: float = 0.05) -> float:
     """
     if k < 2:
         raise ValueError("the Nemenyi test needs at least 2 conditions")
+    return _q_alpha(int(k), float(alpha))
+
+
+@lru_cache(maxsize=64)
+def _q_alpha(k: int, alpha: float) -> float:
+    """The studentized-range quantile of :func:`nemenyi_q_alpha` (a numerical integration of some 10 ms, asked
+    for twice per criterion with the same k and alpha): a pure function of two numbers, so kept."""
     return float(stats.studentized_range.ppf(1.0 - alpha, k, np.inf) / np.sqrt(2.0))
 
 

@@ -15,6 +15,11 @@ computed: no statistic depends on how ties were written.
 :func:`rank_blocks_by` gives every level of a breakdown (stimulus, speaker, participant group) its blocks
 from one trials x conditions matrix per criterion, and within :func:`shared_trial_tables` (one analysis)
 that matrix is built once for all of them: the same numbers as :func:`rank_blocks` on each level's rows.
+
+:func:`criterion_table` builds a criterion's matrix from a frame's codes (:mod:`results_analysis.codes`,
+factorized once per analysis and passed around explicitly) instead of factorizing a million text cells for
+each criterion and breakdown. A subset's codes keep the order of the whole frame's sorted values, so the
+matrix, its rows and their order are the ones the frame's own factorization gives.
 """
 from __future__ import annotations
 
@@ -22,11 +27,13 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
+from results_analysis.codes import FrameCodes
 from results_analysis.errors import AnalysisInputError
 from results_analysis.validate import rated_mask, trial_key
 
@@ -59,6 +66,36 @@ class RankBlocks:
     @property
     def k(self) -> int:
         return int(self.ranks.shape[1])
+
+
+class CriterionTable(NamedTuple):
+    """A criterion's trials x conditions matrix (see :func:`criterion_table`)."""
+
+    rows: np.ndarray          # (rows of the frame,) bool: the criterion's rows
+    n_trials: int             # trials with at least one answer
+    answers: tuple            # (positions among the criterion's rows, trial of each) of the answers in the matrix
+    complete: np.ndarray      # (n_trials,) bool: the trial ranks every condition
+    owner: np.ndarray         # participant of each complete trial
+    values: np.ndarray        # (complete trials, k) within-trial average ranks
+    #: from codes (criterion_table): each complete trial's participant code among ``participants``, which are
+    #: all text (None from a frame's own columns)
+    owner_codes: np.ndarray | None = None
+    participants: np.ndarray | None = None
+
+
+def criterion_table(codes: FrameCodes, criterion: str, conditions: list[str]) -> CriterionTable:
+    """The table :func:`rank_blocks_by` splits, for ``criterion`` of the frame ``codes`` were made from: the
+    numbers ``_criterion_table`` gives from the frame's text columns (see module docstring)."""
+    found = np.flatnonzero(codes.criteria == criterion)
+    rows = codes.criterion == found[0] if found.size else np.zeros(len(codes.criterion), dtype=bool)
+    key = [(codes.participant[rows], codes.participants), (codes.trial[rows], codes.trials)]
+    trials, raw, n_trials, answers, trial_codes = _wide_codes(key, codes.condition[rows], codes.conditions,
+                                                              codes.rank[rows], conditions)
+    complete = ~np.isnan(raw).any(axis=1)
+    text = len(codes.participants) and pd.api.types.infer_dtype(codes.participants, skipna=False) == "string"
+    return CriterionTable(rows, n_trials, answers, complete, trials[0][complete], _trial_ranks(raw[complete]),
+                          owner_codes=trial_codes[0][complete] if text else None,
+                          participants=codes.participants if text else None)
 
 
 def participant_index(participants: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -225,10 +262,18 @@ def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndar
     """
     if block not in BLOCKS:
         raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
+    return split_table(df, criterion, _criterion_table(df, criterion, list(conditions)), levels, block=block,
+                       conditions=conditions)
+
+
+def split_table(df: pd.DataFrame, criterion: str, table: CriterionTable,
+                levels: pd.Series | np.ndarray | pd.Categorical, *, block: str = "participant",
+                conditions: list[str]) -> dict[str, tuple[RankBlocks, RankBlocks]]:
+    """:func:`rank_blocks_by` with the criterion's ``table`` given (from :func:`criterion_table`)."""
     if not isinstance(levels, pd.Categorical):  # a breakdown's caller may pass one: factorized once for all criteria
         levels = pd.Categorical(np.asarray(levels, dtype=object))
     level_codes, names = levels.codes, levels.categories
-    rows, n_trials, (answer, trial), complete, owner, values = _criterion_table(df, criterion, list(conditions))
+    rows, n_trials, (answer, trial), complete, owner, values = table[:6]
     of_answer = level_codes[rows][answer]
     level = np.full(n_trials, -1, dtype=np.int64)
     level[trial] = of_answer  # one of each trial's codes (the last written) ...
@@ -246,6 +291,12 @@ def rank_blocks_by(df: pd.DataFrame, criterion: str, levels: pd.Series | np.ndar
     out = {}
     for code, name in enumerate(names):
         mine = level == code
+        if table.owner_codes is not None and mine.any():  # participants as codes: no comparison of their texts
+            oc, v = table.owner_codes[mine], values[mine]
+            tb = _code_blocks(oc, table.participants, v, list(conditions), "trial")
+            out[str(name)] = (tb if block == "trial" else _code_blocks(oc, table.participants, v, list(conditions),
+                                                                       block), tb)
+            continue
         tb = _blocks(owner[mine], values[mine], list(conditions), "trial", True)
         out[str(name)] = (tb if block == "trial" else _blocks(owner[mine], values[mine], list(conditions), block,
                                                               True), tb)
@@ -266,6 +317,22 @@ def rank_blocks_with_trials(df: pd.DataFrame, criterion: str, *, block: str = "p
     if len(df):
         one_level = pd.Categorical.from_codes(np.zeros(len(df), dtype=np.int8), categories=["all"])
         return rank_blocks_by(df, criterion, one_level, block=block, conditions=conditions)["all"]
+    return _empty_with_trials(df, criterion, block=block, conditions=conditions)
+
+
+def table_with_trials(df: pd.DataFrame, criterion: str, table: CriterionTable, *, block: str = "participant",
+                      conditions: list[str]) -> tuple[RankBlocks, RankBlocks]:
+    """:func:`rank_blocks_with_trials` with the criterion's ``table`` given (from :func:`criterion_table`)."""
+    if block not in BLOCKS:
+        raise ValueError(f"block must be one of {BLOCKS}, not {block!r}")
+    if len(df):
+        one_level = pd.Categorical.from_codes(np.zeros(len(df), dtype=np.int8), categories=["all"])
+        return split_table(df, criterion, table, one_level, block=block, conditions=conditions)["all"]
+    return _empty_with_trials(df, criterion, block=block, conditions=conditions)
+
+
+def _empty_with_trials(df: pd.DataFrame, criterion: str, *, block: str,
+                       conditions: list[str]) -> tuple[RankBlocks, RankBlocks]:
     b = rank_blocks(df, criterion, block=block, conditions=conditions)
     return b, b if block == "trial" else rank_blocks(df, criterion, block="trial", conditions=conditions)
 
@@ -288,7 +355,7 @@ def shared_trial_tables() -> Iterator[None]:
         _TABLES.reset(token)
 
 
-def _criterion_table(df: pd.DataFrame, criterion: str, conditions: list[str]) -> tuple:
+def _criterion_table(df: pd.DataFrame, criterion: str, conditions: list[str]) -> CriterionTable:
     """The rows of ``criterion`` (mask), the number of trials, the answers the matrix holds (positions among
     those rows, trial of each), which trials are complete, and their participants and within-trial ranks."""
     cache = _TABLES.get()
@@ -299,7 +366,7 @@ def _criterion_table(df: pd.DataFrame, criterion: str, conditions: list[str]) ->
     rows = df["criterion"].to_numpy(dtype=object) == criterion
     trials, raw, n_trials, answers = _wide(df.loc[rows, [*key, "condition", "rank"]], key, conditions)
     complete = ~np.isnan(raw).any(axis=1)
-    table = (rows, n_trials, answers, complete, trials[0][complete], _trial_ranks(raw[complete]))
+    table = CriterionTable(rows, n_trials, answers, complete, trials[0][complete], _trial_ranks(raw[complete]))
     if cache is not None:
         cache[tag] = (df, table)  # the frame is kept with it: its id cannot be reused while the block lasts
     return table
@@ -336,6 +403,21 @@ def _blocks(owner: np.ndarray, values: np.ndarray, conditions: list[str], block:
                       block=block)
 
 
+def _code_blocks(owner: np.ndarray, participants: np.ndarray, values: np.ndarray, conditions: list[str],
+                 block: str) -> RankBlocks:
+    """:func:`_blocks` of complete trials (at least one) whose participants are given as codes (``owner``, sorted)
+    among ``participants`` (all text): the same blocks, the runs of a participant's trials found by comparing
+    integers, not texts."""
+    if block == "participant":
+        first = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+        per = np.diff(np.r_[first, len(owner)])
+        owner = owner[first]
+        values = np.add.reduceat(values, first, axis=0) / per[:, None]
+    ranks = within_block_ranks(values) if block == "participant" else values
+    return RankBlocks(values=values, ranks=ranks, conditions=list(conditions), participants=participants[owner],
+                      block=block)
+
+
 def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str],
           ) -> tuple[list[np.ndarray], np.ndarray, int, tuple[np.ndarray, np.ndarray]]:
     """The trials x conditions matrix of ranks that ``sub.pivot_table(index=key, columns="condition",
@@ -347,12 +429,21 @@ def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str],
     of trials and the answers it was built from: their positions in ``sub`` and the trial (row) of each.
     """
     rank = sub["rank"].to_numpy(dtype=float)
-    codes, uniques = zip(*(pd.factorize(sub[c], sort=True) for c in key)) if len(sub) else ((), ())
+    key_codes = [pd.factorize(sub[c], sort=True) for c in key] if len(sub) else []
     cond_codes, cond_names = pd.factorize(sub["condition"], sort=True)
+    return _wide_codes(key_codes, cond_codes, cond_names, rank, conditions, n_key=len(key))[:4]
+
+
+def _wide_codes(key_codes: list[tuple[np.ndarray, np.ndarray]], cond_codes: np.ndarray, cond_names,
+                rank: np.ndarray, conditions: list[str], n_key: int = 2) -> tuple:
+    """:func:`_wide` from the rows' codes: per key column (codes, distinct values sorted), the conditions'
+    codes and names, and the ranks. Any sorted distinct values that include the rows' give the same matrix:
+    only the order of the codes matters. After what _wide returns comes each trial's code per key column."""
+    codes, uniques = zip(*key_codes) if key_codes else ((), ())
     ok = ~np.isnan(rank) & (cond_codes >= 0)
     for c in codes:
         ok &= c >= 0
-    trial = np.zeros(len(sub), dtype=np.int64)
+    trial = np.zeros(len(rank), dtype=np.int64)
     for c, u in zip(codes, uniques):  # lexicographic code of the key, in the key's sort order
         trial = trial * max(len(u), 1) + c
     rows, row_of = _sorted_distinct(trial[ok], int(np.prod([max(len(u), 1) for u in uniques])))
@@ -368,13 +459,14 @@ def _wide(sub: pd.DataFrame, key: list[str], conditions: list[str],
         _, first = np.unique(cell, return_index=True)  # the first answer of each trial x condition
         out.flat[cell[first]] = rank[ok][inside][first]
     n_trials, answers = rows.size, (np.flatnonzero(ok)[inside], row_of[inside])
-    keys = []
+    keys, key_codes = [], []
     for c, u in zip(codes[::-1], uniques[::-1]):  # undo the lexicographic code, last column first
         size = max(len(u), 1)
-        keys.append(np.asarray(u)[rows % size])
+        key_codes.append(rows % size)
+        keys.append(np.asarray(u)[key_codes[-1]])
         rows = rows // size
-    keys = keys[::-1] or [np.zeros(0, dtype=object) for _ in key]
-    return keys, out, n_trials, answers
+    keys = keys[::-1] or [np.zeros(0, dtype=object) for _ in range(n_key)]
+    return keys, out, n_trials, answers, key_codes[::-1]
 
 
 def _sorted_distinct(codes: np.ndarray, span: int) -> tuple[np.ndarray, np.ndarray]:

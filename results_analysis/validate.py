@@ -10,6 +10,7 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from results_analysis.codes import FrameCodes, frame_codes
 from results_analysis.errors import AnalysisInputError
 from results_analysis.loader import REQUIRED_COLUMNS
 
@@ -79,6 +80,12 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
     """Columns, ranks (numbers within range), duplicates and design hashes of the rank rows (a table with
     other paradigms' blocks is checked on its ``rank`` rows, which are what it returns); see
     :func:`validate_results`."""
+    return validated_codes(df)[0]
+
+
+def validated_codes(df: pd.DataFrame) -> tuple[pd.DataFrame, FrameCodes | None]:
+    """:func:`validate_structure`, and the checked frame's codes (:mod:`results_analysis.codes`, factorized
+    once here for the checks and handed on to the rest of an analysis; None when a key value is missing)."""
     from results_analysis.paradigms import rank_rows
 
     df = rank_rows(df)
@@ -95,7 +102,12 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
         raise AnalysisInputError(src, f"{where.iloc[i]}, column 'rank'", "missing or non-numeric rank")
 
     key = trial_key(df)
-    codes = _codes(df, key + ["criterion", "condition"])
+    try:
+        frame = frame_codes(df, rank.to_numpy(dtype=float))
+    except TypeError:  # values that do not sort (a frame not normalized): pandas' own grouping below
+        frame = None
+    frame = frame if frame is not None and frame.complete() else None
+    codes = _frame_key(frame, 4) if frame is not None else None
     dup = pd.Series(_sizes(codes) > 1, index=df.index) if codes is not None else \
         df.duplicated(key + ["criterion", "condition"], keep=False)
     if dup.any():
@@ -108,7 +120,8 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
                                  f"{first['condition']} appears more than once")
 
     rated = rated_mask(df)
-    k_rated = int(df.loc[rated, "condition"].nunique())
+    k_rated = int(frame.present("condition", rated.to_numpy()).size) if frame is not None else \
+        int(df.loc[rated, "condition"].nunique())
     # Rated trials: 1..k over the study's conditions; other trials: 1..(conditions shown in that trial).
     per_trial = _sizes(codes[:-1]) if codes is not None else \
         df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
@@ -125,8 +138,22 @@ def validate_structure(df: pd.DataFrame) -> pd.DataFrame:
             per = df.groupby("design_hash")["participant"].nunique()
             detail = ", ".join(f"{h} ({per[h]} participant{'s' if per[h] != 1 else ''})" for h in hashes)
             warnings.warn(f"{src or '<data frame>'}: column 'design_hash': results mix {len(hashes)} study "
-                          f"designs: {detail}", MixedDesignWarning, stacklevel=3)
-    return df
+                          f"designs: {detail}", MixedDesignWarning, stacklevel=4)
+    return df, frame
+
+
+def _frame_key(frame: FrameCodes, n: int) -> list[tuple[np.ndarray, int]] | None:
+    """What :func:`_codes` gives for the first ``n`` of participant, trial_index, criterion, condition, from a
+    frame's codes (other codes, the same groups)."""
+    cols = [(frame.participant, frame.participants), (frame.trial, frame.trials),
+            (frame.criterion, frame.criteria), (frame.condition, frame.conditions)][:n]
+    out, span = [], 1
+    for code, uniques in cols:
+        span *= max(len(uniques), 1)
+        if span >= 2 ** 62:
+            return None
+        out.append((code, max(len(uniques), 1)))
+    return out
 
 
 def check_complete(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFrame:
@@ -134,15 +161,25 @@ def check_complete(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFra
     the incomplete trial-criterion blocks (listwise deletion) and records how many in
     ``attrs['dropped_incomplete']``; ``incomplete='skillings-mack'`` keeps them (counted in
     ``attrs['incomplete_blocks']``) for the Skillings-Mack test."""
+    return complete_codes(df, None, incomplete=incomplete)[0]
+
+
+def complete_codes(df: pd.DataFrame, frame: FrameCodes | None, *, incomplete: str = "error",
+                   ) -> tuple[pd.DataFrame, FrameCodes | None]:
+    """:func:`check_complete` with the frame's codes (:mod:`results_analysis.codes`; None: factorized here),
+    and the codes of the frame it returns."""
     if incomplete not in INCOMPLETE_MODES:
         raise ValueError(f"incomplete must be one of {INCOMPLETE_MODES}")
     src = df.attrs.get("source")
     where = _where(df)
     rated = rated_mask(df)
-    conditions = sorted(df.loc[rated, "condition"].unique())
+    if frame is not None:
+        conditions = sorted(frame.conditions[frame.present("condition", rated.to_numpy())])
+    else:
+        conditions = sorted(df.loc[rated, "condition"].unique())
     k = len(conditions)
     key = trial_key(df)
-    codes = _codes(df, key + ["criterion"])
+    codes = _frame_key(frame, 3) if frame is not None else _codes(df, key + ["criterion"])
     counts = _sizes(codes) if codes is not None else \
         df.groupby(key + ["criterion"], sort=False)["condition"].transform("size")
     short = rated & (counts < k)
@@ -151,13 +188,13 @@ def check_complete(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFra
         if incomplete == "skillings-mack":
             df.attrs["incomplete_blocks"] = int(df.loc[short, key + ["criterion"]].drop_duplicates().shape[0])
             df.attrs["dropped_incomplete"] = 0
-            return df
+            return df, frame
         if incomplete == "drop":
             n_dropped = int(df.loc[short, key + ["criterion"]].drop_duplicates().shape[0])
             df = df.loc[~short].copy()
             df.attrs.update(attrs)
             df.attrs["dropped_incomplete"] = n_dropped
-            return df
+            return df, (frame.take(~short.to_numpy()) if frame is not None else None)
         i = int(np.argmax(short.to_numpy()))
         row = df.iloc[i]
         have = set(df.loc[(df[key + ["criterion"]] == row[key + ["criterion"]]).all(axis=1), "condition"])
@@ -167,7 +204,7 @@ def check_complete(df: pd.DataFrame, *, incomplete: str = "error") -> pd.DataFra
                                  f"the trial does not rank every condition: {lacks} missing "
                                  "(use --incomplete drop for listwise deletion or --incomplete skillings-mack)")
     df.attrs["dropped_incomplete"] = 0
-    return df
+    return df, frame
 
 
 def _codes(df: pd.DataFrame, cols: list[str]) -> list[tuple[np.ndarray, int]] | None:

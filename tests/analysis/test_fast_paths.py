@@ -204,3 +204,77 @@ def test_condition_order_and_labels_equal_the_row_by_row_walk(seed):
         return
     order = condition_order(df)
     assert (order, condition_labels(df, order)) == want
+
+
+def _z_by_ranking_every_difference(x: np.ndarray, shift: float) -> float:
+    """R's wdiff, written out on every difference (the computation the distinct-value one replaces)."""
+    xd = np.round(x - shift, 10)
+    xd = xd[xd != 0]
+    n = xd.size
+    if n == 0:
+        return 0.0
+    r = rankdata(np.abs(xd))
+    z = r[xd > 0].sum() - n * (n + 1) / 4.0
+    _, t = np.unique(r, return_counts=True)
+    sigma = np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0 - np.sum(t ** 3 - t) / 48.0)
+    return float((z - np.sign(z) * 0.5) / sigma) if sigma > 0 else 0.0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_signed_rank_z_from_distinct_values_equals_ranking_every_difference(seed):
+    from results_analysis.effect_sizes import _z_shifted, walsh_distinct
+    rng = np.random.default_rng(seed)
+    # participants' mean-rank differences: multiples of 1/16 (or thirds), many ties, some zeros
+    step = 1 / 16 if seed % 2 else 1 / 3
+    x = rng.integers(-32, 33, rng.integers(1, 3000)) * step
+    values, counts = np.unique(x, return_counts=True)
+    walsh = walsh_distinct(x)[0]
+    shifts = np.r_[walsh, (walsh[:-1] + walsh[1:]) / 2.0, walsh[0] - 1.0, walsh[-1] + 1.0, 0.0]
+    for shift in rng.choice(shifts, min(60, shifts.size), replace=False):
+        assert _z_shifted(values, counts, shift) == _z_by_ranking_every_difference(x, shift)
+
+
+def test_resample_counts_are_the_float64_weights_in_float32():
+    from results_analysis.bootstrap import resample_counts
+    counts = resample_counts(3001, 40, 9)
+    assert counts.dtype == np.float32 and np.array_equal(counts.astype(np.float64), resample_weights(3001, 40, 9))
+
+
+@pytest.mark.parametrize("step, total_scale", [(0.5, 1), (1 / 16, 1), (1.0, 1), (1 / 3, 1), (0.5, 4001), (0.1, 1)])
+def test_counts_product_equals_the_float64_product(step, total_scale):
+    from results_analysis.bootstrap import counts_product, resample_counts
+    rng = np.random.default_rng(3)
+    clusters = 4000
+    counts = resample_counts(clusters, 300, 2)
+    # rank sums and counts (multiples of 1/2, 1/16, whole), thirds, or sums so large that float32 is not exact
+    sums = rng.integers(0, 50, (clusters, 7)) * step * total_scale
+    want = counts.astype(np.float64) @ sums
+    got = counts_product(counts, sums, clusters)
+    assert got.dtype == np.float64 and np.array_equal(got, want)
+    if step in (1 / 3, 0.1) or total_scale > 1:  # what a plain float32 product would get wrong
+        assert not np.array_equal((counts @ sums.astype(np.float32)).astype(np.float64), want)
+
+
+@pytest.mark.parametrize("k", [2, 3, 5, 6, 7])
+def test_tie_sum_from_tie_sizes_equals_runs_of_sorted_rows(k):
+    from results_analysis.friedman import _tie_sum
+    rng = np.random.default_rng(k)
+    for r in (_row_ranks(rng.integers(0, k, (3000, k)).astype(float)), _row_ranks(rng.random((50, k))),
+              np.full((10, k), (k + 1) / 2.0)):
+        s = np.sort(r, axis=1)  # sum of t^3 - t over the runs of equal values of each sorted row
+        starts = np.ones(s.shape, dtype=bool)
+        starts[:, 1:] = s[:, 1:] != s[:, :-1]
+        t = np.bincount((np.cumsum(starts, axis=1) - 1 + (np.arange(len(s)) * k)[:, None]).ravel()).astype(float)
+        assert _tie_sum(r) == float(np.sum(t ** 3 - t))
+
+
+@pytest.mark.parametrize("shape", [(5000,), (5000, 3), (5000, 3, 3), (0, 4)])
+def test_cluster_totals_equal_add_at(shape):
+    from results_analysis.bootstrap import cluster_totals
+    rng = np.random.default_rng(len(shape))
+    cluster = rng.integers(0, 700, shape[0])
+    values = rng.random(shape) / 3.0  # inexact sums: the order of additions must be np.add.at's
+    want = np.zeros((700,) + shape[1:])
+    np.add.at(want, cluster, values)
+    got = cluster_totals(cluster, 700, values)
+    assert got.shape == want.shape and np.array_equal(got, want)

@@ -121,8 +121,8 @@ def test_one_matrix_per_criterion_in_an_analysis(monkeypatch) -> None:
 
     df = simulate_results(12, 3, seed=4, n_practice=0, n_attention=0)
     calls = []
-    real = ranks._wide
-    monkeypatch.setattr(ranks, "_wide", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = ranks._wide_codes  # every matrix is built there, from a frame's codes or a subset's
+    monkeypatch.setattr(ranks, "_wide_codes", lambda *a, **k: calls.append(1) or real(*a, **k))
     a = run_analysis(df, groups=["speaker", "device"], n_boot=0)
     assert len(calls) == 3  # realism, synchronization, diversity
     monkeypatch.undo()
@@ -153,3 +153,22 @@ def test_ties_is_isclose() -> None:
               np.zeros((0, 4))):
         a, b = r[:, :, None], r[:, None, :]
         assert np.array_equal(ties(a, b), np.isclose(a, b))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_table_from_frame_codes_equals_table_from_text_columns(seed: int) -> None:
+    """criterion_table (codes factorized once for the frame) gives the matrix _criterion_table builds from the
+    criterion's own rows: same rows, trials, answers, owners and ranks, on messy frames (ties, gaps, duplicates,
+    shuffled rows, a criterion without rows)."""
+    from results_analysis.codes import frame_codes
+    from results_analysis.ranks import _criterion_table, criterion_table
+
+    df = _messy(seed)
+    codes = frame_codes(df)
+    for crit in ("realism", "diversity", "absent"):
+        want, got = _criterion_table(df, crit, CONDS), criterion_table(codes, crit, CONDS)
+        assert np.array_equal(got.rows, want.rows) and got.n_trials == want.n_trials
+        assert all(np.array_equal(g, w) for g, w in zip(got.answers, want.answers))
+        assert np.array_equal(got.complete, want.complete)
+        assert got.owner.tolist() == want.owner.tolist() and got.owner.dtype == want.owner.dtype
+        assert np.array_equal(got.values, want.values, equal_nan=True)
