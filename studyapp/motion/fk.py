@@ -16,6 +16,8 @@ path, what the renderer uses: about half the time of float64, measured by ``benc
 """
 from __future__ import annotations
 
+import os
+import threading
 from collections.abc import Iterator
 from functools import lru_cache
 from typing import NamedTuple
@@ -46,6 +48,12 @@ FLOAT32_TOLERANCE = 1e-5
 # On BEAT's 75 joints, float32, bench_motion.py's data, interleaved: 192 frames measured best, 128 and
 # 256 within a few per cent, 512 ~25 % slower.
 _FRAME_BLOCK = 192
+#: Long motions are split into this many frame ranges, worked on side by side (numpy releases the
+#: interpreter lock in its loops): one per core, at most 4 (past that, memory bandwidth, not arithmetic,
+#: bounds it). Set it to 1 to keep forward kinematics on the calling thread.
+THREADS = max(1, min(4, os.cpu_count() or 1))
+# A part shorter than this is not worth a thread (a start and join cost ~0.1 ms; a block ~1 ms).
+_PARALLEL_MIN_FRAMES = 4 * _FRAME_BLOCK
 
 
 class _Plan(NamedTuple):
@@ -209,6 +217,46 @@ def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: n
     if f == 0 or j == 0:
         return out
     plan = _plan(skeleton.parents)
+    parts = _split(f)
+    if len(parts) == 1:
+        _fill(plan, rotations, translations, out)
+        return out
+    # numpy's loops release the interpreter lock, so the parts run on separate cores; the first part runs
+    # on this thread. Errors (only MemoryError is possible here) are raised here, after every part ended.
+    errors: list[BaseException] = []
+
+    def run(a: int, b: int) -> None:
+        try:
+            _fill(plan, rotations[a:b], translations[a:b], out[a:b])
+        except BaseException as e:  # noqa: BLE001 -- handed to the caller's thread below
+            errors.append(e)
+
+    threads = [threading.Thread(target=run, args=ab, name="studyapp-fk", daemon=True) for ab in parts[1:]]
+    for t in threads:
+        t.start()
+    run(*parts[0])
+    for t in threads:
+        t.join()
+    if errors:
+        raise errors[0]
+    return out
+
+
+def _split(f: int) -> list[tuple[int, int]]:
+    """Frame ranges worked on side by side: one per core (at most :data:`THREADS`), each at least
+    :data:`_PARALLEL_MIN_FRAMES` long, split on block boundaries so each part's blocks are full-sized."""
+    n = max(1, min(THREADS, f // _PARALLEL_MIN_FRAMES))
+    if n == 1:
+        return [(0, f)]
+    per = -(-f // n // _FRAME_BLOCK) * _FRAME_BLOCK
+    return [(a, min(a + per, f)) for a in range(0, f, per)]
+
+
+def _fill(plan: _Plan, rotations: np.ndarray, translations: np.ndarray, out: np.ndarray) -> None:
+    """Write the world transforms of ``rotations``/``translations`` (one range of frames) into ``out``
+    ``(n, J, 4, 4)``, block by block."""
+    f, j = rotations.shape[:2]
+    dtype = out.dtype
     block = min(_FRAME_BLOCK, f)
     # Each block goes (3, 4, m, n) per level -> (J, n, 16) in level order (a 2-D transpose per level; the
     # last row [0 0 0 1] is written once) -> (J, n, 16) in joint order (a take of whole rows) -> (n, J, 16)
@@ -226,7 +274,6 @@ def global_transforms(skeleton: Skeleton, rotations: np.ndarray, translations: n
             np.copyto(staged[lo:hi, :n, :12], w.reshape(12, hi - lo, n).transpose(1, 2, 0))
         np.take(staged[:, :n], plan.place, axis=0, out=ordered[:, :n], mode="clip")
         np.copyto(out_m[a:b], ordered_m[:, :n].T)
-    return out
 
 
 def forward_kinematics(motion: Motion, dtype: type = np.float64) -> np.ndarray:
