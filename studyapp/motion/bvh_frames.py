@@ -81,8 +81,8 @@ except ImportError:  # pragma: no cover - other numpy layouts
 THREADS: int | None = None
 MAX_THREADS = 4
 
-_POOL: tuple[int, int, ThreadPoolExecutor] | None = None
-_POOL_LOCK = threading.Lock()
+_POOLS: tuple[int, dict[int, ThreadPoolExecutor]] = (os.getpid(), {})
+_POOLS_LOCK = threading.Lock()
 
 
 def _threads() -> int:
@@ -96,16 +96,17 @@ def _threads() -> int:
 
 
 def _pool(workers: int) -> ThreadPoolExecutor:
-    """The threads that parse pieces (made on first use, shared by every read of this process). A forked
-    child (``prerender --jobs``, a multiprocessing pool) inherits the executor but not its threads, and work
-    queued there would never run: each process makes its own."""
-    global _POOL
-    with _POOL_LOCK:
-        if _POOL is None or _POOL[:2] != (os.getpid(), workers):
-            if _POOL is not None and _POOL[0] == os.getpid():
-                _POOL[2].shutdown(wait=False)
-            _POOL = (os.getpid(), workers, ThreadPoolExecutor(max_workers=workers, thread_name_prefix="bvh-parse"))
-        return _POOL[2]
+    """The ``workers`` threads that parse pieces (made on first use, shared by every read of this process). A
+    forked child (``prerender --jobs``, a multiprocessing pool) inherits the executor but not its threads, and
+    work queued there would never run: each process makes its own."""
+    global _POOLS
+    with _POOLS_LOCK:
+        if _POOLS[0] != os.getpid():
+            _POOLS = (os.getpid(), {})
+        pools = _POOLS[1]
+        if workers not in pools:
+            pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="bvh-parse")
+        return pools[workers]
 
 
 class _WhenAsked:
