@@ -7,8 +7,8 @@ peak memory of loading a 60 s and a 1 h file.
   the same MOTION block (``skiprows`` past the header, whitespace separated, C engine; pandas imported before
   timing); a line-by-line Python parser. The same number of runs each, interleaved (A B C, then C B A),
   medians with min-max. Each as it runs out of the box -- pandas 3 splits a large file between up to one
-  thread per core, ``read_bvh_channels`` parses the next piece on one helper thread -- and then both held to
-  one thread (``pandas.options.mode.max_threads = 1``; ``bvh_frames.PARSE_AHEAD = False``). BLAS/OpenMP are
+  thread per core, ``read_bvh_channels`` parses its pieces on up to one thread per core -- and then both held
+  to one thread (``pandas.options.mode.max_threads = 1``; ``bvh_frames.THREADS = 1``). BLAS/OpenMP are
   pinned to one thread throughout.
 * **Forward kinematics** ``(F, 75, 4, 4)`` at 1,800 / 3,600 / 7,200 / 14,400 frames, float32 (what the renderer
   uploads) and float64, interleaved, medians with min-max and milliseconds per 1,000 frames (linear in frames
@@ -178,11 +178,11 @@ def bench_load(folder: Path, runs: int) -> dict:
             return pd.read_csv(p, skiprows=s, sep=r"\s+", header=None, engine="c", na_filter=False).to_numpy()
 
         def ours_one_thread(p=path):
-            bvh_frames.PARSE_AHEAD = False
+            bvh_frames.THREADS = 1
             try:
                 return read_bvh_channels(p).channels
             finally:
-                bvh_frames.PARSE_AHEAD = True
+                bvh_frames.THREADS = None
 
         def pandas_one_thread(p=path, s=skip):
             with pd.option_context("mode.max_threads", 1):
@@ -200,7 +200,8 @@ def bench_load(folder: Path, runs: int) -> dict:
         results[style] = (path, skip, t)
         mb = path.stat().st_size / 1e6
         print(f"BVH load, 60 s at 120 fps, {style} layout ({mb:.1f} MB), {runs} runs each, interleaved; "
-              f"threads as they come (pandas: up to {_pandas_threads()}; ours: 2), then both held to 1:")
+              f"threads as they come (pandas: up to {_pandas_threads()}; ours: {bvh_frames._threads()}), then both "
+              "held to 1:")
         for k, v in t.items():
             print(_row(k, v))
         ratio = _med(t["read_bvh_channels"]["wall"]) / _med(t["pandas.read_csv (same MOTION block)"]["wall"])
@@ -282,8 +283,8 @@ def main() -> int:
            fixed_layout_ratio=_med(tf["read_bvh_channels"]["wall"]) / _med(tf["pandas.read_csv (same MOTION block)"]["wall"]),
            note="60 s 120 fps BEAT file (DiffSHEG %e layout) to a (7200, 228) float64 array; medians, interleaved; "
                 "each with the threads it uses out of the box (pandas 3 splits the file between threads, ours parses "
-                "one piece ahead on a second thread); one_thread_ratio: both held to one; baseline = the 1.0x target",
-           **{**common, "threads": {"pandas": _pandas_threads(), "read_bvh_channels": 2}})
+                "its pieces on as many); one_thread_ratio: both held to one; baseline = the 1.0x target",
+           **{**common, "threads": {"pandas": _pandas_threads(), "read_bvh_channels": bvh_frames._threads()}})
     for dt, key in (("float32", "fk_ms"), ("float64", "fk_ms_float64")):
         v = fk[7200, dt]
         per = [_med(fk[f, dt]["wall"]) / f for f in (1800, 3600, 7200, 14400)]

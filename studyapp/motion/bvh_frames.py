@@ -15,10 +15,12 @@ first trial). Two parsers, both giving exactly Python's ``float()`` of every num
 A block whose first piece the vectorized parser refuses goes whole to the C reader (one stream when it is
 under :data:`STREAM_MAX_BYTES`).
 
-The vectorized parser works one piece ahead on a second thread (:func:`_ahead`): its numpy calls release the
-interpreter lock, so on a machine with a free core the next piece is parsed while this one is checked and
-copied into the array -- the two cores ``pandas.read_csv`` also uses (pandas 3 splits a large file between
-threads). Everything a piece decides (errors, line numbers, refusals) is still taken in file order.
+The vectorized parser runs on a pool of threads, one per core this process may use (:data:`THREADS`, at
+most :data:`MAX_THREADS`): its numpy calls release the interpreter lock, so pieces are parsed side by side
+while the calling thread reads the next one and copies each result into the array in file order -- the
+cores ``pandas.read_csv`` also uses (pandas 3 splits a large file between threads). One piece per thread is
+in flight. Everything a piece decides (errors, line numbers, refusals) is still taken in file order, and an
+error or a refusal drops the pieces queued after it.
 
 Checks, each an :class:`~studyapp.errors.InputError` naming the file line:
 
@@ -39,6 +41,7 @@ import os
 import re
 import threading
 import warnings
+from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 
@@ -72,24 +75,38 @@ except ImportError:  # pragma: no cover - other numpy layouts
     _C_READER = None
 
 
-_AHEAD: tuple[int, ThreadPoolExecutor] | None = None
-_AHEAD_LOCK = threading.Lock()
+#: Threads that parse pieces: ``None`` is one per core this process may use, at most :data:`MAX_THREADS`;
+#: ``1`` parses every piece on the calling thread when it is reached (``bench_motion.py``'s one-thread row,
+#: against ``pandas.read_csv`` held to one thread).
+THREADS: int | None = None
+MAX_THREADS = 4
+
+_POOLS: tuple[int, dict[int, ThreadPoolExecutor]] = (os.getpid(), {})
+_POOLS_LOCK = threading.Lock()
 
 
-def _ahead() -> ThreadPoolExecutor:
-    """The one thread that parses the next piece ahead (made on first use, shared by every read of this
-    process). A forked child (``prerender --jobs``, a multiprocessing pool) inherits the executor but not its
-    thread, and work queued there would never run: each process makes its own."""
-    global _AHEAD
-    with _AHEAD_LOCK:
-        if _AHEAD is None or _AHEAD[0] != os.getpid():
-            _AHEAD = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="bvh-ahead"))
-        return _AHEAD[1]
+def _threads() -> int:
+    if THREADS is not None:
+        return max(1, THREADS)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, MAX_THREADS))
 
 
-#: Parse the next piece on the ahead thread; False parses every piece on the calling thread when it is
-#: reached (``bench_motion.py``'s one-thread row, against ``pandas.read_csv`` held to one thread).
-PARSE_AHEAD = True
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """The ``workers`` threads that parse pieces (made on first use, shared by every read of this process). A
+    forked child (``prerender --jobs``, a multiprocessing pool) inherits the executor but not its threads, and
+    work queued there would never run: each process makes its own."""
+    global _POOLS
+    with _POOLS_LOCK:
+        if _POOLS[0] != os.getpid():
+            _POOLS = (os.getpid(), {})
+        pools = _POOLS[1]
+        if workers not in pools:
+            pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="bvh-parse")
+        return pools[workers]
 
 
 class _WhenAsked:
@@ -101,12 +118,22 @@ class _WhenAsked:
     def result(self) -> tuple[np.ndarray, int] | None:
         return parse_block(*self._args)
 
+    def cancel(self) -> bool:
+        return True
 
-def _parse_later(piece: bytes, n_channels: int) -> Future | _WhenAsked | None:
-    """``parse_block(piece)`` started on the ahead thread (None for a piece with no frames)."""
+
+def _drop(parses: list[Future | _WhenAsked | None]) -> None:
+    """Cancels parses not started and waits for those running."""
+    for later in parses:
+        if later is not None and not later.cancel():
+            later.exception()
+
+
+def _parse_later(piece: bytes, n_channels: int, workers: int) -> Future | _WhenAsked | None:
+    """``parse_block(piece)`` started on a parsing thread (None for a piece with no frames)."""
     if not piece or not _NON_SPACE.search(piece):
         return None
-    return _ahead().submit(parse_block, piece, n_channels) if PARSE_AHEAD else _WhenAsked(piece, n_channels)
+    return _pool(workers).submit(parse_block, piece, n_channels) if workers > 1 else _WhenAsked(piece, n_channels)
 
 
 class _LineTooLong(Exception):
@@ -328,46 +355,56 @@ def _in_pieces(first: bytes, read: Reader, bytes_left: int, start: int, n_channe
     n = 0
     line = start
     pieces = _pieces(first, read, max(CHUNK_BYTES, 2 * limit))
-    piece = next(pieces, b"")
     consumed = 0
-    parsing = _parse_later(piece, n_channels) if vector and n_channels > 0 else None
-    while piece:
-        nxt = next(pieces, b"")
-        parsing_next = _parse_later(nxt, n_channels) if vector and n_channels > 0 else None
-        too_long = first_long_line(piece, limit) if _has_long_line(piece, limit) else None
-        if too_long is not None:
-            at, length = too_long
-            if not nxt and at == piece.count(b"\n"):
-                length += _rest_of_line(read, CHUNK_BYTES)  # the message gives the whole line's length
-            raise InputError(path, f"line {line + at + 1}",
-                             f"frame line is {length:,} characters long; {n_channels} channels take at most {limit:,} "
-                             "(are the line breaks missing?)")
-        line_ends = None
-        if _NON_SPACE.search(piece):
-            if n_channels == 0:
-                raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
-            block = parsing.result() if parsing is not None else None
-            if block is None and vector and n == 0:
-                if isinstance(parsing_next, Future):
-                    parsing_next.result()  # its work arrays are freed before numpy's reader starts
-                return None
-            values, line_ends = block if block is not None else (_fast_piece(piece, n_channels), None)
-            if values is None:
-                values = slow_frames(_decode(piece).splitlines(), line, n_channels, path, n, last=not nxt)
-            consumed += len(piece)
-            if n == 0 and out.shape[0] == 0:
-                left = max(len(first) + bytes_left - consumed, 0)
-                out = np.empty((_first_capacity(header_frames, piece, len(values), left, n_channels), n_channels), dtype)
-            if n + len(values) > out.shape[0]:
-                grown = np.empty((max(n + len(values), out.shape[0] + out.shape[0] // 2), n_channels), dtype)
-                grown[:n] = out[:n]
-                out = grown
-            out[n : n + len(values)] = values
-            n += len(values)
-        else:
-            consumed += len(piece)
-        line += piece.count(b"\n") if line_ends is None else line_ends
-        piece, parsing = nxt, parsing_next
+    workers = _threads() if vector and n_channels > 0 else 1
+    # pieces in file order with their parses, started as they are read: one piece per parsing thread, the next
+    # read as the first is taken, so memory holds a few pieces whatever the file's length
+    queued: deque[tuple[bytes, Future | _WhenAsked | None]] = deque()
+
+    def fill() -> None:
+        while len(queued) < workers and (more := next(pieces, b"")):
+            queued.append((more, _parse_later(more, n_channels, workers) if vector and n_channels > 0 else None))
+
+    parsing = None
+    try:
+        fill()
+        while queued:
+            piece, parsing = queued.popleft()
+            fill()
+            last = not queued
+            too_long = first_long_line(piece, limit) if _has_long_line(piece, limit) else None
+            if too_long is not None:
+                at, length = too_long
+                if last and at == piece.count(b"\n"):
+                    length += _rest_of_line(read, CHUNK_BYTES)  # the message gives the whole line's length
+                raise InputError(path, f"line {line + at + 1}",
+                                 f"frame line is {length:,} characters long; {n_channels} channels take at most {limit:,} "
+                                 "(are the line breaks missing?)")
+            line_ends = None
+            if _NON_SPACE.search(piece):
+                if n_channels == 0:
+                    raise InputError(path, f"line {start + 1}", "the hierarchy declares no channels but frame data follows")
+                block = parsing.result() if parsing is not None else None
+                if block is None and vector and n == 0:
+                    return None
+                values, line_ends = block if block is not None else (_fast_piece(piece, n_channels), None)
+                if values is None:
+                    values = slow_frames(_decode(piece).splitlines(), line, n_channels, path, n, last=last)
+                consumed += len(piece)
+                if n == 0 and out.shape[0] == 0:
+                    left = max(len(first) + bytes_left - consumed, 0)
+                    out = np.empty((_first_capacity(header_frames, piece, len(values), left, n_channels), n_channels), dtype)
+                if n + len(values) > out.shape[0]:
+                    grown = np.empty((max(n + len(values), out.shape[0] + out.shape[0] // 2), n_channels), dtype)
+                    grown[:n] = out[:n]
+                    out = grown
+                out[n : n + len(values)] = values
+                n += len(values)
+            else:
+                consumed += len(piece)
+            line += piece.count(b"\n") if line_ends is None else line_ends
+    finally:  # an error or a refusal: parses still queued stop, and their work arrays are freed here
+        _drop([parsing, *(later for _, later in queued)])
     if n == out.shape[0]:
         return out
     # trimmed by a copy when a real share would be wasted (a header claiming far more frames than sent)

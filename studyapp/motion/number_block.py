@@ -27,6 +27,8 @@ non-space bytes prove that the tokens found cover the piece exactly, so nothing 
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 __all__ = ["parse_block"]
@@ -73,6 +75,7 @@ def _eight_digits(v: np.ndarray) -> np.ndarray:
 
 _ONE_DIGIT, _UP, _SLOW, _BAD = 128, 22, 100, 127
 _CODES: dict[int, np.ndarray] = {}
+_CODES_LOCK = threading.Lock()
 
 
 def _exponent_codes(nf: int) -> np.ndarray:
@@ -81,17 +84,19 @@ def _exponent_codes(nf: int) -> np.ndarray:
     minus the exponent, 0 to 22), or :data:`_UP` plus the multiplier's index (1 to 22), or :data:`_SLOW` for
     a power of ten beyond the exact range, or :data:`_BAD` when the bytes are not an exponent; plus
     :data:`_ONE_DIGIT` for a one-digit exponent."""
-    if nf not in _CODES:
-        key = np.arange(1 << 17)
-        d1, d2, minus = key & 0xFF, (key >> 8) & 0xFF, key >> 16
-        digit1, digit2 = (d1 >= 48) & (d1 <= 57), (d2 >= 48) & (d2 <= 57)
-        one = digit1 & (d2 <= 32)
-        exponent = np.where(digit2, 10 * (d1 - 48) + d2 - 48, d1 - 48) * np.where(minus == 1, -1, 1)
-        index = nf - exponent
-        code = np.where((index >= 0) & (index <= 22), index,
-                        np.where((index < 0) & (index >= -22), _UP - index, _SLOW)) + np.where(one, _ONE_DIGIT, 0)
-        _CODES[nf] = np.where(digit1 & (digit2 | one), code, _BAD).astype(np.uint8)
-    return _CODES[nf]
+    with _CODES_LOCK:  # parsing threads share one table per layout
+        if nf not in _CODES:
+            # keys as (minus, byte 1, byte 0) on a broadcast grid: small int16 temporaries
+            d1 = np.arange(256, dtype=np.int16)
+            d2, minus = d1[:, None], np.arange(2, dtype=np.int16)[:, None, None]
+            digit1, digit2 = (d1 >= 48) & (d1 <= 57), (d2 >= 48) & (d2 <= 57)
+            one = digit1 & (d2 <= 32)
+            exponent = np.where(digit2, 10 * (d1 - 48) + d2 - 48, d1 - 48) * (1 - 2 * minus)
+            index = nf - exponent
+            code = np.where((index >= 0) & (index <= 22), index,
+                            np.where((index < 0) & (index >= -22), _UP - index, _SLOW)) + np.where(one, _ONE_DIGIT, 0)
+            _CODES[nf] = np.where(digit1 & (digit2 | one), code, _BAD).astype(np.uint8).ravel()
+        return _CODES[nf]
 
 
 def _layout(buf: np.ndarray, first_dot: int) -> tuple[int, bool] | None:
@@ -156,7 +161,7 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
     b ^= a  # high bit of the lead byte alone (none when the 7 bytes are digits)
     # the lead byte is a sign or not; whatever else it is stays out of the token, and the byte count below
     # refuses the piece (a sign after a non-space byte likewise: no token can hold that byte)
-    one = np.right_shift(b, _U(7))  # 0x01 at the lead byte
+    one = np.right_shift(b, _U(7), out=b)  # 0x01 at the lead byte
     np.multiply(one, _U(0xFF), out=c)
     c &= x
     np.multiply(one, _U(0x2D ^ 0x30), out=a)
@@ -167,6 +172,7 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
     if nf == 0 and not run.all():  # "." or "-.": no digit at all
         return None
     np.right_shift(run, _U(7), out=b)
+    del run  # (memory: each parsing thread holds a few arrays of one word per token)
     b *= _U(0xFF)
     x &= b  # the integer digits' values at bytes 6 and down, nothing else
 
@@ -198,6 +204,7 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
         c |= b
     else:
         c[:] = words[:, 1]
+    del windows, words
     values = mant.astype(np.float64)
     if not has_exp:
         c &= _U(0xFF)
@@ -245,7 +252,7 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
         values /= _POW10.take(code)
         for k in list(slow):
             d = int(dots[k])
-            start = d - int(np.bitwise_count(run[k])) - int(signed[k])
+            start = d - int(widths[k]) - int(signed[k])
             token = bytes(buf[start : start + _WIDTH + 8]).split()[0]
             exp_bytes += len(token) - (d - start) - 1 - nf - (3 if one_digit[k] else 4)  # as counted above
             try:
@@ -257,5 +264,7 @@ def parse_block(text: bytes, n_columns: int) -> tuple[np.ndarray, int] | None:
     if n * (1 + nf) + int_digits + int(np.count_nonzero(signed)) + exp_bytes != non_space:
         return None
     bits = values.view(_U)
-    bits |= minus.view(np.uint8).astype(_U) << _U(63)  # the sign (-0.0 stays negative)
+    sign = minus.view(np.uint8).astype(_U)
+    sign <<= _U(63)
+    bits |= sign  # the sign (-0.0 stays negative)
     return values.reshape(n // n_columns, n_columns), newlines.size

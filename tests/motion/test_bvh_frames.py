@@ -114,9 +114,11 @@ def test_the_header_claim_only_sizes_the_first_allocation(tmp_path, small_pieces
 
 @pytest.mark.parametrize("path", ["vector", "stream", "pieces"])
 def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch, path):
-    """4,000 frames (~12 MB of text, ~7 MB of float64) read in 256 KB pieces: the peak stays near the array.
-    ``%e`` lines go to the vectorized parser; lines alternating ``%e`` and ``%.6f`` to numpy's C reader."""
+    """4,000 frames (~12 MB of text, ~7 MB of float64) read in 256 KB pieces on two parsing threads: the peak
+    stays near the array. ``%e`` lines go to the vectorized parser; lines alternating ``%e`` and ``%.6f`` to
+    numpy's C reader."""
     monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 256 << 10)
+    monkeypatch.setattr(bvh_frames, "THREADS", 2)
     if path == "pieces":
         monkeypatch.setattr(bvh_frames, "STREAM_MAX_BYTES", -1)
     rng = np.random.default_rng(2)
@@ -137,9 +139,9 @@ def test_memory_is_the_array_plus_pieces_not_the_text(tmp_path, monkeypatch, pat
     assert np.array_equal(d.channels, np.array([[float(t) for t in ln.split()] for ln in
                                                  p.read_text().splitlines()[-4000:]]))
     # the stream's array grows as it reads (numpy's reader over-allocates by up to a quarter, then trims); the
-    # vectorized parser's work arrays take about 16 bytes per byte of a piece
+    # vectorized parser's work arrays take about 8 bytes per byte of a piece, on each thread
     slack = d.channels.nbytes // 4 if path == "stream" else 0
-    work = 16 * (256 << 10) if path == "vector" else 3 * (256 << 10)
+    work = 2 * 8 * (256 << 10) if path == "vector" else 3 * (256 << 10)
     assert peak < d.channels.nbytes + slack + work + (1 << 20), (peak, d.channels.nbytes, text_bytes)
     assert peak < text_bytes  # holding the text alone would pass this bound
 
@@ -211,18 +213,23 @@ def _uniform_rows(n: int) -> tuple[list[str], np.ndarray]:
 
 @pytest.fixture
 def vector_pieces(monkeypatch):
-    """~12 frame lines a piece; counts the pieces the vectorized parser reads."""
+    """~12 frame lines a piece; records, for each piece the vectorized parser reads, whether it read it (in
+    the order the parsing threads finish them: :func:`first_piece` finds the block's first piece by its text)."""
     monkeypatch.setattr(bvh_frames, "CHUNK_BYTES", 40_000)
-    read = []
+    read = {}
     real = bvh_frames.parse_block
 
     def counted(text, n):
         got = real(text, n)
-        read.append(got is not None)
+        read[bytes(text)] = got is not None
         return got
 
     monkeypatch.setattr(bvh_frames, "parse_block", counted)
     return read
+
+
+def first_piece(read: dict[bytes, bool], first_row: str) -> bool:
+    return next(ok for text, ok in read.items() if text.startswith(first_row.encode()))
 
 
 @pytest.mark.parametrize("bad_frame", [0, 11, 12, 150, 299])
@@ -251,9 +258,9 @@ def test_a_bad_line_in_a_vectorized_file_is_named_as_before(tmp_path, vector_pie
         hint = " (the file looks truncated)" if bad_frame == 299 else ""
         assert err.value.problem == (f"frame {bad_frame + 1} has {N_CH - 1} values but the hierarchy declares "
                                      f"{N_CH} channels{hint}")
-    # the first piece holds frames 1-12 (bad: all goes to numpy's; the piece after it, parsed ahead on the
-    # other thread, is then thrown away)
-    assert vector_pieces[0] == (bad_frame >= 12)
+    # the first piece holds frames 1-12 (bad: all goes to numpy's; the pieces queued after it on the parsing
+    # threads are dropped)
+    assert first_piece(vector_pieces, rows[0]) == (bad_frame >= 12)
 
 
 def test_a_vectorized_file_loads_exactly_whatever_the_header_claims(tmp_path, vector_pieces):
@@ -263,22 +270,43 @@ def test_a_vectorized_file_loads_exactly_whatever_the_header_claims(tmp_path, ve
     p.write_text(_text(rows, frames=299), newline="")
     with pytest.warns(UserWarning, match="header says Frames: 299 but the file has 300 data lines"):
         got = read_bvh_channels(p).channels
-    assert np.array_equal(got, expected) and all(vector_pieces) and len(vector_pieces) > 20
+    assert np.array_equal(got, expected) and all(vector_pieces.values()) and len(vector_pieces) > 20
     with pytest.warns(UserWarning, match="header says Frames: 299"):
         got32 = read_bvh_channels(p, dtype=np.float32).channels
     assert np.array_equal(got32, expected.astype(np.float32))
 
 
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_pieces_parsed_side_by_side_join_in_file_order(tmp_path, vector_pieces, monkeypatch, threads):
+    """Pieces finish on the parsing threads in any order, some refused (``%.9g`` lines: numpy's reader reads
+    those), some blank: the array is the file's frames in file order, and an error after them names its line."""
+    monkeypatch.setattr(bvh_frames, "THREADS", threads)
+    rows, expected = _uniform_rows(300)
+    for k in range(100, 130):  # pieces 9-11: another layout
+        rows[k] = " ".join("%.9g" % float(t) for t in rows[k].split()) + "\n"
+    expected[100:130] = [[float(t) for t in rows[k].split()] for k in range(100, 130)]
+    rows[200:200] = ["\n"] * 300  # a piece of blank lines
+    p = tmp_path / "m.bvh"
+    p.write_text(_text(rows, frames=300), newline="")
+    assert np.array_equal(read_bvh_channels(p).channels, expected)
+    assert sum(not ok for ok in vector_pieces.values()) >= 2 and len(vector_pieces) > 20
+    rows[-5] = rows[-5].replace("e", "x", 1)
+    p.write_text(_text(rows, frames=300), newline="")
+    with pytest.raises(InputError) as err:
+        read_bvh_channels(p)
+    assert err.value.where == f"line {HEADER.count(chr(10)) + 3 + len(rows) - 5}"
+
+
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="fork() is POSIX only")
-def test_a_forked_child_reads_with_its_own_ahead_thread(tmp_path):
-    """The piece parsed ahead runs on a thread; a child forked after a read (``prerender --jobs``) has the
-    parent's executor but not its thread, so a read there must not wait on work that never starts."""
+def test_a_forked_child_reads_with_its_own_parsing_threads(tmp_path):
+    """Pieces are parsed on threads; a child forked after a read (``prerender --jobs``) has the parent's
+    executor but not its threads, so a read there must not wait on work that never starts."""
     rows, expected = _uniform_rows(300)
     p = tmp_path / "m.bvh"
     p.write_text(_text(rows), newline="")
-    small = 40_000  # ~12 frames a piece: many pieces, each parsed ahead
+    small = 40_000  # ~12 frames a piece: many pieces, each parsed on a thread
     code = (f"import os, sys, numpy as np\nfrom studyapp.motion import bvh_frames\n"
-            f"from studyapp.motion.bvh import read_bvh_channels\nbvh_frames.CHUNK_BYTES = {small}\n"
+            f"from studyapp.motion.bvh import read_bvh_channels\nbvh_frames.CHUNK_BYTES = {small}\nbvh_frames.THREADS = 2\n"
             f"first = read_bvh_channels({str(p)!r}).channels\npid = os.fork()\n"
             f"if pid == 0:\n    again = read_bvh_channels({str(p)!r}).channels\n"
             f"    os._exit(0 if np.array_equal(again, first) else 3)\n"
