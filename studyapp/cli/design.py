@@ -65,23 +65,21 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _warm_gl(path: Path) -> None:
     """Compile the programs of a participant's trial frame into this machine's GL driver cache
-    (:mod:`studyapp.render.warmup`): in a lab, the experimenter validates on the participants' PC, whose first
-    participant would otherwise wait for the compile. Best effort and silent: it changes no verdict."""
+    (:mod:`studyapp.render.warmup`, in a child process): in a lab, the experimenter validates on the
+    participants' PC, whose first participant would otherwise wait for the compile. Best effort and silent:
+    it changes no verdict."""
     import logging
 
     from studyapp.errors import StudyappError
-    from studyapp.render.scene import load_avatar
-    from studyapp.render.warmup import warm_shader_cache
+    from studyapp.render.warmup import warm_in_child
     from studyapp.study.design import load_design
 
     try:
         design = load_design(path, reuse_check=True)  # just checked and recorded: the cheap parse only
-        specs = sorted({design.avatar_for(s) for s in design.stimuli})
-        avatars = [load_avatar(None if s == "builtin" else s, bone_map=dict(design.avatar_bone_map) or None)
-                   for s in specs]
     except (StudyappError, OSError, ValueError):
         return
-    outcome = warm_shader_cache(avatars, [None if s == "builtin" else s for s in specs])
+    specs = sorted({design.avatar_for(s) for s in design.stimuli})
+    outcome = warm_in_child([None if s == "builtin" else s for s in specs], dict(design.avatar_bone_map))
     logging.getLogger(__name__).debug("GL shader cache: %s", outcome)
 
 
