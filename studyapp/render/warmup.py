@@ -139,7 +139,7 @@ def warm_shader_cache(avatars: Sequence[Avatar], sources: Sequence[str | Path | 
 
 
 def warm_in_child(sources: Sequence[str | Path | None], bone_map: dict[str, str] | None = None, *,
-                  timeout: float = 120.0) -> str:
+                  timeout: float = 60.0) -> str:
     """:func:`warm_shader_cache` for the avatars ``sources`` (files, None for the built-in one; loaded as
     a trial loads them, with the design's ``bone_map``) in a child process, unless :func:`is_warm`. The
     caller's process stays free of GL (no context of its own made current or released, and a driver that
