@@ -9,8 +9,8 @@ first participant). Mesa keeps that code in its on-disk cache (``$MESA_SHADER_CA
 ``$XDG_CACHE_HOME/mesa_shader_cache``), which every later process on the machine reads instead.
 
 :func:`warm_shader_cache` draws one frame of a rest-pose scene of each given avatar offscreen, through
-:meth:`Renderer.draw_canvas <studyapp.render.renderer.Renderer.draw_canvas>` at the participant window's
-size, so the programs, variants and states are those of a trial frame (the avatars' own meshes, textures
+:meth:`Renderer.draw_canvas <studyapp.render.renderer.Renderer.draw_canvas>` as the participant window's
+scene cache does (at :data:`WARM_SIZE`), so the programs, variants and states are those of a trial frame (the avatars' own meshes, textures
 and morph textures; three labelled slots), and the driver stores them. ``studyapp validate`` calls it on the
 machine it runs on (:func:`warm_in_child`, in a process of its own, so ``validate`` itself never holds a GL
 context): in a lab the experimenter validates on the PC the participants then use (see the README), so the
