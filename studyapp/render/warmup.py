@@ -147,9 +147,12 @@ def warm_in_child(sources: Sequence[str | Path | None], bone_map: dict[str, str]
     if is_warm(sources):
         return "already cached"
     cmd = [sys.executable, "-m", "studyapp.render.warmup", "--bone-map", json.dumps(dict(bone_map or {}))]
-    cmd += [str(s) if s else "builtin" for s in sources]
+    cmd += [str(Path(s).resolve()) if s else "builtin" for s in sources]
+    # run from the folder holding this studyapp: `-m` puts the working folder first on the child's path, and
+    # another checkout there would otherwise be the code that warms
+    root = Path(__file__).resolve().parents[2]
     try:
-        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=root)
     except (OSError, subprocess.TimeoutExpired) as exc:
         return f"not done ({type(exc).__name__})"
     lines = (out.stdout or out.stderr or "").strip().splitlines()
