@@ -142,8 +142,16 @@ if __name__ == "__main__":
 
 def _cold(cmd: list[str]) -> float:
     t = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
+    subprocess.run(cmd, check=True, capture_output=True, cwd=_code_root())
     return time.perf_counter() - t
+
+
+def _code_root() -> str:
+    """The folder holding the studyapp being measured (the one ``PYTHONPATH`` or the install gives), where
+    the ``python -m studyapp.cli`` commands run: ``-m`` puts the working folder first on the path, so run
+    from another checkout they would measure that checkout's code."""
+    import studyapp
+    return str(Path(studyapp.__file__).resolve().parents[1])
 
 
 def _children_cpu() -> float:
@@ -205,13 +213,13 @@ def main(argv: list[str]) -> int:
                 # built-in avatar's), after the experimenter's `validate` there (untimed, as in the lab)
                 fresh = {"XDG_CACHE_HOME": str(Path(tmp) / f"cache{r}"),
                          "STUDYAPP_CACHE_DIR": str(Path(tmp) / f"cache{r}" / "studyapp")}
-                subprocess.run(cmds["studyapp validate demo.toml"], check=True, capture_output=True,
+                subprocess.run(cmds["studyapp validate demo.toml"], check=True, capture_output=True, cwd=_code_root(),
                                env={**os.environ, **fresh})
                 fresh_frames.append(_first_frame(script, fresh))
                 # validated here, but the driver's shader cache empty (validated with another XDG_CACHE_HOME)
                 nodriver = {"XDG_CACHE_HOME": str(Path(tmp) / f"driver{r}"),
                             "STUDYAPP_CACHE_DIR": str(Path(tmp) / f"app{r}")}
-                subprocess.run(cmds["studyapp validate demo.toml"], check=True, capture_output=True,
+                subprocess.run(cmds["studyapp validate demo.toml"], check=True, capture_output=True, cwd=_code_root(),
                                env={**os.environ, **nodriver, "XDG_CACHE_HOME": str(Path(tmp) / f"elsewhere{r}")})
                 nodriver_frames.append(_first_frame(script, nodriver))
         finally:
