@@ -58,7 +58,29 @@ def _cmd_validate(args: argparse.Namespace) -> int:
                   f"{n} problems: the design cannot run until they are fixed.", file=sys.stderr)
         else:
             print(f"{args.design}: OK, the design can run.")
+    if not problems and not args.quick:
+        _warm_gl(args.design)
     return 1 if problems else 0
+
+
+def _warm_gl(path: Path) -> None:
+    """Compile the programs of a participant's trial frame into this machine's GL driver cache
+    (:mod:`studyapp.render.warmup`, in a child process): in a lab, the experimenter validates on the
+    participants' PC, whose first participant would otherwise wait for the compile. Best effort and silent:
+    it changes no verdict."""
+    import logging
+
+    from studyapp.errors import StudyappError
+    from studyapp.render.warmup import warm_in_child
+    from studyapp.study.design import load_design
+
+    try:
+        design = load_design(path, reuse_check=True)  # just checked and recorded: the cheap parse only
+    except (StudyappError, OSError, ValueError):
+        return
+    specs = sorted({design.avatar_for(s) for s in design.stimuli})
+    outcome = warm_in_child([None if s == "builtin" else s for s in specs], dict(design.avatar_bone_map))
+    logging.getLogger(__name__).debug("GL shader cache: %s", outcome)
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:

@@ -174,19 +174,20 @@ class Renderer:
         # each slot lets its raster threads fill one slot while this thread shades the next one's vertices
         # (without it the frame is all vertex work, then all raster work)
         self.flush_slots = software
-        # per lighting ("pixel", "vertex", "vertex-untextured"), compiled when an avatar first needs it
-        self._progs: dict[str, moderngl.Program] = {}
-        self.prog = self._program(self.lighting)
+        # per (lighting, morphs, joints), compiled when a group of triangles first needs it; the passes this
+        # renderer never runs (FXAA without it, the blit when every picture is copied whole) are not compiled
+        # either: each program costs a compile on a participant's first start (see studyapp.render.warmup)
+        self._progs: dict[tuple[str, bool, int], moderngl.Program] = {}
         self.bg_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("background.frag"))
-        self.blit_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("blit.frag"))
-        self.fxaa_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa.frag"))
-        self._fxaa_vao = ctx.vertex_array(self.fxaa_prog, [])
-        self.fxaa_edges_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa_edges.frag"))
-        self._fxaa_edges_vao = ctx.vertex_array(self.fxaa_edges_prog, [])
+        self._blit: tuple[moderngl.Program, moderngl.VertexArray] | None = None
+        if self.fxaa:
+            self.fxaa_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa.frag"))
+            self._fxaa_vao = ctx.vertex_array(self.fxaa_prog, [])
+            self.fxaa_edges_prog = ctx.program(vertex_shader=vert, fragment_shader=read_shader("fxaa_edges.frag"))
+            self._fxaa_edges_vao = ctx.vertex_array(self.fxaa_edges_prog, [])
         self.floor_prog = ctx.program(vertex_shader=read_shader("floor.vert"), fragment_shader=read_shader("floor.frag"))
         self.label_prog = ctx.program(vertex_shader=read_shader("label.vert"), fragment_shader=read_shader("label.frag"))
         self._empty_vao = ctx.vertex_array(self.bg_prog, [])
-        self._blit_vao = ctx.vertex_array(self.blit_prog, [])
         self._label_vao = ctx.vertex_array(self.label_prog, [])
         quad = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32)  # mapped onto floor_bounds()
         self._floor_vbo = ctx.buffer(quad.tobytes())
@@ -226,6 +227,17 @@ class Renderer:
             prog["u_model"].write(np.eye(4, dtype="f4").tobytes())
             self._progs[key] = prog
         return prog
+
+    @property
+    def prog(self) -> moderngl.Program:
+        """The avatar program of :attr:`lighting` for triangles with morphs and four joints (the general one)."""
+        return self._program(self.lighting)
+
+    def _blit_program(self) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        if self._blit is None:
+            prog = self.ctx.program(vertex_shader=read_shader("fullscreen.vert"), fragment_shader=read_shader("blit.frag"))
+            self._blit = (prog, self.ctx.vertex_array(prog, []))
+        return self._blit
 
     def _kind_for(self, avatar: Avatar) -> str:
         if self.lighting != "vertex":
@@ -414,8 +426,9 @@ class Renderer:
             target.viewport = (x, y, w, h)
             ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
             source.color_attachments[0].use(0)
-            self.blit_prog["u_image"].value = 0
-            self._blit_vao.render(moderngl.TRIANGLES, vertices=3)
+            blit_prog, blit_vao = self._blit_program()
+            blit_prog["u_image"].value = 0
+            blit_vao.render(moderngl.TRIANGLES, vertices=3)
             target.viewport = (0, 0, *target.size)
 
     def _fxaa(self, n_slots: int) -> None:
