@@ -72,17 +72,52 @@ def load_results(path: str | Path) -> pd.DataFrame:
     if _is_sqlite(path):
         df = _read_sqlite(path)
     else:
-        try:
-            # every cell as the text written; the columns normalize_results converts are read as object
-            # (pandas' str dtype is slower per operation and would become object text or numbers anyway)
-            dtype = defaultdict(lambda: str, {c: object for c in _TEXT_COLUMNS + _NUMBER_COLUMNS + FLAG_COLUMNS})
-            df = pd.read_csv(path, dtype=dtype, keep_default_na=False, na_values=[""])
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
+        df = _read_numbers_csv(path)
+        if df is None:
+            df = _read_text_csv(path)
         # Line numbers as a text editor shows them: the header is line 1. Plain Python strings (object): a
         # million of them would take longer to convert to pandas' str dtype than to write.
         df["_where"] = pd.Series([f"line {i + 2}" for i in range(len(df))], index=df.index, dtype=object)
     return normalize_results(df, source=path)
+
+
+def _csv_dtypes(numbers) -> defaultdict:
+    """read_csv's dtypes: the columns normalize_results converts as object (pandas' str dtype is slower per
+    operation and would become object text or numbers anyway), the number columns as ``numbers``, any other
+    column (a stimulus tag, a participant group) as pandas' str."""
+    return defaultdict(lambda: str, {**{c: object for c in _TEXT_COLUMNS + FLAG_COLUMNS},
+                                     **{c: numbers for c in _NUMBER_COLUMNS}})
+
+
+def _read_numbers_csv(path: Path) -> pd.DataFrame | None:
+    """The CSV with its number columns parsed to floats by pandas' C parser, or None where that could differ
+    from :func:`_read_text_csv` + :func:`normalize_results`.
+
+    A large export has millions of number cells: as text each becomes a Python string, then a parsed
+    distinct value; parsed in C (without the GIL, on pandas' reader threads) none does. The two agree on
+    every cell C parses (the same decimal-to-float conversion; checked against ``pandas.to_numeric`` cell by
+    cell in the tests), with one exception: C keeps the sign of ``-0``, which ``to_numeric`` reads as the
+    integer 0. A file with a cell C cannot read as a number (``x``, ``nan``; a damaged file) or with a
+    negative zero gives None: the text read then names the cell, or reads it as before.
+    """
+    try:
+        df = pd.read_csv(path, dtype=_csv_dtypes(np.float64), keep_default_na=False, na_values=[""])
+    except (ValueError, OverflowError):  # ParserError and UnicodeDecodeError too: the text read reports them
+        return None
+    for col in _NUMBER_COLUMNS:
+        if col in df.columns:
+            values = df[col].to_numpy()
+            if np.signbit(values[values == 0]).any():
+                return None
+    return df
+
+
+def _read_text_csv(path: Path) -> pd.DataFrame:
+    """The CSV with every cell of the columns :func:`normalize_results` converts as the text written."""
+    try:
+        return pd.read_csv(path, dtype=_csv_dtypes(object), keep_default_na=False, na_values=[""])
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
 
 
 def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.DataFrame:
