@@ -78,7 +78,7 @@ def load_results(path: str | Path) -> pd.DataFrame:
             df = _read_text_csv(path)
         # Line numbers as a text editor shows them: the header is line 1. Kept as numbers, read as text: a
         # million strings take a fifth of a second to write, and only an error message reads one.
-        df["_where"] = pd.Series(PlaceArray.lines(len(df)), index=df.index)
+        df["_where"] = pd.Series(PlaceArray.lines(len(df)), index=df.index, copy=False)
     return normalize_results(df, source=path)
 
 
@@ -154,7 +154,7 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if col not in df.columns:
             if isinstance(default, str):  # text as object, like every text column here (pandas' str dtype
                 # would be converted again by the next normalize_results, as the analysis calls it)
-                df[col] = pd.Series(_constant_text(len(df), default), index=df.index, dtype=object)
+                df[col] = pd.Series(_constant_text(len(df), default), index=df.index, dtype=object, copy=False)
                 whole.add(col)
             elif col == "motion_stimulus":  # each row's own stimulus (the fill below), sharing its column
                 df[col] = df["stimulus"]
@@ -327,9 +327,9 @@ def _as_text(col: pd.Series) -> pd.Series:
     if pd.api.types.infer_dtype(values, skipna=True) in ("string", "empty"):  # object or pandas' str dtype
         out = values.copy()
         out[pd.isna(values)] = None
-        return pd.Series(out, index=col.index, dtype=object)
+        return pd.Series(out, index=col.index, dtype=object, copy=False)
     if col.dtype.kind in "iub":  # no missing values possible; numpy's str of an integer is Python's
-        return pd.Series(col.astype(str).to_numpy(dtype=object), index=col.index, dtype=object)
+        return pd.Series(col.astype(str).to_numpy(dtype=object), index=col.index, dtype=object, copy=False)
     return col.map(lambda v: None if _isna(v) else str(v)).astype(object)
 
 
@@ -355,12 +355,14 @@ def _to_number(col: pd.Series) -> pd.Series:
 def _number_column(col: pd.Series) -> tuple[pd.Series, np.ndarray]:
     """:func:`_to_number` and where ``col`` is missing (``col.isna()``, read from the same factorization:
     isna of a million-cell object column costs as much again)."""
+    if col.dtype == np.float64:  # e.g. parsed by read_csv: to_numeric would only copy it
+        return col, np.isnan(col.to_numpy())
     if col.dtype.kind in "iufb":
         return pd.to_numeric(col, errors="coerce").astype(float), col.isna().to_numpy()
     codes, uniques = pd.factorize(col.to_numpy(dtype=object), use_na_sentinel=True)
     parsed = pd.to_numeric(pd.Series(uniques, dtype=object), errors="coerce").to_numpy(dtype=float)
     out = np.append(parsed, np.nan)[codes]  # code -1 (missing) picks the appended NaN
-    return pd.Series(out, index=col.index), codes < 0
+    return pd.Series(out, index=col.index, copy=False), codes < 0
 
 
 def _flag_value(v, default: bool) -> bool | None:
@@ -380,10 +382,14 @@ def _flag_value(v, default: bool) -> bool | None:
 def _parse_flags(col: pd.Series, name: str, where: pd.Series, src, default: bool) -> pd.Series:
     if col.dtype == bool:
         return col
+    values = col.to_numpy(dtype=object)
+    true = values == "True"
+    if (true | (values == "False")).all():  # as pandas writes flags: two comparisons in C, no hashing
+        return pd.Series(true, index=col.index, copy=False)
     # A flag column holds a handful of distinct values: read each once, not once per cell. Values equal in
     # Python (1, 1.0, True) share one entry and read the same; uniques come in order of first appearance, so
     # the first unreadable one is also the first bad row.
-    codes, uniques = pd.factorize(col.to_numpy(dtype=object), use_na_sentinel=True)
+    codes, uniques = pd.factorize(values, use_na_sentinel=True)
     parsed = [_flag_value(v, default) for v in uniques]
     for j, flag in enumerate(parsed):
         if flag is None:
@@ -391,4 +397,4 @@ def _parse_flags(col: pd.Series, name: str, where: pd.Series, src, default: bool
             raise AnalysisInputError(src, f"{where.iloc[i]}, column '{name}'",
                                      f"{uniques[j]!r} is not a true/false flag")
     table = np.array(parsed + [default], dtype=bool)  # code -1 (missing) picks the last entry: the default
-    return pd.Series(table[codes], index=col.index)
+    return pd.Series(table[codes], index=col.index, copy=False)

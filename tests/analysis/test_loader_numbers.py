@@ -99,3 +99,23 @@ def test_cells_c_reads_otherwise_are_read_as_text(tmp_path, cell: str) -> None:
         assert str(got.value) == str(exc) and "line 4, column 'response_time_s'" in str(exc)
     else:
         _assert_same_frame(load_results(p), expected)
+
+
+FLAGS = ["True", "False", "true", "0", "1", "yes", "n", "1.0", " T ", None, np.nan, True, False, 1, 0.0]
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("choices", [FLAGS[:2], FLAGS])  # as pandas writes flags (the fast path), and any
+def test_flags_read_as_each_cell_reads_alone(seed: int, choices: list) -> None:
+    from results_analysis.loader import _flag_value, _parse_flags
+
+    rng = np.random.default_rng(seed)
+    cells = [choices[i] for i in rng.integers(0, len(choices), 300)]
+    col = pd.Series(cells, dtype=object)
+    where = pd.Series([f"line {i + 2}" for i in range(len(col))])
+    got = _parse_flags(col, "is_practice", where, "r.csv", default=False)
+    expected = [False if c is None or (isinstance(c, float) and np.isnan(c)) else _flag_value(c, False) for c in cells]
+    assert got.dtype == bool and got.tolist() == expected
+    bad = col.where(col.index != 7, "maybe")
+    with pytest.raises(Exception, match="line 9, column 'is_practice': 'maybe' is not a true/false flag"):
+        _parse_flags(bad, "is_practice", where, "r.csv", default=False)
