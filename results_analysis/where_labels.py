@@ -4,9 +4,10 @@ line numbers and written out only when read.
 A 10,000-participant export has about a million rows; as Python strings their places cost a fifth of a second
 to write (and 60 MB) in every analysis, while only an error message ever reads one or two. :class:`PlaceArray`
 is a pandas extension array of those numbers: a cell reads as its text (``"line 12"``), every whole-column
-use (``to_numpy``, ``astype(object)``, ``tolist``, comparison with text) gives the texts, and selecting rows
-(masks, ``take``, concatenation) moves the numbers only. A missing place (a row added by reindexing) reads as
-NaN, as in a column of strings.
+use (``to_numpy``, ``astype(object)``, ``tolist``, comparison with text, ``unique``) gives the texts, and
+selecting rows (masks, ``take``, concatenation) moves the numbers only. A missing place (a row added by
+reindexing or concatenation) reads as NaN, as in a column of strings. Only a place or NaN can be written
+into it (text that is not a place: ``.astype(object)`` first).
 
 >>> import pandas as pd
 >>> s = pd.Series(PlaceArray.lines(3))
@@ -58,10 +59,33 @@ class PlaceArray(ExtensionArray):
 
     @classmethod
     def _from_sequence(cls, scalars, *, dtype=None, copy: bool = False):
-        # Places are made by the loader, never parsed back from text: anything else is plain text (object).
+        """Places from places, from their texts (``unique``, ``where``: pandas passes them back) or from missing
+        values; any other text raises TypeError (pandas then keeps the column as plain text)."""
         if isinstance(scalars, cls):
             return scalars.copy() if copy else scalars
-        raise TypeError("a place column is made by PlaceArray.lines, not from values")
+        numbers, prefixes = [], set()
+        for v in scalars:
+            if v is None or (not isinstance(v, str) and pd.isna(v)):
+                numbers.append(_MISSING)
+                continue
+            head = str(v).rstrip("0123456789") if isinstance(v, str) else ""
+            digits = v[len(head):] if head else ""
+            if not head or not digits or head not in ("line ", "row ") or str(int(digits)) != digits:
+                raise TypeError(f"{v!r} is not a row place (to write other text, take the column "
+                                ".astype(object) first)")
+            numbers.append(int(digits))
+            prefixes.add(head)
+        if len(prefixes) > 1:
+            raise TypeError("row places of two kinds")
+        return cls(np.array(numbers, dtype=np.int64), prefixes.pop() if prefixes else "line ")
+
+    def __setitem__(self, key, value) -> None:
+        value = value if isinstance(value, PlaceArray) else \
+            type(self)._from_sequence(value if pd.api.types.is_list_like(value) else [value])
+        if value._prefix != self._prefix and not value.isna().all():
+            raise TypeError("row places of two kinds")
+        key = pd.api.indexers.check_array_indexer(self, key)
+        self._numbers[key] = value._numbers if len(value) != 1 else value._numbers[0]
 
     @classmethod
     def _from_factorized(cls, values, original: PlaceArray) -> PlaceArray:

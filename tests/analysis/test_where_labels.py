@@ -49,6 +49,12 @@ def _same(a, b) -> None:
     lambda d: d["_where"].to_numpy(),
     lambda d: d["_where"].astype(str),
     lambda d: pickle.loads(pickle.dumps(d)),
+    lambda d: pd.concat([d, pd.DataFrame({"k": [1]})], ignore_index=True),  # a frame without places
+    lambda d: d["_where"].where(d["k"] > 2),
+    lambda d: d["_where"].mask(d["k"] == 2, "line 99"),
+    lambda d: d["_where"].unique(),
+    lambda d: d["_where"].value_counts().sort_index(),
+    lambda d: [d["_where"].nunique()],
 ])
 def test_places_behave_as_their_texts(pair, op) -> None:
     ours, ref = pair
@@ -65,3 +71,10 @@ def test_a_loaded_csv_keeps_its_places_as_numbers_and_names_lines_in_errors(tmp_
     p.write_text(p.read_text().replace("P1,39,c39,realism,B,2", "P1,39,c39,realism,B,x"))
     with pytest.raises(Exception, match="line 81, column 'rank'"):
         load_results(p)
+
+
+def test_text_that_is_no_place_is_refused_with_the_way_out(pair) -> None:
+    ours, _ = pair
+    with pytest.raises(TypeError, match=r"'n/a' is not a row place .*astype\(object\)"):
+        ours["_where"].mask(ours["k"] == 2, "n/a")
+    assert ours["_where"].astype(object).mask(ours["k"] == 2, "n/a").iloc[2] == "n/a"
