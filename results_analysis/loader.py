@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from results_analysis.errors import AnalysisInputError
+from results_analysis.where_labels import PlaceArray
 
 #: Columns every results table must have.
 REQUIRED_COLUMNS = ("participant", "trial_index", "stimulus", "criterion", "condition", "rank")
@@ -72,17 +73,52 @@ def load_results(path: str | Path) -> pd.DataFrame:
     if _is_sqlite(path):
         df = _read_sqlite(path)
     else:
-        try:
-            # every cell as the text written; the columns normalize_results converts are read as object
-            # (pandas' str dtype is slower per operation and would become object text or numbers anyway)
-            dtype = defaultdict(lambda: str, {c: object for c in _TEXT_COLUMNS + _NUMBER_COLUMNS + FLAG_COLUMNS})
-            df = pd.read_csv(path, dtype=dtype, keep_default_na=False, na_values=[""])
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
-        # Line numbers as a text editor shows them: the header is line 1. Plain Python strings (object): a
-        # million of them would take longer to convert to pandas' str dtype than to write.
-        df["_where"] = pd.Series([f"line {i + 2}" for i in range(len(df))], index=df.index, dtype=object)
+        df = _read_numbers_csv(path)
+        if df is None:
+            df = _read_text_csv(path)
+        # Line numbers as a text editor shows them: the header is line 1. Kept as numbers, read as text: a
+        # million strings take a fifth of a second to write, and only an error message reads one.
+        df["_where"] = pd.Series(PlaceArray.lines(len(df)), index=df.index, copy=False)
     return normalize_results(df, source=path)
+
+
+def _csv_dtypes(numbers) -> defaultdict:
+    """read_csv's dtypes: the columns normalize_results converts as object (pandas' str dtype is slower per
+    operation and would become object text or numbers anyway), the number columns as ``numbers``, any other
+    column (a stimulus tag, a participant group) as pandas' str."""
+    return defaultdict(lambda: str, {**{c: object for c in _TEXT_COLUMNS + FLAG_COLUMNS},
+                                     **{c: numbers for c in _NUMBER_COLUMNS}})
+
+
+def _read_numbers_csv(path: Path) -> pd.DataFrame | None:
+    """The CSV with its number columns parsed to floats by pandas' C parser, or None where that could differ
+    from :func:`_read_text_csv` + :func:`normalize_results`.
+
+    A large export has millions of number cells: as text each becomes a Python string, then a parsed
+    distinct value; parsed in C (without the GIL, on pandas' reader threads) none does. The two agree on
+    every cell C parses (the same decimal-to-float conversion; checked against ``pandas.to_numeric`` cell by
+    cell in the tests), with one exception: C keeps the sign of ``-0``, which ``to_numeric`` reads as the
+    integer 0. A file with a cell C cannot read as a number (``x``, ``nan``; a damaged file) or with a
+    negative zero gives None: the text read then names the cell, or reads it as before.
+    """
+    try:
+        df = pd.read_csv(path, dtype=_csv_dtypes(np.float64), keep_default_na=False, na_values=[""])
+    except (ValueError, OverflowError):  # ParserError and UnicodeDecodeError too: the text read reports them
+        return None
+    for col in _NUMBER_COLUMNS:
+        if col in df.columns:
+            values = df[col].to_numpy()
+            if np.signbit(values[values == 0]).any():
+                return None
+    return df
+
+
+def _read_text_csv(path: Path) -> pd.DataFrame:
+    """The CSV with every cell of the columns :func:`normalize_results` converts as the text written."""
+    try:
+        return pd.read_csv(path, dtype=_csv_dtypes(object), keep_default_na=False, na_values=[""])
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
 
 
 def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.DataFrame:
@@ -118,7 +154,7 @@ def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.
         if col not in df.columns:
             if isinstance(default, str):  # text as object, like every text column here (pandas' str dtype
                 # would be converted again by the next normalize_results, as the analysis calls it)
-                df[col] = pd.Series(_constant_text(len(df), default), index=df.index, dtype=object)
+                df[col] = pd.Series(_constant_text(len(df), default), index=df.index, dtype=object, copy=False)
                 whole.add(col)
             elif col == "motion_stimulus":  # each row's own stimulus (the fill below), sharing its column
                 df[col] = df["stimulus"]
@@ -291,9 +327,9 @@ def _as_text(col: pd.Series) -> pd.Series:
     if pd.api.types.infer_dtype(values, skipna=True) in ("string", "empty"):  # object or pandas' str dtype
         out = values.copy()
         out[pd.isna(values)] = None
-        return pd.Series(out, index=col.index, dtype=object)
+        return pd.Series(out, index=col.index, dtype=object, copy=False)
     if col.dtype.kind in "iub":  # no missing values possible; numpy's str of an integer is Python's
-        return pd.Series(col.astype(str).to_numpy(dtype=object), index=col.index, dtype=object)
+        return pd.Series(col.astype(str).to_numpy(dtype=object), index=col.index, dtype=object, copy=False)
     return col.map(lambda v: None if _isna(v) else str(v)).astype(object)
 
 
@@ -319,12 +355,14 @@ def _to_number(col: pd.Series) -> pd.Series:
 def _number_column(col: pd.Series) -> tuple[pd.Series, np.ndarray]:
     """:func:`_to_number` and where ``col`` is missing (``col.isna()``, read from the same factorization:
     isna of a million-cell object column costs as much again)."""
+    if col.dtype == np.float64:  # e.g. parsed by read_csv: to_numeric would only copy it
+        return col, np.isnan(col.to_numpy())
     if col.dtype.kind in "iufb":
         return pd.to_numeric(col, errors="coerce").astype(float), col.isna().to_numpy()
     codes, uniques = pd.factorize(col.to_numpy(dtype=object), use_na_sentinel=True)
     parsed = pd.to_numeric(pd.Series(uniques, dtype=object), errors="coerce").to_numpy(dtype=float)
     out = np.append(parsed, np.nan)[codes]  # code -1 (missing) picks the appended NaN
-    return pd.Series(out, index=col.index), codes < 0
+    return pd.Series(out, index=col.index, copy=False), codes < 0
 
 
 def _flag_value(v, default: bool) -> bool | None:
@@ -344,10 +382,14 @@ def _flag_value(v, default: bool) -> bool | None:
 def _parse_flags(col: pd.Series, name: str, where: pd.Series, src, default: bool) -> pd.Series:
     if col.dtype == bool:
         return col
+    values = col.to_numpy(dtype=object)
+    true = values == "True"
+    if (true | (values == "False")).all():  # as pandas writes flags: two comparisons in C, no hashing
+        return pd.Series(true, index=col.index, copy=False)
     # A flag column holds a handful of distinct values: read each once, not once per cell. Values equal in
     # Python (1, 1.0, True) share one entry and read the same; uniques come in order of first appearance, so
     # the first unreadable one is also the first bad row.
-    codes, uniques = pd.factorize(col.to_numpy(dtype=object), use_na_sentinel=True)
+    codes, uniques = pd.factorize(values, use_na_sentinel=True)
     parsed = [_flag_value(v, default) for v in uniques]
     for j, flag in enumerate(parsed):
         if flag is None:
@@ -355,4 +397,4 @@ def _parse_flags(col: pd.Series, name: str, where: pd.Series, src, default: bool
             raise AnalysisInputError(src, f"{where.iloc[i]}, column '{name}'",
                                      f"{uniques[j]!r} is not a true/false flag")
     table = np.array(parsed + [default], dtype=bool)  # code -1 (missing) picks the last entry: the default
-    return pd.Series(table[codes], index=col.index)
+    return pd.Series(table[codes], index=col.index, copy=False)
