@@ -265,25 +265,25 @@ def main(argv: list[str]) -> int:
     record("startup_help_ratio_vs_numpy", value=help_ / bare, baseline=1.0, unit="x bare `import numpy` time",
            help_s=help_, numpy_s=bare, validate_s=statistics.median(times[cmds_key(cmds, 2)]), target=2.0,
            note="cold `studyapp --help` vs cold `python -c 'import numpy'`, medians, interleaved", **common)
-    record("first_trial_frame_s", value=statistics.median(totals), baseline=1.5, unit="s",
-           spread=[min(totals), max(totals)], cpu_s=statistics.median(cpus), cpu_spread=[min(cpus), max(cpus)],
-           phases={p: statistics.median(f["phases"][p] for f in frames) for p in frames[0]["phases"]},
-           audio_output=audio, note="process start to the demo's first trial frame (the 3D view and the UI over it) "
-           "rendered offscreen and read back, with the audio output opened as `studyapp run` opens it; baseline = "
-           "the 1.5 s target", **common)
-    record("first_trial_frame_fresh_machine_s", value=statistics.median(fresh_totals), baseline=1.5, unit="s",
-           spread=[min(fresh_totals), max(fresh_totals)], cpu_s=statistics.median(fresh_cpus),
-           cpu_spread=[min(fresh_cpus), max(fresh_cpus)], audio_output=audio,
-           phases={p: statistics.median(f["phases"][p] for f in fresh_frames) for p in fresh_frames[0]["phases"]},
-           note="as first_trial_frame_s, on a machine where the app never ran: empty caches (Mesa's shader cache, "
-                "the built-in avatar's); only the experimenter's `validate` ran before it (which fills the GL "
-                "driver's shader cache on the machine it runs on)", **common)
-    record("first_trial_frame_empty_driver_cache_s", value=statistics.median(nodriver_totals), baseline=1.5, unit="s",
-           spread=[min(nodriver_totals), max(nodriver_totals)], cpu_s=statistics.median(nodriver_cpus),
-           cpu_spread=[min(nodriver_cpus), max(nodriver_cpus)], audio_output=audio,
-           phases={p: statistics.median(f["phases"][p] for f in nodriver_frames) for p in nodriver_frames[0]["phases"]},
-           note="as first_trial_frame_fresh_machine_s, but `validate` ran with another driver cache folder: the "
-                "first frame compiles every GL program (a PC where the design was validated elsewhere)", **common)
+    first_frame_notes = {
+        "first_trial_frame_s": (frames, "process start to the demo's first trial frame (the 3D view and the UI "
+                                "over it) rendered offscreen and read back, with the audio output opened as "
+                                "`studyapp run` opens it; baseline = the 1.5 s target"),
+        "first_trial_frame_fresh_machine_s": (fresh_frames, "as first_trial_frame_s, on a machine where the app "
+                                              "never ran: empty caches (Mesa's shader cache, the built-in avatar's); "
+                                              "only the experimenter's `validate` ran before it (which fills the GL "
+                                              "driver's shader cache on the machine it runs on)"),
+        "first_trial_frame_empty_driver_cache_s": (nodriver_frames, "as first_trial_frame_fresh_machine_s, but "
+                                                   "`validate` ran with another driver cache folder: the first frame "
+                                                   "compiles every GL program (a PC where the design was validated "
+                                                   "elsewhere)"),
+    }
+    for key, (runs_of, note) in first_frame_notes.items():
+        tot, cpu = [f["total"] for f in runs_of], [f["cpu"] for f in runs_of]
+        record(key, value=statistics.median(tot), baseline=1.5, unit="s", spread=[min(tot), max(tot)],
+               cpu_s=statistics.median(cpu), cpu_spread=[min(cpu), max(cpu)], audio_output=audio,
+               phases={p: statistics.median(f["phases"][p] for f in runs_of) for p in runs_of[0]["phases"]},
+               note=note, **common)
     return 0
 
 
