@@ -37,6 +37,7 @@ class MediaClock(Protocol):
     def stop(self) -> None: ...
     def replay(self) -> None: ...
     def position_s(self) -> float: ...
+    def position_ahead_s(self, ahead_s: float) -> float: ...
     @property
     def duration_s(self) -> float: ...
     @property
@@ -125,6 +126,12 @@ class SilentClock:
         if self._paused_at is not None:
             return self._paused_at
         return min(self._duration, self._start_s + (self._now() - float(self._anchor)))
+
+    def position_ahead_s(self, ahead_s: float) -> float:
+        """Clip time ``ahead_s`` seconds from now: time runs from :meth:`play` on, so while playing it is the
+        position now plus ``ahead_s`` (not held at the end: the caller bounds it by the clip)."""
+        pos = self.position_s()
+        return pos + max(0.0, float(ahead_s)) if self._active and self._paused_at is None else pos
 
     # -- state -----------------------------------------------------------------------------------
     @property

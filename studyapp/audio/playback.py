@@ -285,6 +285,17 @@ class AudioPlayer:
     # -- clock -----------------------------------------------------------------------------------
     def position_s(self) -> float:
         """Clip time (seconds) audible now: delivered samples / rate minus the output latency."""
+        return self._position(0.0, delivered_only=True)
+
+    def position_ahead_s(self, ahead_s: float) -> float:
+        """Clip time (seconds) audible ``ahead_s`` seconds from now, if the sound keeps flowing. Before the
+        first samples reach the speaker (an output latency after the device took them) the sound is at the
+        start, so a frame aimed at a flip in that time shows the start: extrapolating the standing clock
+        by the time to the flip put the first frames of every play up to a drawing time (~50-80 ms on a
+        loaded software renderer) ahead of the sound."""
+        return self._position(max(0.0, float(ahead_s)), delivered_only=False)
+
+    def _position(self, ahead_s: float, *, delivered_only: bool) -> float:
         import time
 
         if not self._active:
@@ -295,9 +306,10 @@ class AudioPlayer:
         if last is None or last[0] != self._gen:
             return self._start_s  # the device has not asked for this run's first buffer yet
         _, first, dac, frames = last
-        pos = first / self.rate + (time.monotonic() - dac)
-        # Never ahead of what was delivered, never before where this run started.
-        pos = min(pos, (first + frames) / self.rate)
+        pos = first / self.rate + (time.monotonic() + ahead_s - dac)
+        if delivered_only:  # now: never ahead of what was delivered (later, more will have been)
+            pos = min(pos, (first + frames) / self.rate)
+        # Never before where this run started.
         return float(min(max(pos, self._start_s), self.duration_s))
 
     @property

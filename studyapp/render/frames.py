@@ -2,7 +2,7 @@
 
 The audio clock is the master. Before drawing a frame the app asks :class:`FlipPredictor` when that
 frame will appear (the next vsync flip) and draws the media time the audio will have reached by then
-(:func:`media_time_for_flip`). After the flip, :class:`PlayRecorder` compares the time it drew with the
+(:func:`clock_media_time`). After the flip, :class:`PlayRecorder` compares the time it drew with the
 audio clock read at the flip: that difference is the audio/video offset the participant sees.
 
 >>> rec = PlayRecorder(refresh_hz=60.0)
@@ -22,19 +22,13 @@ if TYPE_CHECKING:
     from studyapp.audio.clock import MediaClock
 
 
-def media_time_for_flip(audio_pos_s: float, now: float, predicted_flip: float | None) -> float:
-    """The clip time to draw now so it matches the audio when the frame appears at ``predicted_flip``."""
-    if predicted_flip is None:
-        return audio_pos_s
-    return audio_pos_s + max(0.0, predicted_flip - now)
-
-
 def clock_media_time(clock: MediaClock, now: float, predictor: FlipPredictor | None, duration_s: float) -> float:
     """The clip time a frame drawn at ``now`` shows, for a clip playing on ``clock`` (a media clock).
 
-    Paused: the clock's position (nothing moves). Playing: where the clock will be at the predicted flip,
-    never past the end. Without a predictor, or on a virtual clock (offscreen: no time passes between
-    drawing and the "flip"), the clock's position.
+    Paused: the clock's position (nothing moves). Playing: where the clock will be at the predicted flip
+    (:meth:`~studyapp.audio.clock.MediaClock.position_ahead_s`: an audio clock whose sound has not reached
+    the speaker yet stays at the start), never past the end. Without a predictor, or on a virtual clock
+    (offscreen: no time passes between drawing and the "flip"), the clock's position.
 
     >>> from studyapp.audio.clock import SilentClock
     >>> fp = FlipPredictor(60.0); fp.flipped(10.0)
@@ -47,13 +41,10 @@ def clock_media_time(clock: MediaClock, now: float, predictor: FlipPredictor | N
     >>> round(clock_media_time(wall, 10.0, fp, 2.0), 4)         # shown at the next flip, 1/60 s later
     0.5167
     """
-    pos = clock.position_s()
-    if clock.paused:
-        return pos
-    if getattr(clock, "virtual", False):  # virtual time does not pass between drawing and the flip
-        predictor = None
-    t = media_time_for_flip(pos, now, predictor.predict(now) if predictor is not None else None)
-    return min(t, duration_s)
+    if clock.paused or predictor is None or getattr(clock, "virtual", False):
+        # paused: nothing moves; virtual: no time passes between drawing and the flip
+        return clock.position_s() if clock.paused else min(clock.position_s(), duration_s)
+    return min(clock.position_ahead_s(max(0.0, predictor.predict(now) - now)), duration_s)
 
 
 DRAW_TIME_WINDOW = 30  # recent draw durations the lead is estimated from (half a second at 60 Hz)
