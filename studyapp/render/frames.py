@@ -41,10 +41,12 @@ def clock_media_time(clock: MediaClock, now: float, predictor: FlipPredictor | N
     >>> round(clock_media_time(wall, 10.0, fp, 2.0), 4)         # shown at the next flip, 1/60 s later
     0.5167
     """
-    if clock.paused or predictor is None or getattr(clock, "virtual", False):
-        # paused: nothing moves; virtual: no time passes between drawing and the flip
+    # paused: nothing moves; virtual: no time passes between drawing and the flip; no flip seen yet: no
+    # prediction to aim at
+    flip = None if clock.paused or predictor is None or getattr(clock, "virtual", False) else predictor.predict(now)
+    if flip is None:
         return clock.position_s() if clock.paused else min(clock.position_s(), duration_s)
-    return min(clock.position_ahead_s(max(0.0, predictor.predict(now) - now)), duration_s)
+    return min(clock.position_ahead_s(max(0.0, flip - now)), duration_s)
 
 
 DRAW_TIME_WINDOW = 30  # recent draw durations the lead is estimated from (half a second at 60 Hz)

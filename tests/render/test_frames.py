@@ -71,6 +71,8 @@ def test_media_time_leads_by_time_to_flip():
     wall.play(None, duration_s=5.0)
     assert clock_media_time(wall, 10.0, _Lead(0.012), 5.0) == pytest.approx(2.012)
     assert clock_media_time(wall, 10.0, None, 5.0) == 2.0
+    assert FlipPredictor(60.0).predict(10.0) is None  # no flip seen yet: nothing to aim at
+    assert clock_media_time(wall, 10.0, FlipPredictor(60.0), 5.0) == 2.0
     assert clock_media_time(wall, 10.0, _Lead(4.0), 5.0) == 5.0  # never past the end
     wall.pause()
     assert clock_media_time(wall, 10.0, _Lead(0.012), 5.0) == 2.0
