@@ -16,7 +16,7 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from results_analysis.errors import AnalysisInputError
+from results_analysis.errors import AnalysisInputError, unreadable_csv
 from results_analysis.where_labels import PlaceArray
 
 #: Columns every results table must have.
@@ -118,7 +118,7 @@ def _read_text_csv(path: Path) -> pd.DataFrame:
     try:
         return pd.read_csv(path, dtype=_csv_dtypes(object), keep_default_na=False, na_values=[""])
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
+        raise unreadable_csv(path, exc) from exc
 
 
 def normalize_results(df: pd.DataFrame, source: str | Path | None = None) -> pd.DataFrame:
@@ -266,7 +266,7 @@ def load_study_title(path: str | Path) -> str | None:
             head = pd.read_csv(path, dtype=str, usecols=lambda c: c == "study_title", keep_default_na=False,
                                na_values=[""])
         except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-            raise AnalysisInputError(path, None, f"not a readable CSV file ({exc})") from exc
+            raise unreadable_csv(path, exc) from exc
         return study_title(head)
     from results_analysis.sqlite_schema import study_title_from_connection
 

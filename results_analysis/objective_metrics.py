@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from results_analysis.errors import AnalysisInputError
+from results_analysis.errors import AnalysisInputError, unreadable_csv
 from results_analysis.study_meta import with_criterion_label
 
 #: Columns of a metrics table that describe a row, not measure the motion.
@@ -43,7 +43,7 @@ def load_metrics(path: str | Path) -> pd.DataFrame:
     except FileNotFoundError:
         raise AnalysisInputError(path, None, "metrics file not found") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise AnalysisInputError(path, None, f"not a readable CSV: {exc}") from None
+        raise unreadable_csv(path, exc) from None
     if "condition" not in table.columns:
         raise AnalysisInputError(path, "header", "no 'condition' column; expected the CSV of `studyapp metrics "
                                  "DESIGN --out FILE`")

@@ -35,6 +35,17 @@ def test_loaded_csv_keeps_its_dtypes_and_names_the_bad_line(tmp_path) -> None:
         load_results(p)
 
 
+def test_a_row_with_too_many_fields_is_named_by_its_line_in_one_line(tmp_path) -> None:
+    from results_analysis.errors import AnalysisInputError
+
+    p = tmp_path / "r.csv"
+    p.write_text("participant,trial_index,stimulus,criterion,condition,rank\n"
+                 "P1,0,c1,realism,A,1\nP1,0,c1,realism,B,2,extra\n")
+    with pytest.raises(AnalysisInputError) as err:
+        load_results(p)
+    assert str(err.value) == f"{p}: line 3: 7 fields where the header has 6 (a damaged or hand-edited row?)"
+
+
 def _text_read(path) -> pd.DataFrame:
     """The loader's CSV path with every number cell read as text and parsed by normalize_results (what
     load_results did before it let pandas' C parser read the number columns)."""
