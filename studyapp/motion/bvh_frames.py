@@ -48,6 +48,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import numpy as np
 
 from studyapp.errors import InputError
+from studyapp.motion.cores import usable_cores
 from studyapp.motion.number_block import parse_block
 
 __all__ = ["CHUNK_BYTES", "STREAM_MAX_BYTES", "line_limit", "first_long_line", "parse_frames", "slow_frames"]
@@ -86,13 +87,7 @@ _POOLS_LOCK = threading.Lock()
 
 
 def _threads() -> int:
-    if THREADS is not None:
-        return max(1, THREADS)
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        cores = os.cpu_count() or 1
-    return max(1, min(cores, MAX_THREADS))
+    return max(1, THREADS) if THREADS is not None else usable_cores(MAX_THREADS)
 
 
 def _pool(workers: int) -> ThreadPoolExecutor:

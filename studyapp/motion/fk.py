@@ -16,7 +16,6 @@ path, what the renderer uses: about half the time of float64, measured by ``benc
 """
 from __future__ import annotations
 
-import os
 import threading
 from collections.abc import Iterator
 from functools import lru_cache
@@ -24,6 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from studyapp.motion.cores import usable_cores
 from studyapp.motion.skeleton import Motion, Skeleton
 
 __all__ = [
@@ -51,7 +51,7 @@ _FRAME_BLOCK = 192
 #: Long motions are split into this many frame ranges, worked on side by side (numpy releases the
 #: interpreter lock in its loops): one per core, at most 4 (past that, memory bandwidth, not arithmetic,
 #: bounds it). Set it to 1 to keep forward kinematics on the calling thread.
-THREADS = max(1, min(4, os.cpu_count() or 1))
+THREADS = usable_cores(4)
 # A part shorter than this is not worth a thread (a start and join cost ~0.1 ms; a block ~1 ms).
 _PARALLEL_MIN_FRAMES = 4 * _FRAME_BLOCK
 
